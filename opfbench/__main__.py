@@ -1,0 +1,3 @@
+from opfbench.cli import main
+
+raise SystemExit(main())
