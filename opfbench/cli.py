@@ -1,0 +1,34 @@
+"""`opfbench` command line. Each subcommand lives in `opfbench/commands/<name>.py` and
+provides `register(subparsers)` (adds its parser and sets `func`) — this file only
+wires them together and turns opfbench errors into a stderr message and exit code 2."""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import sys
+
+from opfbench.errors import OpfbenchError
+
+COMMANDS = ("cases", "pf")
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(prog="opfbench", description=__doc__.splitlines()[0])
+    sub = parser.add_subparsers(dest="command", required=True)
+    for name in COMMANDS:
+        importlib.import_module(f"opfbench.commands.{name}").register(sub)
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = build_parser()
+    try:
+        args = parser.parse_args(argv)
+    except SystemExit as exc:  # argparse already printed its message
+        return 0 if exc.code == 0 else 2
+    try:
+        return int(args.func(args) or 0)
+    except OpfbenchError as exc:
+        print(f"opfbench {args.command}: error: {exc}", file=sys.stderr)
+        return 2
