@@ -1,0 +1,31 @@
+"""Argument helpers shared by the subcommands."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+
+
+def fraction(text: str) -> float:
+    """argparse type: a finite, non-negative number."""
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"not a number: {text!r}") from None
+    if not math.isfinite(value) or value < 0:
+        raise argparse.ArgumentTypeError(f"must be a finite number ≥ 0, got {text}")
+    return value
+
+
+def add_operating_point(parser: argparse.ArgumentParser) -> None:
+    """--load-scale and --der-scale, as every snapshot-type command takes them."""
+    parser.add_argument("--load-scale", type=fraction, default=1.0,
+                        help="multiplier on every nominal load (default 1.0)")
+    parser.add_argument("--der-scale", type=fraction, default=0.8,
+                        help="DER active power as a fraction of rating, 0..1 (default 0.8)")
+    parser.add_argument("--json", action="store_true", help="print one JSON object")
+
+
+def print_json(obj: object) -> None:
+    print(json.dumps(obj, indent=2, allow_nan=False))

@@ -1,0 +1,291 @@
+"""Reader for MATPOWER version-2 case files (`.m`).
+
+Reads `mpc.baseMVA`, `mpc.bus`, `mpc.gen`, `mpc.branch` and `mpc.gencost`, and executes
+only the trailing conversions that MATPOWER's distribution cases use (ohm → p.u. for
+branch r/x, kW → MW for loads, kVA → MW/MVAr at a fixed power factor). Any other code
+line is an error: a case file is data, and we do not guess what unknown code means.
+"""
+
+from __future__ import annotations
+
+import re
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from opfbench.errors import CaseFormatError, NetworkError
+from opfbench.network import Network
+
+BUS_COLS, GEN_COLS, BRANCH_COLS = 13, 10, 11  # minimum columns MATPOWER v2 requires
+_MATRICES = ("bus", "gen", "branch", "gencost")
+
+
+@dataclass
+class MatpowerCase:
+    """Raw MATPOWER data after the recognized conversions (MATPOWER units: MW, p.u.)."""
+
+    path: str
+    base_mva: float
+    bus: np.ndarray
+    gen: np.ndarray
+    branch: np.ndarray
+    gencost: np.ndarray | None
+
+
+def _strip_comment(line: str) -> str:
+    # MATPOWER data never contains '%' inside strings we accept, so cut at the first '%'.
+    return line.split("%", 1)[0].strip()
+
+
+def _norm(statement: str) -> str:
+    return re.sub(r"\s+", "", statement)
+
+
+# Conversion statements recognized after the data blocks (whitespace removed).
+_IDX_ASSIGN = re.compile(r"^\[[A-Z_0-9,]+\]=idx_(bus|brch|gen);$")
+_VBASE = "Vbase=mpc.bus(1,BASE_KV)*1e3;"
+_SBASE = "Sbase=mpc.baseMVA*1e6;"
+_OHM_TO_PU = "mpc.branch(:,[BR_RBR_X])=mpc.branch(:,[BR_RBR_X])/(Vbase^2/Sbase);"
+_KW_TO_MW = "mpc.bus(:,[PD,QD])=mpc.bus(:,[PD,QD])/1e3;"
+_PF_SET = re.compile(r"^pf=([0-9.eE+-]+);$")
+_QD_FROM_PF = "mpc.bus(:,QD)=mpc.bus(:,PD)*sin(acos(pf));"
+_PD_FROM_PF = "mpc.bus(:,PD)=mpc.bus(:,PD)*pf;"
+
+
+def _statements(lines: list[tuple[int, str]]) -> list[tuple[int, str]]:
+    """Join MATLAB continuation lines (`...`) into statements, keeping the first line number."""
+    out: list[tuple[int, str]] = []
+    buf, start = "", 0
+    for lineno, text in lines:
+        if not buf:
+            start = lineno
+        if text.endswith("..."):
+            buf += text[:-3] + " "
+            continue
+        buf += text
+        out.append((start, buf))
+        buf = ""
+    if buf:
+        out.append((start, buf))
+    return out
+
+
+def read_matpower(path: str | Path) -> MatpowerCase:
+    """Parse a MATPOWER v2 `.m` file; raise `CaseFormatError` naming file, matrix and row."""
+    path = Path(path)
+    try:
+        text = path.read_text()
+    except OSError as exc:
+        raise CaseFormatError(f"{path}: cannot read case file ({exc.strerror})") from exc
+    name = str(path)
+    lines = [(i + 1, _strip_comment(raw)) for i, raw in enumerate(text.splitlines())]
+    lines = [(i, s) for i, s in lines if s]
+
+    matrices: dict[str, np.ndarray] = {}
+    base_mva: float | None = None
+    trailing: list[tuple[int, str]] = []
+    i = 0
+    while i < len(lines):
+        lineno, s = lines[i]
+        m_start = re.match(r"^mpc\.(\w+)\s*=\s*\[(.*)$", s)
+        if m_start:
+            key = m_start.group(1)
+            if key not in _MATRICES:
+                raise CaseFormatError(f"{name}, line {lineno}: unsupported matrix mpc.{key}")
+            body: list[tuple[int, str]] = []
+            rest = m_start.group(2)
+            i += 1
+            while "]" not in rest:
+                if rest.strip():
+                    body.append((lineno, rest))
+                if i >= len(lines):
+                    raise CaseFormatError(f"{name}: mpc.{key} opened at line {lineno} is never closed with '];'")
+                lineno, rest = lines[i]
+                i += 1
+            before = rest.split("]", 1)[0]
+            if before.strip():
+                body.append((lineno, before))
+            matrices[key] = _parse_matrix(name, key, body)
+            continue
+        if re.match(r"^function\s+mpc\s*=\s*\w+$", s) or re.match(r"^mpc\.version\s*=\s*'2'\s*;?$", s):
+            i += 1
+            continue
+        if re.match(r"^mpc\.version\s*=", s):
+            raise CaseFormatError(f"{name}, line {lineno}: only MATPOWER case format version '2' is supported")
+        m_base = re.match(r"^mpc\.baseMVA\s*=\s*([^;]+);?$", s)
+        if m_base:
+            try:
+                base_mva = float(m_base.group(1))
+            except ValueError:
+                raise CaseFormatError(f"{name}, line {lineno}: mpc.baseMVA is not a number: {m_base.group(1)!r}") from None
+            i += 1
+            continue
+        trailing.append((lineno, s))
+        i += 1
+
+    if base_mva is None:
+        raise CaseFormatError(f"{name}: missing mpc.baseMVA")
+    if not base_mva > 0:
+        raise CaseFormatError(f"{name}: mpc.baseMVA must be positive, got {base_mva}")
+    for key in ("bus", "gen", "branch"):
+        if key not in matrices:
+            raise CaseFormatError(f"{name}: missing mpc.{key}")
+    _check_columns(name, "bus", matrices["bus"], BUS_COLS)
+    _check_columns(name, "gen", matrices["gen"], GEN_COLS)
+    _check_columns(name, "branch", matrices["branch"], BRANCH_COLS)
+    case = MatpowerCase(name, base_mva, matrices["bus"], matrices["gen"], matrices["branch"], matrices.get("gencost"))
+    _apply_conversions(case, _statements(trailing))
+    return case
+
+
+def _parse_matrix(name: str, key: str, body: list[tuple[int, str]]) -> np.ndarray:
+    rows: list[list[float]] = []
+    row_lines: list[int] = []
+    for lineno, chunk in body:
+        for part in chunk.split(";"):
+            tokens = part.replace(",", " ").split()
+            if not tokens:
+                continue
+            values = []
+            for col, tok in enumerate(tokens, start=1):
+                try:
+                    values.append(float(tok))
+                except ValueError:
+                    raise CaseFormatError(
+                        f"{name}: mpc.{key} row {len(rows) + 1} (line {lineno}), column {col}: "
+                        f"non-numeric entry {tok!r}"
+                    ) from None
+            rows.append(values)
+            row_lines.append(lineno)
+    if not rows:
+        return np.zeros((0, 0))
+    widths = {len(r) for r in rows}
+    if len(widths) > 1:
+        first = len(rows[0])
+        bad = next(k for k, r in enumerate(rows) if len(r) != first)
+        raise CaseFormatError(
+            f"{name}: mpc.{key} row {bad + 1} (line {row_lines[bad]}) has {len(rows[bad])} columns, "
+            f"row 1 has {first}"
+        )
+    arr = np.array(rows)
+    if not np.all(np.isfinite(arr)):
+        r, c = np.argwhere(~np.isfinite(arr))[0]
+        raise CaseFormatError(f"{name}: mpc.{key} row {r + 1} (line {row_lines[r]}), column {c + 1}: value {arr[r, c]} is not finite")
+    return arr
+
+
+def _check_columns(name: str, key: str, arr: np.ndarray, need: int) -> None:
+    if arr.shape[0] == 0:
+        raise CaseFormatError(f"{name}: mpc.{key} is empty")
+    if arr.shape[1] < need:
+        raise CaseFormatError(f"{name}: mpc.{key} has {arr.shape[1]} columns, MATPOWER v2 needs at least {need}")
+
+
+def _apply_conversions(case: MatpowerCase, statements: list[tuple[int, str]]) -> None:
+    """Execute the recognized conversion statements in file order."""
+    env: dict[str, float] = {}
+    for lineno, stmt in statements:
+        s = _norm(stmt)
+        if _IDX_ASSIGN.match(s):
+            continue
+        if s == _VBASE:
+            env["Vbase"] = case.bus[0, 9] * 1e3
+        elif s == _SBASE:
+            env["Sbase"] = case.base_mva * 1e6
+        elif s == _OHM_TO_PU:
+            if "Vbase" not in env or "Sbase" not in env:
+                raise CaseFormatError(f"{case.path}, line {lineno}: ohm→p.u. conversion before Vbase/Sbase are defined")
+            case.branch[:, 2:4] /= env["Vbase"] ** 2 / env["Sbase"]
+        elif s == _KW_TO_MW:
+            case.bus[:, 2:4] /= 1e3
+        elif m := _PF_SET.match(s):
+            env["pf"] = float(m.group(1))
+        elif s in (_QD_FROM_PF, _PD_FROM_PF):
+            if "pf" not in env:
+                raise CaseFormatError(f"{case.path}, line {lineno}: power-factor conversion before pf is defined")
+            pf = env["pf"]
+            if s == _QD_FROM_PF:
+                case.bus[:, 3] = case.bus[:, 2] * np.sin(np.arccos(pf))
+            else:
+                case.bus[:, 2] = case.bus[:, 2] * pf
+        else:
+            raise CaseFormatError(f"{case.path}, line {lineno}: unrecognized code line: {stmt.strip()!r}")
+
+
+def to_network(case: MatpowerCase, name: str | None = None) -> Network:
+    """Build the shared `Network` from a parsed case; validates bus references and slack."""
+    label = name or Path(case.path).stem
+    bus, gen, branch = case.bus, case.gen, case.branch
+    ids = bus[:, 0].astype(int)
+    if len(set(ids)) != len(ids):
+        dup = ids[np.flatnonzero(np.bincount(np.unique(ids, return_inverse=True)[1]) > 1)[0]]
+        raise CaseFormatError(f"{case.path}: mpc.bus lists bus {dup} more than once")
+    pos = {b: k for k, b in enumerate(ids)}
+
+    def lookup(matrix: str, row: int, col_name: str, bus_id: float) -> int:
+        if int(bus_id) not in pos:
+            raise CaseFormatError(f"{case.path}: mpc.{matrix} row {row + 1}: {col_name} {int(bus_id)} is not a bus in mpc.bus")
+        return pos[int(bus_id)]
+
+    f = np.array([lookup("branch", k, "from bus", v) for k, v in enumerate(branch[:, 0])], dtype=int)
+    t = np.array([lookup("branch", k, "to bus", v) for k, v in enumerate(branch[:, 1])], dtype=int)
+    gbus = np.array([lookup("gen", k, "bus", v) for k, v in enumerate(gen[:, 0])], dtype=int)
+
+    btype = bus[:, 1].astype(int)
+    bad_type = np.flatnonzero(~np.isin(btype, (1, 2, 3, 4)))
+    if bad_type.size:
+        raise CaseFormatError(f"{case.path}: mpc.bus row {bad_type[0] + 1}: unknown bus type {btype[bad_type[0]]}")
+    slacks = np.flatnonzero(btype == 3)
+    if slacks.size != 1:
+        raise CaseFormatError(f"{case.path}: mpc.bus needs exactly one reference bus (type 3), found {slacks.size}")
+    slack = int(slacks[0])
+    gen_on = gen[:, 7] > 0
+    slack_gens = np.flatnonzero(gen_on & (gbus == slack))
+    if slack_gens.size == 0:
+        raise CaseFormatError(f"{case.path}: no in-service generator at the reference bus {ids[slack]}")
+    others = np.flatnonzero(gen_on & (gbus != slack))
+    # PV buses without an in-service generator behave as PQ buses (MATPOWER does the same).
+    btype = btype.copy()
+    btype[(btype == 2) & ~np.isin(np.arange(len(ids)), gbus[others])] = 1
+    r, x = branch[:, 2], branch[:, 3]
+    status = branch[:, 10] > 0
+    zero_z = np.flatnonzero(status & (r == 0) & (x == 0))
+    if zero_z.size:
+        raise CaseFormatError(f"{case.path}: mpc.branch row {zero_z[0] + 1}: zero impedance (r = x = 0)")
+    tap = np.where(branch[:, 8] == 0, 1.0, branch[:, 8])
+    try:
+        return Network(
+            name=label,
+            base_mva=case.base_mva,
+            bus_ids=ids,
+            bus_type=btype,
+            base_kv=bus[:, 9].copy(),
+            load_p_mw=bus[:, 2].copy(),
+            load_q_mvar=bus[:, 3].copy(),
+            gs_mw=bus[:, 4].copy(),
+            bs_mvar=bus[:, 5].copy(),
+            vmin=bus[:, 12].copy(),
+            vmax=bus[:, 11].copy(),
+            f=f,
+            t=t,
+            r=r.copy(),
+            x=x.copy(),
+            b=branch[:, 4].copy(),
+            tap=tap,
+            shift=branch[:, 9].copy(),
+            status=status,
+            slack=slack,
+            v_slack=float(gen[slack_gens[0], 5]),
+            gen_bus=gbus[others],
+            gen_p_mw=gen[others, 1].copy(),
+            gen_q_mvar=gen[others, 2].copy(),
+            gen_vset=gen[others, 5].copy(),
+        )
+    except NetworkError as exc:
+        raise CaseFormatError(f"{case.path}: {exc}") from None
+
+
+def load_case_file(path: str | Path, name: str | None = None) -> Network:
+    """Read a MATPOWER `.m` file straight into a `Network`."""
+    return to_network(read_matpower(path), name)
