@@ -1,0 +1,88 @@
+"""The result record every strategy returns — local rules and OPF formulations alike —
+so the benchmark treats them the same. Arrays carry a leading snapshot axis S.
+
+Units: Q in MVAr (positive = injected), losses in kW, voltages in p.u., times in ms.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from opfbench.network import Network
+
+# Status values. Local rules: "ok" or "pf-diverged". Formulations add their own
+# (e.g. "infeasible", "solver-failed", "fallback-cold", "fallback-socp", "fallback-no-action").
+OK = "ok"
+PF_DIVERGED = "pf-diverged"
+INFEASIBLE = "infeasible"
+
+
+@dataclass(eq=False)
+class StrategyResult:
+    """Outcome of one strategy over S snapshots.
+
+    q_mvar (S, n_der) setpoints; losses_kw (S,) from the AC power flow at those setpoints
+    (NaN where it did not converge); vm (S, n_bus) |V| p.u.; status (S,) strings;
+    power_flows (S,) power flows used per snapshot; wall_ms total wall time for the batch;
+    excursion_mvar (S,) the largest amount by which any setpoint exceeds its DER's physical
+    capability at the current P (Algorithm 3 without `safe` can do that); lower_bound_kw
+    (S,) a certified lower bound on achievable losses where the strategy provides one
+    (NaN otherwise); extra: per-strategy diagnostics (arrays of length S or scalars).
+    """
+
+    strategy: str
+    k: float
+    net: Network
+    q_mvar: np.ndarray
+    losses_kw: np.ndarray
+    vm: np.ndarray
+    status: np.ndarray
+    power_flows: np.ndarray
+    wall_ms: float
+    excursion_mvar: np.ndarray
+    lower_bound_kw: np.ndarray | None = None
+    extra: dict = field(default_factory=dict)
+
+    @property
+    def n_snapshots(self) -> int:
+        return self.q_mvar.shape[0]
+
+    @property
+    def vmin(self) -> np.ndarray:
+        return self.vm.min(axis=1)
+
+    @property
+    def vmax(self) -> np.ndarray:
+        return self.vm.max(axis=1)
+
+    def voltage_violation(self) -> np.ndarray:
+        """(S,) largest violation of the case's voltage limits (p.u., 0 when compliant)."""
+        low = np.maximum(self.net.vmin - self.vm, 0.0)
+        high = np.maximum(self.vm - self.net.vmax, 0.0)
+        return np.maximum(low, high).max(axis=1)
+
+    def snapshot_json(self, i: int = 0) -> dict:
+        """The JSON contract of one snapshot (keys stable; units MVAr, kW, p.u., ms)."""
+        ok = np.isfinite(self.losses_kw[i])
+        bus_ids = self.net.bus_ids[self.net.der_bus]
+        out = {
+            "strategy": self.strategy,
+            "k": float(self.k),
+            "status": str(self.status[i]),
+            "losses_kw": float(self.losses_kw[i]) if ok else None,
+            "q_mvar": {str(int(b)): float(q) for b, q in zip(bus_ids, self.q_mvar[i])},
+            "vmin": float(self.vmin[i]) if ok else None,
+            "vmax": float(self.vmax[i]) if ok else None,
+            "power_flows": int(self.power_flows[i]),
+            "excursion_mvar": float(self.excursion_mvar[i]),
+            "wall_ms": float(self.wall_ms),
+        }
+        if self.lower_bound_kw is not None:
+            lb = self.lower_bound_kw[i]
+            out["lower_bound_kw"] = float(lb) if np.isfinite(lb) else None
+        for key, value in self.extra.items():
+            v = value[i] if isinstance(value, np.ndarray) and value.ndim else value
+            out[key] = v.item() if isinstance(v, np.generic) else v
+        return out
