@@ -7,10 +7,16 @@ Units: Q in MVAr (positive = injected), losses in kW, voltages in p.u., times in
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
 import numpy as np
 
+from opfbench.capability import qmax
 from opfbench.network import Network
+from opfbench.powerflow import PowerFlowResult, solve_pf_batch
+
+if TYPE_CHECKING:
+    from opfbench.scenario import Scenario
 
 # Status values. Local rules: "ok" or "pf-diverged". Formulations add their own
 # (e.g. "infeasible", "solver-failed", "fallback-cold", "fallback-socp", "fallback-no-action").
@@ -44,6 +50,29 @@ class StrategyResult:
     excursion_mvar: np.ndarray
     lower_bound_kw: np.ndarray | None = None
     extra: dict = field(default_factory=dict)
+
+    @classmethod
+    def from_setpoints(cls, strategy: str, k: float, scenario: "Scenario", q_mvar: np.ndarray,
+                       wall_ms: float, power_flows: np.ndarray | int = 0,
+                       pf: PowerFlowResult | None = None, status: np.ndarray | None = None,
+                       **kw) -> "StrategyResult":
+        """Evaluate setpoints q_mvar (S, n_der) with the batched AC power flow (unless `pf`
+        already holds that evaluation) and build the record. `power_flows` counts the
+        flows the strategy itself used; the evaluation adds one per snapshot when run here.
+        Snapshots whose flow did not converge get status "pf-diverged" and NaN losses."""
+        q = np.atleast_2d(np.asarray(q_mvar, dtype=float))
+        flows = np.broadcast_to(np.asarray(power_flows, dtype=np.int64), (q.shape[0],)).copy()
+        if pf is None:
+            pf = solve_pf_batch(scenario.net, scenario.injections(q))
+            flows += 1
+        conv = np.asarray(pf.converged, dtype=bool).reshape(-1)
+        st = np.full(q.shape[0], OK, dtype=object) if status is None else np.asarray(status, dtype=object).copy()
+        st[~conv] = PF_DIVERGED
+        losses = np.where(conv, np.atleast_1d(pf.losses_kw), np.nan)
+        physical = qmax(scenario.net.der_kinds, scenario.der_p_mw, scenario.net.der_rating_mw)
+        excursion = np.maximum(np.abs(q) - physical, 0.0).max(axis=1, initial=0.0)
+        return cls(strategy, float(k), scenario.net, q, losses, np.atleast_2d(pf.vm), st, flows,
+                   float(wall_ms), excursion, **kw)
 
     @property
     def n_snapshots(self) -> int:
