@@ -1,0 +1,66 @@
+"""DER capability at every breakpoint (SPEC §2)."""
+
+import numpy as np
+import pytest
+
+from opfbench.capability import dfig_qmax, pv_qmax, pv_qmax_night, qmax, usable_qmax
+from opfbench.errors import InputError
+
+
+@pytest.mark.parametrize(
+    "p, expected",
+    [
+        (0.0, 0.0),  # no power, PF limit gives no Q
+        (0.3, 0.225),  # PF-limited: 0.75·P
+        (0.48, 0.36),  # the crossover at P = 0.8·S̄: 0.75·0.48 = √(0.36−0.2304) = 0.36
+        (0.54, np.sqrt(0.36 - 0.54**2)),  # S-limited above 0.8 p.u.
+        (0.6, 0.0),  # full output: no room left
+    ],
+)
+def test_pv_limit(p, expected):
+    assert pv_qmax(np.array(p), np.array(0.6)) == pytest.approx(expected, abs=1e-12)
+
+
+@pytest.mark.parametrize(
+    "pu, expected_pu",
+    [(0.0, 1.0), (0.2, 1.0), (0.4, 1.0), (0.4 + 1e-9, 1.0), (0.7, -5 / 6 * 0.7 + 4 / 3), (0.8, 2 / 3), (1.0, 0.5)],
+)
+def test_dfig_curve(pu, expected_pu):
+    assert dfig_qmax(np.array(pu * 0.6), np.array(0.6)) == pytest.approx(expected_pu * 0.6, abs=1e-8)
+
+
+def test_dfig_at_rated_power_gives_half_and_paper_fault_trace():
+    # the paper's fault trace at bus 27 shows 0.6 MVAr: DFIG rated 0.6 MW at p ≤ 0.4
+    assert dfig_qmax(np.array(0.2), np.array(0.6)) == pytest.approx(0.6)
+    assert dfig_qmax(np.array(0.6), np.array(0.6)) == pytest.approx(0.3)
+
+
+def test_reserve_scales_and_mixes_kinds():
+    kinds = ("PV", "DFIG")
+    p = np.array([[0.48, 0.48]])
+    full = qmax(kinds, p, np.array([0.6, 0.6]))
+    assert full == pytest.approx(np.array([[0.36, 0.4]]))
+    for k in (0.0, 0.2, 0.4, 0.6, 0.8, 1.0):
+        assert usable_qmax(kinds, p, np.array([0.6, 0.6]), k) == pytest.approx((1 - k) * full)
+
+
+def test_night_variant_is_s_limited_only():
+    assert pv_qmax_night(np.array(0.0), np.array(0.6)) == pytest.approx(0.6)
+    assert pv_qmax(np.array(0.0), np.array(0.6)) == 0.0
+
+
+@pytest.mark.parametrize("k", [-0.1, 1.01, float("nan")])
+def test_k_out_of_range(k):
+    with pytest.raises(InputError, match=r"k must lie in \[0, 1\]"):
+        usable_qmax(("PV",), np.array([0.3]), np.array([0.6]), k)
+
+
+@pytest.mark.parametrize("p", [-0.01, 0.61, float("nan")])
+def test_p_out_of_range(p):
+    with pytest.raises(InputError, match="DER active power"):
+        pv_qmax(np.array([p]), np.array([0.6]))
+
+
+def test_unknown_kind():
+    with pytest.raises(InputError, match="unknown DER kind"):
+        qmax(("BESS",), np.array([0.1]), np.array([0.6]))

@@ -1,0 +1,62 @@
+"""CLI: `cases` and `pf` contracts, errors on stderr with exit code 2."""
+
+import json
+
+import pytest
+
+from opfbench.cli import main
+
+PF_KEYS = {"case", "converged", "iterations", "losses_kw", "vmin", "vmin_bus", "vmax", "vmax_bus"}
+
+
+def _json(capsys, argv):
+    code = main(argv)
+    return code, json.loads(capsys.readouterr().out)
+
+
+def test_pf_json_contract(capsys):
+    code, out = _json(capsys, ["pf", "case33bw", "--json"])
+    assert code == 0 and PF_KEYS <= set(out)
+    assert out["losses_kw"] == pytest.approx(202.68, abs=0.05) and out["vmin_bus"] == 18
+
+
+def test_pf_der_scale_applies_to_every_der(capsys):
+    _, full = _json(capsys, ["pf", "paper33", "--der-scale", "0.8", "--json"])
+    _, none = _json(capsys, ["pf", "paper33", "--der-scale", "0", "--json"])
+    assert full["losses_kw"] == pytest.approx(84.26, abs=0.05)
+    assert none["losses_kw"] == pytest.approx(202.68, abs=0.05)
+
+
+def test_pf_on_a_file_path(capsys, tmp_path):
+    from opfbench.cases import _matpower_file
+
+    code, out = _json(capsys, ["pf", str(_matpower_file("case69")), "--json"])
+    assert code == 0 and out["vmin_bus"] == 65
+
+
+def test_pf_non_convergence_is_a_result(capsys):
+    code, out = _json(capsys, ["pf", "paper33", "--load-scale", "10", "--json"])
+    assert code == 1 and out["converged"] is False and out["losses_kw"] is None
+
+
+@pytest.mark.parametrize(
+    "argv, message",
+    [
+        (["pf", "nope"], "unknown case 'nope'"),
+        (["pf", "paper33", "--der-scale", "1.5"], "--der-scale"),
+        (["pf", "paper33", "--load-scale", "nan"], "--load-scale"),
+        (["pf"], "case"),
+    ],
+)
+def test_bad_arguments_exit_2(capsys, argv, message):
+    assert main(argv) == 2
+    err = capsys.readouterr().err
+    assert message in err and "Traceback" not in err
+
+
+def test_cases_lists_shipped_cases(capsys):
+    code, rows = _json(capsys, ["cases", "--json"])
+    by_name = {r["case"]: r for r in rows}
+    assert code == 0
+    assert by_name["paper33"]["ders"] == 5 and by_name["paper33"]["buses"] == 33
+    assert by_name["paper33-meshed"]["meshed"] and by_name["case69"]["buses"] == 69

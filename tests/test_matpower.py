@@ -1,0 +1,105 @@
+"""MATPOWER reader: the shipped cases parse; every malformed input names what is wrong."""
+
+import numpy as np
+import pytest
+
+from opfbench.cases import CASE_NAMES, load_case
+from opfbench.errors import CaseFormatError, InputError
+from opfbench.matpower import load_case_file, read_matpower
+
+GOOD = """function mpc = tiny
+mpc.version = '2';
+mpc.baseMVA = 10;
+mpc.bus = [
+\t1\t3\t0\t0\t0\t0\t1\t1\t0\t12.66\t1\t1\t1;
+\t2\t1\t100\t60\t0\t0\t1\t1\t0\t12.66\t1\t1.1\t0.9;
+\t3\t1\t90\t40\t0\t0\t1\t1\t0\t12.66\t1\t1.1\t0.9;
+];
+mpc.gen = [
+\t1\t0\t0\t10\t-10\t1\t100\t1\t10\t0\t0\t0\t0\t0\t0\t0\t0\t0\t0\t0\t0;
+];
+mpc.branch = [
+\t1\t2\t0.0922\t0.0470\t0\t0\t0\t0\t0\t0\t1\t-360\t360;
+\t2\t3\t0.4930\t0.2511\t0\t0\t0\t0\t0\t0\t1\t-360\t360;
+];
+mpc.gencost = [
+\t2\t0\t0\t3\t0\t20\t0;
+];
+[PQ, PV, REF, NONE, BUS_I, BUS_TYPE, PD, QD, GS, BS, BUS_AREA, VM, ...
+    VA, BASE_KV, ZONE, VMAX, VMIN, LAM_P, LAM_Q, MU_VMAX, MU_VMIN] = idx_bus;
+[F_BUS, T_BUS, BR_R, BR_X, BR_B, RATE_A, RATE_B, RATE_C, ...
+    TAP, SHIFT, BR_STATUS, PF, QF, PT, QT, MU_SF, MU_ST, ...
+    ANGMIN, ANGMAX, MU_ANGMIN, MU_ANGMAX] = idx_brch;
+Vbase = mpc.bus(1, BASE_KV) * 1e3;      %% in Volts
+Sbase = mpc.baseMVA * 1e6;              %% in VA
+mpc.branch(:, [BR_R BR_X]) = mpc.branch(:, [BR_R BR_X]) / (Vbase^2 / Sbase);
+mpc.bus(:, [PD, QD]) = mpc.bus(:, [PD, QD]) / 1e3;
+"""
+
+
+def _write(tmp_path, text, name="broken.m"):
+    path = tmp_path / name
+    path.write_text(text)
+    return path
+
+
+def test_good_file_applies_ohm_and_kw_conversions(tmp_path):
+    case = read_matpower(_write(tmp_path, GOOD, "tiny.m"))
+    zbase = 12.66**2 / 10
+    assert case.branch[0, 2] == pytest.approx(0.0922 / zbase)
+    assert case.bus[1, 2] == pytest.approx(0.1) and case.bus[1, 3] == pytest.approx(0.06)
+    net = load_case_file(tmp_path / "tiny.m")
+    assert list(net.bus_ids) == [1, 2, 3] and net.slack == 0
+
+
+@pytest.mark.parametrize("name", CASE_NAMES)
+def test_shipped_cases_load(name):
+    net = load_case(name)
+    assert net.n_bus >= 33 and not np.isnan(net.r).any()
+
+
+def test_case141_power_factor_conversion():
+    net = load_case("case141")
+    nz = net.load_p_mw > 0
+    pf = net.load_p_mw[nz] / np.hypot(net.load_p_mw[nz], net.load_q_mvar[nz])
+    assert np.allclose(pf, 0.85)
+
+
+@pytest.mark.parametrize(
+    "mutate, message",
+    [
+        (lambda s: s.replace("mpc.bus = [", "mpc.bux = ["), r"unsupported matrix mpc\.bux"),
+        (lambda s: s.split("mpc.bus = [")[0] + "mpc.gen" + s.split("mpc.gen", 1)[1], r"missing mpc\.bus"),
+        (lambda s: s.replace("mpc.baseMVA = 10;", ""), r"missing mpc\.baseMVA"),
+        (lambda s: s.replace("\t3\t1\t90\t40\t0\t0\t1\t1\t0\t12.66\t1\t1.1\t0.9;", "\t3\t1\t90\t40\t0\t0\t1\t1\t0\t12.66\t1\t1.1;"),
+         r"mpc\.bus row 3 \(line 7\) has 12 columns, row 1 has 13"),
+        (lambda s: s.replace("\t2\t3\t0.4930", "\t2\t7\t0.4930"), r"mpc\.branch row 2: to bus 7 is not a bus"),
+        (lambda s: s.replace("\t2\t1\t100\t60", "\t2\t1\tabc\t60"), r"mpc\.bus row 2 \(line 6\), column 3: non-numeric entry 'abc'"),
+        (lambda s: s + "mpc.bus(:, PD) = 2 * mpc.bus(:, PD);\n", r"line 28: unrecognized code line"),
+        (lambda s: s.replace("\t0.2511\t0\t0\t0\t0\t0\t0\t1\t", "\t0.2511\t0\t0\t0\t0\t0\t0\t0\t"), r"islanded .*: 3"),
+        (lambda s: s.replace("mpc.branch = [", "mpc.branch = [\n\t1\t2\t0.1\t0.1\t0\t0\t0\t0\t0\t0;"), r"mpc\.branch row 2 \(line \d+\) has 13 columns, row 1 has 10"),
+        (lambda s: s.replace("\t1\t3\t0\t0", "\t1\t1\t0\t0"), r"exactly one reference bus"),
+        (lambda s: s.replace("mpc.version = '2';", "mpc.version = '1';"), r"version '2'"),
+        (lambda s: s.replace("];\nmpc.gen", "\nmpc.gen", 1), r"non-numeric entry 'mpc.gen"),
+    ],
+    ids=["unknown-matrix", "missing-bus", "missing-baseMVA", "wrong-column-count", "unknown-bus",
+         "non-numeric", "unrecognized-code", "islanded-bus", "ragged-branch", "no-slack", "version", "unclosed"],
+)
+def test_malformed_case_names_the_problem(tmp_path, mutate, message):
+    path = _write(tmp_path, mutate(GOOD))
+    with pytest.raises(CaseFormatError, match=message) as info:
+        load_case_file(path)
+    assert str(path) in str(info.value)
+
+
+def test_too_few_columns(tmp_path):
+    text = GOOD.replace("\t0\t0\t0\t0\t0\t0\t1\t-360\t360;", ";")  # branch rows keep fbus tbus r x
+    with pytest.raises(CaseFormatError, match=r"mpc\.branch has 4 columns, MATPOWER v2 needs at least 11"):
+        load_case_file(_write(tmp_path, text))
+
+
+def test_missing_file_and_unknown_case(tmp_path):
+    with pytest.raises(CaseFormatError, match="cannot read"):
+        load_case_file(tmp_path / "nope.m")
+    with pytest.raises(InputError, match="unknown case 'nope'"):
+        load_case("nope")

@@ -1,0 +1,128 @@
+"""AC power flow: published case figures, pandapower as oracle, batched vs single."""
+
+import numpy as np
+import pytest
+
+from opfbench.cases import load_case
+from opfbench.powerflow import bus_injections, solve_pf, solve_pf_batch
+from opfbench.errors import InputError
+
+
+def _pf(name, der_mw=0.0, load_scale=1.0):
+    net = load_case(name)
+    return solve_pf(net, bus_injections(net, der_mw, 0.0, load_scale))
+
+
+def test_case33bw_published_figures():
+    r = _pf("case33bw")
+    assert r.converged
+    assert r.losses_kw == pytest.approx(202.68, abs=0.05)
+    vmin, bus = r.extreme_voltage("min")
+    assert vmin == pytest.approx(0.9131, abs=5e-4) and bus == 18
+
+
+def test_case69_published_figures():
+    r = _pf("case69")
+    assert r.converged
+    assert r.losses_kw == pytest.approx(224.99, abs=0.05)
+    vmin, bus = r.extreme_voltage("min")
+    assert vmin == pytest.approx(0.9092, abs=5e-4) and bus == 65
+
+
+def test_paper33_nominal_with_der_at_0_8():
+    r = _pf("paper33", der_mw=0.48)
+    assert r.converged
+    assert r.losses_kw == pytest.approx(84.26, abs=0.05)
+    assert r.extreme_voltage("min")[1] == 33
+
+
+def test_losses_equal_power_balance():
+    net = load_case("paper33")
+    r = solve_pf(net, bus_injections(net, 0.3, 0.1, 1.1))
+    balance = r.slack_s_mva.real + net.der_rating_mw.size * 0.3 - 1.1 * net.load_p_mw.sum()
+    assert r.losses_kw == pytest.approx(balance * 1e3, abs=1e-4)  # NR tolerance 1e-9 p.u. on 10 MVA
+
+
+def test_heavy_load_reports_non_convergence():
+    r = _pf("paper33", load_scale=10.0)
+    assert not r.converged
+    batch = solve_pf_batch(load_case("paper33"), bus_injections(load_case("paper33"), 0.0, 0.0, np.array([1.0, 10.0])))
+    assert list(batch.converged) == [True, False]
+
+
+def test_nan_injection_is_a_clear_error():
+    net = load_case("paper33")
+    with pytest.raises(InputError, match="NaN"):
+        bus_injections(net, np.array([0.1, np.nan, 0.1, 0.1, 0.1]))
+
+
+def _random_points(name, n, seed):
+    net = load_case(name)
+    rng = np.random.default_rng(seed)
+    for _ in range(n):
+        yield net, rng.uniform(0.2, 1.6), rng.uniform(0, 1, len(net.ders)) * net.der_rating_mw, \
+            rng.uniform(-0.5, 0.5, len(net.ders)) * net.der_rating_mw
+
+
+@pytest.mark.parametrize("name", ["paper33", "case69-der"])
+def test_agrees_with_pandapower(name):
+    from pandapower_oracle import pandapower_pf
+
+    points = list(_random_points(name, 20, seed=7))
+    for net, ls, p, q in points:
+        ours = solve_pf(net, bus_injections(net, p, q, ls))
+        vm, losses, _ = pandapower_pf(net, ls, p, q)
+        assert ours.converged
+        assert np.max(np.abs(ours.vm - vm)) < 1e-6
+        assert abs(ours.losses_kw - losses) < 1e-3
+
+
+@pytest.mark.parametrize("name", ["paper33", "case69-der", "paper33-meshed", "case141-der"])
+def test_batched_agrees_with_single(name):
+    points = list(_random_points(name, 40, seed=3))
+    net = points[0][0]
+    s = np.array([bus_injections(net, p, q, ls) for _, ls, p, q in points])
+    batch = solve_pf_batch(net, s)
+    assert batch.converged.all()
+    for k, row in enumerate(s):
+        single = solve_pf(net, row)
+        assert np.max(np.abs(batch.v[k] - single.v)) < 1e-9
+        assert abs(batch.losses_kw[k] - single.losses_kw) < 1e-5  # NR stops at 1e-9 p.u. = 1e-5 kW
+
+
+def test_case_with_pv_bus_and_tap_matches_pandapower(tmp_path):
+    """A meshed-free 4-bus case with a voltage-controlled bus and an off-nominal tap."""
+    from pandapower_oracle import pandapower_pf
+    from opfbench.matpower import load_case_file
+
+    path = tmp_path / "case4pv.m"
+    path.write_text(CASE4_PV)
+    net = load_case_file(path)
+    ours = solve_pf(net, bus_injections(net))
+    vm, losses, _ = pandapower_pf(net, 1.0, np.zeros(0), np.zeros(0))
+    assert ours.converged
+    assert np.max(np.abs(ours.vm - vm)) < 1e-6
+    assert abs(ours.losses_kw - losses) < 1e-3
+    assert ours.vm[net.index_of(400)] == pytest.approx(1.05)
+    assert solve_pf_batch(net, np.array([bus_injections(net)] * 2)).converged.all()
+
+
+CASE4_PV = """function mpc = case4pv
+mpc.version = '2';
+mpc.baseMVA = 1;
+mpc.bus = [
+\t1\t3\t0\t0\t0\t0\t1\t1\t0\t12.5\t1\t1.1\t0.9;
+\t2\t1\t0.4\t0.2\t0\t0\t1\t1\t0\t12.5\t1\t1.1\t0.9;
+\t3\t1\t0.4\t0.2\t0\t0\t1\t1\t0\t12.5\t1\t1.1\t0.9;
+\t400\t2\t0.4\t0.2\t0\t0\t1\t1\t0\t12.5\t1\t1.1\t0.9;
+];
+mpc.gen = [
+\t1\t0\t0\t10\t-10\t1.0\t100\t1\t10\t0;
+\t400\t0.2\t0\t10\t-10\t1.05\t100\t1\t10\t0;
+];
+mpc.branch = [
+\t2\t3\t0.003\t0.006\t0\t0\t0\t0\t0\t0\t1;
+\t1\t2\t0.003\t0.006\t0\t0\t0\t0\t0\t0\t1;
+\t400\t1\t0.003\t0.006\t0\t0\t0\t0\t1.025\t0\t1;
+];
+"""
