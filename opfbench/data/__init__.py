@@ -1,0 +1,1 @@
+"""Embedded public time series and the profiles built from them."""
