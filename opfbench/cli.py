@@ -10,7 +10,7 @@ import sys
 
 from opfbench.errors import OpfbenchError
 
-COMMANDS = ("cases", "pf", "snapshot")
+COMMANDS = ("cases", "pf", "snapshot", "data")
 
 
 def build_parser() -> argparse.ArgumentParser:
