@@ -53,10 +53,14 @@ def test_forecast_excursion_and_safe(capsys: pytest.CaptureFixture) -> None:
     assert any(loose["q_mvar"][b] > 0.135 + 1e-6 for b in pv)
 
 
-def test_text_output(capsys: pytest.CaptureFixture) -> None:
+def test_text_output_shows_lfma_diagnostics(capsys: pytest.CaptureFixture) -> None:
     assert main(["snapshot", "paper33", "--strategy", "lfma"]) == 0
     out = capsys.readouterr().out
-    assert "lfma" in out and "power flows   4" in out
+    assert "lfma" in out and "power flows   4" in out and "upstream disagreements: []" in out
+    assert main(["snapshot", "paper33-meshed", "--strategy", "lfma", "--json"]) == 0
+    buses = json.loads(capsys.readouterr().out)["upstream_disagreements"]
+    assert main(["snapshot", "paper33-meshed", "--strategy", "lfma"]) == 0
+    assert f"upstream disagreements: {buses}" in capsys.readouterr().out
 
 
 @pytest.mark.parametrize("args,message", [
