@@ -63,4 +63,6 @@ def run(args: argparse.Namespace) -> int:
         print(f"  lower bound   {out['lower_bound_kw']:.3f} kW")
     print("  Q setpoints   " + ", ".join(f"bus {b}: {q:+.4f}" for b, q in out["q_mvar"].items()) + " MVAr")
     print(f"  power flows   {out['power_flows']}   excursion {out['excursion_mvar']:.4f} MVAr   wall {out['wall_ms']:.2f} ms")
+    for key in result.extra:  # strategy diagnostics, e.g. LFMA's upstream disagreements
+        print(f"  {key.replace('_', ' ')}: {out[key]}")
     return 0

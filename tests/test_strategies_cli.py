@@ -1,0 +1,83 @@
+"""`opfbench snapshot CASE --strategy {no-action,llma,lfma}` through `opfbench.cli.main`."""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+
+from opfbench.cli import main
+
+KEYS = {"strategy", "k", "status", "losses_kw", "q_mvar", "vmin", "vmax", "power_flows", "excursion_mvar", "wall_ms"}
+
+
+def snapshot_json(capsys: pytest.CaptureFixture, *args: str) -> dict:
+    assert main(["snapshot", "paper33", *args, "--json"]) == 0
+    return json.loads(capsys.readouterr().out)
+
+
+@pytest.mark.parametrize("strategy,flows", [("no-action", 1), ("llma", 1), ("lfma", 4)])
+def test_json_contract(capsys: pytest.CaptureFixture, strategy: str, flows: int) -> None:
+    out = snapshot_json(capsys, "--strategy", strategy, "--k", "0.2")
+    assert KEYS <= set(out)
+    assert out["strategy"] == strategy and out["k"] == 0.2 and out["status"] == "ok"
+    assert out["power_flows"] == flows
+    assert set(out["q_mvar"]) == {"10", "16", "19", "29", "27"}  # the paper's DER buses
+    assert 0.9 < out["vmin"] <= out["vmax"] <= 1.1 and out["losses_kw"] > 0
+    assert out["excursion_mvar"] == 0.0
+    if strategy == "no-action":
+        assert all(q == 0.0 for q in out["q_mvar"].values())
+    if strategy == "lfma":
+        assert out["upstream_disagreements"] == [] and out["diverged_step"] == 0
+
+
+def test_k_one_equals_no_action(capsys: pytest.CaptureFixture) -> None:
+    none = snapshot_json(capsys, "--strategy", "no-action")
+    for strategy in ("llma", "lfma"):
+        out = snapshot_json(capsys, "--strategy", strategy, "--k", "1")
+        assert all(q == 0.0 for q in out["q_mvar"].values())
+        assert out["losses_kw"] == none["losses_kw"]
+
+
+def test_forecast_excursion_and_safe(capsys: pytest.CaptureFixture) -> None:
+    # P^C = 0.3·P̄, P^F = 0.5·P̄ (P̄ = 0.6 MW): the PV limit rises from 0.75·0.18 = 0.135 to
+    # 0.75·0.3 = 0.225 MVAr; the DFIG (bus 27) stays at 1.0·P̄ = 0.6 MVAr for p ≤ 0.4.
+    args = ["--strategy", "lfma", "--der-scale", "0.3", "--forecast-der-scale", "0.5"]
+    loose, safe = snapshot_json(capsys, *args), snapshot_json(capsys, *args, "--safe")
+    plain = snapshot_json(capsys, "--strategy", "lfma", "--der-scale", "0.3")
+    assert loose["excursion_mvar"] > 0 and safe["excursion_mvar"] == 0.0
+    assert safe["q_mvar"] == plain["q_mvar"]  # here the safe cap is exactly the plain limit (k = 0)
+    pv = ("10", "16", "19", "29")
+    assert all(abs(loose["q_mvar"][b]) <= 0.225 + 1e-12 for b in pv)
+    assert all(abs(safe["q_mvar"][b]) <= 0.135 + 1e-12 for b in pv)
+    assert any(loose["q_mvar"][b] > 0.135 + 1e-6 for b in pv)
+
+
+def test_text_output_shows_lfma_diagnostics(capsys: pytest.CaptureFixture) -> None:
+    assert main(["snapshot", "paper33", "--strategy", "lfma"]) == 0
+    out = capsys.readouterr().out
+    assert "lfma" in out and "power flows   4" in out and "upstream disagreements: []" in out
+    assert main(["snapshot", "paper33-meshed", "--strategy", "lfma", "--json"]) == 0
+    buses = json.loads(capsys.readouterr().out)["upstream_disagreements"]
+    assert main(["snapshot", "paper33-meshed", "--strategy", "lfma"]) == 0
+    assert f"upstream disagreements: {buses}" in capsys.readouterr().out
+
+
+@pytest.mark.parametrize("args,message", [
+    (["--strategy", "llma", "--k", "1.5"], "reserve coefficient k must lie in [0, 1]"),
+    (["--strategy", "no-action", "--k", "2"], "reserve coefficient k must lie in [0, 1]"),
+    (["--strategy", "lfma", "--k", "-0.1"], "--k"),
+    (["--strategy", "lfma", "--k", "nan"], "--k"),
+    (["--strategy", "lfma", "--der-scale", "1.5"], "der_scale"),
+    (["--strategy", "llma", "--fallback", "chain"], "--fallback"),
+    (["--strategy", "teleport"], "invalid choice"),
+])
+def test_bad_arguments_exit_2(capsys: pytest.CaptureFixture, args: list[str], message: str) -> None:
+    assert main(["snapshot", "paper33", *args]) == 2
+    captured = capsys.readouterr()
+    assert message in captured.err and captured.out == ""
+
+
+def test_unknown_case_exit_2(capsys: pytest.CaptureFixture) -> None:
+    assert main(["snapshot", "nowhere33", "--strategy", "lfma"]) == 2
+    assert "unknown case" in capsys.readouterr().err
