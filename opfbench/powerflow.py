@@ -20,6 +20,7 @@ from dataclasses import dataclass
 from functools import cached_property, lru_cache
 
 import numpy as np
+from threadpoolctl import ThreadpoolController
 
 from opfbench.errors import InputError
 from opfbench.network import Network
@@ -29,6 +30,9 @@ SWEEP_TOLERANCE = 1e-10  # p.u. largest voltage update (batched fixed point)
 MISMATCH_CHECK = 1e-8  # p.u.; a batched snapshot whose mismatch exceeds this goes to NR
 MAX_NR_ITER = 30
 MAX_SWEEP_ITER = 200
+# The batched mat-muls are small (n_bus² × S); multi-threaded BLAS only adds
+# synchronisation there, and is many times slower when the other core is busy.
+_BLAS = ThreadpoolController()
 
 
 @dataclass(frozen=True, eq=False)
@@ -86,13 +90,6 @@ class PowerFlowResult:
         return np.take_along_axis(vm, np.expand_dims(k, -1), -1).squeeze(-1), self.net.bus_ids[k]
 
 
-def der_incidence(net: Network) -> np.ndarray:
-    """(n_der, n_bus) 0/1 matrix mapping DER quantities onto their buses."""
-    c = np.zeros((len(net.ders), net.n_bus))
-    c[np.arange(len(net.ders)), net.der_bus] = 1.0
-    return c
-
-
 def bus_injections(
     net: Network,
     der_p_mw: np.ndarray | float = 0.0,
@@ -117,7 +114,11 @@ def bus_injections(
     load = net.load_p_mw + 1j * net.load_q_mvar
     fixed = np.zeros(net.n_bus, dtype=complex)
     np.add.at(fixed, net.gen_bus, net.gen_p_mw + 1j * net.gen_q_mvar)
-    return fixed - scale[..., None] * load + der_s @ der_incidence(net)
+    base = fixed - scale[..., None] * load
+    lead = np.broadcast_shapes(base.shape[:-1], der_s.shape[:-1])
+    out = np.broadcast_to(base, lead + (net.n_bus,)).copy()
+    np.add.at(out, (..., net.der_bus), np.broadcast_to(der_s, lead + der_s.shape[-1:]))
+    return out
 
 
 def _check_injections(net: Network, s_mw: np.ndarray) -> np.ndarray:
@@ -220,6 +221,7 @@ class _ZbusFactor:
     z: np.ndarray  # inverse of Y[keep, keep]
     v_noload: np.ndarray  # -Z·Y[keep, slack]·V_slack
     y_keep_t: np.ndarray  # Y[keep, :].T, for the final mismatch check
+    v_noload_full: np.ndarray  # (n_bus,) no-load voltages including the slack
 
 
 @lru_cache(maxsize=64)
@@ -227,7 +229,10 @@ def _zbus(net: Network) -> _ZbusFactor:
     keep = np.flatnonzero(np.arange(net.n_bus) != net.slack)
     y = net.ybus
     z = np.linalg.inv(y[np.ix_(keep, keep)])
-    return _ZbusFactor(keep, z, -z @ y[keep, net.slack] * net.v_slack, np.ascontiguousarray(y[keep].T))
+    v_noload = -z @ y[keep, net.slack] * net.v_slack
+    full = np.full(net.n_bus, net.v_slack, dtype=complex)
+    full[keep] = v_noload
+    return _ZbusFactor(keep, z, v_noload, np.ascontiguousarray(y[keep].T), full)
 
 
 @dataclass
@@ -237,14 +242,17 @@ class _Sweep:
     settled: np.ndarray  # (S,) bool: update fell below tol
 
 
-def _fixed_point(fac: _ZbusFactor, s_conj: np.ndarray, tol: float, max_iter: int) -> _Sweep:
-    """Iterate V ← Z·conj(S/V) + V₀ on all columns of `s_conj` (conj(S), shape (m, S)).
+def _fixed_point(fac: _ZbusFactor, s_conj: np.ndarray, tol: float, max_iter: int,
+                 v_start: np.ndarray | None) -> _Sweep:
+    """Iterate V ← Z·conj(S/V) + V₀ on all columns of `s_conj` (conj(S), shape (m, S)),
+    starting from `v_start` (m, S) or, without it, from the no-load voltages.
 
     Written with preallocated buffers and in-place ufuncs: at 1440 snapshots the
     temporaries of the plain expression cost more than the mat-mul itself.
     """
     m, n_snap = s_conj.shape
-    out = _Sweep(np.repeat(fac.v_noload[:, None], n_snap, axis=1),
+    start = np.repeat(fac.v_noload[:, None], n_snap, axis=1) if v_start is None else v_start.astype(complex)
+    out = _Sweep(start,
                  np.zeros(n_snap, dtype=np.int64), np.zeros(n_snap, dtype=bool))
     active = np.arange(n_snap)
     v, s_act = out.v.copy(), s_conj
@@ -283,9 +291,11 @@ def _fixed_point(fac: _ZbusFactor, s_conj: np.ndarray, tol: float, max_iter: int
     return out
 
 
-def solve_pf_batch(net: Network, s_mw: np.ndarray, tol: float = SWEEP_TOLERANCE,
-                   max_iter: int = MAX_SWEEP_ITER) -> PowerFlowResult:
-    """Power flow for many snapshots at once; `s_mw` shaped (S, n_bus) complex MW.
+def solve_pf_batch(net: Network, s_mw: np.ndarray, v0: np.ndarray | None = None,
+                   tol: float = SWEEP_TOLERANCE, max_iter: int = MAX_SWEEP_ITER) -> PowerFlowResult:
+    """Power flow for many snapshots at once; `s_mw` shaped (S, n_bus) complex MW; `v0`
+    (S, n_bus) complex p.u. an optional warm start (e.g. the previous solution of a
+    nearby operating point; non-finite rows fall back to the no-load start).
 
     Returns a result with arrays shaped (S, n_bus) and per-snapshot `converged` and
     `iterations`. A snapshot counts as solved when its fixed-point update is below `tol`
@@ -300,14 +310,20 @@ def solve_pf_batch(net: Network, s_mw: np.ndarray, tol: float = SWEEP_TOLERANCE,
         return PowerFlowResult(net, np.array([r.v for r in results]),
                                np.array([r.converged for r in results]), np.array([r.iterations for r in results]))
     fac = _zbus(net)
-    sweep = _fixed_point(fac, np.conj(s[:, fac.keep]).T, tol, max_iter)
+    with _BLAS.limit(limits=1, user_api="blas"):
+        start = None
+        if v0 is not None:
+            v0 = np.asarray(v0, dtype=complex).reshape(n_snap, net.n_bus)
+            start = np.where(np.isfinite(v0).all(axis=1, keepdims=True) & (np.abs(v0) > 0).all(axis=1, keepdims=True),
+                             v0, fac.v_noload_full)[:, fac.keep].T.copy()
+        sweep = _fixed_point(fac, np.conj(s[:, fac.keep]).T, tol, max_iter, start)
+        v = np.empty((n_snap, net.n_bus), dtype=complex)
+        v[:, fac.keep] = sweep.v.T
+        v[:, net.slack] = net.v_slack
+        # Certify: the power-flow equations themselves must hold, not only the fixed point.
+        with np.errstate(all="ignore"):
+            mismatch = np.abs(v[:, fac.keep] * np.conj(v @ fac.y_keep_t) - s[:, fac.keep]).max(axis=1)
     iterations, settled = sweep.iterations, sweep.settled
-    v = np.empty((n_snap, net.n_bus), dtype=complex)
-    v[:, fac.keep] = sweep.v.T
-    v[:, net.slack] = net.v_slack
-    # Certify: the power-flow equations themselves must hold, not only the fixed point.
-    with np.errstate(all="ignore"):
-        mismatch = np.abs(v[:, fac.keep] * np.conj(v @ fac.y_keep_t) - s[:, fac.keep]).max(axis=1)
     settled &= mismatch < MISMATCH_CHECK
     converged = settled.copy()
     for k in np.flatnonzero(~settled):

@@ -70,6 +70,25 @@ class Scenario:
         """Reactive load at each DER's own bus (S, n_der) MVAr — what LLMA measures."""
         return self.load_scale[:, None] * self.net.load_q_mvar[self.net.der_bus][None, :]
 
+    @classmethod
+    def from_profiles(cls, net: Network, load_pu: np.ndarray, pv_pu: np.ndarray, wind_pu: np.ndarray,
+                      forecast_pv_pu: np.ndarray | None = None,
+                      forecast_wind_pu: np.ndarray | None = None) -> "Scenario":
+        """Snapshots from per-unit profiles (S,): loads follow `load_pu` × nominal load;
+        PV units `pv_pu` × rating; DFIG units `wind_pu` × rating (the mapping rule of
+        `opfbench.data.profiles`). Forecast profiles, when given, set P^F the same way."""
+        is_pv = np.array([kind == "PV" for kind in net.der_kinds])
+
+        def der_mw(pv: np.ndarray, wind: np.ndarray) -> np.ndarray:
+            pv, wind = np.asarray(pv, dtype=float), np.asarray(wind, dtype=float)
+            return np.where(is_pv, pv[:, None], wind[:, None]) * net.der_rating_mw
+
+        forecast = None
+        if forecast_pv_pu is not None or forecast_wind_pu is not None:
+            forecast = der_mw(pv_pu if forecast_pv_pu is None else forecast_pv_pu,
+                              wind_pu if forecast_wind_pu is None else forecast_wind_pu)
+        return cls(net, np.asarray(load_pu, dtype=float), der_mw(pv_pu, wind_pu), forecast)
+
     def take(self, rows: np.ndarray | slice) -> "Scenario":
         """The sub-scenario of some snapshots."""
         fc = None if self.der_p_forecast_mw is None else self.der_p_forecast_mw[rows]

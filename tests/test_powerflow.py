@@ -90,6 +90,20 @@ def test_batched_agrees_with_single(name):
         assert abs(batch.losses_kw[k] - single.losses_kw) < 1e-5  # NR stops at 1e-9 p.u. = 1e-5 kW
 
 
+def test_batched_warm_start_converges_to_the_same_point_in_fewer_iterations():
+    net = load_case("paper33")
+    s = bus_injections(net, np.array([[0.3] * 5, [0.5] * 5]), np.array([[0.1] * 5, [-0.1] * 5]), np.array([1.0, 0.8]))
+    cold = solve_pf_batch(net, s)
+    near = bus_injections(net, np.array([[0.31] * 5, [0.5] * 5]), np.array([[0.1] * 5, [-0.1] * 5]), np.array([1.0, 0.8]))
+    start = cold.v.copy()
+    start[1] = np.nan  # an unusable start row falls back to the no-load start
+    warm = solve_pf_batch(net, near, v0=start)
+    reference = solve_pf_batch(net, near)
+    assert warm.converged.all()
+    assert np.abs(warm.v - reference.v).max() < 1e-9
+    assert warm.iterations[0] < reference.iterations[0] and warm.iterations[1] == reference.iterations[1]
+
+
 def test_case_with_pv_bus_and_tap_matches_pandapower(tmp_path):
     """A meshed-free 4-bus case with a voltage-controlled bus and an off-nominal tap."""
     from pandapower_oracle import pandapower_pf

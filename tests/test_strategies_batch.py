@@ -8,6 +8,7 @@ import pytest
 
 import opfbench.strategies.local as local
 from opfbench.bench.local import bench_local
+from opfbench.bench.profiles import paper_day_scenario
 from opfbench.cases import load_case
 from opfbench.errors import InputError
 from opfbench.powerflow import PowerFlowResult, solve_pf_batch
@@ -41,9 +42,9 @@ def test_lfma_uses_one_batched_flow_per_step_and_shows_intermediate_divergence(m
     clean = local.lfma_trace(scenario, 0.0)
     calls: list[int] = []
 
-    def flaky(net, s_mw):  # the grid "fails" snapshot 1 at the answer to step 3
+    def flaky(net, s_mw, v0=None):  # the grid "fails" snapshot 1 at the answer to step 3
         calls.append(s_mw.shape[0])
-        pf = solve_pf_batch(net, s_mw)
+        pf = solve_pf_batch(net, s_mw, v0)
         if len(calls) == 3:
             converged = pf.converged.copy()
             converged[1] = False
@@ -89,7 +90,7 @@ def test_loss_table_matches_direct_runs() -> None:
 
 
 def test_bench_local_runs_a_small_day() -> None:
-    out = bench_local(n=24, repeats=1, loop_sample=2)
+    out = bench_local(paper_day_scenario("paper33").take(slice(600, 624)), repeats=1, loop_sample=2)
     assert out["snapshots"] == 24
     rules = out["rules"]
     assert {r["ok"] for r in rules.values()} == {24}

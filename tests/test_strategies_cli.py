@@ -36,7 +36,7 @@ def test_k_one_equals_no_action(capsys: pytest.CaptureFixture) -> None:
     for strategy in ("llma", "lfma"):
         out = snapshot_json(capsys, "--strategy", strategy, "--k", "1")
         assert all(q == 0.0 for q in out["q_mvar"].values())
-        assert out["losses_kw"] == none["losses_kw"]
+        assert out["losses_kw"] == pytest.approx(none["losses_kw"], abs=1e-6)  # LFMA flows start warm
 
 
 def test_forecast_excursion_and_safe(capsys: pytest.CaptureFixture) -> None:

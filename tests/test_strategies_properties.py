@@ -84,7 +84,7 @@ def test_k_one_is_exactly_no_action(scenario: Scenario) -> None:
         for safe in (False, True):
             res = rule(scenario, 1.0, safe=safe)
             assert np.all(res.q_mvar == 0.0)
-            np.testing.assert_array_equal(res.losses_kw, reference.losses_kw)
+            np.testing.assert_allclose(res.losses_kw, reference.losses_kw, rtol=0, atol=1e-6)  # warm-started flows
 
 
 def paper33_scenario(seed: int, n: int = 200, forecast: bool = False, case: str = "paper33") -> Scenario:

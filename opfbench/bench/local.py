@@ -1,40 +1,18 @@
-"""Sub-benchmark: the local rules over a day of 1-min snapshots of `paper33`, batched.
+"""Sub-benchmark: the local rules over the paper day (1440 × 1 min) on `paper33`, each
+rule run as one batch, and LFMA run snapshot by snapshot on a sample for comparison.
 
-The day is synthetic and deterministic (seeded): loads follow a two-peak daily shape,
-PV a clear-sky bell from 06:00 to 18:00 dented by random clouds, the DFIG a smooth
-random walk. It stands in for the real series until the data pipeline provides them;
-only timing and the bookkeeping (statuses, power-flow counts) are the point here.
-
-    python -m opfbench.bench.local [--n 1440] [--repeats 3]
+    python -m opfbench.bench local [--json]
 """
 
 from __future__ import annotations
 
-import argparse
-import json
 import time
 
 import numpy as np
 
-from opfbench.cases import load_case
+from opfbench.bench.profiles import paper_day_scenario
 from opfbench.registry import LOCAL_RULES, run_strategy
 from opfbench.scenario import Scenario
-
-SEED = 20240601
-
-
-def daily_scenario(case: str = "paper33", n: int = 1440, seed: int = SEED) -> Scenario:
-    """n equally spaced snapshots over 24 h (n = 1440: one per minute)."""
-    net = load_case(case)
-    rng = np.random.default_rng(seed)
-    hours = np.arange(n) * 24.0 / n
-    load = 0.55 + 0.30 * np.exp(-((hours - 8.0) / 2.0) ** 2) + 0.45 * np.exp(-((hours - 19.0) / 2.5) ** 2)
-    sun = np.clip(np.sin(np.pi * (hours - 6.0) / 12.0), 0.0, None)
-    clouds = 1.0 - 0.5 * np.clip(np.convolve(rng.standard_normal(n), np.ones(15) / 15, "same"), 0.0, 1.0)
-    wind = 0.5 + 0.4 * np.sin(np.cumsum(rng.normal(0.0, 0.02, n)) + 1.0)
-    kinds = np.array(net.der_kinds)
-    per_unit = np.where(kinds == "PV", (sun * clouds)[:, None], wind[:, None])
-    return Scenario(net, load, per_unit * net.der_rating_mw)
 
 
 def _best_ms(fn, repeats: int) -> tuple[float, object]:
@@ -46,36 +24,34 @@ def _best_ms(fn, repeats: int) -> tuple[float, object]:
     return best, out
 
 
-def bench_local(n: int = 1440, k: float = 0.4, repeats: int = 3, loop_sample: int = 60) -> dict:
-    """Best-of-`repeats` wall time of each local rule over `n` snapshots in one batch, and
-    for comparison LFMA run snapshot by snapshot on the first `loop_sample` of them
-    (extrapolated to n). Energy losses assume the n snapshots span 24 h."""
-    scenario = daily_scenario(n=n)
+def bench_local(scenario: Scenario, k: float = 0.4, repeats: int = 3, loop_sample: int = 60) -> dict:
+    """Best-of-`repeats` wall time of each local rule over all snapshots of `scenario` in
+    one batch, and LFMA run one snapshot at a time on the first `loop_sample` snapshots
+    (extrapolated). Energy assumes the snapshots are equally spaced over 24 h."""
+    n = scenario.n_snapshots
     out: dict = {"case": scenario.net.name, "snapshots": n, "k": k, "repeats": repeats, "rules": {}}
     for name in LOCAL_RULES:
         ms, res = _best_ms(lambda: run_strategy(name, scenario, k), repeats)
-        ok = res.status == "ok"
         out["rules"][name] = {
-            "wall_ms": round(ms, 2), "ms_per_snapshot": round(ms / n, 4),
-            "power_flows_per_snapshot": int(res.power_flows.max()), "ok": int(ok.sum()),
-            "energy_losses_kwh": round(float(np.nansum(res.losses_kw) * 24.0 / n), 3),
+            "wall_ms": ms, "ms_per_snapshot": ms / n,
+            "power_flows_per_snapshot": int(res.power_flows.max()), "ok": int((res.status == "ok").sum()),
+            "energy_losses_kwh": float(np.nansum(res.losses_kw) * 24.0 / n),
         }
     m = min(loop_sample, n)
-    if m:
-        ms, _ = _best_ms(lambda: [run_strategy("lfma", scenario.take(slice(i, i + 1)), k) for i in range(m)], 1)
-        out["lfma_one_by_one_ms_extrapolated"] = round(ms * n / m, 1)
+    ms, _ = _best_ms(lambda: [run_strategy("lfma", scenario.take(slice(i, i + 1)), k) for i in range(m)], 1)
+    out["lfma_one_by_one_ms_extrapolated"] = ms * n / m
+    out["ratio_batch_vs_one_by_one"] = out["lfma_one_by_one_ms_extrapolated"] / out["rules"]["lfma"]["wall_ms"]
     return out
 
 
-def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--n", type=int, default=1440)
-    parser.add_argument("--k", type=float, default=0.4)
-    parser.add_argument("--repeats", type=int, default=3)
-    args = parser.parse_args(argv)
-    print(json.dumps(bench_local(args.n, args.k, args.repeats), indent=2))
-    return 0
+def run() -> dict:
+    return bench_local(paper_day_scenario("paper33"))
 
 
-if __name__ == "__main__":
-    raise SystemExit(main())
+def print_table(f: dict) -> None:
+    print(f"local rules on {f['case']}, {f['snapshots']} snapshots of the paper day, k = {f['k']}")
+    for name, r in f["rules"].items():
+        print(f"  {name:<10} {r['wall_ms']:8.1f} ms  ({r['ms_per_snapshot']:.3f} ms/snapshot, "
+              f"{r['power_flows_per_snapshot']} flows/snapshot, {r['ok']} ok, {r['energy_losses_kwh']:.2f} kWh)")
+    print(f"  LFMA one snapshot at a time (extrapolated): {f['lfma_one_by_one_ms_extrapolated']:.0f} ms "
+          f"→ batching is {f['ratio_batch_vs_one_by_one']:.1f}× faster")

@@ -1,5 +1,5 @@
-"""Power-flow benchmark on `paper33`: single NR solve, the batched solver on 1440
-snapshots, and the same 1440 snapshots through pandapower `runpp` (a loop, as a user
+"""Power-flow benchmark on `paper33`: single NR solve, the batched solver on the 1440
+snapshots of the paper day (DER Q = 0), and the same 1440 snapshots through pandapower `runpp` (a loop, as a user
 of pandapower would run a time series) and power-grid-model's batch calculation."""
 
 from __future__ import annotations
@@ -10,12 +10,10 @@ from statistics import median
 
 import numpy as np
 
-from opfbench.bench.profiles import synthetic_day
-from opfbench.cases import load_case
+from opfbench.bench.profiles import paper_day_scenario
 from opfbench.network import Network
 from opfbench.powerflow import bus_injections, solve_pf, solve_pf_batch
 
-N_SNAPSHOTS = 1440
 NUMBA = importlib.util.find_spec("numba") is not None  # pandapower's fast path, when installed
 
 
@@ -27,11 +25,6 @@ def _best_ms(fn, repeat: int) -> float:
         fn()
         times.append((time.perf_counter() - t0) * 1e3)
     return median(times)
-
-
-def _snapshots(net: Network) -> np.ndarray:
-    load, der_pu = synthetic_day(N_SNAPSHOTS, len(net.ders))
-    return bus_injections(net, der_pu * net.der_rating_mw, 0.0, load)
 
 
 def _pandapower_loop_ms(net: Network, s_mw: np.ndarray) -> tuple[float, float]:
@@ -101,9 +94,10 @@ def _pgm_batch_ms(net: Network, s_mw: np.ndarray) -> tuple[float | None, float |
 
 
 def run() -> dict:
-    net = load_case("paper33")
+    day = paper_day_scenario("paper33")
+    net = day.net
     s_one = bus_injections(net, 0.8 * net.der_rating_mw)
-    s_day = _snapshots(net)
+    s_day = day.injections(0.0)
     solve_pf_batch(net, s_day)  # factor once, warm caches
     single_ms = _best_ms(lambda: solve_pf(net, s_one), 300)
     batch_ms = _best_ms(lambda: solve_pf_batch(net, s_day), 30)
@@ -112,7 +106,7 @@ def run() -> dict:
     pgm_ms, pgm_dv = _pgm_batch_ms(net, s_day)
     return {
         "case": net.name,
-        "snapshots": N_SNAPSHOTS,
+        "snapshots": day.n_snapshots,
         "single_ms": single_ms,
         "batch_1440_ms": batch_ms,
         "batch_converged": int(batch.converged.sum()),
@@ -128,7 +122,7 @@ def run() -> dict:
 
 
 def print_table(f: dict) -> None:
-    print(f"power flow on {f['case']}, {f['snapshots']} snapshots of a synthetic day")
+    print(f"power flow on {f['case']}, {f['snapshots']} snapshots of the paper day")
     print(f"  single NR solve              {f['single_ms']:.3f} ms")
     print(f"  batched solver, 1440 steps   {f['batch_1440_ms']:.2f} ms  ({f['batch_converged']} converged, ≤ {f['batch_max_iterations']} iterations)")
     numba = "with numba" if f["pandapower_numba"] else "without numba"

@@ -126,7 +126,7 @@ def lfma_trace(scenario: Scenario, k: float = 0.0, safe: bool = False) -> LfmaTr
 
     def answer(q: np.ndarray) -> np.ndarray:
         """Apply setpoints q, solve the grid, record divergence, return the meter readings."""
-        pf = solve_pf_batch(net, scenario.injections(q))
+        pf = solve_pf_batch(net, scenario.injections(q), v0=flows[-1].v if flows else None)
         flows.append(pf)
         diverged[(diverged == 0) & ~np.asarray(pf.converged)] = len(flows)
         return meters.outflow_q(pf)
