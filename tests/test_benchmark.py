@@ -1,0 +1,56 @@
+"""The benchmark runner on the paper day (local rules only, to stay fast)."""
+
+import numpy as np
+import pytest
+
+from opfbench.benchmark import BenchmarkConfig, day_scenarios, run_benchmark, summarize
+from opfbench.errors import InputError
+
+
+@pytest.fixture(scope="module")
+def table():
+    config = BenchmarkConfig(strategies=("no-action", "llma", "lfma"), ks=(0.0, 0.8), night="20:00-05:00")
+    return run_benchmark(config, progress=lambda msg: None)
+
+
+def test_table_is_tidy_and_complete(table):
+    assert len(table) == 3 * 2 * 2 * 2 * 1440  # strategies × k × night modes × forecast × steps
+    assert (table.status == "ok").all()
+    assert table.groupby(["strategy", "k", "night_mode", "forecast"]).size().eq(1440).all()
+
+
+def test_summary_orders_rules_and_reserve(table):
+    s = summarize(table).set_index(["strategy", "k", "night_mode", "forecast"])
+    for k in (0.0, 0.8):
+        row = lambda name: s.loc[(name, k, "connected", "off")]  # noqa: E731
+        assert row("lfma").energy_kwh < row("llma").energy_kwh < row("no-action").energy_kwh
+        assert row("no-action").savings_pct == pytest.approx(0.0)
+    assert s.loc[("lfma", 0.0, "connected", "off")].energy_kwh < s.loc[("lfma", 0.8, "connected", "off")].energy_kwh
+    # energy = average kW × 24 h for a whole day of 1-min steps
+    row = s.loc[("no-action", 0.0, "connected", "off")]
+    assert row.energy_kwh == pytest.approx(row.avg_loss_kw * 24.0)
+
+
+def test_disconnecting_pv_in_the_clock_window_removes_evening_output():
+    index, scenarios = day_scenarios(BenchmarkConfig(night="20:00-05:00", forecast=("off",)))
+    on, off = scenarios["connected", "off"], scenarios["disconnected", "off"]
+    evening = (index.hour >= 20)
+    pv = np.array([kind == "PV" for kind in on.net.der_kinds])
+    assert on.der_p_mw[evening][:, pv].sum() > 0 and off.der_p_mw[evening][:, pv].sum() == 0
+    np.testing.assert_array_equal(on.der_p_mw[:, ~pv], off.der_p_mw[:, ~pv])
+
+
+@pytest.mark.parametrize("kwargs, message", [
+    ({"strategies": ("magic",)}, "unknown strategy"),
+    ({"night_modes": ("sometimes",)}, "unknown night mode"),
+    ({"forecast": ("crystal-ball",)}, "unknown forecast source"),
+    ({"ks": ()}, "nothing to run"),
+])
+def test_bad_configuration(kwargs, message):
+    with pytest.raises(InputError, match=message):
+        BenchmarkConfig(**kwargs)
+
+
+def test_bad_night_window():
+    with pytest.raises(InputError, match="night"):
+        day_scenarios(BenchmarkConfig(night="dusk"))
