@@ -113,5 +113,6 @@ class StrategyResult:
             out["lower_bound_kw"] = float(lb) if np.isfinite(lb) else None
         for key, value in self.extra.items():
             v = value[i] if isinstance(value, np.ndarray) and value.ndim else value
-            out[key] = v.item() if isinstance(v, np.generic) else v
+            v = v.item() if isinstance(v, np.generic) else v
+            out[key] = None if isinstance(v, float) and not np.isfinite(v) else v  # JSON has no NaN
         return out

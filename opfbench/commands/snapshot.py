@@ -61,6 +61,9 @@ def run(args: argparse.Namespace) -> int:
         print(f"  voltages      {out['vmin']:.5f} … {out['vmax']:.5f} p.u.")
     if out.get("lower_bound_kw") is not None:
         print(f"  lower bound   {out['lower_bound_kw']:.3f} kW")
+    if "fallback" in out:  # the formulations: how the point was obtained
+        print(f"  solver        {out['solver_status']} · {out['iterations']} iterations · {out['solve_ms']:.2f} ms"
+              f" · fallback {out['fallback']}")
     print("  Q setpoints   " + ", ".join(f"bus {b}: {q:+.4f}" for b, q in out["q_mvar"].items()) + " MVAr")
     print(f"  power flows   {out['power_flows']}   excursion {out['excursion_mvar']:.4f} MVAr   wall {out['wall_ms']:.2f} ms")
     for key in result.extra:  # strategy diagnostics, e.g. LFMA's upstream disagreements

@@ -1,0 +1,133 @@
+"""Solve-time benchmark of the centralized formulations against pandapower's runopp.
+
+`python -m opfbench.bench opf [--json]` runs `bench_opf` on paper33. Over n
+snapshots of a smooth day (`daily_scenario`) it times, per snapshot and in one run:
+
+- the AC OPF, IPOPT warm-started from the previous snapshot (wall time of the
+  `AcOpf.solve` call, CasADi overhead included; IPOPT's own time alongside), and the
+  same snapshots solved cold, for the iteration counts;
+- the SOCP relaxation (`SocpRelaxation.solve` call);
+- pandapower `runopp` on the same snapshots (`PandapowerOpf`), with its losses checked
+  against ours (our AC power flow at IPOPT's setpoints) where both converged.
+
+Medians in ms; `ratio_*` = pandapower median / ours. The machine's load average is
+recorded because the timings depend on it.
+"""
+
+from __future__ import annotations
+
+import os
+import time
+
+import numpy as np
+
+from opfbench.cases import load_case
+from opfbench.bench.pandapower_opf import PandapowerOpf
+from opfbench.formulations.acopf import build_acopf
+from opfbench.formulations.common import snapshot_data
+from opfbench.formulations.socp import build_socp
+from opfbench.network import Network
+from opfbench.powerflow import solve_pf_batch
+from opfbench.scenario import Scenario
+
+AGREEMENT_KW = 1e-2  # pandapower's and our optimal losses agree when this close
+
+
+def daily_scenario(net: Network, n: int = 200) -> Scenario:
+    """n snapshots evenly over 24 h of a smooth synthetic day.
+
+    Load scale 0.6 + 0.4·d(t), d(t) = (1 − cos(2π(t − 4 h)/24 h))/2 (low at 4 h, peak at
+    16 h); PV at 0.9·rating·exp(−((t − 12.5 h)/2.8 h)²); DFIG at (0.55 + 0.3·sin(2πt/24 h
+    + 1))·rating.
+    """
+    t = np.arange(n) * 24.0 / n
+    load = 0.6 + 0.4 * 0.5 * (1 - np.cos(2 * np.pi * (t - 4) / 24))
+    pv = 0.9 * np.exp(-(((t - 12.5) / 2.8) ** 2))
+    wind = 0.55 + 0.3 * np.sin(2 * np.pi * t / 24 + 1)
+    is_pv = np.array([kind == "PV" for kind in net.der_kinds])
+    share = np.where(is_pv[None, :], pv[:, None], wind[:, None])
+    return Scenario(net, load, share * net.der_rating_mw)
+
+
+def _ms(start: float) -> float:
+    return (time.perf_counter() - start) * 1e3
+
+
+def bench_opf(n: int = 200, case: str = "paper33", k: float = 0.0) -> dict:
+    """Time IPOPT (warm), SOCP and pandapower runopp over `n` snapshots; see the module doc."""
+    load_before = os.getloadavg()
+    net = load_case(case)
+    scenario = daily_scenario(net, n)
+    data = snapshot_data(scenario, k)
+    opf, relax, peer = build_acopf(net), build_socp(net), PandapowerOpf(net)
+
+    warm, start_point = [], None
+    ipopt_wall = np.empty(n)
+    for i in range(n):
+        t0 = time.perf_counter()
+        sol = opf.solve(data.s_fixed[i], data.q_limit[i], start_point)
+        ipopt_wall[i] = _ms(t0)
+        warm.append(sol)
+        start_point = sol if sol.success else start_point
+    cold = [opf.solve(data.s_fixed[i], data.q_limit[i]) for i in range(n)]
+
+    socp_wall = np.empty(n)
+    socp = []
+    for i in range(n):
+        t0 = time.perf_counter()
+        socp.append(relax.solve(data.s_fixed[i], data.q_limit[i]))
+        socp_wall[i] = _ms(t0)
+
+    q_mvar_limit = data.q_limit * net.base_mva
+    peers = [peer.solve(scenario.load_scale[i], scenario.der_p_mw[i], q_mvar_limit[i]) for i in range(n)]
+
+    ipopt_ok = np.array([s.success for s in warm])
+    q_opf = np.array([s.q_pu for s in warm]) * net.base_mva
+    our_losses = np.where(ipopt_ok, solve_pf_batch(net, scenario.injections(q_opf)).losses_kw, np.nan)
+    pp_ok = np.array([p.converged for p in peers])
+    both = ipopt_ok & pp_ok
+    diff = np.abs(np.array([p.losses_kw for p in peers]) - our_losses)[both]
+    socp_ok = np.array([s.optimal for s in socp])
+    lower = np.array([s.lower_bound_kw for s in socp])
+
+    ipopt_ms = float(np.median(ipopt_wall))
+    socp_ms = float(np.median(socp_wall))
+    pp_ms = float(np.median([p.wall_ms for p in peers]))
+    return {
+        "case": case,
+        "k": k,
+        "total": n,
+        "solved": int((ipopt_ok & socp_ok).sum()),
+        "solved_by_solver": {"ipopt": int(ipopt_ok.sum()), "socp": int(socp_ok.sum()), "pandapower": int(pp_ok.sum())},
+        "pandapower_failures": int((~pp_ok).sum()),
+        "ipopt_ms": ipopt_ms,
+        "socp_ms": socp_ms,
+        "pandapower_runopp_ms": pp_ms,
+        "ratio_ipopt_vs_pandapower": pp_ms / ipopt_ms,
+        "ratio_socp_vs_pandapower": pp_ms / socp_ms,
+        "ipopt_internal_ms": float(np.median([s.solve_ms for s in warm])),
+        "ipopt_cold_ms": float(np.median([s.solve_ms for s in cold])),
+        "ipopt_iterations_warm_mean": float(np.mean([s.iterations for s in warm])),
+        "ipopt_iterations_cold_mean": float(np.mean([s.iterations for s in cold])),
+        "pandapower_agrees": int((diff <= AGREEMENT_KW).sum()),
+        "pandapower_max_loss_diff_kw": float(diff.max(initial=0.0)),
+        "max_relative_gap": float(np.nanmax((our_losses - lower) / our_losses)),
+        "loadavg_before": [round(x, 2) for x in load_before],
+        "loadavg_after": [round(x, 2) for x in os.getloadavg()],
+        "cpus": os.cpu_count(),
+    }
+
+
+def run() -> dict:
+    return bench_opf()
+
+
+def print_table(f: dict) -> None:
+    print(f"centralized formulations on {f['case']}, {f['total']} snapshots of a smooth day, k = {f['k']}")
+    print(f"  IPOPT warm-started    {f['ipopt_ms']:.2f} ms median  ({f['ipopt_iterations_warm_mean']:.1f} iterations; "
+          f"cold {f['ipopt_iterations_cold_mean']:.1f})  → {f['ratio_ipopt_vs_pandapower']:.0f}× pandapower")
+    print(f"  SOCP (Clarabel)       {f['socp_ms']:.2f} ms median  → {f['ratio_socp_vs_pandapower']:.0f}× pandapower"
+          f"  (largest relative gap {f['max_relative_gap']:.1e})")
+    print(f"  pandapower runopp     {f['pandapower_runopp_ms']:.1f} ms median, {f['pandapower_failures']} failures, "
+          f"agrees on {f['pandapower_agrees']} (max |Δ| {f['pandapower_max_loss_diff_kw']:.1e} kW)")
+    print(f"  solved by both ours   {f['solved']}/{f['total']}   load average {f['loadavg_before']} → {f['loadavg_after']}")

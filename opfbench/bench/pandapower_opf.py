@@ -1,0 +1,104 @@
+"""pandapower's `runopp` (PIPS interior point, MATPOWER's algorithm) on our networks — the
+peer the formulations are timed and cross-checked against.
+
+The pandapower net is built from a MATPOWER case dict of our Network
+(`pandapower.converter.from_ppc`): loads from the case (scaled per snapshot), the slack
+as ext_grid at `net.v_slack`, each DER a controllable static generator with fixed P
+(min_p = max_p = P) and Q in ±(1 − k)·Qmax, cost 1 per MW on the ext_grid's P, so
+runopp minimizes the slack import = losses + const. PIPS's default tolerances (1e-6)
+stop ~1.5 kW short of the optimum on paper33, so they are tightened to `PIPS_TOLERANCE`
+for an equal-accuracy comparison.
+"""
+
+from __future__ import annotations
+
+import time
+import warnings
+from dataclasses import dataclass
+
+import numpy as np
+
+from opfbench.network import Network
+
+PIPS_TOLERANCE = 1e-10
+PIPS_OPTIONS = {f"PDIPM_{name}TOL": PIPS_TOLERANCE for name in ("GRAD", "COMP", "COST", "FEAS")}
+
+
+def to_ppc(net: Network) -> dict:
+    """MATPOWER version-2 case dict of `net` at nominal load: the slack as the only
+    generator (unbounded P/Q), branches as in-service/out-of-service π models."""
+    n = net.n_bus
+    bus = np.zeros((n, 13))
+    bus[:, 0] = np.arange(1, n + 1)
+    bus[:, 1] = net.bus_type
+    bus[:, 2], bus[:, 3] = net.load_p_mw, net.load_q_mvar
+    bus[:, 4], bus[:, 5] = net.gs_mw, net.bs_mvar
+    bus[:, 6], bus[:, 7], bus[:, 9], bus[:, 10] = 1, 1.0, net.base_kv, 1
+    bus[:, 11], bus[:, 12] = net.vmax, net.vmin
+    gen = np.zeros((1, 21))
+    # bus, Qmax, Qmin, Vg, mBase, status, Pmax, Pmin
+    gen[0, [0, 3, 4, 5, 6, 7, 8, 9]] = [net.slack + 1, 1e4, -1e4, net.v_slack, net.base_mva, 1, 1e4, -1e4]
+    branch = np.zeros((net.n_branch, 13))
+    branch[:, 0], branch[:, 1] = net.f + 1, net.t + 1
+    branch[:, 2], branch[:, 3], branch[:, 4] = net.r, net.x, net.b
+    branch[:, 8] = np.where(net.tap == 1.0, 0.0, net.tap)
+    branch[:, 9] = net.shift
+    branch[:, 10] = net.status
+    branch[:, 11], branch[:, 12] = -360, 360
+    return {"version": "2", "baseMVA": net.base_mva, "bus": bus, "gen": gen, "branch": branch}
+
+
+@dataclass(frozen=True)
+class RunoppOutcome:
+    """One runopp call: converged flag, branch losses (kW), DER Q (MVAr), wall time (ms)."""
+
+    converged: bool
+    losses_kw: float
+    q_mvar: np.ndarray
+    wall_ms: float
+
+
+class PandapowerOpf:
+    """A pandapower net of `net` with the DERs as controllable sgens; `solve` per snapshot."""
+
+    def __init__(self, net: Network, slack_export: bool = True):
+        import pandapower as pp
+        from pandapower.converter.pypower import from_ppc
+
+        self._pp = pp
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            self.pnet = from_ppc(to_ppc(net), f_hz=50, validate_conversion=False)
+        self.net = net
+        self._load_p = self.pnet.load.p_mw.to_numpy().copy()
+        self._load_q = self.pnet.load.q_mvar.to_numpy().copy()
+        if not slack_export:
+            self.pnet.ext_grid["min_p_mw"] = 0.0
+        self._sgens = [pp.create_sgen(self.pnet, self.pnet.bus.index[b], p_mw=0.0, q_mvar=0.0, min_p_mw=0.0,
+                                      max_p_mw=0.0, min_q_mvar=0.0, max_q_mvar=0.0, controllable=True)
+                       for b in net.der_bus]
+        pp.create_poly_cost(self.pnet, self.pnet.ext_grid.index[0], "ext_grid", cp1_eur_per_mw=1.0)
+
+    def solve(self, load_scale: float, der_p_mw: np.ndarray, q_limit_mvar: np.ndarray) -> RunoppOutcome:
+        """runopp at one snapshot; failures (non-convergence, exceptions) give converged=False."""
+        pnet = self.pnet
+        pnet.load["p_mw"] = self._load_p * load_scale
+        pnet.load["q_mvar"] = self._load_q * load_scale
+        pnet.sgen.loc[self._sgens, "p_mw"] = der_p_mw
+        pnet.sgen.loc[self._sgens, "min_p_mw"] = der_p_mw
+        pnet.sgen.loc[self._sgens, "max_p_mw"] = der_p_mw
+        pnet.sgen.loc[self._sgens, "min_q_mvar"] = -q_limit_mvar
+        pnet.sgen.loc[self._sgens, "max_q_mvar"] = q_limit_mvar
+        start = time.perf_counter()
+        try:
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")
+                self._pp.runopp(pnet, delta=1e-10, **PIPS_OPTIONS)
+            converged = bool(pnet.OPF_converged)
+        except self._pp.OPFNotConverged:
+            converged = False
+        wall_ms = (time.perf_counter() - start) * 1e3
+        if not converged:
+            return RunoppOutcome(False, np.nan, np.full(len(self._sgens), np.nan), wall_ms)
+        losses = (pnet.res_line.pl_mw.sum() + pnet.res_trafo.pl_mw.sum()) * 1e3
+        return RunoppOutcome(True, float(losses), pnet.res_sgen.q_mvar.loc[self._sgens].to_numpy(), wall_ms)

@@ -1,0 +1,273 @@
+"""Second-order-cone relaxation of the loss-minimizing reactive dispatch (cvxpy + Clarabel).
+
+Same problem as the AC OPF (`acopf`): DER Q within ±(1 − k)·Qmax(P), DER P fixed, slack
+at `net.v_slack` (v_slack² = |V_slack|²), every other |V| in [vmin, vmax], optionally
+slack P ≥ 0; objective = branch losses. Two relaxations of the voltage coupling:
+
+- **DistFlow** (branch flow model, Baran–Wu / Farivar–Low), radial feeders. Per branch
+  from parent i to child j: sending-end flow P + jQ into the series impedance r + jx,
+  squared series current ℓ; v_j = v_i − 2(rP + xQ) + (r² + x²)ℓ, and the relaxation
+  P² + Q² ≤ v_i·ℓ of P² + Q² = v_i·ℓ. Line charging b is exact as a shunt b/2 at both
+  ends (π model); bus shunts Gs/Bs exact. Not modelled: tap ratios ≠ 1 and phase
+  shifts — such a case raises NetworkError (use the Jabr model).
+- **Jabr** (bus injection SOC), any feeder: W = V·Vᴴ on the branches, v_i = W_ii,
+  c + js = W_ft, flows linear in (v, c, s) for the general π model with taps/shifts,
+  relaxation c² + s² ≤ v_f·v_t (the angle-cycle conditions of meshes are dropped).
+
+Any AC-feasible point maps to a feasible point of either relaxation with the same
+losses, so the optimum is a lower bound on the AC OPF's. The bound reported is
+min(primal, dual) objective of Clarabel's solution (kW). Clarabel's "AlmostSolved"
+(reduced tolerances met) counts as solved and is recorded as such in solver_status; a
+solve that stalls after an in-place data update is retried once on a fresh solver
+(`conic.ParametricConeProgram.solve`), recorded as e.g. "InsufficientProgress → Solved".
+
+`relaxation_gap` = max over branches of the cone residual at the optimum, in p.u.²:
+v_i·ℓ − P² − Q² for DistFlow (squared apparent power on base_mva), v_f·v_t − c² − s²
+for Jabr (squared voltage-product magnitude). 0 (in practice ≲ 1e-7, the solver's
+tolerance) means the relaxation is exact on every branch (for Jabr on a meshed feeder also the cycle condition would have to hold; the AC
+losses of the setpoints against the bound is the end-to-end measure).
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+from functools import lru_cache
+from typing import Literal
+
+import clarabel
+import cvxpy as cp
+import numpy as np
+
+from opfbench.errors import InputError, NetworkError
+from opfbench.formulations.common import (
+    FROM_NO_ACTION,
+    FROM_SOLVER,
+    SOLVER_FAILED,
+    PiBranches,
+    bus_shunts,
+    check_supported,
+    incidence,
+    diagnostics,
+    evaluated_result,
+    kw_per_pu,
+    snapshot_data,
+)
+from opfbench.formulations.conic import INFEASIBLE as CONIC_INFEASIBLE
+from opfbench.formulations.conic import SOLVED, ParametricConeProgram, conic_status
+from opfbench.network import Network
+from opfbench.result import INFEASIBLE, OK
+from opfbench.scenario import Scenario
+
+Model = Literal["auto", "distflow", "jabr"]
+TOLERANCE = 1e-8  # Clarabel gap and feasibility tolerances (objective in kW)
+MAX_ITER = 200
+
+
+@dataclass(frozen=True)
+class SocpSolve:
+    """One snapshot's relaxation solve. outcome: "optimal" | "infeasible" (certified by
+    Clarabel) | "failed"; solver_status: Clarabel's own status; solve_ms: wall time of
+    Clarabel's data update and solve(s); iterations: summed over attempts. Where not optimal,
+    lower_bound_kw and relaxation_gap are NaN and q_pu is None."""
+
+    outcome: str
+    solver_status: str
+    lower_bound_kw: float
+    q_pu: np.ndarray | None
+    relaxation_gap: float
+    solve_ms: float
+    iterations: int
+
+    @property
+    def optimal(self) -> bool:
+        return self.outcome == "optimal"
+
+
+class SocpRelaxation:
+    """The relaxation built once per (network, slack_export); `solve` per snapshot.
+
+    Parameters (cvxpy, DPP): p_fixed, q_fixed (n_bus,) fixed injections and q_limit
+    (n_der,) usable Q limit, all p.u. Subclasses add the network model.
+    """
+
+    model: str = ""
+
+    def __init__(self, net: Network, slack_export: bool = True):
+        check_supported(net)
+        self.net, self.slack_export = net, slack_export
+        n = net.n_bus
+        self.p_fixed = cp.Parameter(n, name="p_fixed")
+        self.q_fixed = cp.Parameter(n, name="q_fixed")
+        self.q_limit = cp.Parameter(len(net.ders), nonneg=True, name="q_limit")
+        self.q = cp.Variable(len(net.ders), name="q_der")
+        self.v = cp.Variable(n, name="v")  # |V|² p.u.²
+        mismatch_p, mismatch_q, losses, cone_constraints = self._network_model()
+        slack = net.slack
+        others = np.flatnonzero(np.arange(n) != slack)
+        constraints = cone_constraints + [
+            mismatch_p[others] == 0,
+            mismatch_q[others] == 0,
+            self.v[slack] == net.v_slack**2,
+            self.v[others] >= net.vmin[others] ** 2,
+            self.v[others] <= net.vmax[others] ** 2,
+            self.q <= self.q_limit,
+            self.q >= -self.q_limit,
+        ]
+        if not slack_export:
+            constraints.append(mismatch_p[slack] >= 0)  # the external grid's P
+        self.problem = cp.Problem(cp.Minimize(kw_per_pu(net) * losses), constraints)
+        settings = clarabel.DefaultSettings()
+        settings.verbose = False
+        settings.max_iter = MAX_ITER
+        settings.tol_gap_abs = settings.tol_gap_rel = settings.tol_feas = TOLERANCE
+        self.program = ParametricConeProgram(self.problem, (self.p_fixed, self.q_fixed, self.q_limit), settings)
+
+    def _network_model(self) -> tuple[cp.Expression, cp.Expression, cp.Expression, list[cp.Constraint]]:
+        """(mismatch_p, mismatch_q, branch losses, model constraints), p.u., per `common`."""
+        raise NotImplementedError
+
+    def _cone_residual(self, value) -> float:
+        """Largest cone residual at a solution; `value(var)` reads a variable."""
+        raise NotImplementedError
+
+    def _der_q_at_buses(self) -> cp.Expression:
+        return incidence(self.net.der_bus, self.net.n_bus) @ self.q
+
+    def solve(self, s_fixed: np.ndarray, q_limit: np.ndarray) -> SocpSolve:
+        """Solve one snapshot: fixed injections `s_fixed` (n_bus,) complex p.u., usable
+        Q limits `q_limit` (n_der,) p.u."""
+        theta = np.concatenate([s_fixed.real, s_fixed.imag, q_limit])
+        start = time.perf_counter()
+        attempts = self.program.solve(theta)
+        solve_ms = (time.perf_counter() - start) * 1e3  # Clarabel's own solve_time is not used:
+        # after an in-place update it reads ~0.2 ms above the wall time of update + solve.
+        sol = attempts[-1]
+        status = " → ".join(conic_status(a) for a in attempts)
+        iterations = sum(a.iterations for a in attempts)
+        if conic_status(sol) not in SOLVED:
+            outcome = "infeasible" if conic_status(sol) in CONIC_INFEASIBLE else "failed"
+            return SocpSolve(outcome, status, np.nan, None, np.nan, solve_ms, iterations)
+
+        def value(var: cp.Variable) -> np.ndarray:
+            return self.program.value(sol, var)
+
+        bound = min(sol.obj_val, sol.obj_val_dual)
+        q_pu = np.clip(value(self.q), -q_limit, q_limit)  # within solver tolerance of the limits anyway
+        return SocpSolve("optimal", status, float(bound), q_pu, self._cone_residual(value),
+                         solve_ms, iterations)
+
+
+class DistFlowSocp(SocpRelaxation):
+    """Branch-flow (DistFlow) relaxation for radial feeders; see the module docstring."""
+
+    model = "distflow"
+
+    def _network_model(self):
+        net = self.net
+        if net.meshed:
+            raise NetworkError(f"{net.name}: DistFlow needs a radial feeder; this one is meshed (use the Jabr model)")
+        on = np.flatnonzero(net.status)
+        odd = on[(net.tap[on] != 1.0) | (net.shift[on] != 0.0)]
+        if odd.size:
+            raise NetworkError(
+                f"{net.name}: the DistFlow model assumes tap ratio 1 and no phase shift; branch "
+                f"{net.bus_ids[net.f[odd[0]]]}-{net.bus_ids[net.t[odd[0]]]} has tap {net.tap[odd[0]]:g}, "
+                f"shift {net.shift[odd[0]]:g}° (use the Jabr model)"
+            )
+        child = np.array([j for j in net.bfs_order if j != net.slack], dtype=int)
+        parent, branch = net.parent[child], net.parent_branch[child]
+        n, m = net.n_bus, child.size
+        at_child, at_parent = incidence(child, n), incidence(parent, n)
+        r, x = net.r[branch], net.x[branch]
+        gsh, bsh = bus_shunts(net)
+        charging = np.zeros(n)  # π-model line charging as bus shunts, b/2 at each end
+        np.add.at(charging, net.f[on], net.b[on] / 2)
+        np.add.at(charging, net.t[on], net.b[on] / 2)
+        self.p_br = cp.Variable(m, name="p_branch")
+        self.q_br = cp.Variable(m, name="q_branch")
+        self.l_br = cp.Variable(m, name="l_branch")  # |I|² p.u.²
+        v, p_br, q_br, l_br = self.v, self.p_br, self.q_br, self.l_br
+        v_parent = at_parent.T @ v
+        mismatch_p = at_parent @ p_br - at_child @ (p_br - cp.multiply(r, l_br)) + cp.multiply(gsh, v) - self.p_fixed
+        mismatch_q = (at_parent @ q_br - at_child @ (q_br - cp.multiply(x, l_br)) - cp.multiply(bsh + charging, v)
+                      - self.q_fixed - self._der_q_at_buses())
+        constraints = [
+            at_child.T @ v == v_parent - 2 * (cp.multiply(r, p_br) + cp.multiply(x, q_br))
+            + cp.multiply(r**2 + x**2, l_br),
+            cp.SOC(v_parent + l_br, cp.vstack([2 * p_br, 2 * q_br, v_parent - l_br]), axis=0),
+        ]
+        self._at_parent = at_parent
+        return mismatch_p, mismatch_q, r @ l_br, constraints
+
+    def _cone_residual(self, value) -> float:
+        v_par = self._at_parent.T @ value(self.v)
+        p, q, l_ = value(self.p_br), value(self.q_br), value(self.l_br)
+        return float(np.max(v_par * l_ - p**2 - q**2, initial=0.0))
+
+
+class JabrSocp(SocpRelaxation):
+    """Bus-injection (Jabr) SOC relaxation for any feeder; see the module docstring."""
+
+    model = "jabr"
+
+    def _network_model(self):
+        br = PiBranches.of(self.net)
+        gsh, bsh = bus_shunts(self.net)
+        self.c_br = cp.Variable(br.n_branch, name="c_branch")  # Re V_f·conj(V_t)
+        self.s_br = cp.Variable(br.n_branch, name="s_branch")  # Im V_f·conj(V_t)
+        self._branches = br
+        vf, vt = br.at_from.T @ self.v, br.at_to.T @ self.v
+        p_f, q_f, p_t, q_t = br.flows(vf, vt, self.c_br, self.s_br, cp.multiply)
+        mismatch_p = br.at_from @ p_f + br.at_to @ p_t + cp.multiply(gsh, self.v) - self.p_fixed
+        mismatch_q = (br.at_from @ q_f + br.at_to @ q_t - cp.multiply(bsh, self.v) - self.q_fixed
+                      - self._der_q_at_buses())
+        cone = cp.SOC(vf + vt, cp.vstack([2 * self.c_br, 2 * self.s_br, vf - vt]), axis=0)
+        return mismatch_p, mismatch_q, cp.sum(p_f + p_t), [cone]
+
+    def _cone_residual(self, value) -> float:
+        v = value(self.v)
+        c, s = value(self.c_br), value(self.s_br)
+        vf, vt = self._branches.at_from.T @ v, self._branches.at_to.T @ v
+        return float(np.max(vf * vt - c**2 - s**2, initial=0.0))
+
+
+@lru_cache(maxsize=16)
+def build_socp(net: Network, slack_export: bool = True, model: Model = "auto") -> SocpRelaxation:
+    """The relaxation of `net` (cached per network object and options): "auto" picks
+    DistFlow on radial feeders and Jabr on meshed ones."""
+    if model == "auto":
+        model = "jabr" if net.meshed else "distflow"
+    if model == "distflow":
+        return DistFlowSocp(net, slack_export)
+    if model == "jabr":
+        return JabrSocp(net, slack_export)
+    raise InputError(f"unknown SOCP model {model!r}; choose auto, distflow or jabr")
+
+
+def run_socp(scenario: Scenario, k: float, *, slack_export: bool = True, model: Model = "auto") -> StrategyResult:
+    """The relaxation's setpoints on every snapshot, evaluated by the AC power flow.
+
+    Status "ok" where Clarabel solved it, "infeasible" where it certified infeasibility
+    (then no action, Q = 0, which also proves the AC OPF infeasible), "solver-failed"
+    otherwise (also Q = 0). lower_bound_kw: the relaxation bound (NaN where not solved).
+    """
+    start = time.perf_counter()
+    data = snapshot_data(scenario, k)
+    relax = build_socp(scenario.net, slack_export, model)
+    solves = [relax.solve(data.s_fixed[i], data.q_limit[i]) for i in range(data.n_snapshots)]
+    n_der = len(scenario.net.ders)
+    q_pu = np.array([s.q_pu if s.optimal else np.zeros(n_der) for s in solves])
+    status = np.array([OK if s.optimal else INFEASIBLE if s.outcome == "infeasible" else SOLVER_FAILED
+                       for s in solves], dtype=object)
+    extra = diagnostics(socp_diagnostics(s) | {"fallback": FROM_SOLVER if s.optimal else FROM_NO_ACTION,
+                                               "model": relax.model} for s in solves)
+    wall_ms = (time.perf_counter() - start) * 1e3
+    return evaluated_result("socp", k, scenario, data, q_pu, slack_export, wall_ms, status,
+                            np.array([s.lower_bound_kw for s in solves]), extra)
+
+
+def socp_diagnostics(s: SocpSolve) -> dict:
+    """The per-snapshot diagnostics a relaxation solve contributes to a result's `extra`."""
+    return {"solve_ms": s.solve_ms, "iterations": int(s.iterations), "solver_status": s.solver_status,
+            "relaxation_gap": s.relaxation_gap}

@@ -1,0 +1,117 @@
+"""SOCP relaxation (cvxpy + Clarabel): a valid lower bound, exact on radial feeders."""
+
+from __future__ import annotations
+
+import cvxpy as cp
+import numpy as np
+import pytest
+
+from opfbench.cases import load_case
+from opfbench.errors import InputError, NetworkError
+from opfbench.formulations.acopf import run_acopf
+from opfbench.formulations.common import snapshot_data
+from opfbench.formulations.socp import DistFlowSocp, JabrSocp, build_socp, run_socp
+from opfbench.scenario import Scenario
+
+BOUND_SLACK = 1e-6  # relative: solver tolerances of both sides
+
+
+def random_scenario(net, n: int, seed: int) -> Scenario:
+    rng = np.random.default_rng(seed)
+    return Scenario(net, rng.uniform(0.3, 1.3, n), rng.uniform(0.0, 1.0, (n, len(net.ders))) * net.der_rating_mw)
+
+
+@pytest.mark.parametrize("case, n, exact", [("paper33", 20, True), ("case69-der", 8, True),
+                                            ("paper33-meshed", 20, False)])
+def test_lower_bound_below_ac_opf(case, n, exact):
+    net = load_case(case)
+    scenario = random_scenario(net, n, seed=7)
+    for k in (0.0, 0.5):
+        opf = run_acopf(scenario, k)
+        ok = opf.status == "ok"
+        assert ok.sum() >= n - 2, opf.status
+        # Anything else must be a heavy-load snapshot the relaxation proves infeasible.
+        assert np.all(opf.status[~ok] == "infeasible")
+        assert np.all(opf.extra["socp_status"][~ok] == "PrimalInfeasible")
+        lower, losses = opf.lower_bound_kw[ok], opf.losses_kw[ok]
+        assert np.all(np.isfinite(lower))
+        assert np.all(lower <= losses * (1 + BOUND_SLACK)), np.max(lower / losses)
+        gap = (losses - lower) / losses
+        if exact:
+            assert gap.max() <= 1e-5, gap.max()
+            assert np.max(opf.extra["relaxation_gap"][ok]) < 1e-6  # solver-tolerance level
+        else:
+            assert gap.max() > 1e-4  # Jabr drops the mesh's angle conditions: a real gap
+
+
+def test_relaxation_setpoints_are_optimal_when_exact():
+    net = load_case("paper33")
+    scenario = random_scenario(net, 10, seed=3)
+    socp, opf = run_socp(scenario, 0.0), run_acopf(scenario, 0.0)
+    assert np.all(socp.status == "ok") and set(socp.extra["model"]) == {"distflow"}
+    np.testing.assert_allclose(socp.losses_kw, opf.losses_kw, rtol=1e-5)
+    assert np.all(socp.lower_bound_kw <= socp.losses_kw * (1 + BOUND_SLACK))
+    assert np.all(socp.extra["ac_feasible"])
+
+
+def test_meshed_feeder_uses_jabr_and_its_point_is_ac_evaluated():
+    net = load_case("paper33-meshed")
+    res = run_socp(Scenario.snapshot(net, 1.0, 0.8), 0.0)
+    assert res.extra["model"][0] == "jabr" and res.status[0] == "ok"
+    assert res.lower_bound_kw[0] < res.losses_kw[0]
+
+
+def test_jabr_and_distflow_agree_on_a_radial_feeder():
+    net = load_case("paper33")
+    data = snapshot_data(Scenario.snapshot(net, 0.9, 0.6), 0.2)
+    args = (data.s_fixed[0], data.q_limit[0])
+    dist, jabr = build_socp(net, model="distflow").solve(*args), build_socp(net, model="jabr").solve(*args)
+    assert jabr.lower_bound_kw == pytest.approx(dist.lower_bound_kw, rel=1e-6)
+    np.testing.assert_allclose(jabr.q_pu, dist.q_pu, atol=1e-6)
+
+
+@pytest.mark.parametrize("model", ["distflow", "jabr"])
+def test_direct_clarabel_path_matches_cvxpy_solve(model):
+    net = load_case("paper33")
+    relax = build_socp(net, model=model)
+    assert relax.problem.is_dpp()
+    for scale in (0.5, 1.2):
+        data = snapshot_data(Scenario.snapshot(net, scale, 0.7), 0.0)
+        fast = relax.solve(data.s_fixed[0], data.q_limit[0])
+        relax.p_fixed.value, relax.q_fixed.value = data.s_fixed[0].real, data.s_fixed[0].imag
+        relax.q_limit.value = data.q_limit[0]
+        relax.problem.solve(solver=cp.CLARABEL)
+        assert relax.problem.status == "optimal"
+        assert fast.lower_bound_kw == pytest.approx(relax.problem.value, rel=1e-7)
+        np.testing.assert_allclose(fast.q_pu, relax.q.value, atol=1e-6)
+
+
+def test_infeasible_voltage_band_is_certified():
+    net = load_case("paper33")
+    tight = net.with_changes(vmin=np.full(net.n_bus, 0.99), vmax=np.full(net.n_bus, 1.0))
+    res = run_socp(Scenario.snapshot(tight, 1.2, 0.5), 0.0)
+    assert res.status[0] == "infeasible" and res.extra["fallback"][0] == "no-action"
+    assert np.isnan(res.lower_bound_kw[0]) and np.all(res.q_mvar == 0)
+
+
+def test_distflow_refuses_what_it_does_not_model():
+    net = load_case("paper33")
+    tapped = net.with_changes(tap=np.where(np.arange(net.n_branch) == 3, 1.02, net.tap))
+    with pytest.raises(NetworkError, match="tap ratio 1"):
+        DistFlowSocp(tapped)
+    JabrSocp(tapped)  # the bus-injection model handles taps
+    with pytest.raises(NetworkError, match="radial"):
+        DistFlowSocp(load_case("paper33-meshed"))
+    with pytest.raises(InputError, match="unknown SOCP model"):
+        build_socp(net, model="sdp")
+
+
+def test_line_charging_is_modelled_exactly():
+    """With π-model charging, DistFlow (charging as bus shunts) and the exact AC OPF agree."""
+    base = load_case("paper33")
+    net = base.with_changes(b=np.full(base.n_branch, 0.002))
+    scenario = Scenario.snapshot(net, 1.0, 0.8)
+    opf = run_acopf(scenario, 0.0)
+    assert opf.status[0] == "ok"
+    assert opf.lower_bound_kw[0] == pytest.approx(opf.losses_kw[0], rel=1e-5)
+    assert opf.losses_kw[0] != pytest.approx(run_acopf(Scenario.snapshot(base, 1.0, 0.8), 0.0).losses_kw[0], abs=1e-2)
