@@ -28,7 +28,8 @@ class Scenario:
     def __post_init__(self) -> None:
         n_der = len(self.net.ders)
         ls = np.atleast_1d(np.asarray(self.load_scale, dtype=float))
-        p = np.atleast_2d(np.asarray(self.der_p_mw, dtype=float)).reshape(-1, n_der)
+        p = np.asarray(self.der_p_mw, dtype=float).reshape(ls.shape[0], n_der) if n_der == 0 else \
+            np.atleast_2d(np.asarray(self.der_p_mw, dtype=float)).reshape(-1, n_der)
         if ls.shape[0] != p.shape[0]:
             raise InputError(f"scenario: {ls.shape[0]} load scales but {p.shape[0]} rows of DER power")
         _check_finite("load_scale", ls)
@@ -41,7 +42,7 @@ class Scenario:
         object.__setattr__(self, "load_scale", ls)
         object.__setattr__(self, "der_p_mw", p)
         if self.der_p_forecast_mw is not None:
-            pf = np.atleast_2d(np.asarray(self.der_p_forecast_mw, dtype=float)).reshape(-1, n_der)
+            pf = np.asarray(self.der_p_forecast_mw, dtype=float).reshape(p.shape)
             _check_finite("der_p_forecast_mw", pf)
             if pf.shape != p.shape:
                 raise InputError(f"scenario: forecast shape {pf.shape} differs from current DER power {p.shape}")

@@ -60,3 +60,10 @@ def test_cases_lists_shipped_cases(capsys):
     assert code == 0
     assert by_name["paper33"]["ders"] == 5 and by_name["paper33"]["buses"] == 33
     assert by_name["paper33-meshed"]["meshed"] and by_name["case69"]["buses"] == 69
+
+
+@pytest.mark.parametrize("strategy", ["no-action", "llma", "lfma", "acopf", "socp"])
+def test_every_strategy_runs_on_a_case_without_der(capsys, strategy):
+    code, out = _json(capsys, ["snapshot", "case33bw", "--strategy", strategy, "--json"])
+    assert code == 0 and out["status"] == "ok" and out["q_mvar"] == {}
+    assert out["losses_kw"] == pytest.approx(202.68, abs=0.05)

@@ -11,6 +11,7 @@ from opfbench.cases import load_case
 from opfbench.errors import InputError
 from opfbench.formulations.acopf import run_acopf
 from opfbench.formulations.dominance import opf_dominance
+from opfbench.registry import run_strategy
 from opfbench.result import StrategyResult
 from opfbench.scenario import Scenario
 
@@ -38,6 +39,25 @@ def test_acopf_never_worse_than_no_action(random60, k):
     # Where Q = 0 meets the limits it bounds the optimum from above.
     baseline = no_action(random60).losses_kw
     assert np.all(opf.losses_kw <= baseline + 1e-3)
+
+
+@pytest.mark.parametrize("case", ["paper33", "case69-der"])
+@pytest.mark.parametrize("k", [0.0, 0.4, 0.8])
+def test_acopf_never_worse_than_the_local_rules(case, k):
+    """≥ 50 random scenarios: AC OPF ≤ LLMA and LFMA (under the same k) wherever the
+    rule's point is voltage-feasible. Exceptions would be listed with their scenario."""
+    net = load_case(case)
+    rng = np.random.default_rng(11)
+    n = 60
+    scenario = Scenario(net, rng.uniform(0.2, 1.4, n), rng.uniform(0.0, 1.0, (n, 5)) * net.der_rating_mw)
+    opf = run_acopf(scenario, k)
+    for rule in ("llma", "lfma"):
+        other = run_strategy(rule, scenario, k)
+        report = opf_dominance(opf, other, scenario)
+        exceptions = [(i, scenario.load_scale[i], scenario.der_p_mw[i].round(3).tolist(), a, b)
+                      for i, a, b in report.violations]
+        assert report.ok, f"{rule}: OPF lost at (snapshot, load scale, DER MW, OPF kW, rule kW) {exceptions}"
+        assert report.compared >= 50 and report.opf_unsolved == 0
 
 
 def test_dominance_detects_a_point_that_beats_a_bad_opf(random60):

@@ -190,7 +190,7 @@ def evaluated_result(strategy: str, k: float, scenario: Scenario, data: Snapshot
     flow, with extra["ac_feasible"] (the point meets every limit of the OPF, `ac_feasible`)
     and the scalar extra["slack_export"] (the option the limits were checked with)."""
     net = scenario.net
-    q_mvar = np.asarray(q_pu, dtype=float).reshape(-1, len(net.ders)) * net.base_mva
+    q_mvar = np.asarray(q_pu, dtype=float).reshape(scenario.n_snapshots, len(net.ders)) * net.base_mva
     pf = solve_pf_batch(net, scenario.injections(q_mvar))
     extra = extra | {"ac_feasible": ac_feasible(net, pf, data.s_fixed, slack_export), "slack_export": slack_export}
     flows = np.asarray(power_flows, dtype=np.int64) + 1

@@ -110,5 +110,7 @@ class ParametricConeProgram:
 
     def value(self, solution: clarabel.DefaultSolution, var: cp.Variable) -> np.ndarray:
         """A (vector) variable's value in a solution."""
+        if var.size == 0:  # e.g. the DER setpoints of a case without DER
+            return np.zeros(0)
         start = self._var_col[var.id]
         return np.asarray(solution.x[start:start + var.size])

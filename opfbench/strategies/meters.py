@@ -58,6 +58,8 @@ class LocalMeters:
     def detect_upstream(self, outflow: np.ndarray) -> np.ndarray:
         """(S, n_der) meter position of the line with the largest |Q| (LFMA step 1).
         Ties go to the first line in `Network.incident_branches` order."""
+        if outflow.shape[-1] == 0:  # no DER (or no metered line): nothing to detect
+            return np.zeros(outflow.shape[:-1], dtype=np.int64)
         return np.where(self.valid, np.abs(outflow), -1.0).argmax(axis=-1)
 
     def upstream_branch(self, position: np.ndarray) -> np.ndarray:
