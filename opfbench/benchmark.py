@@ -33,8 +33,9 @@ NIGHT_MODES = ("connected", "disconnected")
 
 @dataclass(frozen=True)
 class BenchmarkConfig:
-    """What to run. `night` is "sun" (sunset → sunrise at the data site) or a clock
-    window "HH:MM-HH:MM" (the paper: "20:00-05:00"); `forecast` lists "off" and/or
+    """What to run. `night` is a clock window "HH:MM-HH:MM" (default the paper's
+    "20:00-05:00", which still holds some evening PV output in June) or "sun" (sunset →
+    sunrise at the data site, when PV output is zero anyway); `forecast` lists "off" and/or
     "oracle" (P^F = the next step's actual output, an upper bound on what a forecaster
     can give)."""
 
@@ -42,7 +43,7 @@ class BenchmarkConfig:
     strategies: tuple[str, ...] = STRATEGY_NAMES
     ks: tuple[float, ...] = (0.0, 0.2, 0.4, 0.6, 0.8)
     night_modes: tuple[str, ...] = NIGHT_MODES
-    night: str = "sun"
+    night: str = "20:00-05:00"
     forecast: tuple[str, ...] = ("off", "oracle")
 
     def __post_init__(self) -> None:

@@ -17,7 +17,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--strategies", nargs="+", default=list(STRATEGY_NAMES), choices=STRATEGY_NAMES)
     p.add_argument("--k", nargs="+", type=fraction, default=[0.0, 0.2, 0.4, 0.6, 0.8], help="reserve coefficients")
     p.add_argument("--night-modes", nargs="+", default=list(NIGHT_MODES), choices=NIGHT_MODES)
-    p.add_argument("--night", default="sun", help="'sun' (sunset→sunrise) or a window like 20:00-05:00")
+    p.add_argument("--night", default="20:00-05:00",
+                   help="night hours: a clock window (default the paper's 20:00-05:00) or 'sun' (sunset→sunrise)")
     p.add_argument("--forecast", nargs="+", default=["off", "oracle"], choices=("off", "oracle"))
     p.add_argument("--out", type=Path, default=Path("reports/run"), help="output folder (default reports/run)")
     p.add_argument("--json", action="store_true", help="print the summary as JSON")
