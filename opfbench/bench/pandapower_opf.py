@@ -25,8 +25,9 @@ PIPS_OPTIONS = {f"PDIPM_{name}TOL": PIPS_TOLERANCE for name in ("GRAD", "COMP", 
 
 
 def to_ppc(net: Network) -> dict:
-    """MATPOWER version-2 case dict of `net` at nominal load: the slack as the only
-    generator (unbounded P/Q), branches as in-service/out-of-service π models."""
+    """MATPOWER version-2 case dict of `net` at nominal load: the slack generator
+    (unbounded P/Q) first, then the case's fixed generators (P, Q, voltage setpoint),
+    branches as in-service/out-of-service π models. DERs are not included."""
     n = net.n_bus
     bus = np.zeros((n, 13))
     bus[:, 0] = np.arange(1, n + 1)
@@ -35,9 +36,12 @@ def to_ppc(net: Network) -> dict:
     bus[:, 4], bus[:, 5] = net.gs_mw, net.bs_mvar
     bus[:, 6], bus[:, 7], bus[:, 9], bus[:, 10] = 1, 1.0, net.base_kv, 1
     bus[:, 11], bus[:, 12] = net.vmax, net.vmin
-    gen = np.zeros((1, 21))
-    # bus, Qmax, Qmin, Vg, mBase, status, Pmax, Pmin
-    gen[0, [0, 3, 4, 5, 6, 7, 8, 9]] = [net.slack + 1, 1e4, -1e4, net.v_slack, net.base_mva, 1, 1e4, -1e4]
+    gen = np.zeros((1 + len(net.gen_bus), 21))
+    # bus, Pg, Qg, Qmax, Qmin, Vg, mBase, status, Pmax, Pmin
+    cols = [0, 1, 2, 3, 4, 5, 6, 7, 8, 9]
+    gen[0, cols] = [net.slack + 1, 0, 0, 1e4, -1e4, net.v_slack, net.base_mva, 1, 1e4, -1e4]
+    for row, (b, p, q, vset) in enumerate(zip(net.gen_bus, net.gen_p_mw, net.gen_q_mvar, net.gen_vset), start=1):
+        gen[row, cols] = [b + 1, p, q, 1e4, -1e4, vset, net.base_mva, 1, p, p]
     branch = np.zeros((net.n_branch, 13))
     branch[:, 0], branch[:, 1] = net.f + 1, net.t + 1
     branch[:, 2], branch[:, 3], branch[:, 4] = net.r, net.x, net.b
