@@ -23,7 +23,7 @@ import pandas as pd
 
 from opfbench.cases import load_case
 from opfbench.data import night_mask, night_mask_window, paper_day
-from opfbench.errors import InputError
+from opfbench.errors import DataError, InputError
 from opfbench.registry import FORMULATIONS, STRATEGY_NAMES, run_strategy
 from opfbench.result import OK, StrategyResult
 from opfbench.scenario import Scenario
@@ -35,9 +35,13 @@ NIGHT_MODES = ("connected", "disconnected")
 class BenchmarkConfig:
     """What to run. `night` is a clock window "HH:MM-HH:MM" (default the paper's
     "20:00-05:00", which still holds some evening PV output in June) or "sun" (sunset →
-    sunrise at the data site, when PV output is zero anyway); `forecast` lists "off" and/or
-    "oracle" (P^F = the next step's actual output, an upper bound on what a forecaster
-    can give)."""
+    sunrise at the data site, when PV output is zero anyway). `forecast` lists forecast
+    sources for Algorithm 3: "off"; "oracle" (P^F = the next step's actual output, an
+    upper bound on what a forecaster can give); or a forecasting model's name (e.g.
+    "wavelet-cnn-lstm") whose test-part PV forecasts `opfbench forecast --dataset pv
+    --out DIR` wrote to `forecast_dir` — PV units then use that model's one-step-ahead
+    forecast, the DFIG keeps P^F = P^C (the wind forecaster is trained on the TRY
+    series, which does not cover the paper day)."""
 
     case: str = "paper33"
     strategies: tuple[str, ...] = STRATEGY_NAMES
@@ -45,6 +49,7 @@ class BenchmarkConfig:
     night_modes: tuple[str, ...] = NIGHT_MODES
     night: str = "20:00-05:00"
     forecast: tuple[str, ...] = ("off", "oracle")
+    forecast_dir: str = "reports/forecast"
 
     def __post_init__(self) -> None:
         for name in self.strategies:
@@ -53,9 +58,6 @@ class BenchmarkConfig:
         for mode in self.night_modes:
             if mode not in NIGHT_MODES:
                 raise InputError(f"unknown night mode {mode!r}; choose from {', '.join(NIGHT_MODES)}")
-        for source in self.forecast:
-            if source not in ("off", "oracle"):
-                raise InputError(f"unknown forecast source {source!r}; choose 'off' or 'oracle'")
         if not self.strategies or not self.ks:
             raise InputError("nothing to run: give at least one strategy and one k")
 
@@ -67,6 +69,23 @@ def _night(index: pd.DatetimeIndex, night: str) -> np.ndarray:
     if not sep:
         raise InputError(f"night must be 'sun' or a window 'HH:MM-HH:MM', got {night!r}")
     return night_mask_window(index, start, end).to_numpy()
+
+
+def _model_pv_forecast_pu(config: BenchmarkConfig, model: str, index: pd.DatetimeIndex) -> np.ndarray:
+    """P^F per unit for each step t of `index`: the model's forecast for t + 1 step, made
+    from data up to t (the forecast file is indexed by target time)."""
+    from opfbench.data import load_pv_minute
+    from opfbench.forecasting import load_forecast
+
+    series = load_forecast(config.forecast_dir, "pv", model) / load_pv_minute().attrs["rating_kw"]
+    step = index[1] - index[0]
+    targets = (index + step).tz_convert("UTC")
+    ahead = series.reindex(targets)
+    if ahead.isna().any():
+        missing = targets[ahead.isna().to_numpy()]
+        raise DataError(f"forecast {model!r} in {config.forecast_dir} has no value for {len(missing)} step(s) of the "
+                        f"day, first {missing[0]}; the forecasts cover {series.index[0]} .. {series.index[-1]}")
+    return np.clip(ahead.to_numpy(), 0.0, 1.0)
 
 
 def day_scenarios(config: BenchmarkConfig) -> tuple[pd.DatetimeIndex, dict[tuple[str, str], Scenario]]:
@@ -81,9 +100,13 @@ def day_scenarios(config: BenchmarkConfig) -> tuple[pd.DatetimeIndex, dict[tuple
         for source in config.forecast:
             if source == "off":
                 out[mode, source] = Scenario.from_profiles(net, day["load"].to_numpy(), pv, wind)
-            else:  # one step ahead, the last step repeats itself
+                continue
+            if source == "oracle":  # one step ahead, the last step repeats itself
                 ahead = np.append(pv[1:], pv[-1]), np.append(wind[1:], wind[-1])
-                out[mode, source] = Scenario.from_profiles(net, day["load"].to_numpy(), pv, wind, *ahead)
+            else:
+                pv_f = _model_pv_forecast_pu(config, source, day.index)
+                ahead = (pv_f * ~night if mode == "disconnected" else pv_f), wind
+            out[mode, source] = Scenario.from_profiles(net, day["load"].to_numpy(), pv, wind, *ahead)
     return day.index, out
 
 

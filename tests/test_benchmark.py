@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from opfbench.benchmark import BenchmarkConfig, day_scenarios, run_benchmark, summarize
-from opfbench.errors import InputError
+from opfbench.errors import DataError, InputError
 
 
 @pytest.fixture(scope="module")
@@ -43,12 +43,16 @@ def test_disconnecting_pv_in_the_clock_window_removes_evening_output():
 @pytest.mark.parametrize("kwargs, message", [
     ({"strategies": ("magic",)}, "unknown strategy"),
     ({"night_modes": ("sometimes",)}, "unknown night mode"),
-    ({"forecast": ("crystal-ball",)}, "unknown forecast source"),
     ({"ks": ()}, "nothing to run"),
 ])
 def test_bad_configuration(kwargs, message):
     with pytest.raises(InputError, match=message):
         BenchmarkConfig(**kwargs)
+
+
+def test_missing_model_forecast_is_a_clear_error(tmp_path):
+    with pytest.raises(DataError, match="no forecast file"):
+        day_scenarios(BenchmarkConfig(forecast=("wavelet-cnn-lstm",), forecast_dir=str(tmp_path)))
 
 
 def test_bad_night_window():

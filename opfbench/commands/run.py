@@ -19,7 +19,10 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--night-modes", nargs="+", default=list(NIGHT_MODES), choices=NIGHT_MODES)
     p.add_argument("--night", default="20:00-05:00",
                    help="night hours: a clock window (default the paper's 20:00-05:00) or 'sun' (sunset→sunrise)")
-    p.add_argument("--forecast", nargs="+", default=["off", "oracle"], choices=("off", "oracle"))
+    p.add_argument("--forecast", nargs="+", default=["off", "oracle"],
+                   help="forecast sources: off, oracle (next step's actual) and/or a model name whose PV "
+                        "forecasts `opfbench forecast --dataset pv --out DIR` wrote (default: off oracle)")
+    p.add_argument("--forecast-dir", default="reports/forecast", help="where model forecasts are (default reports/forecast)")
     p.add_argument("--out", type=Path, default=Path("reports/run"), help="output folder (default reports/run)")
     p.add_argument("--json", action="store_true", help="print the summary as JSON")
     p.set_defaults(func=run)
@@ -27,7 +30,7 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 def run(args: argparse.Namespace) -> int:
     config = BenchmarkConfig(args.case, tuple(args.strategies), tuple(args.k), tuple(args.night_modes),
-                             args.night, tuple(args.forecast))
+                             args.night, tuple(args.forecast), args.forecast_dir)
     table = run_benchmark(config)
     summary = summarize(table)
     args.out.mkdir(parents=True, exist_ok=True)
