@@ -10,7 +10,7 @@ import sys
 
 from opfbench.errors import OpfbenchError
 
-COMMANDS = ("cases", "pf")
+COMMANDS = ("cases", "pf", "forecast")
 
 
 def build_parser() -> argparse.ArgumentParser:
