@@ -71,9 +71,10 @@ def test_quick_run_is_deterministic_and_writes_its_files(run_cli, tmp_path):
 
 
 def test_quick_wind_table_and_model_subset(run_cli):
-    code, out, err = run_cli("--dataset", "wind", "--quick", "--models", "arima")
+    code, out, err = run_cli("--dataset", "wind", "--quick", "--models", "arima", "--weather", "previous")
     assert code == 0
     lines = out.splitlines()
+    assert "weather lag 1 step(s)" in lines[0]
     assert lines[1].split()[:3] == ["model", "mse_scaled", "mape_pct"]
     assert [line.split()[0] for line in lines[2:]] == ["persistence", "arima"]
     assert "0.0589" in lines[3] and "17.60" in lines[3]  # paper Table I, ARIMA wind

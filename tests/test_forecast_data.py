@@ -114,3 +114,14 @@ def test_metrics_by_hand():
     assert m.skill == pytest.approx(1 - np.sqrt(1.5) / np.sqrt((0 + 4 + 4 + 36) / 4))
     with pytest.raises(InputError):
         evaluate(actual, forecast[:3], persistence, scale_kw=1.0, rating_kw=1.0, mape_threshold=0.1)
+
+
+def test_lag_weather_shifts_only_the_inputs():
+    ds = pv_dataset(synthetic_pv_minute(days=1))
+    lagged = ds.lag_weather(1)
+    assert lagged.weather_lag == 1 and len(lagged.frame) == len(ds.frame) - 1
+    np.testing.assert_array_equal(lagged.frame[TARGET].to_numpy(), ds.frame[TARGET].to_numpy()[1:])
+    np.testing.assert_array_equal(lagged.frame["ghi_wm2"].to_numpy(), ds.frame["ghi_wm2"].to_numpy()[:-1])
+    assert ds.lag_weather(0) is ds
+    with pytest.raises(InputError):
+        ds.lag_weather(-1)

@@ -114,7 +114,7 @@ def test_paper_architecture():
 
 def test_training_reduces_the_loss():
     ds = wind_dataset(synthetic_wind_hourly(days=40, seed=2))
-    model = NeuralForecaster("lstm", NetConfig(conv=False), TrainConfig(window=24, epochs=4, windows_per_epoch=512, threads=1))
+    model = NeuralForecaster("lstm", NetConfig(conv=False), TrainConfig(window=24, epochs=4, windows_per_epoch=512))
     model.fit(ds.frame)
     assert len(model.log) == 4
     assert model.log[-1].train_loss < 0.7 * model.log[0].train_loss

@@ -37,16 +37,22 @@ class ForecastDataset:
         name: dataset name ("pv" or "wind").
         frame: tz-aware regular DatetimeIndex; column `TARGET` (kW) and weather columns.
         rating_kw: rated power of the plant (kW), used for the MAPE threshold.
+        weather_lag: steps by which the weather columns lag the row time: 0 = weather
+            at the target time (a perfect weather forecast, as the paper); 1 = only the
+            weather measured one step earlier (a forecast without weather prediction).
     """
 
     name: str
     frame: pd.DataFrame
     rating_kw: float
+    weather_lag: int = 0
 
     def __post_init__(self) -> None:
         _check_frame(self.frame, self.name)
         if not np.isfinite(self.rating_kw) or self.rating_kw <= 0:
             raise InputError(f"dataset {self.name}: rating_kw must be positive, got {self.rating_kw}")
+        if self.weather_lag < 0:
+            raise InputError(f"dataset {self.name}: weather_lag must be >= 0, got {self.weather_lag}")
 
     @property
     def exog_columns(self) -> list[str]:
@@ -62,7 +68,18 @@ class ForecastDataset:
         """The first `rows` rows (for quick runs)."""
         if rows < 2:
             raise InputError(f"dataset {self.name}: need at least 2 rows, got {rows}")
-        return ForecastDataset(self.name, self.frame.iloc[:rows], self.rating_kw)
+        return ForecastDataset(self.name, self.frame.iloc[:rows], self.rating_kw, self.weather_lag)
+
+    def lag_weather(self, steps: int) -> ForecastDataset:
+        """The weather columns shifted `steps` later (row t holds the weather of t - steps);
+        the first `steps` rows are dropped."""
+        if steps < 0 or steps >= len(self.frame) - 1:
+            raise InputError(f"dataset {self.name}: cannot lag the weather by {steps} steps")
+        if steps == 0:
+            return self
+        shifted = self.frame.copy()
+        shifted[self.exog_columns] = shifted[self.exog_columns].shift(steps)
+        return ForecastDataset(self.name, shifted.iloc[steps:], self.rating_kw, self.weather_lag + steps)
 
     def split(self, train_fraction: float = 0.9) -> tuple[pd.DataFrame, pd.DataFrame]:
         """Chronological split into (train, test) frames; train = the first fraction."""

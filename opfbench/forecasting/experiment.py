@@ -50,6 +50,7 @@ class ComparisonResult:
         forecasts: test part, column "actual" and one column per model (kW).
         runs: per model, in run order.
         train_range: (first, last) training timestamps.
+        weather_lag: steps by which the weather inputs lag the target (0 = at target time).
     """
 
     dataset: str
@@ -59,6 +60,7 @@ class ComparisonResult:
     forecasts: pd.DataFrame
     runs: dict[str, ModelRun]
     train_range: tuple[pd.Timestamp, pd.Timestamp]
+    weather_lag: int = 0
 
     def metrics_table(self) -> dict[str, dict[str, object]]:
         """{model: {mse_scaled, mape_pct, mae_kw, rmse_kw, skill, ..., fit_s, predict_s, details}}"""
@@ -112,7 +114,9 @@ def run_comparison(
         )
         for name in names
     }
-    return ComparisonResult(data.name, data.rating_kw, settings, seed, forecasts, runs, (train.index[0], train.index[-1]))
+    return ComparisonResult(
+        data.name, data.rating_kw, settings, seed, forecasts, runs, (train.index[0], train.index[-1]), data.weather_lag
+    )
 
 
 def _test_forecast(model: Forecaster, frame: pd.DataFrame, n_train: int, exog_columns: list[str]) -> np.ndarray:

@@ -59,7 +59,7 @@ class TrainConfig:
     learning_rate: float = 1e-3
     val_fraction: float = 0.1
     seed: int = 0
-    threads: int = 2
+    threads: int = 1
 
     def __post_init__(self) -> None:
         if self.window < 2 or self.epochs < 1 or self.batch_size < 1 or not 0 <= self.val_fraction < 1:

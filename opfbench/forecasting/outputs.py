@@ -30,6 +30,7 @@ def run_metadata(result: ComparisonResult) -> dict[str, object]:
         "dataset": result.dataset,
         "rating_kw": result.rating_kw,
         "seed": result.seed,
+        "weather_lag_steps": result.weather_lag,
         "settings": asdict(result.settings),
         "train": [str(t) for t in result.train_range],
         "test": [str(result.forecasts.index[0]), str(result.forecasts.index[-1])],

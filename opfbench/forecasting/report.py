@@ -52,7 +52,7 @@ def forecast_section(result: ComparisonResult) -> str:
     return f"""<section class="forecast" id="forecast-{escape(result.dataset)}">
 <h2>One-step-ahead forecast: {escape(result.dataset.upper())}</h2>
 <p>Training {escape(str(result.train_range[0]))} – {escape(str(result.train_range[1]))};
-test {escape(str(f.index[0]))} – {escape(str(f.index[-1]))} ({len(f)} steps of {escape(str(f.index[1] - f.index[0]))}).
+test {escape(str(f.index[0]))} – {escape(str(f.index[-1]))} ({len(f)} steps of {_step_text(f.index)}).
 Rating {result.rating_kw:g} kW. Input window {s.window} steps; networks trained {s.epochs} epochs of
 {escape(str(s.windows_per_epoch or "all"))} windows (batch {s.batch_size}, Adam {s.learning_rate:g}, best epoch on the
 last {s.train_config(result.seed).val_fraction:.0%} of the training windows); ARIMA order by AIC on the last {s.arima_fit_samples} training steps;
@@ -66,7 +66,7 @@ wavelet {escape(s.wavelet)}, {s.wavelet_level} levels, applied per input window.
 </table>
 <p class="note">MSE on the series min-max scaled with the training range of the power; MAPE over test samples
 whose actual power exceeds {s.mape_threshold:.0%} of the rating; skill = 1 − RMSE/RMSE<sub>persistence</sub>.
-All models see the weather at the target time (a perfect weather forecast, as in the paper).
+{_weather_text(result.weather_lag)}
 Paper values: SYSLAB (DTU) 2019 data at 5-min resolution, with a softmax output layer; our data and
 resolution differ, so only the ranking is comparable.</p>
 <img alt="{escape(result.dataset)} test day: actual vs forecasts" src="data:image/png;base64,{_day_plot(result)}">
@@ -87,8 +87,8 @@ def html_page(title: str, body: str) -> str:
 
 
 def plot_day(forecasts: pd.DataFrame) -> pd.DataFrame:
-    """The test day shown: 24 h from the first midnight (UTC) of the test part when a full
-    day follows it, else the first 24 h of the test part."""
+    """The test day shown: 24 h from the first midnight (index time zone) of the test part
+    when a full day follows it, else the first 24 h of the test part."""
     index = forecasts.index
     midnight = index[0].ceil("D")
     start = midnight if midnight + pd.Timedelta(days=1) <= index[-1] + (index[1] - index[0]) else index[0]
@@ -111,6 +111,17 @@ def _table_row(dataset: str, name: str, values: dict[str, object]) -> str:
     return f"<tr><td>{escape(name)}</td>{tds}</tr>"
 
 
+def _weather_text(lag: int) -> str:
+    if lag == 0:
+        return "All models see the weather at the target time (a perfect weather forecast, as in the paper)."
+    return f"Models see the weather only up to {lag} step(s) before the target time (no weather forecast)."
+
+
+def _step_text(index: pd.DatetimeIndex) -> str:
+    minutes = (index[1] - index[0]).total_seconds() / 60.0
+    return f"{minutes / 60:g} h" if minutes >= 60 else f"{minutes:g} min"
+
+
 def _fmt(value: object, spec: str) -> str:
     return "—" if not isinstance(value, (int, float)) or not math.isfinite(value) else format(value, spec)
 
@@ -122,8 +133,8 @@ def _day_plot(result: ComparisonResult) -> str:
     for name in (c for c in day.columns if c != "actual"):
         ax.plot(day.index, day[name], linewidth=1.0, label=name)
     ax.set_ylabel("power (kW)")
-    ax.set_xlabel("time (UTC)")
-    ax.set_title(f"{result.dataset.upper()}: one-step-ahead forecasts, {day.index[0]:%Y-%m-%d %H:%M} + 24 h")
+    ax.set_xlabel(f"time ({day.index.tz})")
+    ax.set_title(f"{result.dataset.upper()}: one-step-ahead forecasts, {day.index[0]:%Y-%m-%d %H:%M} to {day.index[-1]:%Y-%m-%d %H:%M}")
     ax.legend(loc="upper left", fontsize=8)
     ax.grid(alpha=0.3)
     fig.autofmt_xdate()
