@@ -1,0 +1,88 @@
+"""`opfbench forecast`: compare one-step-ahead PV / wind forecasters (paper §II, Table I).
+
+Full run (documented budget ≤ ~30 min per dataset on 2 CPU cores):
+    opfbench forecast --dataset pv --out reports/forecast
+    opfbench forecast --dataset wind --out reports/forecast
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from dataclasses import replace
+
+from opfbench.errors import InputError
+from opfbench.forecasting.datasets import DATASETS, load_dataset
+from opfbench.forecasting.experiment import ComparisonResult, run_comparison
+from opfbench.forecasting.models import MODEL_NAMES, settings_for
+from opfbench.forecasting.outputs import json_safe, write_outputs
+from opfbench.forecasting.report import PAPER_TABLE
+
+METRIC_COLUMNS = (("mse_scaled", ".5f"), ("mape_pct", ".2f"), ("mae_kw", ".4f"), ("rmse_kw", ".4f"), ("skill", ".3f"))
+
+
+def register(subparsers: argparse._SubParsersAction) -> None:
+    parser = subparsers.add_parser(
+        "forecast",
+        help="compare persistence, ARIMA, LSTM, CNN-LSTM and Wavelet-CNN-LSTM one-step forecasts",
+        description=__doc__,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    parser.add_argument("--dataset", required=True, choices=DATASETS)
+    parser.add_argument(
+        "--models",
+        default=",".join(MODEL_NAMES),
+        help=f"comma-separated subset of {','.join(MODEL_NAMES)} (persistence always runs: it is the skill reference)",
+    )
+    parser.add_argument("--quick", action="store_true", help="smoke run: a few days of data, 2 short epochs")
+    parser.add_argument("--out", metavar="DIR", help="write forecast_<dataset>.csv/.json/.html into DIR")
+    parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument(
+        "--weather",
+        choices=("target", "previous"),
+        default="target",
+        help="weather input at the target time (paper: a perfect weather forecast) or one step earlier",
+    )
+    parser.add_argument("--threads", type=int, help="torch CPU threads (default 1: robust on a shared machine)")
+    parser.add_argument("--json", action="store_true", help="print the metrics as JSON")
+    parser.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    models = tuple(m.strip() for m in args.models.split(",") if m.strip())
+    if not models:
+        raise InputError("--models is empty")
+    settings = settings_for(args.dataset, args.quick)
+    if args.threads is not None:
+        if args.threads < 1:
+            raise InputError(f"--threads must be >= 1, got {args.threads}")
+        settings = replace(settings, threads=args.threads)
+    dataset = load_dataset(args.dataset).lag_weather(1 if args.weather == "previous" else 0)
+    result = run_comparison(dataset, models, settings, args.seed, progress=lambda msg: print(msg, file=sys.stderr))
+    if args.out:
+        for path in write_outputs(result, args.out):
+            print(f"wrote {path}", file=sys.stderr)
+    if args.json:
+        print(json.dumps(json_safe(result.metrics_table()), indent=2))
+    else:
+        print(format_table(result))
+    return 0
+
+
+def format_table(result: ComparisonResult) -> str:
+    """Plain-text metrics table with the paper's Table I values."""
+    header = f"{'model':<18}" + "".join(f"{name:>12}" for name, _ in METRIC_COLUMNS) + f"{'fit_s':>9}{'paper_mse':>11}{'paper_mape':>11}"
+    lines = [
+        f"{result.dataset}: {len(result.forecasts)} test steps from {result.forecasts.index[0]}, "
+        f"MAPE on actual > {result.settings.mape_threshold:.0%} of {result.rating_kw:g} kW, "
+        f"weather lag {result.weather_lag} step(s), seed {result.seed}",
+        header,
+    ]
+    for name, run in result.runs.items():
+        values = run.as_dict()
+        paper = PAPER_TABLE.get(result.dataset, {}).get(name)
+        cells = "".join(f"{format(values[key], spec):>12}" for key, spec in METRIC_COLUMNS)
+        reference = f"{paper[0]:>11.4f}{paper[1]:>11.2f}" if paper else f"{'-':>11}{'-':>11}"
+        lines.append(f"{name:<18}{cells}{values['fit_s']:>9.1f}{reference}")
+    return "\n".join(lines)
