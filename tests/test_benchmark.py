@@ -58,3 +58,33 @@ def test_missing_model_forecast_is_a_clear_error(tmp_path):
 def test_bad_night_window():
     with pytest.raises(InputError, match="night"):
         day_scenarios(BenchmarkConfig(night="dusk"))
+
+
+def test_model_forecast_feeds_algorithm_3_one_step_ahead(tmp_path):
+    """A forecast file indexed by target time: P^F at step t is the forecast for t + 1."""
+    from opfbench.data import load_pv_minute, paper_day
+
+    pv = load_pv_minute()["pv_ac_kw"]
+    window = pv.loc["2016-06-27 20:00":"2016-06-28 23:00"]
+    frame = window.to_frame("actual").assign(mymodel=0.5 * window)
+    frame.index = frame.index.strftime("%Y-%m-%dT%H:%M:%S%z").rename("timestamp")
+    frame.to_csv(tmp_path / "forecast_pv.csv")
+    config = BenchmarkConfig(forecast=("mymodel",), night_modes=("connected",), forecast_dir=str(tmp_path))
+    index, scenarios = day_scenarios(config)
+    sc = scenarios["connected", "mymodel"]
+    pv_units = np.array([kind == "PV" for kind in sc.net.der_kinds])
+    expected = 0.5 * pv.reindex((index + (index[1] - index[0])).tz_convert("UTC")).to_numpy() / 10.0
+    np.testing.assert_allclose(sc.der_p_forecast_mw[:, pv_units], expected[:, None] * sc.net.der_rating_mw[pv_units])
+    np.testing.assert_array_equal(sc.der_p_forecast_mw[:, ~pv_units], sc.der_p_mw[:, ~pv_units])  # DFIG: P^F = P^C
+    np.testing.assert_allclose(sc.der_p_mw[:, pv_units][:, 0], paper_day()["pv"].to_numpy() * 0.6)
+
+
+def test_model_forecast_not_covering_the_day_is_refused(tmp_path):
+    from opfbench.data import load_pv_minute
+
+    pv = load_pv_minute()["pv_ac_kw"].loc["2016-06-28 03:00":"2016-06-28 12:00"]
+    frame = pv.to_frame("actual").assign(mymodel=pv)
+    frame.index = frame.index.strftime("%Y-%m-%dT%H:%M:%S%z").rename("timestamp")
+    frame.to_csv(tmp_path / "forecast_pv.csv")
+    with pytest.raises(DataError, match="has no value for"):
+        day_scenarios(BenchmarkConfig(forecast=("mymodel",), forecast_dir=str(tmp_path)))
