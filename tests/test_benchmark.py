@@ -88,3 +88,34 @@ def test_model_forecast_not_covering_the_day_is_refused(tmp_path):
     frame.to_csv(tmp_path / "forecast_pv.csv")
     with pytest.raises(DataError, match="has no value for"):
         day_scenarios(BenchmarkConfig(forecast=("mymodel",), forecast_dir=str(tmp_path)))
+
+
+def _check_day(table):
+    """Per step: the SOCP bound is below every strategy's losses and the AC OPF beats every
+    local rule; per configuration: LFMA < LLMA < no action."""
+    wide = table.pivot_table(index=["time", "k", "night_mode"], columns="strategy", values="losses_kw")
+    bound = table[table.strategy == "acopf"].set_index(["time", "k", "night_mode"])["lower_bound_kw"]
+    for name in wide.columns:
+        assert (bound <= wide[name] + 1e-3).all(), name
+        if name not in ("acopf", "socp"):
+            assert (wide["acopf"] <= wide[name] + 1e-3).all(), name
+    energy = table.groupby(["strategy", "k", "night_mode"]).losses_kw.sum()
+    for k in table.k.unique():
+        for mode in table.night_mode.unique():
+            e = energy.xs((k, mode), level=("k", "night_mode"))
+            assert e["acopf"] <= e["lfma"] < e["llma"] < e["no-action"]
+
+
+def test_whole_day_every_strategy_at_k0():
+    table = run_benchmark(BenchmarkConfig(ks=(0.0,), night_modes=("connected",), forecast=("off",)),
+                          progress=lambda msg: None)
+    assert (table.status == "ok").all() and (table.voltage_violation < 1e-6).all()
+    _check_day(table)
+
+
+@pytest.mark.slow
+def test_whole_default_grid():
+    """The main job's full grid (`opfbench run` defaults): every step solved, orderings hold."""
+    table = run_benchmark(BenchmarkConfig(), progress=lambda msg: None)
+    assert (table.status == "ok").all()
+    _check_day(table[table.forecast == "off"])
