@@ -42,14 +42,14 @@ def check_time_index(index: pd.Index, name: str, step: pd.Timedelta | None = Non
         raise DataError(f"{name}: column 'time' is not a time-zone-aware time index")
     if len(index) == 0:
         raise DataError(f"{name}: column 'time' is empty")
-    diffs = np.diff(index.asi8)
+    diffs = np.diff(index.as_unit("ns").asi8)
     if (diffs <= 0).any():
         pos = int((diffs <= 0).argmax()) + 1
         raise DataError(
             f"{name}: column 'time' is not strictly increasing at row {pos} ({index[pos]})"
         )
-    if step is not None and (diffs != step.value).any():
-        pos = int((diffs != step.value).argmax()) + 1
+    if step is not None and (diffs != pd.Timedelta(step).as_unit("ns").value).any():
+        pos = int((diffs != pd.Timedelta(step).as_unit("ns").value).argmax()) + 1
         raise DataError(f"{name}: column 'time' is not evenly spaced by {step} at row {pos} ({index[pos]})")
 
 

@@ -46,9 +46,9 @@ def interpolate_to(series: pd.Series, index: pd.DatetimeIndex) -> np.ndarray:
             f"window {index[0]} .. {index[-1]} leaves the span of profile {series.name!r} "
             f"({series.index[0]} .. {series.index[-1]})"
         )
-    origin = series.index.asi8[0]
-    x = (index.asi8 - origin) / 1e9
-    xp = (series.index.asi8 - origin) / 1e9
+    origin = series.index.as_unit("ns").asi8[0]
+    x = (index.as_unit("ns").asi8 - origin) / 1e9
+    xp = (series.index.as_unit("ns").asi8 - origin) / 1e9
     return np.interp(x, xp, series.to_numpy(dtype=float))
 
 

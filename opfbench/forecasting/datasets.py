@@ -165,7 +165,7 @@ def _check_index(index: pd.Index, name: str) -> None:
         raise DataError(f"{name} data: index must be a tz-aware DatetimeIndex")
     if len(index) < 2:
         raise DataError(f"{name} data: need at least 2 rows, got {len(index)}")
-    steps = np.diff(index.asi8)
+    steps = np.diff(index.as_unit("ns").asi8)
     if steps.min() <= 0:
         raise DataError(f"{name} data: index is not strictly increasing")
     if steps.min() != steps.max():
