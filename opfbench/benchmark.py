@@ -71,21 +71,28 @@ def _night(index: pd.DatetimeIndex, night: str) -> np.ndarray:
     return night_mask_window(index, start, end).to_numpy()
 
 
-def _model_pv_forecast_pu(config: BenchmarkConfig, model: str, index: pd.DatetimeIndex) -> np.ndarray:
+def _model_pv_forecast_pu(config: BenchmarkConfig, model: str, index: pd.DatetimeIndex,
+                          pv_now: np.ndarray) -> np.ndarray:
     """P^F per unit for each step t of `index`: the model's forecast for t + 1 step, made
-    from data up to t (the forecast file is indexed by target time)."""
+    from data up to t (the forecast file is indexed by target time). Steps the forecast
+    file does not cover keep P^F = P^C, but only where P^C and the next step's output are
+    0 (night: the test split may start at UTC midnight, after the local day began);
+    anywhere else a missing forecast is an error."""
     from opfbench.data import load_pv_minute
     from opfbench.forecasting import load_forecast
 
     series = load_forecast(config.forecast_dir, "pv", model) / load_pv_minute().attrs["rating_kw"]
     step = index[1] - index[0]
     targets = (index + step).tz_convert("UTC")
-    ahead = series.reindex(targets)
-    if ahead.isna().any():
-        missing = targets[ahead.isna().to_numpy()]
-        raise DataError(f"forecast {model!r} in {config.forecast_dir} has no value for {len(missing)} step(s) of the "
-                        f"day, first {missing[0]}; the forecasts cover {series.index[0]} .. {series.index[-1]}")
-    return np.clip(ahead.to_numpy(), 0.0, 1.0)
+    ahead = series.reindex(targets).to_numpy()
+    missing = np.isnan(ahead)
+    dark = (pv_now == 0) & (np.append(pv_now[1:], pv_now[-1]) == 0)
+    if (missing & ~dark).any():
+        first = targets[np.flatnonzero(missing & ~dark)[0]]
+        raise DataError(f"forecast {model!r} in {config.forecast_dir} has no value for {int((missing & ~dark).sum())} "
+                        f"daylight step(s) of the day, first {first}; the forecasts cover "
+                        f"{series.index[0]} .. {series.index[-1]}")
+    return np.clip(np.where(missing, pv_now, ahead), 0.0, 1.0)
 
 
 def day_scenarios(config: BenchmarkConfig) -> tuple[pd.DatetimeIndex, dict[tuple[str, str], Scenario]]:
@@ -104,7 +111,7 @@ def day_scenarios(config: BenchmarkConfig) -> tuple[pd.DatetimeIndex, dict[tuple
             if source == "oracle":  # one step ahead, the last step repeats itself
                 ahead = np.append(pv[1:], pv[-1]), np.append(wind[1:], wind[-1])
             else:
-                pv_f = _model_pv_forecast_pu(config, source, day.index)
+                pv_f = _model_pv_forecast_pu(config, source, day.index, day["pv"].to_numpy())
                 ahead = (pv_f * ~night if mode == "disconnected" else pv_f), wind
             out[mode, source] = Scenario.from_profiles(net, day["load"].to_numpy(), pv, wind, *ahead)
     return day.index, out

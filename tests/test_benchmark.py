@@ -65,7 +65,7 @@ def test_model_forecast_feeds_algorithm_3_one_step_ahead(tmp_path):
     from opfbench.data import load_pv_minute, paper_day
 
     pv = load_pv_minute()["pv_ac_kw"]
-    window = pv.loc["2016-06-27 20:00":"2016-06-28 23:00"]
+    window = pv.loc["2016-06-28 00:00":"2016-06-28 23:00"]  # the test split starts at UTC midnight
     frame = window.to_frame("actual").assign(mymodel=0.5 * window)
     frame.index = frame.index.strftime("%Y-%m-%dT%H:%M:%S%z").rename("timestamp")
     frame.to_csv(tmp_path / "forecast_pv.csv")
@@ -73,7 +73,10 @@ def test_model_forecast_feeds_algorithm_3_one_step_ahead(tmp_path):
     index, scenarios = day_scenarios(config)
     sc = scenarios["connected", "mymodel"]
     pv_units = np.array([kind == "PV" for kind in sc.net.der_kinds])
-    expected = 0.5 * pv.reindex((index + (index[1] - index[0])).tz_convert("UTC")).to_numpy() / 10.0
+    ahead = pv.reindex((index + (index[1] - index[0])).tz_convert("UTC")).to_numpy() / 10.0
+    covered = (index + (index[1] - index[0])).tz_convert("UTC") >= window.index[0]
+    expected = np.where(covered, 0.5 * ahead, paper_day()["pv"].to_numpy())  # uncovered night: P^F = P^C (= 0)
+    assert (~covered).sum() == 119 and np.all(expected[~covered] == 0)
     np.testing.assert_allclose(sc.der_p_forecast_mw[:, pv_units], expected[:, None] * sc.net.der_rating_mw[pv_units])
     np.testing.assert_array_equal(sc.der_p_forecast_mw[:, ~pv_units], sc.der_p_mw[:, ~pv_units])  # DFIG: P^F = P^C
     np.testing.assert_allclose(sc.der_p_mw[:, pv_units][:, 0], paper_day()["pv"].to_numpy() * 0.6)
@@ -86,7 +89,7 @@ def test_model_forecast_not_covering_the_day_is_refused(tmp_path):
     frame = pv.to_frame("actual").assign(mymodel=pv)
     frame.index = frame.index.strftime("%Y-%m-%dT%H:%M:%S%z").rename("timestamp")
     frame.to_csv(tmp_path / "forecast_pv.csv")
-    with pytest.raises(DataError, match="has no value for"):
+    with pytest.raises(DataError, match="daylight step"):
         day_scenarios(BenchmarkConfig(forecast=("mymodel",), forecast_dir=str(tmp_path)))
 
 
