@@ -98,6 +98,7 @@ def _check_day(table):
     local rule; per configuration: LFMA < LLMA < no action."""
     wide = table.pivot_table(index=["time", "k", "night_mode"], columns="strategy", values="losses_kw")
     bound = table[table.strategy == "acopf"].set_index(["time", "k", "night_mode"])["lower_bound_kw"]
+    bound = bound.reindex(wide.index)
     for name in wide.columns:
         assert (bound <= wide[name] + 1e-3).all(), name
         if name not in ("acopf", "socp"):
