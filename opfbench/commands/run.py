@@ -6,7 +6,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from opfbench.benchmark import NIGHT_MODES, BenchmarkConfig, run_benchmark, summarize
+from opfbench.study import NIGHT_MODES, BenchmarkConfig, run_benchmark, summarize
 from opfbench.commands.common import fraction, print_json
 from opfbench.registry import STRATEGY_NAMES
 

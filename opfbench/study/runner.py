@@ -1,4 +1,4 @@
-"""The benchmark runner: case + day profiles → scenarios → every strategy → one tidy table.
+"""The study runner: case + day profiles → scenarios → every strategy → one tidy table.
 
 Grid: {strategy} × {k} × {night mode} (× {forecast} for the local rules). Night mode
 "connected" keeps PV inverters on the grid at night with whatever small output the data

@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from opfbench.benchmark import BenchmarkConfig, day_scenarios, run_benchmark, summarize
+from opfbench.study import BenchmarkConfig, day_scenarios, run_benchmark, summarize
 from opfbench.errors import DataError, InputError
 
 
