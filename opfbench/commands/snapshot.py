@@ -7,7 +7,7 @@ import argparse
 from opfbench.cases import load_case
 from opfbench.commands.common import add_operating_point, fraction, print_json
 from opfbench.errors import InputError
-from opfbench.registry import FORMULATIONS, LOCAL_RULES, STRATEGY_NAMES, run_strategy
+from opfbench.registry import STRATEGIES, STRATEGY_NAMES, get_strategy, run_strategy
 from opfbench.scenario import Scenario
 
 
@@ -29,19 +29,23 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def _options(args: argparse.Namespace) -> dict:
-    if args.strategy in LOCAL_RULES:
-        for flag, given in (("--fallback", args.fallback is not None), ("--no-slack-export", args.no_slack_export)):
-            if given:
-                raise InputError(f"{flag} applies to the formulations ({', '.join(FORMULATIONS)}), not to {args.strategy}")
-        return {"safe": args.safe} if args.strategy != "no-action" else {}
-    for flag, given in (("--safe", args.safe), ("--forecast-der-scale", args.forecast_der_scale is not None)):
-        if given:
-            raise InputError(f"{flag} applies to the local rules ({', '.join(LOCAL_RULES)}), not to {args.strategy}")
-    if args.fallback is not None and args.strategy != "acopf":
-        raise InputError("--fallback applies to acopf only")
-    options = {"slack_export": not args.no_slack_export}
-    if args.strategy == "acopf":
-        options["fallback"] = args.fallback or "chain"
+    """The strategy options the flags set; a flag the strategy does not take is an error
+    (which strategies take it is the registry's word)."""
+    spec = get_strategy(args.strategy)
+    given = {"--safe": ("safe", True) if args.safe else None,
+             "--fallback": ("fallback", args.fallback) if args.fallback is not None else None,
+             "--no-slack-export": ("slack_export", False) if args.no_slack_export else None}
+    options = {}
+    for flag, option in given.items():
+        if option is None:
+            continue
+        if option[0] not in spec.options:
+            takers = [s.name for s in STRATEGIES.values() if option[0] in s.options]
+            raise InputError(f"{flag} applies to {', '.join(takers)}, not to {args.strategy}")
+        options[option[0]] = option[1]
+    if args.forecast_der_scale is not None and not spec.uses_forecast:
+        takers = [s.name for s in STRATEGIES.values() if s.uses_forecast]
+        raise InputError(f"--forecast-der-scale applies to {', '.join(takers)}, not to {args.strategy}")
     return options
 
 
