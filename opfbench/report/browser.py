@@ -42,6 +42,7 @@ window.addEventListener("load", function () { setTimeout(function () {
   var out = {errors: __probe.errors, plots: plots.length, drawn: drawn,
              sections: Array.prototype.map.call(document.querySelectorAll("section"), function (s) { return s.id; }),
              resources: performance.getEntriesByType("resource").map(function (r) { return r.name; }),
+             images: document.querySelectorAll("img").length,
              height: Math.ceil(document.documentElement.scrollHeight)};
   var pre = document.createElement("pre"); pre.id = "opfbench-probe"; pre.textContent = JSON.stringify(out);
   document.body.appendChild(pre); }, 1000); });
@@ -52,7 +53,7 @@ window.addEventListener("load", function () { setTimeout(function () {
 class PageCheck:
     """What the page did in the browser: errors (console.error, uncaught errors), number of
     plot containers and of drawn Plotly plots, section ids, resources it loaded, requests
-    that reached the network (the proxy), full page height (px)."""
+    that reached the network (the proxy), full page height (px), <img> elements."""
 
     errors: list[str]
     plots: int
@@ -61,6 +62,7 @@ class PageCheck:
     resources: list[str]
     requests: list[str]
     height: int
+    images: int
 
     @property
     def page_requests(self) -> list[str]:
@@ -158,7 +160,7 @@ def check_page(html: str | Path, *, proxy: _Proxy, profile: str, timeout_s: floa
         raise RuntimeError("the probe did not run: the page never finished loading")
     data = json.loads(found.group(1).replace("&quot;", '"').replace("&lt;", "<").replace("&gt;", ">").replace("&amp;", "&"))
     return PageCheck(data["errors"], data["plots"], data["drawn"], data["sections"], data["resources"], list(proxy.seen),
-                     int(data["height"]))
+                     int(data["height"]), int(data["images"]))
 
 
 @_with_proxy
