@@ -145,8 +145,8 @@ def _binary() -> str:
 
 
 @_with_proxy
-def check_page(html: str | Path, *, proxy: _Proxy, profile: str, timeout_s: float = 180) -> PageCheck:
-    """Open `html` (a file) in headless Chromium with the network refused; see `PageCheck`.
+def check_page(html: str | Path, width: int = 1400, *, proxy: _Proxy, profile: str, timeout_s: float = 180) -> PageCheck:
+    """Open `html` (a file) in a `width` px wide headless Chromium with the network refused; see `PageCheck`.
     A copy of the page with a probe script is opened; the page itself is not changed."""
     text = Path(html).read_text(encoding="utf-8")
     if "<head>" not in text:
@@ -154,7 +154,7 @@ def check_page(html: str | Path, *, proxy: _Proxy, profile: str, timeout_s: floa
     with tempfile.TemporaryDirectory(prefix="opfbench-probe-") as folder:
         probed = Path(folder) / "page.html"
         probed.write_text(text.replace("<head>", "<head>\n" + _PROBE, 1), encoding="utf-8")
-        dom = _run(_binary(), ["--dump-dom", probed.as_uri()], proxy, profile, timeout_s)
+        dom = _run(_binary(), [f"--window-size={width},1000", "--dump-dom", probed.as_uri()], proxy, profile, timeout_s)
     found = re.search(r'<pre id="opfbench-probe">(.*?)</pre>', dom, re.S)
     if found is None:
         raise RuntimeError("the probe did not run: the page never finished loading")
@@ -170,7 +170,7 @@ def _screenshot(html: Path, png: Path, width: int, height: int, *, proxy: _Proxy
 
 def screenshot(html: str | Path, png: str | Path, width: int = 1400, max_height: int = 30000) -> Path:
     """Full-page PNG of `html` (the page's height, at most `max_height` px) at `width` px."""
-    height = min(check_page(html).height, max_height)
+    height = min(check_page(html, width).height, max_height)
     png = Path(png).resolve()
     png.parent.mkdir(parents=True, exist_ok=True)
     _screenshot(Path(html), png, width, height)

@@ -9,6 +9,7 @@ from dataclasses import dataclass, field
 from functools import lru_cache
 
 import jinja2
+import numpy as np
 import pandas as pd
 
 from opfbench import __version__
@@ -72,20 +73,20 @@ def _digits(column: str) -> int:
 
 
 def _cell(value: object, digits: int) -> str:
-    if isinstance(value, float):
+    if isinstance(value, (float, np.floating)):
         return "—" if not math.isfinite(value) else f"{value:,.{digits}f}"
     return "—" if value is None else str(value)
 
 
 def table_html(frame: pd.DataFrame) -> str:
-    """`frame` as an HTML table: floats formatted per column (p.u. 4 decimals, MSE 5, else
-    2), NaN as "—", every cell escaped."""
-    shown = frame.copy()
-    for column in shown.columns:
-        if pd.api.types.is_float_dtype(shown[column]) or shown[column].dtype == object:
-            digits = _digits(str(column))
-            shown[column] = [_cell(v, digits) for v in shown[column]]
-    return shown.to_html(index=False, escape=True, border=0, na_rep="—")
+    """`frame` as an HTML table (template table.html.j2, every cell escaped): numbers
+    right-aligned and formatted per column (p.u. 4 decimals, MSE 5, else 2), NaN as "—"."""
+    numeric = [pd.api.types.is_numeric_dtype(frame[c]) and not pd.api.types.is_bool_dtype(frame[c]) for c in frame.columns]
+    digits = [_digits(str(c)) for c in frame.columns]
+    rows = [[_cell(v, d) for v, d in zip(row, digits, strict=True)]
+            for row in frame.itertuples(index=False, name=None)]
+    return environment().get_template("table.html.j2").render(
+        columns=list(zip([str(c) for c in frame.columns], numeric, strict=True)), rows=rows)
 
 
 def table(frame: pd.DataFrame, text: str = "", collapse_over: int = 40) -> Block:

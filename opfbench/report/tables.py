@@ -10,7 +10,7 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 
-from opfbench.registry import FORMULATIONS, LOCAL_RULES
+from opfbench.registry import FORMULATIONS, LOCAL_RULES, STRATEGIES
 from opfbench.report import paper
 
 STATUSES = ("ok", "fallback-cold", "fallback-socp", "fallback-no-action", "infeasible", "solver-failed", "pf-diverged")
@@ -66,6 +66,7 @@ def convergence(steps: pd.DataFrame) -> pd.DataFrame:
             counts[status] = 0
     extra = [c for c in counts.columns if c not in STATUSES]
     counts = counts[list(STATUSES) + extra]
+    counts.columns.name = None
     total = counts.sum(axis=1)
     out = counts.copy()
     out.insert(0, "steps", total)
@@ -136,11 +137,9 @@ def night_vs_paper(summary: pd.DataFrame, k: float = 0.0) -> pd.DataFrame:
         for strategy in paper.NIGHT_TABLE["connected"]:
             row: dict[str, object] = {"case": case, "strategy": strategy}
             for mode in ("connected", "disconnected"):
-                avg, kwh = paper.NIGHT_TABLE[mode][strategy]
-                row[f"paper {mode} kW"], row[f"paper {mode} kWh"] = avg, kwh
+                row[f"paper {mode} kWh"] = paper.NIGHT_TABLE[mode][strategy][1]
             for mode in ("connected", "disconnected", "connected-q"):
                 hit = ours[(ours["case"] == case) & (ours["strategy"] == strategy) & (ours["night_mode"] == mode)]
-                row[f"ours {mode} kW"] = float(hit["avg_loss_kw"].iloc[0]) if len(hit) else np.nan
                 row[f"ours {mode} kWh"] = float(hit["energy_kwh"].iloc[0]) if len(hit) else np.nan
             row["paper reduction %"] = 100 * (1 - row["paper connected kWh"] / row["paper disconnected kWh"])
             row["ours reduction %"] = 100 * (1 - row["ours connected kWh"] / row["ours disconnected kWh"])
@@ -167,7 +166,8 @@ def voltage(summary: pd.DataFrame) -> pd.DataFrame:
 
 def excursions(summary: pd.DataFrame) -> pd.DataFrame:
     """Algorithm 3 (forecast on): steps whose setpoint exceeds the capability at P^C, and the largest excess."""
-    sub = summary[summary["forecast"] != "off"]
+    sub = summary[(summary["forecast"] != "off") & summary["strategy"].map(
+        lambda s: STRATEGIES[s].uses_forecast if s in STRATEGIES else True)]
     return order(sub[CONFIG + ["steps", "excursion_steps", "max_excursion_mvar"]])
 
 
