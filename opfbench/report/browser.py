@@ -169,9 +169,15 @@ def _screenshot(html: Path, png: Path, width: int, height: int, *, proxy: _Proxy
 
 
 def screenshot(html: str | Path, png: str | Path, width: int = 1400, max_height: int = 30000) -> Path:
-    """Full-page PNG of `html` (the page's height, at most `max_height` px) at `width` px."""
+    """Full-page PNG of `html` (the page's height, at most `max_height` px) at `width` px,
+    stored with an adaptive 256-colour palette (a third of the size; Pillow comes with matplotlib)."""
+    from PIL import Image
+
     height = min(check_page(html, width).height, max_height)
     png = Path(png).resolve()
     png.parent.mkdir(parents=True, exist_ok=True)
     _screenshot(Path(html), png, width, height)
+    with Image.open(png) as image:
+        small = image.convert("RGB").quantize(colors=256, method=Image.Quantize.MEDIANCUT)
+    small.save(png, optimize=True)
     return png

@@ -74,8 +74,10 @@ def losses(inputs: Inputs, price: tuple[float, str, str]) -> Section:
                       collapse_over=60))
     sec.add(table(tables.energy_pivot(s, tables.REFERENCE_NIGHT, "savings_pct"),
                   "Savings vs no action (%), PV connected at night", collapse_over=60))
-    full = tables.losses(s, price[0]).rename(columns={"money_per_day": f"{price[1]} per day",
-                                                      "money_per_year": f"{price[1]} per year"})
+    money = tables.losses(s, price[0])
+    sec.add(table(tables.energy_pivot(money, tables.REFERENCE_NIGHT, "money_per_year"),
+                  f"Money saved per year vs no action ({price[1]}), PV connected at night", collapse_over=60))
+    full = money.rename(columns={"money_per_day": f"{price[1]} per day", "money_per_year": f"{price[1]} per year"})
     sec.add(table(full, "Every configuration", collapse_over=0))
     if inputs.steps is not None:
         sec.blocks += _plots(plots.losses_day(inputs.steps))
