@@ -32,7 +32,7 @@ def test_full_report_has_every_section_and_no_missing_input(folders):
     html = build_html(load_inputs(run, fault_dir=fault))
     for section in SECTIONS:
         assert f'<section id="{section}" class="report-section">' in html
-    assert "Not available" not in html
+    assert "Not available" not in html and "could not be built" not in html
     assert html.count("<script>") == 2  # plotly.js once, the drawing loop once
     assert html.count('class="plot"') == html.count('type="application/json"') >= 10
     assert "<script src=" not in html and "<link" not in html

@@ -40,7 +40,9 @@ class Inputs:
 
 
 def _parquet(path: Path) -> pd.DataFrame | None:
-    return pd.read_parquet(path) if path.is_file() else None
+    """The table, or None when the file is absent or has no rows (nothing to report either way)."""
+    frame = pd.read_parquet(path) if path.is_file() else None
+    return frame if frame is not None and len(frame) else None
 
 
 def _json(path: Path) -> dict | None:
@@ -55,8 +57,8 @@ def load_inputs(run_dir: str | Path, forecast_dir: str | Path | None = None,
     inp.manifest = _json(run / "manifest.json")
     inp.steps = _parquet(run / "steps.parquet")
     if (run / "summary.csv").is_file():
-        inp.summary = pd.read_csv(run / "summary.csv", dtype={"case": str, "strategy": str, "night_mode": str,
-                                                               "forecast": str})
+        summary = pd.read_csv(run / "summary.csv", dtype={"case": str, "strategy": str, "night_mode": str, "forecast": str})
+        inp.summary = summary if len(summary) else None
     inp.der_q = _parquet(run / "der_q.parquet")
     inp.bus_v = _parquet(run / "bus_v.parquet")
     for name, frame in (("manifest.json", inp.manifest), ("steps.parquet", inp.steps), ("summary.csv", inp.summary)):

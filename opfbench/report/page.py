@@ -18,7 +18,7 @@ from opfbench.report.plots import Plot
 
 @dataclass
 class Block:
-    """One piece of a section: kind ∈ heading, note, missing, meta, table, plot, claims."""
+    """One piece of a section: kind ∈ heading, note, missing, error, meta, table, plot, claims."""
 
     kind: str
     text: str = ""

@@ -192,6 +192,8 @@ def fault(inputs: Inputs) -> Section:
     if inputs.fault is None:
         return sec.add(*_missing(inputs, "fault.parquet"))
     rec = tables.recovery(inputs.fault)
+    if rec.empty:
+        return sec.add(Block("note", text=f"{inputs.fault_dir}/fault.parquet has no row at a faulted bus (faulted = true)."))
     variants = sorted(rec["variant"].unique())
     variant = "reference" if "reference" in variants else variants[0]
     sec.add(table(tables.recovery_pivot(rec, variant), f"Recovery time (ms) at the faulted bus, model variant {variant}"))
@@ -211,9 +213,26 @@ def paper_claims(inputs: Inputs) -> Section:
     return sec.add(Block("claims", claims=claims(inputs)))
 
 
+SECTIONS = (
+    ("claims", "The paper's claims", paper_claims), ("metadata", "Run metadata", metadata),
+    ("losses", "Losses and savings", losses), ("convergence", "Convergence of the formulations", convergence),
+    ("night", "Night hours", night), ("gap", "Optimality gap", gap), ("voltage", "Voltage compliance", voltage),
+    ("forecasting", "Forecasting", forecasting), ("fault", "Fault ride-through", fault),
+)
+"""(id, title, builder) in page order."""
+FAILED = "This section could not be built from its input files"
+
+
 def all_sections(inputs: Inputs, price: tuple[float, str, str]) -> list[Section]:
-    return [paper_claims(inputs), metadata(inputs, price), losses(inputs, price), convergence(inputs), night(inputs),
-            gap(inputs), voltage(inputs), forecasting(inputs), fault(inputs)]
+    """Every section; one whose input files are inconsistent (a contract broken by the
+    writer) shows the error instead of stopping the report."""
+    out = []
+    for sid, title, build in SECTIONS:
+        try:
+            out.append(build(inputs, price) if build in (metadata, losses) else build(inputs))
+        except (KeyError, ValueError, IndexError, TypeError) as exc:
+            out.append(Section(sid, title, blocks=[Block("error", text=f"{FAILED}: {type(exc).__name__}: {exc}")]))
+    return out
 
 
 def price_of(inputs: Inputs, price: float | None) -> tuple[float, str, str]:
