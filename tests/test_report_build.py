@@ -80,5 +80,7 @@ def test_report_command_rebuilds_the_page(folders, tmp_path, capsys):
     assert main(["report", str(run), "--fault-dir", str(fault), "--out", str(out), "--price", "0.5"]) == 0
     html = out.read_text()
     assert "0.5 EUR/kWh — given with --price" in html
+    again = write_report(run, fault_dir=fault, out=tmp_path / "again.html", price=0.5)
+    assert again.read_text() == html  # rebuilding from the same files gives the same page
     assert main(["report", str(tmp_path / "absent")]) == 2
     assert "opfbench run --out" in capsys.readouterr().err
