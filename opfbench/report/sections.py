@@ -213,6 +213,8 @@ def paper_claims(inputs: Inputs) -> Section:
     return sec.add(Block("claims", claims=claims(inputs)))
 
 
+PRICED = {metadata, losses}
+"""Builders that also take the energy price (currency per kWh, currency, source)."""
 SECTIONS = (
     ("claims", "The paper's claims", paper_claims), ("metadata", "Run metadata", metadata),
     ("losses", "Losses and savings", losses), ("convergence", "Convergence of the formulations", convergence),
@@ -229,7 +231,7 @@ def all_sections(inputs: Inputs, price: tuple[float, str, str]) -> list[Section]
     out = []
     for sid, title, build in SECTIONS:
         try:
-            out.append(build(inputs, price) if build in (metadata, losses) else build(inputs))
+            out.append(build(inputs, price) if build in PRICED else build(inputs))
         except (KeyError, ValueError, IndexError, TypeError) as exc:
             out.append(Section(sid, title, blocks=[Block("error", text=f"{FAILED}: {type(exc).__name__}: {exc}")]))
     return out
