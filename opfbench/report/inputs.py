@@ -1,0 +1,88 @@
+"""Read the files a run, a forecast run and a fault study wrote (see the file contracts:
+run folder, forecast folder, fault folder). Every input is optional: a missing one is
+None plus the command that produces it, so its report section can say so."""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import pandas as pd
+
+import opfbench
+
+RUN_COMMAND = "opfbench run --out {dir}"
+DETAIL_COMMAND = "opfbench run --detail --out {dir} (default on for periods of ≤ 2 days)"
+FORECAST_COMMAND = "opfbench forecast --dataset pv --out DIR and opfbench forecast --dataset wind --out DIR"
+FAULT_COMMAND = "opfbench fault CASE --out DIR (then opfbench report RUN_DIR --fault-dir DIR)"
+DOCS_FORECAST = Path(opfbench.__file__).resolve().parents[1] / "docs" / "forecast"
+"""The committed forecast JSONs, read when no forecast folder is given (a source checkout only)."""
+
+
+@dataclass
+class Inputs:
+    """Everything the report reads; None where the file is absent (see `missing`)."""
+
+    run_dir: Path
+    manifest: dict | None = None
+    steps: pd.DataFrame | None = None
+    summary: pd.DataFrame | None = None
+    der_q: pd.DataFrame | None = None
+    bus_v: pd.DataFrame | None = None
+    forecast: dict[str, dict] = field(default_factory=dict)  # dataset -> forecast_<dataset>.json
+    forecast_dir: Path | None = None
+    fault: pd.DataFrame | None = None
+    traces: pd.DataFrame | None = None
+    fault_manifest: dict | None = None
+    fault_dir: Path | None = None
+    missing: dict[str, str] = field(default_factory=dict)  # input name -> how to produce it
+
+
+def _parquet(path: Path) -> pd.DataFrame | None:
+    """The table, or None when the file is absent or has no rows (nothing to report either way)."""
+    frame = pd.read_parquet(path) if path.is_file() else None
+    return frame if frame is not None and len(frame) else None
+
+
+def _json(path: Path) -> dict | None:
+    return json.loads(path.read_text()) if path.is_file() else None
+
+
+def load_inputs(run_dir: str | Path, forecast_dir: str | Path | None = None,
+                fault_dir: str | Path | None = None) -> Inputs:
+    """Read what exists; record how to produce what does not."""
+    run = Path(run_dir)
+    inp = Inputs(run_dir=run)
+    inp.manifest = _json(run / "manifest.json")
+    inp.steps = _parquet(run / "steps.parquet")
+    if (run / "summary.csv").is_file():
+        summary = pd.read_csv(run / "summary.csv", dtype={"case": str, "strategy": str, "night_mode": str, "forecast": str})
+        inp.summary = summary if len(summary) else None
+    inp.der_q = _parquet(run / "der_q.parquet")
+    inp.bus_v = _parquet(run / "bus_v.parquet")
+    for name, frame in (("manifest.json", inp.manifest), ("steps.parquet", inp.steps), ("summary.csv", inp.summary)):
+        if frame is None:
+            inp.missing[name] = RUN_COMMAND.format(dir=run)
+    for name, frame in (("der_q.parquet", inp.der_q), ("bus_v.parquet", inp.bus_v)):
+        if frame is None:
+            inp.missing[name] = DETAIL_COMMAND.format(dir=run)
+
+    inp.forecast_dir = Path(forecast_dir) if forecast_dir is not None else DOCS_FORECAST
+    for dataset in ("pv", "wind"):
+        data = _json(inp.forecast_dir / f"forecast_{dataset}.json")
+        if data is not None:
+            inp.forecast[dataset] = data
+    if not inp.forecast:
+        inp.missing["forecast"] = FORECAST_COMMAND
+
+    if fault_dir is not None:
+        inp.fault_dir = Path(fault_dir)
+        inp.fault = _parquet(inp.fault_dir / "fault.parquet")
+        inp.traces = _parquet(inp.fault_dir / "traces.parquet")
+        inp.fault_manifest = _json(inp.fault_dir / "manifest.json")
+    if inp.fault is None:
+        inp.missing["fault.parquet"] = FAULT_COMMAND
+    if inp.traces is None:
+        inp.missing["traces.parquet"] = FAULT_COMMAND
+    return inp

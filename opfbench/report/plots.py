@@ -1,0 +1,232 @@
+"""The report's Plotly figures. Each function returns a list of `Plot` (possibly empty when
+its input lacks the data); `Plot.json` is the figure as JSON safe to embed in a
+<script type="application/json"> element (<, > and & escaped as \\u003c, \\u003e, \\u0026).
+
+Strings from input (case, strategy, model names) are HTML-escaped before they reach
+Plotly, whose text rendering understands a few HTML tags."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from html import escape
+
+import numpy as np
+import pandas as pd
+import plotly.graph_objects as go
+from plotly.subplots import make_subplots
+
+from opfbench.report.tables import REFERENCE_NIGHT, order
+
+MAX_POINTS = 1440
+"""Per-step traces are bin-averaged to at most this many points (a day at 1 min)."""
+HEIGHT = 380
+
+
+@dataclass(frozen=True)
+class Plot:
+    id: str
+    title: str
+    json: str
+
+
+def plot_json(pid: str, title: str, fig: go.Figure, xtitle: str, ytitle: str, height: int = HEIGHT) -> Plot:
+    fig.update_layout(template="plotly_white", height=height, title=escape(title), margin=dict(l=60, r=20, t=50, b=50),
+                      legend=dict(orientation="v"))
+    if xtitle:
+        fig.update_xaxes(title_text=xtitle)
+    if ytitle:
+        fig.update_yaxes(title_text=ytitle)
+    text = fig.to_json(engine="json")
+    return Plot(pid, title, text.replace("<", "\\u003c").replace(">", "\\u003e").replace("&", "\\u0026"))
+
+
+def _decimate(frame: pd.DataFrame, value: str) -> pd.DataFrame:
+    """Mean of `value` in at most MAX_POINTS equal bins of rows (rows sorted by time)."""
+    if len(frame) <= MAX_POINTS:
+        return frame[["time", value]]
+    bins = np.arange(len(frame)) * MAX_POINTS // len(frame)
+    return frame.groupby(bins).agg(time=("time", "first"), **{value: (value, "mean")})
+
+
+def _reference(frame: pd.DataFrame) -> tuple[pd.DataFrame, float]:
+    """Rows of the reference setting: night connected (else the first mode), forecast off, smallest k."""
+    modes = list(frame["night_mode"].unique())
+    mode = REFERENCE_NIGHT if REFERENCE_NIGHT in modes else modes[0]
+    sub = frame[(frame["night_mode"] == mode) & (frame["forecast"] == "off")]
+    k = float(sub["k"].min()) if len(sub) else float("nan")
+    return sub[np.isclose(sub["k"], k)], k
+
+
+def _cases(frame: pd.DataFrame) -> list[str]:
+    return sorted(frame["case"].astype(str).unique())
+
+
+def losses_day(steps: pd.DataFrame) -> list[Plot]:
+    out = []
+    for i, case in enumerate(_cases(steps)):
+        sub, k = _reference(steps[steps["case"] == case])
+        fig = go.Figure()
+        for strategy in order(sub[["strategy"]].drop_duplicates())["strategy"]:
+            d = _decimate(sub[sub["strategy"] == strategy].sort_values("time"), "losses_kw")
+            fig.add_scatter(x=d["time"], y=d["losses_kw"], mode="lines", name=escape(strategy))
+        out.append(plot_json(f"losses-day-{i}", f"{case}: losses through the day (k={k:g}, night connected, forecast off)",
+                         fig, "time", "losses (kW)"))
+    return out
+
+
+def energy_vs_k(summary: pd.DataFrame) -> list[Plot]:
+    out = []
+    for i, case in enumerate(_cases(summary)):
+        sub = summary[(summary["case"] == case) & (summary["night_mode"] == REFERENCE_NIGHT)]
+        fig = go.Figure()
+        for (strategy, forecast), grp in order(sub).groupby(["strategy", "forecast"], sort=False):
+            grp = grp.sort_values("k")
+            name = strategy if forecast == "off" else f"{strategy} (forecast {forecast})"
+            fig.add_scatter(x=grp["k"], y=grp["energy_kwh"], mode="lines+markers", name=escape(name),
+                            line=dict(dash="solid" if forecast == "off" else "dot"))
+        out.append(plot_json(f"energy-k-{i}", f"{case}: energy losses vs reserve k (night connected)", fig,
+                         "reserve coefficient k", "energy losses (kWh)"))
+    return out
+
+
+def der_q_day(der_q: pd.DataFrame) -> list[Plot]:
+    out = []
+    for i, case in enumerate(_cases(der_q)):
+        sub, k = _reference(der_q[der_q["case"] == case])
+        strategies = [s for s in order(sub[["strategy"]].drop_duplicates())["strategy"] if s != "no-action"]
+        if not strategies:
+            continue
+        fig = make_subplots(rows=len(strategies), cols=1, shared_xaxes=True, subplot_titles=[escape(s) for s in strategies],
+                            vertical_spacing=0.06)
+        for row, strategy in enumerate(strategies, start=1):
+            for bus, grp in sub[sub["strategy"] == strategy].groupby("bus"):
+                d = _decimate(grp.sort_values("time"), "q_mvar")
+                kind = escape(str(grp["kind"].iloc[0]))
+                fig.add_scatter(x=d["time"], y=d["q_mvar"], mode="lines", name=f"bus {bus} ({kind})",
+                                legendgroup=str(bus), showlegend=row == 1, row=row, col=1)
+            fig.update_yaxes(title_text="Q (MVAr)", row=row, col=1)
+        out.append(plot_json(f"der-q-{i}", f"{case}: DER Q setpoints through the day (k={k:g}, night connected, "
+                         "forecast off)", fig, "", "", height=max(HEIGHT, 220 * len(strategies))))
+    return out
+
+
+def voltage_envelope(steps: pd.DataFrame, limits: dict[str, tuple[float, float]]) -> list[Plot]:
+    out = []
+    for i, case in enumerate(_cases(steps)):
+        sub, k = _reference(steps[steps["case"] == case])
+        fig = go.Figure()
+        for j, strategy in enumerate(order(sub[["strategy"]].drop_duplicates())["strategy"]):
+            grp = sub[sub["strategy"] == strategy].sort_values("time")
+            lo, hi = _decimate(grp, "vmin_pu"), _decimate(grp, "vmax_pu")
+            color = _COLORS[j % len(_COLORS)]
+            fig.add_scatter(x=lo["time"], y=lo["vmin_pu"], mode="lines", name=f"{escape(strategy)} min",
+                            line=dict(color=color), legendgroup=escape(strategy))
+            fig.add_scatter(x=hi["time"], y=hi["vmax_pu"], mode="lines", name=f"{escape(strategy)} max",
+                            line=dict(color=color, dash="dot"), legendgroup=escape(strategy))
+        if case in limits:
+            for v in limits[case]:
+                fig.add_hline(y=v, line=dict(color="#b00", dash="dash", width=1))
+        out.append(plot_json(f"voltage-{i}", f"{case}: voltage envelope through the day (k={k:g}, night connected, "
+                         "forecast off; dashed red: the case's limits)", fig, "time", "|V| (p.u.)"))
+    return out
+
+
+def gap_vs_k(summary: pd.DataFrame) -> list[Plot]:
+    out = []
+    for i, case in enumerate(_cases(summary)):
+        sub = summary[(summary["case"] == case) & (summary["night_mode"] == REFERENCE_NIGHT) & (summary["forecast"] == "off")]
+        sub = sub.dropna(subset=["gap_pct"])
+        if sub.empty:
+            continue
+        fig = go.Figure()
+        for strategy, grp in order(sub).groupby("strategy", sort=False):
+            grp = grp.sort_values("k")
+            fig.add_scatter(x=grp["k"], y=grp["gap_pct"], mode="lines+markers", name=escape(strategy),
+                            customdata=grp["gap_kwh"], hovertemplate="k=%{x}<br>gap %{y:.2f} %<br>%{customdata:.2f} kWh")
+        out.append(plot_json(f"gap-{i}", f"{case}: gap to the SOCP lower bound (night connected, forecast off)", fig,
+                         "reserve coefficient k", "gap to the bound (%)"))
+    return out
+
+
+def night_bars(summary: pd.DataFrame) -> list[Plot]:
+    out = []
+    for i, case in enumerate(_cases(summary)):
+        sub = summary[(summary["case"] == case) & (summary["forecast"] == "off")]
+        k = float(sub["k"].min())
+        sub = order(sub[np.isclose(sub["k"], k)])
+        fig = go.Figure()
+        for mode, grp in sub.groupby("night_mode", sort=True):
+            fig.add_bar(x=[escape(s) for s in grp["strategy"]], y=grp["energy_kwh"], name=f"PV {escape(mode)} at night")
+        fig.update_layout(barmode="group")
+        out.append(plot_json(f"night-{i}", f"{case}: energy losses per night mode (k={k:g}, forecast off)", fig,
+                         "strategy", "energy losses (kWh)"))
+    return out
+
+
+def solve_times(steps: pd.DataFrame) -> list[Plot]:
+    sub = steps.dropna(subset=["solver_ms"])
+    if sub.empty:
+        return []
+    fig = go.Figure()
+    for (case, strategy), grp in order(sub).groupby(["case", "strategy"], sort=False):
+        fig.add_box(y=grp["solver_ms"], name=escape(f"{strategy} ({case})"), boxpoints=False)
+    return [plot_json("solve-times", "Solve time per step and formulation", fig, "", "solve time (ms)")]
+
+
+def recovery_per_bus(rec: pd.DataFrame) -> list[Plot]:
+    sub = rec[rec["variant"] == "reference"] if (rec["variant"] == "reference").any() else rec
+    if sub.empty:
+        return []
+    k = float(sub["k"].min())
+    sub = order(sub[np.isclose(sub["k"], k) & (sub["forecast"] == "off")])
+    fig = go.Figure()
+    for strategy, grp in sub.groupby("strategy", sort=False):
+        fig.add_bar(x=[escape(f"{c} bus {b}") for c, b in zip(grp["case"], grp["fault_bus"], strict=True)],
+                    y=grp["recovery_ms"], name=escape(strategy))
+    fig.update_layout(barmode="group")
+    return [plot_json("recovery-bus", f"Recovery time per fault bus (k={k:g}, forecast off, reference model)", fig,
+                  "fault bus", "recovery time (ms)")]
+
+
+def recovery_vs_k(rec: pd.DataFrame) -> list[Plot]:
+    sub = rec[rec["variant"] == "reference"] if (rec["variant"] == "reference").any() else rec
+    sub = sub[sub["forecast"] == "off"]
+    if sub.empty:
+        return []
+    fig = go.Figure()
+    for (case, bus, strategy), grp in order(sub).groupby(["case", "fault_bus", "strategy"], sort=False):
+        grp = grp.sort_values("k")
+        fig.add_scatter(x=grp["k"], y=grp["recovery_ms"], mode="lines+markers", name=escape(f"{strategy}, {case} fault at {bus}"),
+                        legendgroup=escape(strategy))
+    return [plot_json("recovery-k", "Recovery time vs reserve k (forecast off, reference model)", fig,
+                  "reserve coefficient k", "recovery time (ms)")]
+
+
+def fault_traces(traces: pd.DataFrame, bus: int = 27) -> list[Plot]:
+    """|V| and Q at `bus` (the paper's DFIG) through the fault, per strategy: the fault at
+    `bus` when simulated, else the first fault bus; smallest k, forecast off, reference model."""
+    sub = traces[(traces["bus"] == bus) & (traces["forecast"] == "off")]
+    if (sub["variant"] == "reference").any():
+        sub = sub[sub["variant"] == "reference"]
+    if sub.empty:
+        return []
+    fault_bus = bus if (sub["fault_bus"] == bus).any() else sorted(sub["fault_bus"].unique())[0]
+    sub = sub[sub["fault_bus"] == fault_bus]
+    case = sorted(sub["case"].astype(str).unique())[0]
+    sub = sub[sub["case"] == case]
+    k = float(sub["k"].min())
+    sub = sub[np.isclose(sub["k"], k)]
+    fig = make_subplots(rows=2, cols=1, shared_xaxes=True, subplot_titles=("|V| (p.u.)", "Q (MVAr)"), vertical_spacing=0.1)
+    for j, (strategy, grp) in enumerate(order(sub).groupby("strategy", sort=False)):
+        grp = grp.sort_values("t_s")
+        color = _COLORS[j % len(_COLORS)]
+        fig.add_scatter(x=grp["t_s"], y=grp["v_pu"], mode="lines", name=escape(strategy), line=dict(color=color),
+                        legendgroup=escape(strategy), row=1, col=1)
+        fig.add_scatter(x=grp["t_s"], y=grp["q_mvar"], mode="lines", name=escape(strategy), line=dict(color=color),
+                        legendgroup=escape(strategy), showlegend=False, row=2, col=1)
+    fig.update_xaxes(title_text="time (s)", row=2, col=1)
+    return [plot_json("fault-traces", f"{case}: voltage and Q at bus {bus}, fault at bus {fault_bus} (k={k:g}, forecast off)",
+                  fig, "", "", height=2 * HEIGHT)]
+
+
+_COLORS = ("#1f77b4", "#ff7f0e", "#2ca02c", "#d62728", "#9467bd", "#8c564b", "#e377c2", "#7f7f7f")

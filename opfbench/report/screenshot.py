@@ -1,0 +1,25 @@
+"""Full-page screenshot of a report in headless Chromium (the README's docs/report.png):
+
+    python -m opfbench.report.screenshot reports/run/report.html docs/report.png [--width 1400]
+"""
+
+from __future__ import annotations
+
+import argparse
+
+from opfbench.report.browser import screenshot
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(prog="python -m opfbench.report.screenshot", description=__doc__.splitlines()[0])
+    parser.add_argument("html")
+    parser.add_argument("png")
+    parser.add_argument("--width", type=int, default=1400, help="window width in px (default 1400)")
+    parser.add_argument("--max-height", type=int, default=30000, help="cap on the page height in px (default 30000)")
+    args = parser.parse_args(argv)
+    print(screenshot(args.html, args.png, args.width, args.max_height))
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

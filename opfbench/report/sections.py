@@ -1,0 +1,249 @@
+"""The report's sections, in order; each reads `Inputs` and never raises on a missing
+input: the section says which command produces it."""
+
+from __future__ import annotations
+
+from opfbench.report import plots, tables
+from opfbench.report.claims import claims
+from opfbench.report.inputs import Inputs
+from opfbench.report.page import Block, Section, table
+
+DEFAULT_PRICE_PER_KWH = 0.20
+DEFAULT_CURRENCY = "EUR"
+DEFAULT_PRICE_SOURCE = ("Eurostat, EU average electricity price for non-household consumers, second half of 2023, "
+                        "excluding VAT and recoverable taxes (≈ 0.20 EUR/kWh; dataset nrg_pc_205, "
+                        "Statistics Explained 'Electricity price statistics', April 2024)")
+"""Default energy price for the money rows: the price a DSO-sized buyer pays for the energy it loses."""
+
+
+def _missing(inputs: Inputs, *names: str) -> list[Block]:
+    return [Block("missing", text=name, command=inputs.missing[name]) for name in names if name in inputs.missing]
+
+
+def _plots(found: list[plots.Plot]) -> list[Block]:
+    return [Block("plot", plot=p) for p in found]
+
+
+def metadata(inputs: Inputs, price: tuple[float, str, str]) -> Section:
+    sec = Section("metadata", "Run metadata")
+    m = inputs.manifest
+    if m is None:
+        return sec.add(Block("note", text=f"Run folder {inputs.run_dir}."), *_missing(inputs, "manifest.json"))
+    cfg, period = m.get("config", {}), m.get("period", {})
+    versions = ", ".join(f"{k} {v}" for k, v in (m.get("versions") or {}).items())
+    timings, machine = m.get("timings") or {}, m.get("machine") or {}
+    cases = "; ".join(
+        f"{name}: {c.get('buses')} buses, DER " + ", ".join(f"{d.get('kind')} at bus {d.get('bus')} ({d.get('rating_mw')} MW)"
+                                                            for d in c.get("ders", []))
+        + f", limits [{c.get('vmin_pu')}, {c.get('vmax_pu')}] p.u."
+        for name, c in (m.get("cases") or {}).items())
+    items = [
+        ("command", " ".join(str(a) for a in m.get("command") or [])),
+        ("run folder", str(inputs.run_dir)),
+        ("created (UTC)", str(m.get("created_utc"))),
+        ("cases", cases or ", ".join(cfg.get("cases", []))),
+        ("period", f"{cfg.get('period')}: {period.get('start')} → {period.get('end')}, {period.get('steps')} steps "
+                   f"of {cfg.get('step_minutes')} min"),
+        ("grid", f"strategies {', '.join(cfg.get('strategies', []))}; k {', '.join(f'{k:g}' for k in cfg.get('ks', []))}; "
+                 f"night modes {', '.join(cfg.get('night_modes', []))} (night {cfg.get('night')}); "
+                 f"forecast {', '.join(cfg.get('forecast', []))}"),
+        ("data sources", "; ".join(m.get("data_sources") or [])),
+        ("energy price", f"{price[0]:g} {price[1]}/kWh — {price[2]}"),
+        ("opfbench", f"{m.get('opfbench_version')} (git commit {m.get('git_commit') or 'not available'})"),
+        ("versions", versions),
+        ("machine", f"{machine.get('cores')} cores, {machine.get('platform')}"),
+        ("wall time", f"{timings.get('wall_s')} s total, {timings.get('workers')} workers, "
+                      f"scheduler {timings.get('scheduler') or 'local'}"),
+    ]
+    sec.add(Block("meta", items=items))
+    if inputs.summary is not None:
+        sec.add(table(tables.wall_times(inputs.summary), "Wall and solver time per configuration (s)", collapse_over=0))
+    return sec
+
+
+def losses(inputs: Inputs, price: tuple[float, str, str]) -> Section:
+    sec = Section("losses", "Losses and savings",
+                  f"Average losses (kW), energy (kWh), savings vs no action (same case, k and night mode, forecast off) and "
+                  f"the money they save at {price[0]:g} {price[1]}/kWh ({price[2]}); per year = the run's daily "
+                  f"savings × 365.")
+    if inputs.summary is None:
+        return sec.add(*_missing(inputs, "summary.csv"))
+    s = inputs.summary
+    for mode in [m for m in ("connected", "disconnected", "connected-q") if m in set(s["night_mode"])]:
+        sec.add(table(tables.energy_pivot(s, mode), f"Energy losses (kWh) per strategy and k, PV {mode} at night",
+                      collapse_over=60))
+    sec.add(table(tables.energy_pivot(s, tables.REFERENCE_NIGHT, "savings_pct"),
+                  "Savings vs no action (%), PV connected at night", collapse_over=60))
+    money = tables.losses(s, price[0])
+    sec.add(table(tables.energy_pivot(money, tables.REFERENCE_NIGHT, "money_per_year"),
+                  f"Money saved per year vs no action ({price[1]}), PV connected at night", collapse_over=60))
+    full = money.rename(columns={"money_per_day": f"{price[1]} per day", "money_per_year": f"{price[1]} per year"})
+    sec.add(table(full, "Every configuration", collapse_over=0))
+    if inputs.steps is not None:
+        sec.blocks += _plots(plots.losses_day(inputs.steps))
+    sec.blocks += _plots(plots.energy_vs_k(s))
+    if inputs.der_q is not None:
+        sec.blocks += _plots(plots.der_q_day(inputs.der_q))
+    else:
+        sec.blocks += _missing(inputs, "der_q.parquet")
+    return sec
+
+
+def convergence(inputs: Inputs) -> Section:
+    sec = Section("convergence", "Convergence of the formulations",
+                  "Per formulation and k: steps of each status (ok; fallback-cold / fallback-socp / fallback-no-action: "
+                  "IPOPT failed, a fallback point was used; infeasible / solver-failed: no feasible point found, no "
+                  "action applied; pf-diverged: the setpoints' power flow did not converge).")
+    if inputs.steps is None:
+        return sec.add(*_missing(inputs, "steps.parquet"))
+    conv = tables.convergence(inputs.steps)
+    if conv.empty:
+        return sec.add(Block("note", text="The run has no formulation (acopf, acopf-paper, socp)."))
+    sec.add(table(conv, "Steps per status"))
+    sec.add(table(tables.failure_reasons(inputs.steps), "Steps not ok: status, solver return status and fallback used"))
+    sec.add(table(tables.solver_stats(inputs.steps), "IPOPT iterations and solve times (ms)"))
+    sec.blocks += _plots(plots.solve_times(inputs.steps))
+    if inputs.summary is not None:
+        setup = tables.paper_setup(inputs.summary, inputs.steps)
+        sec.add(Block("heading", text="The paper's OPF setup (acopf-paper)"))
+        if setup.empty:
+            sec.add(Block("note", text="The run has no acopf-paper configuration: run opfbench run with the default "
+                                       "strategies (or --strategies ... acopf-paper)."))
+        else:
+            sec.add(Block("note", text="acopf-paper: the slack may not export and a failed solve falls back to no action, "
+                                       "as in the paper; its energy beside our AC OPF (fallback chain) and LFMA."))
+            sec.add(table(setup))
+    return sec
+
+
+def night(inputs: Inputs) -> Section:
+    sec = Section("night", "Night hours",
+                  "PV inverters connected vs disconnected at night, and connected-q: connected with the S-limited "
+                  "capability at night (Q without the power-factor limit, 'Q at night'). Reduction % = "
+                  "1 − E(mode)/E(disconnected).")
+    if inputs.summary is None:
+        return sec.add(*_missing(inputs, "summary.csv"))
+    s = inputs.summary
+    if "connected-q" not in set(s["night_mode"]):
+        sec.add(Block("note", text="The run has no connected-q night mode: run opfbench run --night-modes connected "
+                                   "disconnected connected-q."))
+    k = float(s["k"].min())
+    sec.add(Block("heading", text=f"The paper's night-hour table beside ours (k = {k:g}, forecast off)"))
+    sec.add(Block("note", text="Paper Table III (SYSLAB data, 20 August 2019); the paper does not state k. "
+                               "acopf = our AC OPF (fallback chain)."))
+    sec.add(table(tables.night_vs_paper(s, k)))
+    sec.add(table(tables.night(s), "Energy (kWh) per night mode, every strategy and k"))
+    sec.blocks += _plots(plots.night_bars(s))
+    return sec
+
+
+def gap(inputs: Inputs) -> Section:
+    sec = Section("gap", "Optimality gap",
+                  "Each strategy's energy against the SOCP relaxation's lower bound (slack may export; certified: "
+                  "no AC-feasible setpoints can lose less), summed over the same steps: gap kWh and % of the bound.")
+    if inputs.summary is None:
+        return sec.add(*_missing(inputs, "summary.csv"))
+    s = inputs.summary
+    sec.add(table(tables.energy_pivot(s[s["forecast"] == "off"], tables.REFERENCE_NIGHT, "gap_pct"),
+                  "Gap to the bound (%), PV connected at night, forecast off"))
+    sec.add(table(tables.gap(s), "Gap per configuration", collapse_over=0))
+    sec.blocks += _plots(plots.gap_vs_k(s))
+    return sec
+
+
+def voltage(inputs: Inputs) -> Section:
+    sec = Section("voltage", "Voltage compliance",
+                  "Steps outside the case's voltage limits and the extreme voltages per strategy (over every k, night "
+                  "mode and forecast); Algorithm 3's capability excursions (setpoints above the inverter's capability at "
+                  "the current P, when the forecast P gives a larger limit).")
+    if inputs.summary is None:
+        return sec.add(*_missing(inputs, "summary.csv"))
+    limits = {name: (c.get("vmin_pu"), c.get("vmax_pu")) for name, c in ((inputs.manifest or {}).get("cases") or {}).items()}
+    if limits:
+        sec.add(Block("note", text="Limits: " + "; ".join(f"{n} [{lo}, {hi}] p.u." for n, (lo, hi) in limits.items())))
+    sec.add(table(tables.voltage(inputs.summary)))
+    exc = tables.excursions(inputs.summary)
+    if exc.empty:
+        sec.add(Block("note", text="No forecast-aware configuration in the run (forecast off only)."))
+    else:
+        sec.add(table(exc, "Algorithm 3: steps with a capability excursion and the largest excursion (MVAr)"))
+    if inputs.steps is not None:
+        sec.blocks += _plots(plots.voltage_envelope(inputs.steps, limits))
+    return sec
+
+
+def forecasting(inputs: Inputs) -> Section:
+    source = inputs.forecast_dir
+    sec = Section("forecasting", "Forecasting",
+                  "One-step-ahead forecast metrics beside the paper's Table I (SYSLAB 2019, 5-min data; our data and "
+                  "resolution differ, so only the ranking is comparable). MSE on min-max scaled data, MAPE on samples "
+                  "above a fraction of the rating (see the forecast run).")
+    if not inputs.forecast:
+        return sec.add(*_missing(inputs, "forecast"))
+    sec.add(Block("note", text=f"From {source}: " + ", ".join(f"forecast_{d}.json" for d in inputs.forecast)))
+    sec.add(table(tables.forecast_metrics(inputs.forecast)))
+    return sec
+
+
+def fault(inputs: Inputs) -> Section:
+    sec = Section("fault", "Fault ride-through",
+                  "Voltage recovery time at the faulted bus (fault inception until |V| stays ≥ 0.9 p.u.) per fault bus, "
+                  "strategy, k and forecast, and the time each strategy adds over no action.")
+    if inputs.fault is None:
+        return sec.add(*_missing(inputs, "fault.parquet"))
+    rec = tables.recovery(inputs.fault)
+    if rec.empty:
+        return sec.add(Block("note", text=f"{inputs.fault_dir}/fault.parquet has no row at a faulted bus (faulted = true)."))
+    variants = sorted(rec["variant"].unique())
+    variant = "reference" if "reference" in variants else variants[0]
+    sec.add(table(tables.recovery_pivot(rec, variant), f"Recovery time (ms) at the faulted bus, model variant {variant}"))
+    sec.add(table(tables.sensitivity(rec), "Sensitivity to the source / motor model variants"))
+    sec.add(table(rec, "Every simulation (faulted bus)", collapse_over=0))
+    sec.blocks += _plots(plots.recovery_per_bus(rec)) + _plots(plots.recovery_vs_k(rec))
+    if inputs.traces is not None:
+        sec.blocks += _plots(plots.fault_traces(inputs.traces))
+    else:
+        sec.blocks += _missing(inputs, "traces.parquet")
+    return sec
+
+
+def paper_claims(inputs: Inputs) -> Section:
+    sec = Section("claims", "The paper's claims",
+                  "Each claim with the paper's figure, ours, and a verdict computed from the tables above.")
+    return sec.add(Block("claims", claims=claims(inputs)))
+
+
+PRICED = {metadata, losses}
+"""Builders that also take the energy price (currency per kWh, currency, source)."""
+SECTIONS = (
+    ("claims", "The paper's claims", paper_claims), ("metadata", "Run metadata", metadata),
+    ("losses", "Losses and savings", losses), ("convergence", "Convergence of the formulations", convergence),
+    ("night", "Night hours", night), ("gap", "Optimality gap", gap), ("voltage", "Voltage compliance", voltage),
+    ("forecasting", "Forecasting", forecasting), ("fault", "Fault ride-through", fault),
+)
+"""(id, title, builder) in page order."""
+FAILED = "This section could not be built from its input files"
+
+
+def all_sections(inputs: Inputs, price: tuple[float, str, str]) -> list[Section]:
+    """Every section; one whose input files are inconsistent (a contract broken by the
+    writer) shows the error instead of stopping the report."""
+    out = []
+    for sid, title, build in SECTIONS:
+        try:
+            out.append(build(inputs, price) if build in PRICED else build(inputs))
+        except (KeyError, ValueError, IndexError, TypeError) as exc:
+            out.append(Section(sid, title, blocks=[Block("error", text=f"{FAILED}: {type(exc).__name__}: {exc}")]))
+    return out
+
+
+def price_of(inputs: Inputs, price: float | None) -> tuple[float, str, str]:
+    """(price per kWh, currency, source): `price` if given, else the manifest's, else the default."""
+    cfg = (inputs.manifest or {}).get("config", {})
+    currency = cfg.get("currency") or DEFAULT_CURRENCY
+    if price is not None:
+        return float(price), currency, "given with --price"
+    if cfg.get("price_per_kwh") is not None:
+        return float(cfg["price_per_kwh"]), currency, str(cfg.get("price_source") or "the run's manifest")
+    return DEFAULT_PRICE_PER_KWH, DEFAULT_CURRENCY, DEFAULT_PRICE_SOURCE
+

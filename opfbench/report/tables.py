@@ -1,0 +1,218 @@
+"""The report's tables, derived from the run / forecast / fault files (pandas in, pandas out).
+
+Conventions: energies kWh, losses kW, voltages p.u., times ms; savings % = 100·(1 −
+E/E_no-action) with E_no-action the same case/k/night mode, forecast off (summary.csv's
+`no_action_kwh`). Every table keeps the `case` column so several feeders stay apart.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pandas as pd
+
+from opfbench.registry import FORMULATIONS, LOCAL_RULES, STRATEGIES
+from opfbench.report import paper
+
+STATUSES = ("ok", "fallback-cold", "fallback-socp", "fallback-no-action", "infeasible", "solver-failed", "pf-diverged")
+CONFIG = ["case", "strategy", "k", "night_mode", "forecast"]
+REFERENCE_NIGHT = "connected"
+"""The night mode of the tables that fix one (the paper's main setting)."""
+
+
+def order(frame: pd.DataFrame) -> pd.DataFrame:
+    """Rows in the registry's strategy order, then case, k, night mode, forecast."""
+    known = list(LOCAL_RULES + FORMULATIONS)
+    rank = {name: i for i, name in enumerate(known)}
+    keys = [c for c in ("case", "strategy", "k", "night_mode", "forecast") if c in frame.columns]
+    out = frame.assign(_rank=frame["strategy"].map(lambda s: rank.get(s, len(known)))) if "strategy" in frame else frame
+    by = [c if c != "strategy" else "_rank" for c in keys]
+    out = out.sort_values(by, kind="stable") if by else out
+    return out.drop(columns="_rank", errors="ignore").reset_index(drop=True)
+
+
+def losses(summary: pd.DataFrame, price_per_kwh: float) -> pd.DataFrame:
+    """Per configuration: avg kW, kWh, savings % and money saved per day and per year
+    (the run's savings scaled to 24 h and to 365 days) at `price_per_kwh`."""
+    days = summary["hours"] / 24.0
+    saved_per_day = (summary["no_action_kwh"] - summary["energy_kwh"]) / days
+    out = summary[CONFIG + ["avg_loss_kw", "energy_kwh", "savings_pct"]].assign(
+        saved_kwh_per_day=saved_per_day, money_per_day=saved_per_day * price_per_kwh,
+        money_per_year=saved_per_day * price_per_kwh * 365.0)
+    return order(out)
+
+
+def energy_pivot(summary: pd.DataFrame, night_mode: str = REFERENCE_NIGHT, value: str = "energy_kwh") -> pd.DataFrame:
+    """`value` per (case, strategy, forecast) × k, one night mode."""
+    sub = summary[summary["night_mode"] == night_mode]
+    table = sub.pivot_table(index=["case", "strategy", "forecast"], columns="k", values=value, aggfunc="first")
+    table.columns = [f"k={k:g}" for k in table.columns]
+    return order(table.reset_index())
+
+
+def formulation_steps(steps: pd.DataFrame) -> pd.DataFrame:
+    """Rows of strategies that call a solver (registered formulations, or any with an IPOPT/solver status)."""
+    solver = steps["strategy"].isin(FORMULATIONS) | (steps["solver_status"].fillna("") != "")
+    return steps[solver]
+
+
+def convergence(steps: pd.DataFrame) -> pd.DataFrame:
+    """Per case × formulation × k: steps with each status (count and share %)."""
+    sub = formulation_steps(steps)
+    if sub.empty:
+        return pd.DataFrame()
+    counts = pd.crosstab([sub["case"], sub["strategy"], sub["k"]], sub["status"])
+    for status in STATUSES:
+        if status not in counts:
+            counts[status] = 0
+    extra = [c for c in counts.columns if c not in STATUSES]
+    counts = counts[list(STATUSES) + extra]
+    counts.columns.name = None
+    total = counts.sum(axis=1)
+    out = counts.copy()
+    out.insert(0, "steps", total)
+    out["not ok %"] = 100.0 * (total - counts["ok"]) / total
+    return order(out.reset_index())
+
+
+def failure_reasons(steps: pd.DataFrame) -> pd.DataFrame:
+    """Steps not "ok" per case × formulation × status × solver return status."""
+    sub = formulation_steps(steps)
+    sub = sub[sub["status"] != "ok"]
+    if sub.empty:
+        return pd.DataFrame(columns=["case", "strategy", "status", "solver_status", "fallback", "steps"])
+    out = sub.groupby(["case", "strategy", "status", "solver_status", "fallback"]).size().rename("steps").reset_index()
+    return order(out)
+
+
+def solver_stats(steps: pd.DataFrame) -> pd.DataFrame:
+    """IPOPT iterations and solve times (ms) per case × formulation: median, 90th percentile, max."""
+    sub = formulation_steps(steps)
+    if sub.empty:
+        return pd.DataFrame()
+    g = sub.groupby(["case", "strategy"])
+    out = pd.DataFrame({
+        "steps": g.size(),
+        "iterations median": g["iterations"].median(), "iterations p90": g["iterations"].quantile(0.9),
+        "iterations max": g["iterations"].max(),
+        "solve ms median": g["solver_ms"].median(), "solve ms p90": g["solver_ms"].quantile(0.9),
+        "solve ms max": g["solver_ms"].max(), "solve s total": g["solver_ms"].sum() / 1e3,
+    })
+    return order(out.reset_index())
+
+
+def paper_setup(summary: pd.DataFrame, steps: pd.DataFrame | None) -> pd.DataFrame:
+    """The paper's OPF setup (acopf-paper) beside our AC OPF and LFMA, per case × k × night
+    mode (forecast off): energy kWh, and acopf-paper's failed steps by cause."""
+    sub = summary[(summary["forecast"] == "off") & summary["strategy"].isin(["lfma", "acopf", "acopf-paper"])]
+    if not (sub["strategy"] == "acopf-paper").any():
+        return pd.DataFrame()
+    out = sub.pivot_table(index=["case", "night_mode", "k"], columns="strategy", values="energy_kwh", aggfunc="first")
+    out.columns = [f"{c} kWh" for c in out.columns]
+    if steps is not None:
+        paper_steps = steps[(steps["strategy"] == "acopf-paper") & (steps["forecast"] == "off")]
+        causes = pd.crosstab([paper_steps["case"], paper_steps["night_mode"], paper_steps["k"]], paper_steps["status"])
+        for status in ("infeasible", "solver-failed", "fallback-no-action"):
+            out[f"acopf-paper {status}"] = causes[status] if status in causes else 0
+    return out.reset_index()
+
+
+def night(summary: pd.DataFrame) -> pd.DataFrame:
+    """Energy per night mode (forecast off) per case × strategy × k, and the reduction %
+    of keeping PV connected (and of connected-q) vs disconnected at night."""
+    sub = summary[summary["forecast"] == "off"]
+    table = sub.pivot_table(index=["case", "strategy", "k"], columns="night_mode", values="energy_kwh", aggfunc="first")
+    table.columns = [str(c) for c in table.columns]
+    if "disconnected" in table:
+        for mode in ("connected", "connected-q"):
+            if mode in table:
+                table[f"{mode} vs disconnected %"] = 100.0 * (1 - table[mode] / table["disconnected"])
+    return order(table.reset_index())
+
+
+def night_vs_paper(summary: pd.DataFrame, k: float = 0.0) -> pd.DataFrame:
+    """The paper's night-hour table beside ours at reserve `k` (forecast off)."""
+    rows = []
+    ours = summary[(summary["forecast"] == "off") & np.isclose(summary["k"], k)]
+    for case in sorted(ours["case"].unique()):
+        for strategy in paper.NIGHT_TABLE["connected"]:
+            row: dict[str, object] = {"case": case, "strategy": strategy}
+            for mode in ("connected", "disconnected"):
+                row[f"paper {mode} kWh"] = paper.NIGHT_TABLE[mode][strategy][1]
+            for mode in ("connected", "disconnected", "connected-q"):
+                hit = ours[(ours["case"] == case) & (ours["strategy"] == strategy) & (ours["night_mode"] == mode)]
+                row[f"ours {mode} kWh"] = float(hit["energy_kwh"].iloc[0]) if len(hit) else np.nan
+            row["paper reduction %"] = 100 * (1 - row["paper connected kWh"] / row["paper disconnected kWh"])
+            row["ours reduction %"] = 100 * (1 - row["ours connected kWh"] / row["ours disconnected kWh"])
+            rows.append(row)
+    return pd.DataFrame(rows)
+
+
+def gap(summary: pd.DataFrame) -> pd.DataFrame:
+    """Energy vs the certified SOCP lower bound per case × strategy × k × night mode (forecast off)."""
+    sub = summary[summary["forecast"] == "off"]
+    cols = CONFIG + ["energy_kwh", "lower_bound_kwh", "gap_kwh", "gap_pct", "certified_share"]
+    return order(sub[[c for c in cols if c in sub.columns]])
+
+
+def voltage(summary: pd.DataFrame) -> pd.DataFrame:
+    """Per case × strategy (over every k, night mode and forecast): steps outside the case's
+    limits, lowest and highest voltage."""
+    g = summary.groupby(["case", "strategy"])
+    out = pd.DataFrame({"configurations": g.size(), "steps": g["steps"].sum(),
+                        "steps outside limits": g["voltage_violation_steps"].sum(),
+                        "vmin_pu": g["vmin_pu"].min(), "vmax_pu": g["vmax_pu"].max()})
+    return order(out.reset_index())
+
+
+def excursions(summary: pd.DataFrame) -> pd.DataFrame:
+    """Algorithm 3 (forecast on): steps whose setpoint exceeds the capability at P^C, and the largest excess."""
+    sub = summary[(summary["forecast"] != "off") & summary["strategy"].map(
+        lambda s: STRATEGIES[s].uses_forecast if s in STRATEGIES else True)]
+    return order(sub[CONFIG + ["steps", "excursion_steps", "max_excursion_mvar"]])
+
+
+def forecast_metrics(forecast: dict[str, dict]) -> pd.DataFrame:
+    """Metrics of each forecast JSON beside the paper's Table I."""
+    rows = []
+    for dataset, data in forecast.items():
+        for model, m in data.get("metrics", {}).items():
+            ref = paper.FORECAST_TABLE.get(dataset, {}).get(model, (np.nan, np.nan))
+            rows.append({"dataset": dataset, "model": model, "MSE (scaled)": m.get("mse_scaled"),
+                         "MAPE %": m.get("mape_pct"), "MAE kW": m.get("mae_kw"), "RMSE kW": m.get("rmse_kw"),
+                         "skill": m.get("skill"), "fit s": m.get("fit_s"),
+                         "paper MSE": ref[0], "paper MAPE %": ref[1]})
+    return pd.DataFrame(rows)
+
+
+def recovery(fault: pd.DataFrame) -> pd.DataFrame:
+    """Recovery time at the faulted bus per simulation, and the time added vs no action
+    (same case, fault bus, k, forecast, variant)."""
+    keys = ["case", "fault_bus", "strategy", "k", "forecast", "variant"]
+    sub = fault[fault["faulted"].astype(bool)][keys + ["recovery_ms", "status", "vmin_pu", "margin_pu"]]
+    base = sub[sub["strategy"] == "no-action"].set_index(["case", "fault_bus", "k", "forecast", "variant"])["recovery_ms"]
+    out = sub.join(base.rename("no_action_ms"), on=["case", "fault_bus", "k", "forecast", "variant"])
+    out["added_ms"] = out["recovery_ms"] - out["no_action_ms"]
+    return order(out.drop(columns="no_action_ms"))
+
+
+def recovery_pivot(rec: pd.DataFrame, variant: str = "reference") -> pd.DataFrame:
+    """Recovery ms per (case, fault bus, strategy, forecast) × k for one model variant."""
+    sub = rec[rec["variant"] == variant]
+    table = sub.pivot_table(index=["case", "fault_bus", "strategy", "forecast"], columns="k", values="recovery_ms",
+                            aggfunc="first")
+    table.columns = [f"k={k:g}" for k in table.columns]
+    return order(table.reset_index())
+
+
+def sensitivity(rec: pd.DataFrame) -> pd.DataFrame:
+    """Mean recovery and added time per model variant × strategy (over fault buses, k, forecast)."""
+    g = rec.groupby(["case", "variant", "strategy"])
+    out = pd.DataFrame({"simulations": g.size(), "recovered": g["recovery_ms"].count(),
+                        "recovery ms mean": g["recovery_ms"].mean(), "added ms mean": g["added_ms"].mean(),
+                        "added ms min": g["added_ms"].min(), "added ms max": g["added_ms"].max()})
+    return order(out.reset_index())
+
+
+def wall_times(summary: pd.DataFrame) -> pd.DataFrame:
+    """Wall and solver time (s) per configuration."""
+    return order(summary[CONFIG + ["steps", "wall_s", "solver_s"]])
