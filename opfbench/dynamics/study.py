@@ -280,3 +280,25 @@ def write_study(out: Path, records: list[SimRecord], config: StudyConfig, point:
     }
     write_json(out / "manifest.json", manifest)
     return [out / "fault.parquet", out / "traces.parquet", out / "manifest.json"]
+
+
+def recovery_summary(table: pd.DataFrame) -> pd.DataFrame:
+    """One row per (variant, fault_bus, strategy, k, forecast) of a `fault.parquet` table:
+    recovery at the fault bus and the feeder's recovery (the slowest bus), that bus's
+    voltage margin, and both recoveries minus no action's in the same variant and fault
+    (ms; positive = slower than no action)."""
+    keys = ["variant", "fault_bus", "strategy", "k", "forecast"]
+    t = table.assign(rec=table["recovery_ms"].fillna(np.inf))
+    worst = t.loc[t.groupby(keys, sort=False)["rec"].idxmax(), keys + ["bus", "recovery_ms", "margin_pu"]]
+    worst = worst.rename(columns={"bus": "slowest_bus", "recovery_ms": "feeder_recovery_ms",
+                                  "margin_pu": "slowest_margin_pu"})
+    at_fault = table.loc[table["faulted"], keys + ["recovery_ms", "vmin_pu", "motors_stalled"]]
+    out = at_fault.rename(columns={"recovery_ms": "fault_bus_recovery_ms", "vmin_pu": "fault_bus_vmin_pu"})
+    out = out.merge(worst, on=keys)
+    base = out[out["strategy"] == "no-action"].groupby(["variant", "fault_bus"])[
+        ["fault_bus_recovery_ms", "feeder_recovery_ms"]].first()
+    base.columns = ["na_fault", "na_feeder"]
+    out = out.join(base, on=["variant", "fault_bus"])
+    out["delta_fault_bus_ms"] = out["fault_bus_recovery_ms"] - out.pop("na_fault")
+    out["delta_feeder_ms"] = out["feeder_recovery_ms"] - out.pop("na_feeder")
+    return out.reset_index(drop=True)
