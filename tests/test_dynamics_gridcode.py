@@ -26,7 +26,7 @@ def test_reactive_current_follows_the_curve_with_limit_and_priority(v, q0_pu):
     p = InverterParams()
     irat, p0 = 0.06, 0.048  # 0.6 MVA on a 10 MVA base, P at 0.8 × rating
     v0 = 1.0
-    inv = np.array([[irat, p0, q0_pu * irat, q0_pu * irat / v0]])
+    inv = np.array([[irat, p0, q0_pu * irat, q0_pu * irat / v0, p0 / v0]])
     idr, iqr = kernel.references(v, v, 1.0, inv, _scalars(p), np.zeros(1, dtype=np.bool_), 0)
     if v >= 0.9:
         iq_expected = q0_pu * irat / v
@@ -47,7 +47,7 @@ def test_lags_reach_the_references():
     0.2 s at an imposed 0.5 p.u. the injected Q is the grid code's full current."""
     p = InverterParams()
     sc = _scalars(p)
-    inv = np.array([[0.06, 0.048, 0.0, 0.0]])
+    inv = np.array([[0.06, 0.048, 0.0, 0.0, 0.048]])
     x = np.array([1.0, 0.048, 0.0, 1.0])  # Vf, Id, Iq, r (no motors)
     v = np.array([0.5 + 0j])
     dx = np.empty(4)

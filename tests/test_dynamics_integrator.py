@@ -24,8 +24,8 @@ def model():
 
 
 def _radau(model, fault: FaultParams, t_grid: np.ndarray) -> np.ndarray:
-    """|V| at t_grid (all buses) from Radau on the same right-hand side, segment by segment
-    (the switch instants are segment ends, as in the fixed-step run)."""
+    """|V| at t_grid (all buses) from Radau on the same right-hand side, segment by segment;
+    at a switch instant the voltages before the switch, as in the fixed-step run."""
     x = model.x0.copy()
     t0 = 0.0
     out = np.empty((len(t_grid), model.net.n_bus))

@@ -27,10 +27,11 @@ from numba import njit
 M_RS, M_XP, M_DX, M_T0, M_H, M_TM0, M_S0, M_EXP, M_GR, M_GI = range(10)
 N_MOTOR_COLUMNS = 10  # M_GR + j·M_GI = 1/(Rs + jX'), motor base
 # columns of the inverter parameter table
-I_RAT, I_P0, I_Q0, I_IQ0 = range(4)
+I_RAT, I_P0, I_Q0, I_IQ0, I_ID0 = range(5)
+N_INVERTER_COLUMNS = 5
 # inverter scalars
-S_WB, S_IMAX, S_SLOPE, S_VDIP, S_GCMAX, S_TF, S_TLAG, S_RAMP, S_RAMP_RATE, S_TRIP, S_VTRIP = range(11)
-N_SCALARS = 11
+S_WB, S_IMAX, S_SLOPE, S_VDIP, S_GCMAX, S_TF, S_TLAG, S_RAMP, S_RAMP_RATE, S_TRIP, S_VTRIP, S_CC = range(12)
+N_SCALARS = 12
 FP_TOL = 1e-12  # p.u., fixed-point convergence of the DER-bus voltages
 FP_MAX_ITER = 60
 
@@ -109,6 +110,8 @@ def references(vm, vf, r, inv_par, sc, tripped, d):
     """(Id_ref, Iq_ref) of inverter d at terminal |V| = vm, filtered Vf = vf, cap r."""
     if tripped[d]:
         return 0.0, 0.0
+    if sc[S_CC] > 0.5:  # constant-current control (no grid code): the pre-fault currents
+        return inv_par[d, I_ID0], inv_par[d, I_IQ0]
     irat = inv_par[d, I_RAT]
     imax = sc[S_IMAX] * irat
     if vf < sc[S_VDIP]:
@@ -177,7 +180,7 @@ def rhs(x, zr, zi, i_const, mot_bus, mot_y, mot_par, inv_bus, inv_par, sc, tripp
 def integrate(x0, zrs, zis, seg_steps, seg_h, i_const, mot_bus, mot_y, mot_par, inv_bus, inv_par, sc, v_der0, every):
     """RK4 over consecutive segments; segment g uses the impedance matrix zrs[g] + j·zis[g], seg_steps[g]
     steps of seg_h[g] s. At a segment boundary the sample holds the voltages on the
-    ending segment's network. Returns (t, vm, t_rec, vm_rec, q_rec, x_end, ok): |V| at
+    ending segment's network (just before the switch). Returns (t, vm, t_rec, vm_rec, q_rec, x_end, ok): |V| at
     every step (all buses), and every `every`-th step |V| and Q (p.u.) at the DER buses;
     ok False (arrays cut at the failing step) when the network solve or the states fail."""
     n = zrs.shape[1]
@@ -223,8 +226,8 @@ def integrate(x0, zrs, zis, seg_steps, seg_h, i_const, mot_bus, mot_y, mot_par, 
                     x[2 * nm + m] = 1.0
             t += h
             k += 1
-            # the state at t_k: voltages on this segment's network (a switch at a segment
-            # end is recorded by the next segment's first evaluation, which overwrites it)
+            # the state at t_k, voltages on this segment's network: at a switch instant the
+            # sample is the one before the switch (as ANDES records it)
             v, ok5 = network_voltages(x, zr, zi, i_const, mot_bus, mot_y, inv_bus, tripped, v_der)
             if not (ok1 and ok2 and ok3 and ok4 and ok5) or not np.all(np.isfinite(x)):
                 ok = False

@@ -176,12 +176,14 @@ def build_model(scenario: Scenario, q_mvar: np.ndarray, params: ModelParams, emf
     s_rated = np.where(is_pv, rating, np.hypot(der_p, qmax(net.der_kinds, der_p, rating)))
     vd = np.abs(v0[net.der_bus])
     p0, q0 = der_p / base, np.asarray(q_mvar, float) / base
-    inv_par = np.column_stack([s_rated / base, p0, q0, q0 / vd]) if len(net.ders) else np.zeros((0, 4))
+    inv_par = np.column_stack([s_rated / base, p0, q0, q0 / vd, p0 / vd]) if len(net.ders) else \
+        np.zeros((0, kernel.N_INVERTER_COLUMNS))
     sc = np.zeros(kernel.N_SCALARS)
     sc[[kernel.S_WB, kernel.S_IMAX, kernel.S_SLOPE, kernel.S_VDIP, kernel.S_GCMAX, kernel.S_TF, kernel.S_TLAG,
-        kernel.S_RAMP, kernel.S_RAMP_RATE, kernel.S_TRIP, kernel.S_VTRIP]] = [
+        kernel.S_RAMP, kernel.S_RAMP_RATE, kernel.S_TRIP, kernel.S_VTRIP, kernel.S_CC]] = [
         2 * np.pi * NOMINAL_HZ, ip.i_max, ip.slope, ip.v_dip, ip.gc_max, ip.t_filter_s, ip.t_lag_s,
-        1.0 if ip.active == "ramp" else 0.0, ip.ramp_pu_s, 1.0 if ip.area_c_trip else 0.0, ip.v_trip]
+        1.0 if ip.active == "ramp" else 0.0, ip.ramp_pu_s, 1.0 if ip.area_c_trip else 0.0, ip.v_trip,
+        1.0 if ip.control == "constant-current" else 0.0]
     low = np.flatnonzero(vd < ip.v_dip)
     if low.size:
         b = net.bus_ids[net.der_bus[low[0]]]

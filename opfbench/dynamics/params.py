@@ -24,6 +24,7 @@ from opfbench.errors import InputError
 EmfMode = Literal["reset", "held", "given"]
 TorqueLaw = Literal["quadratic", "constant"]
 ActivePowerMode = Literal["constant-power", "ramp"]
+InverterControl = Literal["grid-code", "constant-current"]
 NOMINAL_HZ = 50.0
 RECOVERY_PU = 0.9  # the recovery threshold |V| ≥ 0.9 p.u.
 
@@ -83,7 +84,9 @@ class InverterParams:
     active current P/|V| within the limit, so P returns as soon as the limit allows) or
     "ramp" (an active-power cap r·P: r decays to 0 through `t_lag_s` while Vf < v_dip and
     rises at `ramp_pu_s` (fraction of P per s) once Vf ≥ v_dip).
-    `area_c_trip`: disconnect for good below `v_trip` (area C), default stay connected."""
+    `area_c_trip`: disconnect for good below `v_trip` (area C), default stay connected.
+    `control` "constant-current" replaces all of this by the pre-fault currents (a REGC-type
+    converter with fixed commands: what the ANDES cross-check compares)."""
 
     i_max: float = 1.1
     slope: float = 2.5
@@ -95,6 +98,7 @@ class InverterParams:
     ramp_pu_s: float = 2.0
     area_c_trip: bool = False
     v_trip: float = 0.2
+    control: InverterControl = "grid-code"
 
 
 @dataclass(frozen=True)
@@ -149,6 +153,8 @@ class ModelParams:
             raise InputError(f"unknown EMF mode {s.emf!r}; choose reset, held or given")
         if m.torque not in ("quadratic", "constant"):
             raise InputError(f"unknown torque law {m.torque!r}; choose quadratic or constant")
+        if i.control not in ("grid-code", "constant-current"):
+            raise InputError(f"unknown inverter control {i.control!r}; choose grid-code or constant-current")
         if i.active not in ("constant-power", "ramp"):
             raise InputError(f"unknown active-power mode {i.active!r}; choose constant-power or ramp")
 
