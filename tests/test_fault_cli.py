@@ -62,3 +62,13 @@ def test_variants_are_labelled(capsys):
     assert [r["variant"] for r in records] == ["reference", "motors=0.3", "emf=held"]
     # fewer motors: the voltage at the fault bus recovers sooner
     assert records[1]["recovery_ms"]["27"] < records[0]["recovery_ms"]["27"]
+
+
+def test_bench_reports_null_without_andes(monkeypatch):
+    import opfbench.bench.fault as bench_fault
+    import opfbench.dynamics.andes_ref as andes_ref
+
+    monkeypatch.setattr(andes_ref, "andes_available", lambda: False)
+    monkeypatch.setattr(bench_fault, "run_study", lambda config, point: ([], {"study_s": 1.0, "simulations": 0}))
+    f = bench_fault.run()
+    assert f["andes_sim_ms"] is None and f["ratio_vs_andes"] is None and f["sim_ms"] > 0 and f["steps"] == 3000
