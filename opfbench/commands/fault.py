@@ -86,6 +86,8 @@ def run(args: argparse.Namespace) -> int:
         raise InputError(f"--fault-impedance must be ≥ 0, got {args.fault_impedance:g}")
     if args.step_ms <= 0:
         raise InputError(f"--step-ms must be > 0, got {args.step_ms:g}")
+    if args.time is not None and (args.load_scale != 1.0 or args.der_scale != 0.8):
+        raise InputError("--time takes loads and DER output from the paper day: drop --load-scale/--der-scale")
     if args.fault_bus == ["all"]:
         buses = tuple(int(b) for b in net.bus_ids)
     else:
