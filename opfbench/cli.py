@@ -10,7 +10,7 @@ import sys
 
 from opfbench.errors import OpfbenchError
 
-COMMANDS = ("cases", "pf", "snapshot", "data", "run", "forecast", "report")
+COMMANDS = ("cases", "pf", "snapshot", "data", "run", "forecast", "report", "fault")
 
 
 def build_parser() -> argparse.ArgumentParser:

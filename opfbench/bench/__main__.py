@@ -6,7 +6,7 @@ import argparse
 import importlib
 import json
 
-BENCHES = ("pf", "local", "opf")
+BENCHES = ("pf", "local", "opf", "fault")
 
 
 def main(argv: list[str] | None = None) -> int:
