@@ -25,7 +25,7 @@ TIMINGS = ("fit_s", "predict_s")
 def run_cli(monkeypatch, capsys):
     """Run `opfbench forecast ...` on synthetic data; returns (exit code, stdout, stderr)."""
     synthetic = {"pv": lambda: pv_dataset(synthetic_pv_minute(days=6)), "wind": lambda: wind_dataset(synthetic_wind_hourly(days=60))}
-    monkeypatch.setattr(command, "load_dataset", lambda name: synthetic[name]())
+    monkeypatch.setattr("opfbench.forecasting.datasets.forecast_dataset", lambda name: synthetic[name]())
 
     def run(*argv: str) -> tuple[int, str, str]:
         code = cli.main(["forecast", *argv])

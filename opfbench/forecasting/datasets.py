@@ -3,7 +3,7 @@
 A `ForecastDataset` holds one regular, tz-aware frame with the target column
 `TARGET` (power in kW) and the exogenous weather columns. The adapters `pv_dataset`
 and `wind_dataset` turn the data contract of `opfbench.data` (`load_pv_minute`,
-`load_wind_hourly`) into such a dataset; `load_dataset` calls those loaders (imported
+`load_wind_hourly`) into such a dataset; `forecast_dataset` calls those loaders (imported
 lazily, so this module works without `opfbench.data`).
 
 Inputs (paper §II): PV — air temperature (°C), relative humidity (%), global horizontal
@@ -18,13 +18,12 @@ from dataclasses import dataclass
 import numpy as np
 import pandas as pd
 
-from opfbench import data
 from opfbench.errors import DataError, InputError
+from opfbench.forecasting.names import FORECAST_DATASETS
 
 TARGET = "power_kw"
 """Name of the target column (power in kW) in every dataset frame."""
 
-DATASETS = ("pv", "wind")
 
 PV_COLUMNS = ("pv_ac_kw", "temp_air_c", "relative_humidity_pct", "ghi_wm2")
 WIND_COLUMNS = ("wind_power_kw", "wind_speed_ms", "wind_dir_deg", "temp_air_c", "relative_humidity_pct")
@@ -129,10 +128,12 @@ def wind_dataset(df: pd.DataFrame) -> ForecastDataset:
     return ForecastDataset("wind", _interpolate(frame, "wind"), _rating(df, "wind"))
 
 
-def load_dataset(name: str) -> ForecastDataset:
+def forecast_dataset(name: str) -> ForecastDataset:
     """Load a project dataset (BSRN PV at 1 min, TRY wind hourly) through `opfbench.data`."""
-    if name not in DATASETS:
-        raise InputError(f"unknown dataset {name!r}; choose one of {', '.join(DATASETS)}")
+    if name not in FORECAST_DATASETS:
+        raise InputError(f"unknown dataset {name!r}; choose one of {', '.join(FORECAST_DATASETS)}")
+    from opfbench import data
+
     if name == "pv":
         return pv_dataset(data.load_pv_minute())
     return wind_dataset(data.load_wind_hourly())
