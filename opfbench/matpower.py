@@ -144,6 +144,12 @@ def read_matpower(path: str | Path) -> MatpowerCase:
     _check_columns(name, "bus", matrices["bus"], BUS_COLS)
     _check_columns(name, "gen", matrices["gen"], GEN_COLS)
     _check_columns(name, "branch", matrices["branch"], BRANCH_COLS)
+    branch = matrices["branch"]
+    neg_r = np.flatnonzero(branch[:, 2] < 0)
+    if neg_r.size:  # checked on the file's values, before any unit conversion
+        k = neg_r[0]
+        raise CaseFormatError(f"{name}: mpc.branch row {k + 1} ({branch[k, 0]:g}-{branch[k, 1]:g}): negative "
+                              f"resistance BR_R = {branch[k, 2]:g}; it would make negative losses, so it is refused")
     case = MatpowerCase(name, base_mva, matrices["bus"], matrices["gen"], matrices["branch"], matrices.get("gencost"))
     _apply_conversions(case, _statements(trailing))
     return case
@@ -242,11 +248,6 @@ def to_network(case: MatpowerCase, name: str | None = None) -> Network:
             if bad.size:
                 raise CaseFormatError(f"{case.path}: mpc.{matrix} row {bad[0] + 1}, column {col + 1} ({col_name}): "
                                       f"{arr[bad[0], col]:g} is not an integer")
-    neg_r = np.flatnonzero(branch[:, 2] < 0)
-    if neg_r.size:
-        k = neg_r[0]
-        raise CaseFormatError(f"{case.path}: mpc.branch row {k + 1} ({branch[k, 0]:.0f}-{branch[k, 1]:.0f}): negative "
-                              f"resistance BR_R = {branch[k, 2]:.6g}; it would make negative losses, so it is refused")
     crossed = np.flatnonzero(bus[:, 12] > bus[:, 11])
     if crossed.size:
         i = crossed[0]

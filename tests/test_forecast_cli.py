@@ -14,7 +14,6 @@ import pandas as pd
 import pytest
 
 import opfbench.cli as cli
-from opfbench.commands import forecast as command
 from opfbench.forecasting.datasets import pv_dataset, wind_dataset
 from opfbench.forecasting.experiment import run_comparison
 from opfbench.forecasting import models
