@@ -101,7 +101,7 @@ class StrategyResult:
             "k": float(self.k),
             "status": str(self.status[i]),
             "losses_kw": float(self.losses_kw[i]) if ok else None,
-            "q_mvar": {str(int(b)): float(q) for b, q in zip(bus_ids, self.q_mvar[i])},
+            "q_mvar": {str(int(b)): float(q) for b, q in zip(bus_ids, self.q_mvar[i], strict=True)},
             "vmin": float(self.vmin[i]) if ok else None,
             "vmax": float(self.vmax[i]) if ok else None,
             "power_flows": int(self.power_flows[i]),

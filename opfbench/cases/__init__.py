@@ -65,7 +65,7 @@ def place_ders(net: Network, name: str) -> Network:
         picks.append(int(ranked[k]))
     rating = 0.8075 * float(net.load_p_mw.sum()) / 5
     kinds = ("PV", "PV", "PV", "DFIG", "PV")
-    ders = tuple(DER(b, kind, rating) for b, kind in zip(picks, kinds))
+    ders = tuple(DER(b, kind, rating) for b, kind in zip(picks, kinds, strict=True))
     return _paper_limits(net.with_changes(name=name, ders=ders))
 
 
