@@ -175,7 +175,7 @@ def _forecast_dir(tmp_path, values, timestamps=None, raw: bytes | None = None):
     ([1.0, 2.0, 3.0], ["2016-06-01T10:00:00+0000", "yesterday", "2016-06-01T10:02:00+0000"],
      r"column 'timestamp', line 3: 'yesterday' is not a timestamp"),
     ([1.0, 2.0, 3.0], ["2016-06-01T10:00:00+0000", "2016-06-01T09:00:00+0000", "2016-06-01T10:02:00+0000"],
-     "timestamps are not strictly increasing"),
+     r"column 'timestamp' is not strictly increasing at row 1"),
 ])
 def test_bad_forecast_values_are_refused_not_clipped(tmp_path, values, timestamps, message):
     folder = _forecast_dir(tmp_path, values, timestamps)

@@ -43,8 +43,8 @@ def test_gaps_are_filled_linearly_in_time():
     "mutate, message",
     [
         (lambda df: df.drop(columns="ghi_wm2"), "missing column"),
-        (lambda df: df.tz_localize(None), "tz-aware"),
-        (lambda df: df.drop(df.index[5]), "regular grid"),
+        (lambda df: df.tz_localize(None), "time-zone-aware"),
+        (lambda df: df.drop(df.index[5]), "not evenly spaced"),
         (lambda df: df.assign(temp_air_c=np.nan), "no values"),
     ],
 )

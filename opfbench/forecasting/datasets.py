@@ -18,6 +18,7 @@ from dataclasses import dataclass
 import numpy as np
 import pandas as pd
 
+from opfbench.data.cleaning import check_time_index, fill_gaps_linear
 from opfbench.errors import DataError, InputError
 from opfbench.forecasting.names import FORECAST_DATASETS
 
@@ -158,19 +159,14 @@ def _interpolate(frame: pd.DataFrame, name: str) -> pd.DataFrame:
     if empty:
         raise DataError(f"{name} data: column(s) {', '.join(empty)} contain no values")
     _check_index(frame.index, name)
-    return frame.interpolate(method="time", limit_direction="both")
+    return fill_gaps_linear(frame)[0]
 
 
 def _check_index(index: pd.Index, name: str) -> None:
-    if not isinstance(index, pd.DatetimeIndex) or index.tz is None:
-        raise DataError(f"{name} data: index must be a tz-aware DatetimeIndex")
+    """A tz-aware, strictly increasing, evenly spaced index of at least 2 rows."""
     if len(index) < 2:
         raise DataError(f"{name} data: need at least 2 rows, got {len(index)}")
-    steps = np.diff(index.as_unit("ns").asi8)
-    if steps.min() <= 0:
-        raise DataError(f"{name} data: index is not strictly increasing")
-    if steps.min() != steps.max():
-        raise DataError(f"{name} data: index is not a regular grid (steps from {steps.min()} to {steps.max()} ns)")
+    check_time_index(index, f"{name} data", index[1] - index[0] if isinstance(index, pd.DatetimeIndex) else None)
 
 
 def _check_frame(frame: pd.DataFrame, name: str) -> None:

@@ -15,6 +15,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from opfbench.data.cleaning import check_time_index
 from opfbench.errors import DataError, InputError
 from opfbench.forecasting.experiment import ComparisonResult
 from opfbench.jsonio import write_atomic, write_json
@@ -95,8 +96,7 @@ def load_forecast(directory: str | Path, dataset: str, model: str) -> pd.Series:
         raise InputError(f"{path} has no model {model!r}; available: {', '.join(columns)}")
     index = pd.to_datetime(frame["timestamp"], format=_TIME_FORMAT, utc=True, errors="coerce")
     _first_bad(path, "timestamp", frame["timestamp"], index.isna().to_numpy(), "is not a timestamp like 2016-06-01T00:00:00+0000")
-    if not index.is_monotonic_increasing or index.duplicated().any():
-        raise DataError(f"{path}: timestamps are not strictly increasing")
+    check_time_index(pd.DatetimeIndex(index), str(path), column="timestamp")
     values = pd.to_numeric(frame[model], errors="coerce").to_numpy(dtype=float)
     _first_bad(path, model, frame[model], np.isnan(values), "is not a number")
     _first_bad(path, model, frame[model], ~np.isfinite(values), "is not finite")
