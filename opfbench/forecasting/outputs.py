@@ -8,6 +8,7 @@
 
 from __future__ import annotations
 
+import io
 import json
 from dataclasses import asdict
 from pathlib import Path
@@ -84,9 +85,11 @@ def load_forecast(directory: str | Path, dataset: str, model: str) -> pd.Series:
         raise DataError(f"no forecast file {path}; run `opfbench forecast --dataset {dataset} --out {directory}`")
     rating = _rating_kw(forecast_path(directory, dataset, "json"), dataset)
     try:
-        frame = pd.read_csv(path, dtype=str, keep_default_na=False, encoding="utf-8")
+        text = path.read_bytes().decode("utf-8")
     except UnicodeDecodeError as exc:
         raise DataError(f"{path}: not a UTF-8 text file (byte {exc.start})") from None
+    try:
+        frame = pd.read_csv(io.StringIO(text), dtype=str, keep_default_na=False)
     except (ValueError, pd.errors.ParserError) as exc:
         raise DataError(f"{path}: unreadable CSV ({exc})") from None
     if "timestamp" not in frame.columns:
