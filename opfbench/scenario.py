@@ -21,8 +21,9 @@ class Scenario:
     der_p_forecast_mw (S, n_der) MW or None. A single snapshot may give der_p_mw as
     (n_der,). The constructor copies its inputs into read-only arrays and checks shapes
     against the network (a transposed array is an error, never reshaped), that values
-    are real and finite, loads ≥ 0 and 0 ≤ P ≤ rating. A forecast outside [0, rating]
-    is clipped to the plant's range (P^F beyond the rating is not a possible output)."""
+    are real and finite, loads ≥ 0 and 0 ≤ P ≤ rating — for the forecast P^F too: a
+    forecast outside the plant's range is refused, never clipped here (a caller that
+    turns a forecaster's output into P^F clips it explicitly)."""
 
     net: Network
     load_scale: np.ndarray
@@ -40,17 +41,23 @@ class Scenario:
         _check_finite("der_p_mw", p)
         if np.any(ls < 0):
             raise InputError(f"scenario: load_scale must be ≥ 0, got {ls.min()} at index {int(np.argmin(ls))}")
-        rating = self.net.der_rating_mw
-        if np.any(p < 0) or np.any(p > rating * (1 + 1e-9)):
-            s, d = np.argwhere((p < 0) | (p > rating * (1 + 1e-9)))[0]
-            raise InputError(f"scenario: der_p_mw must lie in [0, rating] MW; snapshot {s}, DER {d} "
-                             f"(bus {self.net.bus_ids[self.net.ders[d].bus]}): {p[s, d]:.6g} MW, rating {rating[d]:.6g} MW")
+        self._check_range("der_p_mw", p)
         object.__setattr__(self, "load_scale", _frozen(ls))
         object.__setattr__(self, "der_p_mw", _frozen(p))
         if self.der_p_forecast_mw is not None:
             pf = _der_array("der_p_forecast_mw", self.der_p_forecast_mw, ls.shape[0], n_der)
             _check_finite("der_p_forecast_mw", pf)
-            object.__setattr__(self, "der_p_forecast_mw", _frozen(np.clip(pf, 0.0, rating)))
+            self._check_range("der_p_forecast_mw", pf)
+            object.__setattr__(self, "der_p_forecast_mw", _frozen(pf))
+
+    def _check_range(self, label: str, p: np.ndarray) -> None:
+        """0 ≤ P ≤ rating (MW) per DER, up to round-off."""
+        rating = self.net.der_rating_mw
+        bad = (p < 0) | (p > rating * (1 + 1e-9))
+        if np.any(bad):
+            s, d = np.argwhere(bad)[0]
+            raise InputError(f"scenario: {label} must lie in [0, rating] MW; snapshot {s}, DER {d} "
+                             f"(bus {self.net.bus_ids[self.net.ders[d].bus]}): {p[s, d]:.6g} MW, rating {rating[d]:.6g} MW")
 
     @classmethod
     def snapshot(cls, net: Network, load_scale: float = 1.0, der_scale: float = 0.8,

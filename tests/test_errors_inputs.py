@@ -147,6 +147,14 @@ def test_scenario_names_the_out_of_range_der(net):
         Scenario(net, np.ones(2), p)
 
 
+def test_scenario_refuses_a_forecast_outside_the_rating(net):
+    p = np.full((1, 5), 0.3)
+    with pytest.raises(InputError, match=r"der_p_forecast_mw must lie in \[0, rating\] MW; snapshot 0, DER 0 \(bus 10\): 1e\+12"):
+        Scenario(net, [1.0], p, np.full((1, 5), 1e12))
+    with pytest.raises(InputError, match=r"der_p_forecast_mw must lie in \[0, rating\] MW; snapshot 0, DER 0 \(bus 10\): -0.1"):
+        Scenario(net, [1.0], p, np.full((1, 5), -0.1))
+
+
 def test_from_profiles_checks_profile_shapes(net):
     with pytest.raises(InputError, match=r"pv_pu must have the shape of load_pu \(3,\), got \(2,\)"):
         Scenario.from_profiles(net, np.ones(3), np.zeros(2), np.zeros(3))
