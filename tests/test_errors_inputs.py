@@ -245,7 +245,7 @@ def test_strategies_table_unknown_case_exit_2():
 
 
 # ----- lazy imports -----------------------------------------------------------------------------
-def test_cli_and_pf_do_not_import_torch_statsmodels_matplotlib():
+def test_cli_pf_and_forecast_files_do_not_import_torch_statsmodels_matplotlib():
     code = ("import sys, contextlib, io\n"
             "import opfbench.cli as cli\n"
             "heavy = ('torch', 'statsmodels', 'matplotlib')\n"
@@ -253,6 +253,8 @@ def test_cli_and_pf_do_not_import_torch_statsmodels_matplotlib():
             "after_parser = [m for m in heavy if m in sys.modules]\n"
             "with contextlib.redirect_stdout(io.StringIO()):\n"
             "    rc = cli.main(['pf', 'paper33', '--json'])\n"
-            "print(after_parser, [m for m in heavy if m in sys.modules], rc)\n")
+            "after_pf = [m for m in heavy if m in sys.modules]\n"
+            "from opfbench.forecasting import load_forecast  # what `run --forecast MODEL` reads\n"
+            "print(after_parser, after_pf, [m for m in heavy if m in sys.modules], rc)\n")
     proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
-    assert proc.stdout.strip() == "[] [] 0", proc.stderr
+    assert proc.stdout.strip() == "[] [] [] 0", proc.stderr
