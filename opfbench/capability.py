@@ -1,4 +1,4 @@
-"""DER reactive capability (paper §III, SPEC §2). All quantities in MW/MVAr; Q positive =
+"""DER reactive capability (paper §III). All quantities in MW/MVAr; Q positive =
 injected (over-excited). Limits are symmetric: Qmin = −Qmax.
 
 - PV: S̄ = P̄; |Q| ≤ P·tan(acos 0.8) = 0.75·P and |Q| ≤ √(S̄² − P²).

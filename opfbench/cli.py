@@ -1,6 +1,10 @@
 """`opfbench` command line. Each subcommand lives in `opfbench/commands/<name>.py` and
 provides `register(subparsers)` (adds its parser and sets `func`) — this file only
-wires them together and turns opfbench errors into a stderr message and exit code 2."""
+wires them together and turns opfbench errors into a stderr message and exit code 2.
+
+Command modules keep their top-level imports light (numpy, pandas, the network model);
+torch, statsmodels and matplotlib are imported inside a command only when a forecasting
+model or a plot needs them, so `opfbench --help`, `pf`, `snapshot` and `run` start fast."""
 
 from __future__ import annotations
 
@@ -31,4 +35,9 @@ def main(argv: list[str] | None = None) -> int:
         return int(args.func(args) or 0)
     except OpfbenchError as exc:
         print(f"opfbench {args.command}: error: {exc}", file=sys.stderr)
+        return 2
+    except MemoryError:
+        case = f" on case {args.case!r}" if getattr(args, "case", None) else ""
+        print(f"opfbench {args.command}: error: out of memory{case}: the problem is too large for this "
+              "machine's memory (a smaller case, or fewer snapshots)", file=sys.stderr)
         return 2

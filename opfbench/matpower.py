@@ -4,6 +4,12 @@ Reads `mpc.baseMVA`, `mpc.bus`, `mpc.gen`, `mpc.branch` and `mpc.gencost`, and e
 only the trailing conversions that MATPOWER's distribution cases use (ohm → p.u. for
 branch r/x, kW → MW for loads, kVA → MW/MVAr at a fixed power factor). Any other code
 line is an error: a case file is data, and we do not guess what unknown code means.
+
+Refused with a `CaseFormatError` naming the file (and matrix, row, column or line): a file
+that is not UTF-8 text; a non-numeric or non-finite entry; a non-finite or non-positive
+baseMVA; a fractional bus number or bus type; a negative branch resistance (it would make
+negative losses and a meaningless loss bound); VMIN > VMAX at a bus; a power factor
+outside (0, 1]; the ohm → p.u. conversion with a zero or negative BASE_KV at bus row 1.
 """
 
 from __future__ import annotations
@@ -75,9 +81,13 @@ def read_matpower(path: str | Path) -> MatpowerCase:
     """Parse a MATPOWER v2 `.m` file; raise `CaseFormatError` naming file, matrix and row."""
     path = Path(path)
     try:
-        text = path.read_text()
+        text = path.read_bytes().decode("utf-8")
     except OSError as exc:
         raise CaseFormatError(f"{path}: cannot read case file ({exc.strerror})") from exc
+    except UnicodeDecodeError as exc:
+        raise CaseFormatError(f"{path}: not a text MATPOWER file (byte {exc.start} is not UTF-8)") from None
+    if "\x00" in text:
+        raise CaseFormatError(f"{path}: not a text MATPOWER file (contains NUL bytes)")
     name = str(path)
     lines = [(i + 1, _strip_comment(raw)) for i, raw in enumerate(text.splitlines())]
     lines = [(i, s) for i, s in lines if s]
@@ -126,14 +136,20 @@ def read_matpower(path: str | Path) -> MatpowerCase:
 
     if base_mva is None:
         raise CaseFormatError(f"{name}: missing mpc.baseMVA")
-    if not base_mva > 0:
-        raise CaseFormatError(f"{name}: mpc.baseMVA must be positive, got {base_mva}")
+    if not (np.isfinite(base_mva) and base_mva > 0):
+        raise CaseFormatError(f"{name}: mpc.baseMVA must be a finite positive number, got {base_mva}")
     for key in ("bus", "gen", "branch"):
         if key not in matrices:
             raise CaseFormatError(f"{name}: missing mpc.{key}")
     _check_columns(name, "bus", matrices["bus"], BUS_COLS)
     _check_columns(name, "gen", matrices["gen"], GEN_COLS)
     _check_columns(name, "branch", matrices["branch"], BRANCH_COLS)
+    branch = matrices["branch"]
+    neg_r = np.flatnonzero(branch[:, 2] < 0)
+    if neg_r.size:  # checked on the file's values, before any unit conversion
+        k = neg_r[0]
+        raise CaseFormatError(f"{name}: mpc.branch row {k + 1} ({branch[k, 0]:g}-{branch[k, 1]:g}): negative "
+                              f"resistance BR_R = {branch[k, 2]:g}; it would make negative losses, so it is refused")
     case = MatpowerCase(name, base_mva, matrices["bus"], matrices["gen"], matrices["branch"], matrices.get("gencost"))
     _apply_conversions(case, _statements(trailing))
     return case
@@ -190,6 +206,9 @@ def _apply_conversions(case: MatpowerCase, statements: list[tuple[int, str]]) ->
         if _IDX_ASSIGN.match(s):
             continue
         if s == _VBASE:
+            if not case.bus[0, 9] > 0:
+                raise CaseFormatError(f"{case.path}, line {lineno}: Vbase from mpc.bus row 1 BASE_KV = {case.bus[0, 9]:g} kV; "
+                                      "the ohm → p.u. conversion needs a positive base voltage")
             env["Vbase"] = case.bus[0, 9] * 1e3
         elif s == _SBASE:
             env["Sbase"] = case.base_mva * 1e6
@@ -200,7 +219,12 @@ def _apply_conversions(case: MatpowerCase, statements: list[tuple[int, str]]) ->
         elif s == _KW_TO_MW:
             case.bus[:, 2:4] /= 1e3
         elif m := _PF_SET.match(s):
-            env["pf"] = float(m.group(1))
+            try:
+                env["pf"] = float(m.group(1))
+            except ValueError:
+                raise CaseFormatError(f"{case.path}, line {lineno}: pf is not a number: {m.group(1)!r}") from None
+            if not 0 < env["pf"] <= 1:
+                raise CaseFormatError(f"{case.path}, line {lineno}: power factor pf = {m.group(1)} must lie in (0, 1]")
         elif s in (_QD_FROM_PF, _PD_FROM_PF):
             if "pf" not in env:
                 raise CaseFormatError(f"{case.path}, line {lineno}: power-factor conversion before pf is defined")
@@ -217,6 +241,17 @@ def to_network(case: MatpowerCase, name: str | None = None) -> Network:
     """Build the shared `Network` from a parsed case; validates bus references and slack."""
     label = name or Path(case.path).stem
     bus, gen, branch = case.bus, case.gen, case.branch
+    for matrix, arr, cols in (("bus", bus, ((0, "BUS_I"), (1, "BUS_TYPE"))),
+                              ("branch", branch, ((0, "F_BUS"), (1, "T_BUS"))), ("gen", gen, ((0, "GEN_BUS"),))):
+        for col, col_name in cols:
+            bad = np.flatnonzero(arr[:, col] != np.round(arr[:, col]))
+            if bad.size:
+                raise CaseFormatError(f"{case.path}: mpc.{matrix} row {bad[0] + 1}, column {col + 1} ({col_name}): "
+                                      f"{arr[bad[0], col]:g} is not an integer")
+    crossed = np.flatnonzero(bus[:, 12] > bus[:, 11])
+    if crossed.size:
+        i = crossed[0]
+        raise CaseFormatError(f"{case.path}: mpc.bus row {i + 1} (bus {bus[i, 0]:.0f}): VMIN {bus[i, 12]:g} > VMAX {bus[i, 11]:g} p.u.")
     ids = bus[:, 0].astype(int)
     if len(set(ids)) != len(ids):
         dup = ids[np.flatnonzero(np.bincount(np.unique(ids, return_inverse=True)[1]) > 1)[0]]

@@ -1,4 +1,4 @@
-"""The one network model shared by power flow, local rules, OPF formulations and dynamics.
+"""The one network model shared by power flow, the local rules and the OPF formulations.
 
 Storage follows MATPOWER: loads in MW/MVAr, branch impedances in p.u. on `base_mva` and
 the bus's base kV. Buses keep their external numbers (`bus_ids`); every array indexed by
@@ -18,6 +18,11 @@ import numpy as np
 from opfbench.errors import NetworkError
 
 DerKind = Literal["PV", "DFIG"]
+
+_BUS_ARRAYS = ("bus_ids", "bus_type", "base_kv", "load_p_mw", "load_q_mvar", "gs_mw", "bs_mvar", "vmin", "vmax")
+_BRANCH_ARRAYS = ("f", "t", "r", "x", "b", "tap", "shift", "status")
+_GEN_ARRAYS = ("gen_bus", "gen_p_mw", "gen_q_mvar", "gen_vset")
+_DTYPES = {"bus_ids": int, "bus_type": int, "f": int, "t": int, "status": bool, "gen_bus": int}
 
 
 @dataclass(frozen=True)
@@ -39,6 +44,11 @@ class Network:
     Fixed generators (other than the slack's) are kept as gen_bus/gen_p_mw/gen_q_mvar/
     gen_vset: at PV buses the solver holds |V| = gen_vset, elsewhere they are P/Q
     injections.
+
+    The network is immutable: the constructor copies every array and makes the copies
+    read-only, so a shared (cached) network cannot be changed by one caller for all
+    others. It checks array lengths, finite values, non-negative branch resistance and
+    vmin ≤ vmax per bus, and that every bus is connected to the slack.
     """
 
     name: str
@@ -69,7 +79,46 @@ class Network:
     ders: tuple[DER, ...] = ()
 
     def __post_init__(self) -> None:
+        for name in _BUS_ARRAYS + _BRANCH_ARRAYS + _GEN_ARRAYS:
+            arr = np.array(getattr(self, name), dtype=_DTYPES.get(name, float))
+            arr.setflags(write=False)
+            object.__setattr__(self, name, arr)
+        self._check_arrays()
         self._check_connected()
+
+    def _check_arrays(self) -> None:
+        for group, n in ((_BUS_ARRAYS, self.n_bus), (_BRANCH_ARRAYS, self.n_branch), (_GEN_ARRAYS, len(self.gen_bus))):
+            for name in group:
+                arr = getattr(self, name)
+                if arr.shape != (n,):
+                    raise NetworkError(f"{self.name}: {name} has shape {arr.shape}, expected ({n},) like {group[0]}")
+                if arr.dtype.kind == "f" and not np.all(np.isfinite(arr)):
+                    raise NetworkError(f"{self.name}: {name} has a non-finite value at position {int(np.argmin(np.isfinite(arr)))}")
+        if not (np.isfinite(self.base_mva) and self.base_mva > 0):
+            raise NetworkError(f"{self.name}: base_mva must be a finite positive number, got {self.base_mva}")
+        for name in ("f", "t", "gen_bus"):
+            arr = getattr(self, name)
+            if arr.size and (arr.min() < 0 or arr.max() >= self.n_bus):
+                raise NetworkError(f"{self.name}: {name} refers to a bus index outside 0..{self.n_bus - 1}")
+        if not 0 <= self.slack < self.n_bus:
+            raise NetworkError(f"{self.name}: slack index {self.slack} outside 0..{self.n_bus - 1}")
+        neg_r = np.flatnonzero(self.r < 0)
+        if neg_r.size:
+            k = neg_r[0]
+            raise NetworkError(
+                f"{self.name}: branch {k + 1} ({self.bus_ids[self.f[k]]}-{self.bus_ids[self.t[k]]}) has negative "
+                f"resistance r = {self.r[k]:.6g} p.u.; negative r makes negative losses and is refused")
+        crossed = np.flatnonzero(self.vmin > self.vmax)
+        if crossed.size:
+            i = crossed[0]
+            raise NetworkError(f"{self.name}: bus {self.bus_ids[i]} has Vmin {self.vmin[i]:g} > Vmax {self.vmax[i]:g} p.u.")
+        for d in self.ders:
+            if d.kind not in ("PV", "DFIG"):
+                raise NetworkError(f"{self.name}: unknown DER kind {d.kind!r}; expected PV or DFIG")
+            if not 0 <= d.bus < self.n_bus:
+                raise NetworkError(f"{self.name}: DER at bus index {d.bus} outside 0..{self.n_bus - 1}")
+            if not (np.isfinite(d.rating_mw) and d.rating_mw > 0):
+                raise NetworkError(f"{self.name}: DER at bus {self.bus_ids[d.bus]} has rating {d.rating_mw} MW; must be > 0")
 
     # ----- sizes and lookups -------------------------------------------------------
     @property

@@ -12,6 +12,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from opfbench.capability import qmax
+from opfbench.jsonio import json_safe
 from opfbench.network import Network
 from opfbench.powerflow import PowerFlowResult, solve_pf_batch
 
@@ -93,26 +94,24 @@ class StrategyResult:
         return np.maximum(low, high).max(axis=1)
 
     def snapshot_json(self, i: int = 0) -> dict:
-        """The JSON contract of one snapshot (keys stable; units MVAr, kW, p.u., ms)."""
-        ok = np.isfinite(self.losses_kw[i])
+        """The JSON contract of one snapshot (keys stable; units MVAr, kW, p.u., ms); a
+        value that is not finite (no converged flow, no bound) is null."""
         bus_ids = self.net.bus_ids[self.net.der_bus]
+        ok = bool(np.isfinite(self.losses_kw[i]))
         out = {
             "strategy": self.strategy,
             "k": float(self.k),
             "status": str(self.status[i]),
-            "losses_kw": float(self.losses_kw[i]) if ok else None,
-            "q_mvar": {str(int(b)): float(q) for b, q in zip(bus_ids, self.q_mvar[i])},
-            "vmin": float(self.vmin[i]) if ok else None,
-            "vmax": float(self.vmax[i]) if ok else None,
+            "losses_kw": self.losses_kw[i],
+            "q_mvar": {str(int(b)): q for b, q in zip(bus_ids, self.q_mvar[i], strict=True)},
+            "vmin": self.vmin[i] if ok else None,
+            "vmax": self.vmax[i] if ok else None,
             "power_flows": int(self.power_flows[i]),
-            "excursion_mvar": float(self.excursion_mvar[i]),
+            "excursion_mvar": self.excursion_mvar[i],
             "wall_ms": float(self.wall_ms),
         }
         if self.lower_bound_kw is not None:
-            lb = self.lower_bound_kw[i]
-            out["lower_bound_kw"] = float(lb) if np.isfinite(lb) else None
+            out["lower_bound_kw"] = self.lower_bound_kw[i]
         for key, value in self.extra.items():
-            v = value[i] if isinstance(value, np.ndarray) and value.ndim else value
-            v = v.item() if isinstance(v, np.generic) else v
-            out[key] = None if isinstance(v, float) and not np.isfinite(v) else v  # JSON has no NaN
-        return out
+            out[key] = value[i] if isinstance(value, np.ndarray) and value.ndim else value
+        return json_safe(out)  # type: ignore[return-value]

@@ -17,8 +17,13 @@ from opfbench.powerflow import bus_injections
 
 @dataclass(frozen=True, eq=False)
 class Scenario:
-    """S snapshots on one network. Arrays: load_scale (S,), der_p_mw (S, n_der),
-    der_p_forecast_mw (S, n_der) or None."""
+    """S snapshots on one network. Arrays: load_scale (S,), der_p_mw (S, n_der) MW,
+    der_p_forecast_mw (S, n_der) MW or None. A single snapshot may give der_p_mw as
+    (n_der,). The constructor copies its inputs into read-only arrays and checks shapes
+    against the network (a transposed array is an error, never reshaped), that values
+    are real and finite, loads ≥ 0 and 0 ≤ P ≤ rating — for the forecast P^F too: a
+    forecast outside the plant's range is refused, never clipped here (a caller that
+    turns a forecaster's output into P^F clips it explicitly)."""
 
     net: Network
     load_scale: np.ndarray
@@ -27,26 +32,32 @@ class Scenario:
 
     def __post_init__(self) -> None:
         n_der = len(self.net.ders)
-        ls = np.atleast_1d(np.asarray(self.load_scale, dtype=float))
-        p = np.asarray(self.der_p_mw, dtype=float).reshape(ls.shape[0], n_der) if n_der == 0 else \
-            np.atleast_2d(np.asarray(self.der_p_mw, dtype=float)).reshape(-1, n_der)
-        if ls.shape[0] != p.shape[0]:
-            raise InputError(f"scenario: {ls.shape[0]} load scales but {p.shape[0]} rows of DER power")
+        ls = _real_array("load_scale", self.load_scale)
+        if ls.ndim > 1:
+            raise InputError(f"scenario: load_scale must be a number or a 1-D array (S,), got shape {ls.shape}")
+        ls = np.atleast_1d(ls)
+        p = _der_array("der_p_mw", self.der_p_mw, ls.shape[0], n_der)
         _check_finite("load_scale", ls)
         _check_finite("der_p_mw", p)
         if np.any(ls < 0):
-            raise InputError(f"scenario: load scale must be ≥ 0, got {ls.min()}")
-        rating = self.net.der_rating_mw
-        if np.any(p < 0) or np.any(p > rating * (1 + 1e-9)):
-            raise InputError(f"scenario: DER active power must lie in [0, rating] MW; got range [{p.min():.4g}, {p.max():.4g}]")
-        object.__setattr__(self, "load_scale", ls)
-        object.__setattr__(self, "der_p_mw", p)
+            raise InputError(f"scenario: load_scale must be ≥ 0, got {ls.min()} at index {int(np.argmin(ls))}")
+        self._check_range("der_p_mw", p)
+        object.__setattr__(self, "load_scale", _frozen(ls))
+        object.__setattr__(self, "der_p_mw", _frozen(p))
         if self.der_p_forecast_mw is not None:
-            pf = np.asarray(self.der_p_forecast_mw, dtype=float).reshape(p.shape)
+            pf = _der_array("der_p_forecast_mw", self.der_p_forecast_mw, ls.shape[0], n_der)
             _check_finite("der_p_forecast_mw", pf)
-            if pf.shape != p.shape:
-                raise InputError(f"scenario: forecast shape {pf.shape} differs from current DER power {p.shape}")
-            object.__setattr__(self, "der_p_forecast_mw", np.clip(pf, 0.0, rating))
+            self._check_range("der_p_forecast_mw", pf)
+            object.__setattr__(self, "der_p_forecast_mw", _frozen(pf))
+
+    def _check_range(self, label: str, p: np.ndarray) -> None:
+        """0 ≤ P ≤ rating (MW) per DER, up to round-off."""
+        rating = self.net.der_rating_mw
+        bad = (p < 0) | (p > rating * (1 + 1e-9))
+        if np.any(bad):
+            s, d = np.argwhere(bad)[0]
+            raise InputError(f"scenario: {label} must lie in [0, rating] MW; snapshot {s}, DER {d} "
+                             f"(bus {self.net.bus_ids[self.net.ders[d].bus]}): {p[s, d]:.6g} MW, rating {rating[d]:.6g} MW")
 
     @classmethod
     def snapshot(cls, net: Network, load_scale: float = 1.0, der_scale: float = 0.8,
@@ -79,21 +90,60 @@ class Scenario:
         PV units `pv_pu` × rating; DFIG units `wind_pu` × rating (the mapping rule of
         `opfbench.data.profiles`). Forecast profiles, when given, set P^F the same way."""
         is_pv = np.array([kind == "PV" for kind in net.der_kinds])
+        load = _real_array("load_pu", load_pu)
+        if load.ndim != 1:
+            raise InputError(f"scenario: load_pu must be a 1-D profile (S,), got shape {load.shape}")
 
-        def der_mw(pv: np.ndarray, wind: np.ndarray) -> np.ndarray:
-            pv, wind = np.asarray(pv, dtype=float), np.asarray(wind, dtype=float)
+        def profile(label: str, value: np.ndarray) -> np.ndarray:
+            arr = _real_array(label, value)
+            if arr.shape != load.shape:
+                raise InputError(f"scenario: {label} must have the shape of load_pu {load.shape}, got {arr.shape}")
+            return arr
+
+        def der_mw(pv: np.ndarray, wind: np.ndarray, prefix: str = "") -> np.ndarray:
+            pv, wind = profile(f"{prefix}pv_pu", pv), profile(f"{prefix}wind_pu", wind)
             return np.where(is_pv, pv[:, None], wind[:, None]) * net.der_rating_mw
 
         forecast = None
         if forecast_pv_pu is not None or forecast_wind_pu is not None:
             forecast = der_mw(pv_pu if forecast_pv_pu is None else forecast_pv_pu,
-                              wind_pu if forecast_wind_pu is None else forecast_wind_pu)
-        return cls(net, np.asarray(load_pu, dtype=float), der_mw(pv_pu, wind_pu), forecast)
+                              wind_pu if forecast_wind_pu is None else forecast_wind_pu, "forecast_")
+        return cls(net, load, der_mw(pv_pu, wind_pu), forecast)
 
     def take(self, rows: np.ndarray | slice) -> "Scenario":
         """The sub-scenario of some snapshots."""
         fc = None if self.der_p_forecast_mw is None else self.der_p_forecast_mw[rows]
         return Scenario(self.net, self.load_scale[rows], self.der_p_mw[rows], fc)
+
+
+def _real_array(label: str, value: object) -> np.ndarray:
+    """A float copy of `value`; complex or non-numeric input is an error (never truncated)."""
+    try:
+        arr = np.array(value)
+    except ValueError:  # ragged nested lists
+        raise InputError(f"scenario: {label} is not a regular array (rows of different lengths)") from None
+    if np.iscomplexobj(arr):
+        raise InputError(f"scenario: {label} must be real, got complex values")
+    try:
+        return np.array(arr, dtype=float)
+    except (TypeError, ValueError):
+        raise InputError(f"scenario: {label} must be numeric, got {arr.dtype} values") from None
+
+
+def _der_array(label: str, value: object, n_snap: int, n_der: int) -> np.ndarray:
+    """`value` as (S, n_der); (n_der,) is accepted for a single snapshot."""
+    arr = _real_array(label, value)
+    if arr.ndim == 1 and n_snap == 1 and arr.shape[0] == n_der:
+        arr = arr[None, :]
+    if arr.shape != (n_snap, n_der):
+        raise InputError(f"scenario: {label} must have shape (S, n_der) = ({n_snap}, {n_der}) "
+                         f"(S from load_scale, n_der from the network), got {arr.shape}")
+    return arr
+
+
+def _frozen(arr: np.ndarray) -> np.ndarray:
+    arr.setflags(write=False)
+    return arr
 
 
 def _check_finite(label: str, arr: np.ndarray) -> None:

@@ -1,4 +1,4 @@
-"""DER capability at every breakpoint (SPEC §2)."""
+"""DER capability at every breakpoint (paper §III)."""
 
 import numpy as np
 import pytest

@@ -14,7 +14,7 @@ def test_data_json_lists_every_dataset(capsys):
     listing = json.loads(capsys.readouterr().out)
     assert [d["name"] for d in listing] == ["pv_minute", "wind_hourly", "simbench_profiles"]
     for entry, loaded, step in zip(listing, (load_pv_minute(), load_wind_hourly(), load_simbench_profiles()),
-                                   ("1min", "1h", "15min")):
+                                   ("1min", "1h", "15min"), strict=True):
         assert set(entry) == {"name", "rows", "start", "end", "step", "columns", "gaps_filled"}
         assert entry["rows"] == len(loaded) and entry["step"] == step
         assert entry["start"] == loaded.index[0].isoformat() and entry["end"] == loaded.index[-1].isoformat()

@@ -1,19 +1,22 @@
 """`opfbench forecast --quick` end to end on synthetic data: determinism, files, report,
 and no leakage through the run itself (scalers, order search, training see only the
-training part)."""
+training part). The runs use `TINY`: the `--quick` settings with one epoch of 64 windows
+and one ARIMA order on 300 samples, so that the whole pipeline runs in seconds (what is tested is the
+contract, not the forecast quality)."""
 
 from __future__ import annotations
 
 import json
+from dataclasses import replace
 
 import numpy as np
 import pandas as pd
 import pytest
 
 import opfbench.cli as cli
-from opfbench.commands import forecast as command
 from opfbench.forecasting.datasets import pv_dataset, wind_dataset
 from opfbench.forecasting.experiment import run_comparison
+from opfbench.forecasting import models
 from opfbench.forecasting.models import MODEL_NAMES, settings_for
 from opfbench.forecasting.outputs import load_forecast
 from tests.forecast_synthetic import synthetic_pv_minute, synthetic_wind_hourly
@@ -21,11 +24,18 @@ from tests.forecast_synthetic import synthetic_pv_minute, synthetic_wind_hourly
 TIMINGS = ("fit_s", "predict_s")
 
 
+def tiny_settings(dataset: str, quick: bool = True):
+    """The quick settings, cut to one epoch of 64 windows and one ARIMA order fitted on 300 samples."""
+    return replace(settings_for(dataset, quick), epochs=1, windows_per_epoch=64,
+                   arima_orders=((1, 0, 0),), arima_fit_samples=300)
+
+
 @pytest.fixture
 def run_cli(monkeypatch, capsys):
     """Run `opfbench forecast ...` on synthetic data; returns (exit code, stdout, stderr)."""
     synthetic = {"pv": lambda: pv_dataset(synthetic_pv_minute(days=6)), "wind": lambda: wind_dataset(synthetic_wind_hourly(days=60))}
-    monkeypatch.setattr(command, "load_dataset", lambda name: synthetic[name]())
+    monkeypatch.setattr("opfbench.forecasting.datasets.forecast_dataset", lambda name: synthetic[name]())
+    monkeypatch.setattr(models, "settings_for", tiny_settings)
 
     def run(*argv: str) -> tuple[int, str, str]:
         code = cli.main(["forecast", *argv])
@@ -99,7 +109,7 @@ def test_load_forecast_errors(tmp_path):
 
 def test_run_does_not_leak_the_test_part():
     """Changing the last test hours changes nothing before them, in any model."""
-    settings = settings_for("wind", quick=True)
+    settings = tiny_settings("wind")
     raw = synthetic_wind_hourly(days=42)
     base = run_comparison(wind_dataset(raw), MODEL_NAMES, settings, seed=0)
     cut = raw.index[-30]

@@ -8,7 +8,7 @@ import pandas as pd
 import pytest
 
 from opfbench.errors import DataError, InputError
-from opfbench.forecasting.datasets import TARGET, ForecastDataset, load_dataset, pv_dataset, wind_dataset
+from opfbench.forecasting.datasets import TARGET, ForecastDataset, forecast_dataset, pv_dataset, wind_dataset
 from opfbench.forecasting.metrics import evaluate
 from opfbench.forecasting.scaling import MinMaxScaler
 from tests.forecast_synthetic import synthetic_pv_minute, synthetic_wind_hourly
@@ -43,8 +43,8 @@ def test_gaps_are_filled_linearly_in_time():
     "mutate, message",
     [
         (lambda df: df.drop(columns="ghi_wm2"), "missing column"),
-        (lambda df: df.tz_localize(None), "tz-aware"),
-        (lambda df: df.drop(df.index[5]), "regular grid"),
+        (lambda df: df.tz_localize(None), "time-zone-aware"),
+        (lambda df: df.drop(df.index[5]), "not evenly spaced"),
         (lambda df: df.assign(temp_air_c=np.nan), "no values"),
     ],
 )
@@ -74,10 +74,10 @@ def test_split_is_chronological_90_10():
 
 
 def test_load_dataset_reads_the_embedded_data_and_rejects_unknown_names():
-    pv = load_dataset("pv")
+    pv = forecast_dataset("pv")
     assert pv.rating_kw == 10.0 and len(pv.frame) == 43_200
     with pytest.raises(InputError, match="unknown dataset"):
-        load_dataset("hydro")
+        forecast_dataset("hydro")
 
 
 def test_dataset_rejects_nan_and_bad_rating():

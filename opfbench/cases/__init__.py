@@ -1,7 +1,7 @@
 """Cases shipped with opfbench, by name.
 
 - `case33bw`, `case69`, `case141`: MATPOWER's distribution feeders as published (no DER).
-- `paper33`: the paper's modified IEEE 33-bus feeder (SPEC §1): case33bw with PV inverters
+- `paper33`: the paper's modified IEEE 33-bus feeder (paper §IV): case33bw with PV inverters
   at buses 10, 16, 19, 29 and a DFIG at bus 27, each rated 0.6 MW; slack 1.0 p.u.;
   voltage limits [0.9, 1.1] p.u. on every bus (slack included); the five tie lines open.
 - `paper33-meshed`: the same with the five tie lines closed.
@@ -65,7 +65,7 @@ def place_ders(net: Network, name: str) -> Network:
         picks.append(int(ranked[k]))
     rating = 0.8075 * float(net.load_p_mw.sum()) / 5
     kinds = ("PV", "PV", "PV", "DFIG", "PV")
-    ders = tuple(DER(b, kind, rating) for b, kind in zip(picks, kinds))
+    ders = tuple(DER(b, kind, rating) for b, kind in zip(picks, kinds, strict=True))
     return _paper_limits(net.with_changes(name=name, ders=ders))
 
 

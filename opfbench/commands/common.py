@@ -3,8 +3,11 @@
 from __future__ import annotations
 
 import argparse
-import json
 import math
+
+from opfbench.jsonio import print_json
+
+__all__ = ["add_operating_point", "fraction", "print_json"]
 
 
 def fraction(text: str) -> float:
@@ -25,7 +28,3 @@ def add_operating_point(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--der-scale", type=fraction, default=0.8,
                         help="DER active power as a fraction of rating, 0..1 (default 0.8)")
     parser.add_argument("--json", action="store_true", help="print one JSON object")
-
-
-def print_json(obj: object) -> None:
-    print(json.dumps(obj, indent=2, allow_nan=False))

@@ -3,7 +3,8 @@
 from __future__ import annotations
 
 import argparse
-import json
+
+from opfbench.jsonio import print_json
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -18,7 +19,7 @@ def run(args: argparse.Namespace) -> int:
 
     summaries = describe_datasets()
     if args.json:
-        print(json.dumps(summaries, indent=2))
+        print_json(summaries)
         return 0
     for s in summaries:
         print(f"{s['name']}: {s['rows']} rows, {s['start']} .. {s['end']}, step {s['step']}")

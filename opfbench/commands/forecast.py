@@ -8,16 +8,18 @@ Full run (documented budget ≤ ~30 min per dataset on 2 CPU cores):
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 from dataclasses import replace
+from typing import TYPE_CHECKING
 
 from opfbench.errors import InputError
-from opfbench.forecasting.datasets import DATASETS, load_dataset
-from opfbench.forecasting.experiment import ComparisonResult, run_comparison
-from opfbench.forecasting.models import MODEL_NAMES, settings_for
-from opfbench.forecasting.outputs import json_safe, write_outputs
-from opfbench.forecasting.report import PAPER_TABLE
+from opfbench.forecasting.names import FORECAST_DATASETS, MODEL_NAMES
+from opfbench.jsonio import print_json
+
+if TYPE_CHECKING:
+    from opfbench.forecasting.experiment import ComparisonResult
+
+SEED_MAX = 2**32 - 1  # numpy's seed range; torch accepts it too
 
 METRIC_COLUMNS = (("mse_scaled", ".5f"), ("mape_pct", ".2f"), ("mae_kw", ".4f"), ("rmse_kw", ".4f"), ("skill", ".3f"))
 
@@ -29,7 +31,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         description=__doc__,
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
-    parser.add_argument("--dataset", required=True, choices=DATASETS)
+    parser.add_argument("--dataset", required=True, choices=FORECAST_DATASETS)
     parser.add_argument(
         "--models",
         default=",".join(MODEL_NAMES),
@@ -37,7 +39,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     )
     parser.add_argument("--quick", action="store_true", help="smoke run: a few days of data, 2 short epochs")
     parser.add_argument("--out", metavar="DIR", help="write forecast_<dataset>.csv/.json/.html into DIR")
-    parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--seed", type=int, default=0, help=f"random seed in [0, {SEED_MAX}] (default 0)")
     parser.add_argument(
         "--weather",
         choices=("target", "previous"),
@@ -50,28 +52,42 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from opfbench.forecasting.datasets import forecast_dataset
+    from opfbench.forecasting.experiment import run_comparison
+    from opfbench.forecasting.models import settings_for
+    from opfbench.forecasting.outputs import check_out_dir, write_outputs
+
     models = tuple(m.strip() for m in args.models.split(",") if m.strip())
     if not models:
         raise InputError("--models is empty")
+    unknown = [m for m in models if m not in MODEL_NAMES]
+    if unknown:
+        raise InputError(f"--models: unknown model(s) {', '.join(unknown)}; choose from {', '.join(MODEL_NAMES)}")
+    if not 0 <= args.seed <= SEED_MAX:
+        raise InputError(f"--seed must lie in [0, {SEED_MAX}], got {args.seed}")
     settings = settings_for(args.dataset, args.quick)
     if args.threads is not None:
         if args.threads < 1:
             raise InputError(f"--threads must be >= 1, got {args.threads}")
         settings = replace(settings, threads=args.threads)
-    dataset = load_dataset(args.dataset).lag_weather(1 if args.weather == "previous" else 0)
+    if args.out:  # before the computation, not after it
+        check_out_dir(args.out)
+    dataset = forecast_dataset(args.dataset).lag_weather(1 if args.weather == "previous" else 0)
     result = run_comparison(dataset, models, settings, args.seed, progress=lambda msg: print(msg, file=sys.stderr))
     if args.out:
         for path in write_outputs(result, args.out):
             print(f"wrote {path}", file=sys.stderr)
     if args.json:
-        print(json.dumps(json_safe(result.metrics_table()), indent=2))
+        print_json(result.metrics_table())
     else:
         print(format_table(result))
     return 0
 
 
-def format_table(result: ComparisonResult) -> str:
+def format_table(result: "ComparisonResult") -> str:
     """Plain-text metrics table with the paper's Table I values."""
+    from opfbench.forecasting.report import PAPER_TABLE
+
     header = f"{'model':<18}" + "".join(f"{name:>12}" for name, _ in METRIC_COLUMNS) + f"{'fit_s':>9}{'paper_mse':>11}{'paper_mape':>11}"
     lines = [
         f"{result.dataset}: {len(result.forecasts)} test steps from {result.forecasts.index[0]}, "

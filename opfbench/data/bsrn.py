@@ -75,7 +75,7 @@ def parse_bsrn_lr0100(source: Source) -> pd.DataFrame:
     minutes = np.empty(n, dtype=np.int64)
     for k in range(n):
         pair = (body[2 * k].split(), body[2 * k + 1].split())
-        for line, (tokens, want) in enumerate(zip(pair, _TOKENS_PER_LINE)):
+        for line, (tokens, want) in enumerate(zip(pair, _TOKENS_PER_LINE, strict=True)):
             if len(tokens) != want:
                 raise DataError(
                     f"{name}: line {first + 2 * k + line + 1}: expected {want} fields, got {len(tokens)}"

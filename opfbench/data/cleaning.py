@@ -35,22 +35,21 @@ def check_finite(df: pd.DataFrame, name: str) -> None:
             )
 
 
-def check_time_index(index: pd.Index, name: str, step: pd.Timedelta | None = None) -> None:
+def check_time_index(index: pd.Index, name: str, step: pd.Timedelta | None = None, column: str = "time") -> None:
     """Require a tz-aware, strictly increasing DatetimeIndex, evenly spaced by ``step``
-    when given; otherwise raise `DataError` naming ``name`` and the time column."""
+    when given; otherwise raise `DataError` naming ``name`` and the time column. The one
+    time-index check of the project (derived files, forecasting datasets, forecast files)."""
     if not isinstance(index, pd.DatetimeIndex) or index.tz is None:
-        raise DataError(f"{name}: column 'time' is not a time-zone-aware time index")
+        raise DataError(f"{name}: column {column!r} is not a time-zone-aware time index")
     if len(index) == 0:
-        raise DataError(f"{name}: column 'time' is empty")
+        raise DataError(f"{name}: column {column!r} is empty")
     diffs = np.diff(index.as_unit("ns").asi8)
     if (diffs <= 0).any():
         pos = int((diffs <= 0).argmax()) + 1
-        raise DataError(
-            f"{name}: column 'time' is not strictly increasing at row {pos} ({index[pos]})"
-        )
+        raise DataError(f"{name}: column {column!r} is not strictly increasing at row {pos} ({index[pos]})")
     if step is not None and (diffs != pd.Timedelta(step).as_unit("ns").value).any():
         pos = int((diffs != pd.Timedelta(step).as_unit("ns").value).argmax()) + 1
-        raise DataError(f"{name}: column 'time' is not evenly spaced by {step} at row {pos} ({index[pos]})")
+        raise DataError(f"{name}: column {column!r} is not evenly spaced by {step} at row {pos} ({index[pos]})")
 
 
 def check_bounds(df: pd.DataFrame, name: str, bounds: dict[str, tuple[float, float]]) -> None:

@@ -108,7 +108,7 @@ def derive_simbench(source_dir: Path) -> tuple[pd.DataFrame, dict]:
 
 
 #: dataset name -> (derivation, decimals per column)
-DATASETS = {
+DERIVED = {
     "pv_minute": (derive_pv_minute, {"ghi_wm2": 1, "dni_wm2": 1, "dhi_wm2": 1, "temp_air_c": 2,
                                      "relative_humidity_pct": 2, "pressure_hpa": 2, "pv_ac_kw": 4}),
     "wind_hourly": (derive_wind_hourly, {"wind_speed_ms": 2, "wind_dir_deg": 1, "temp_air_c": 2,
@@ -122,7 +122,7 @@ def derive_all(source_dir: Path, out_dir: Path = FILES_DIR) -> dict:
     source_dir, out_dir = Path(source_dir), Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     datasets = {}
-    for name, (derive, decimals) in DATASETS.items():
+    for name, (derive, decimals) in DERIVED.items():
         df, entry = derive(source_dir)
         write_series_csv_gz(df, out_dir / entry["file"], decimals)
         datasets[name] = {**entry, "sha256": sha256(out_dir / entry["file"])}

@@ -18,6 +18,7 @@ import numpy as np
 import pandas as pd
 
 from opfbench.errors import DataError
+from opfbench.jsonio import write_atomic, write_json
 
 #: The folder of the embedded derived files.
 FILES_DIR = Path(__file__).parent / "files"
@@ -41,7 +42,7 @@ def write_series_csv_gz(df: pd.DataFrame, path: Path, decimals: dict[str, int]) 
     buffer = io.BytesIO()
     with gzip.GzipFile(filename="", mode="wb", fileobj=buffer, compresslevel=9, mtime=0) as gz:
         gz.write(text.encode("ascii"))
-    Path(path).write_bytes(buffer.getvalue())
+    write_atomic(path, buffer.getvalue())
 
 
 def read_series_csv_gz(path: Path, tz: str) -> pd.DataFrame:
@@ -56,7 +57,7 @@ def read_series_csv_gz(path: Path, tz: str) -> pd.DataFrame:
 
 def write_manifest(manifest: dict, folder: Path) -> None:
     """Write the manifest as indented JSON (keys in insertion order) with a final newline."""
-    (Path(folder) / MANIFEST).write_text(json.dumps(manifest, indent=2) + "\n", encoding="utf-8")
+    write_json(Path(folder) / MANIFEST, manifest)
 
 
 def read_manifest(folder: Path) -> dict:

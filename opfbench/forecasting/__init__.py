@@ -5,36 +5,33 @@ persistence, ARIMA(X), LSTM, CNN-LSTM and Wavelet-CNN-LSTM. `run_comparison` fit
 on the chronological training part and scores rolling one-step forecasts on the test
 part; `write_outputs` / `load_forecast` store and read those forecasts
 (`DIR/forecast_<dataset>.csv`) for the benchmark's forecast mode.
+
+Names are imported on first use (PEP 562), so `import opfbench.forecasting` does not
+load torch, statsmodels or matplotlib; each is imported only when a model or a plot
+needs it.
 """
 
-from opfbench.forecasting.base import Forecaster
-from opfbench.forecasting.datasets import TARGET, ForecastDataset, load_dataset, pv_dataset, wind_dataset
-from opfbench.forecasting.experiment import ComparisonResult, run_comparison
-from opfbench.forecasting.metrics import ForecastMetrics, evaluate
-from opfbench.forecasting.models import MODEL_NAMES, RunSettings, build_model, settings_for
-from opfbench.forecasting.outputs import forecast_path, load_forecast, write_outputs
-from opfbench.forecasting.report import PAPER_TABLE, forecast_page, forecast_section, html_page
+from __future__ import annotations
 
-__all__ = [
-    "MODEL_NAMES",
-    "PAPER_TABLE",
-    "TARGET",
-    "ComparisonResult",
-    "ForecastDataset",
-    "ForecastMetrics",
-    "Forecaster",
-    "RunSettings",
-    "build_model",
-    "evaluate",
-    "forecast_page",
-    "forecast_path",
-    "forecast_section",
-    "html_page",
-    "load_dataset",
-    "load_forecast",
-    "pv_dataset",
-    "run_comparison",
-    "settings_for",
-    "wind_dataset",
-    "write_outputs",
-]
+import importlib
+
+_EXPORTS = {
+    "Forecaster": "base",
+    "TARGET": "datasets", "ForecastDataset": "datasets", "forecast_dataset": "datasets",
+    "pv_dataset": "datasets", "wind_dataset": "datasets",
+    "ComparisonResult": "experiment", "run_comparison": "experiment",
+    "ForecastMetrics": "metrics", "evaluate": "metrics",
+    "MODEL_NAMES": "models", "RunSettings": "models", "build_model": "models", "settings_for": "models",
+    "forecast_path": "outputs", "load_forecast": "outputs", "write_outputs": "outputs",
+    "PAPER_TABLE": "report", "forecast_page": "report", "forecast_section": "report", "html_page": "report",
+}
+
+__all__ = sorted(_EXPORTS)
+
+
+def __getattr__(name: str) -> object:
+    if name not in _EXPORTS:
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+    value = getattr(importlib.import_module(f"{__name__}.{_EXPORTS[name]}"), name)
+    globals()[name] = value
+    return value

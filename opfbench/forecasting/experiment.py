@@ -4,11 +4,14 @@ over the test part, metrics against the persistence baseline.
 Only the training part reaches `fit` (scalers, ARIMA order and parameters, network
 weights, best-epoch choice). Test forecasts are rolling one-step-ahead: each uses the
 observed power before its time and the weather at its time, without refitting.
+Every model's forecast is clipped to the plant's range [0, rating] before it is scored
+and stored: a PV or wind plant cannot produce below zero or above its rating, and the
+benchmark reads these forecasts as P^F (a no-op for persistence, which repeats
+measurements the loaders already check against that range).
 """
 
 from __future__ import annotations
 
-import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
 
@@ -16,12 +19,12 @@ import numpy as np
 import pandas as pd
 
 from opfbench.errors import InputError
+from opfbench.timing import elapsed_ms, now
 from opfbench.forecasting.arima import Arima
 from opfbench.forecasting.base import Forecaster
 from opfbench.forecasting.datasets import TARGET, ForecastDataset
 from opfbench.forecasting.metrics import ForecastMetrics, evaluate
 from opfbench.forecasting.models import MODEL_NAMES, RunSettings, build_model
-from opfbench.forecasting.neural import NeuralForecaster, WaveletForecaster
 
 REFERENCE = "persistence"
 
@@ -92,12 +95,13 @@ def run_comparison(
         model = build_model(name, settings, seed)
         if len(train) <= model.lookback + 1:
             raise InputError(f"{data.name}: {len(train)} training rows are too few for {name} (lookback {model.lookback})")
-        start = time.perf_counter()
+        start = now()
         model.fit(train)
-        fit_s = time.perf_counter() - start
-        start = time.perf_counter()
-        forecasts[name] = _test_forecast(model, data.frame, len(train), data.exog_columns)
-        timings[name] = (fit_s, time.perf_counter() - start, _details(model))
+        fit_s = elapsed_ms(start) / 1e3
+        start = now()
+        forecast = _test_forecast(model, data.frame, len(train), data.exog_columns)
+        forecasts[name] = np.clip(forecast, 0.0, data.rating_kw)
+        timings[name] = (fit_s, elapsed_ms(start) / 1e3, _details(model))
     actual = forecasts["actual"].to_numpy()
     scale = float(train[TARGET].max() - train[TARGET].min())
     runs = {
@@ -127,10 +131,11 @@ def _test_forecast(model: Forecaster, frame: pd.DataFrame, n_train: int, exog_co
 
 
 def _details(model: Forecaster) -> dict[str, object]:
+    """What was fitted: ARIMA order and convergence; the networks' best epoch(s)."""
     if isinstance(model, Arima):
         return {"arima_order": list(model.order), "arima_converged": model.converged}
-    if isinstance(model, NeuralForecaster):
-        return {"best_epoch": model.best_epoch}
-    if isinstance(model, WaveletForecaster):
+    if hasattr(model, "components"):  # Wavelet-CNN-LSTM: one network per component
         return {"best_epoch": [c.best_epoch for c in model.components]}
+    if hasattr(model, "best_epoch"):
+        return {"best_epoch": model.best_epoch}
     return {}

@@ -12,16 +12,17 @@ Quick runs use the first few days (PV) / weeks (wind), 2 epochs of 512 windows, 
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 from opfbench.errors import InputError
 from opfbench.forecasting.arima import Arima, Order, order_grid
 from opfbench.forecasting.base import Forecaster
-from opfbench.forecasting.networks import NetConfig
-from opfbench.forecasting.neural import NeuralForecaster, TrainConfig, WaveletForecaster
+from opfbench.forecasting.names import MODEL_NAMES
 from opfbench.forecasting.persistence import Persistence
 
-MODEL_NAMES = ("persistence", "arima", "lstm", "cnn-lstm", "wavelet-cnn-lstm")
-"""Model names, in table order."""
+if TYPE_CHECKING:  # torch is imported only when a network model is built
+    from opfbench.forecasting.neural import TrainConfig
+
 
 
 @dataclass(frozen=True)
@@ -56,7 +57,9 @@ class RunSettings:
     wavelet_level: int = 3
     threads: int = 1
 
-    def train_config(self, seed: int) -> TrainConfig:
+    def train_config(self, seed: int) -> "TrainConfig":
+        from opfbench.forecasting.neural import TrainConfig
+
         return TrainConfig(
             window=self.window,
             epochs=self.epochs,
@@ -88,15 +91,18 @@ def settings_for(dataset: str, quick: bool) -> RunSettings:
 
 def build_model(name: str, settings: RunSettings, seed: int) -> Forecaster:
     """A fresh, unfitted model by name (one of MODEL_NAMES)."""
-    train = settings.train_config(seed)
     if name == "persistence":
         return Persistence()
     if name == "arima":
         return Arima(orders=settings.arima_orders, fit_samples=settings.arima_fit_samples)
+    if name not in MODEL_NAMES:
+        raise InputError(f"unknown model {name!r}; choose from {', '.join(MODEL_NAMES)}")
+    from opfbench.forecasting.networks import NetConfig  # torch only for the network models
+    from opfbench.forecasting.neural import NeuralForecaster, WaveletForecaster
+
+    train = settings.train_config(seed)
     if name == "lstm":
         return NeuralForecaster(name, NetConfig(conv=False), train)
     if name == "cnn-lstm":
         return NeuralForecaster(name, NetConfig(conv=True), train)
-    if name == "wavelet-cnn-lstm":
-        return WaveletForecaster(name, NetConfig(conv=True), train, settings.wavelet, settings.wavelet_level)
-    raise InputError(f"unknown model {name!r}; choose from {', '.join(MODEL_NAMES)}")
+    return WaveletForecaster(name, NetConfig(conv=True), train, settings.wavelet, settings.wavelet_level)

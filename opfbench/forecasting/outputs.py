@@ -8,20 +8,40 @@
 
 from __future__ import annotations
 
+import io
 import json
-import math
 from dataclasses import asdict
 from pathlib import Path
 
+import numpy as np
 import pandas as pd
 
+from opfbench.data.cleaning import check_time_index
 from opfbench.errors import DataError, InputError
 from opfbench.forecasting.experiment import ComparisonResult
-from opfbench.forecasting.report import forecast_page
+from opfbench.jsonio import write_atomic, write_json
+
+_TIME_FORMAT = "%Y-%m-%dT%H:%M:%S%z"
 
 
 def forecast_path(directory: str | Path, dataset: str, suffix: str = "csv") -> Path:
     return Path(directory) / f"forecast_{dataset}.{suffix}"
+
+
+def check_out_dir(directory: str | Path) -> Path:
+    """`directory` usable for `write_outputs` (created if missing): raise `InputError`
+    naming it when it is a file or cannot be written — checked before any computation."""
+    out = Path(directory)
+    if out.exists() and not out.is_dir():
+        raise InputError(f"--out {out}: exists and is not a folder")
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+        probe = out / ".opfbench-write-test"
+        probe.write_bytes(b"")
+        probe.unlink()
+    except OSError as exc:
+        raise InputError(f"--out {out}: cannot write there ({exc.strerror})") from None
+    return out
 
 
 def run_metadata(result: ComparisonResult) -> dict[str, object]:
@@ -39,42 +59,71 @@ def run_metadata(result: ComparisonResult) -> dict[str, object]:
 
 
 def write_outputs(result: ComparisonResult, directory: str | Path) -> list[Path]:
-    """Write the CSV, JSON and HTML files of `result` into `directory` (created)."""
-    out = Path(directory)
-    out.mkdir(parents=True, exist_ok=True)
-    csv = forecast_path(out, result.dataset, "csv")
-    result.forecasts.to_csv(csv, index_label="timestamp", date_format="%Y-%m-%dT%H:%M:%S%z")
-    meta = forecast_path(out, result.dataset, "json")
-    payload = {"run": run_metadata(result), "metrics": result.metrics_table()}
-    meta.write_text(json.dumps(json_safe(payload), indent=2) + "\n")
-    html = forecast_path(out, result.dataset, "html")
-    html.write_text(forecast_page(result))
+    """Write the CSV, JSON and HTML files of `result` into `directory` (created), each atomically."""
+    from opfbench.forecasting.report import forecast_page  # matplotlib only when a page is drawn
+
+    out = check_out_dir(directory)
+    csv = write_atomic(forecast_path(out, result.dataset, "csv"),
+                       result.forecasts.to_csv(index_label="timestamp", date_format=_TIME_FORMAT))
+    meta = write_json(forecast_path(out, result.dataset, "json"),
+                      {"run": run_metadata(result), "metrics": result.metrics_table()})
+    html = write_atomic(forecast_path(out, result.dataset, "html"), forecast_page(result))
     return [csv, meta, html]
 
 
 def load_forecast(directory: str | Path, dataset: str, model: str) -> pd.Series:
     """Test-part one-step forecasts (kW) of `model` written by `write_outputs`.
 
-    `model` may also be "actual". The index is tz-aware (UTC).
+    `model` may also be "actual". The index is tz-aware (UTC). The values must be
+    finite and within [0, rating] of the plant (the rating the run's JSON beside the CSV
+    records, or without that file the rating of the embedded dataset's plant); a timestamp that is not ISO 8601 with an offset, a non-numeric or
+    out-of-range value, a file that is not UTF-8 is a `DataError` naming file, column
+    and line — never clipped, never skipped.
     """
     path = forecast_path(directory, dataset, "csv")
     if not path.is_file():
         raise DataError(f"no forecast file {path}; run `opfbench forecast --dataset {dataset} --out {directory}`")
-    frame = pd.read_csv(path, index_col="timestamp")
-    if model not in frame.columns:
-        raise InputError(f"{path} has no model {model!r}; available: {', '.join(frame.columns)}")
-    series = frame[model].astype(float)
-    series.index = pd.to_datetime(series.index, utc=True)
-    series.index.name = "timestamp"
-    return series
+    rating = _rating_kw(forecast_path(directory, dataset, "json"), dataset)
+    try:
+        text = path.read_bytes().decode("utf-8")
+    except UnicodeDecodeError as exc:
+        raise DataError(f"{path}: not a UTF-8 text file (byte {exc.start})") from None
+    try:
+        frame = pd.read_csv(io.StringIO(text), dtype=str, keep_default_na=False)
+    except (ValueError, pd.errors.ParserError) as exc:
+        raise DataError(f"{path}: unreadable CSV ({exc})") from None
+    if "timestamp" not in frame.columns:
+        raise DataError(f"{path}: no 'timestamp' column")
+    if model not in frame.columns or model == "timestamp":
+        columns = [c for c in frame.columns if c != "timestamp"]
+        raise InputError(f"{path} has no model {model!r}; available: {', '.join(columns)}")
+    index = pd.to_datetime(frame["timestamp"], format=_TIME_FORMAT, utc=True, errors="coerce")
+    _first_bad(path, "timestamp", frame["timestamp"], index.isna().to_numpy(), "is not a timestamp like 2016-06-01T00:00:00+0000")
+    check_time_index(pd.DatetimeIndex(index), str(path), column="timestamp")
+    values = pd.to_numeric(frame[model], errors="coerce").to_numpy(dtype=float)
+    _first_bad(path, model, frame[model], np.isnan(values), "is not a number")
+    _first_bad(path, model, frame[model], ~np.isfinite(values), "is not finite")
+    _first_bad(path, model, frame[model], (values < 0) | (values > rating),
+               f"is outside the plant's range [0, {rating:g}] kW")
+    return pd.Series(values, index=pd.DatetimeIndex(index, name="timestamp"), name=model)
 
 
-def json_safe(value: object) -> object:
-    """NaN/inf become null (strict JSON)."""
-    if isinstance(value, float) and not math.isfinite(value):
-        return None
-    if isinstance(value, dict):
-        return {k: json_safe(v) for k, v in value.items()}
-    if isinstance(value, (list, tuple)):
-        return [json_safe(v) for v in value]
-    return value
+def _rating_kw(meta: Path, dataset: str) -> float:
+    if not meta.exists():
+        from opfbench.forecasting.datasets import forecast_dataset
+
+        return forecast_dataset(dataset).rating_kw
+    try:
+        rating = float(json.loads(meta.read_text(encoding="utf-8"))["run"]["rating_kw"])
+    except (OSError, ValueError, KeyError, TypeError) as exc:
+        raise DataError(f"{meta}: no readable run.rating_kw ({exc})") from None
+    if not (np.isfinite(rating) and rating > 0):
+        raise DataError(f"{meta}: run.rating_kw must be a positive number, got {rating}")
+    return rating
+
+
+def _first_bad(path: Path, column: str, raw: pd.Series, bad: np.ndarray, problem: str) -> None:
+    if bad.any():
+        i = int(np.flatnonzero(bad)[0])
+        raise DataError(f"{path}, column {column!r}, line {i + 2}: {raw.iloc[i]!r} {problem}"
+                        f" ({int(bad.sum())} such row(s))")

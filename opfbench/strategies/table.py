@@ -2,7 +2,7 @@
 sweep of reserve coefficients k, without and with a forecast (Algorithm 3).
 
 Forecast rule: P^F = min(factor · P^C, P̄) per DER (factor 1.2 = a +20 % forecast),
-with P^C = der_scale · P̄.
+with P^C = der_scale · P̄. The rules and their options come from the registry.
 
     python -m opfbench.strategies.table [--case paper33] [--der-scale 0.8] [--safe]
 """
@@ -10,13 +10,16 @@ with P^C = der_scale · P̄.
 from __future__ import annotations
 
 import argparse
+import sys
 from typing import Sequence
 
 import numpy as np
 import pandas as pd
 
 from opfbench.cases import load_case
-from opfbench.registry import LOCAL_RULES, run_strategy
+from opfbench.commands.common import fraction
+from opfbench.errors import OpfbenchError
+from opfbench.registry import LOCAL_RULES, STRATEGIES, run_strategy
 from opfbench.scenario import Scenario
 
 PAPER_KS = (0.0, 0.2, 0.4, 0.6, 0.8)
@@ -34,16 +37,15 @@ def loss_table(case: str = "paper33", ks: Sequence[float] = PAPER_KS, load_scale
     """One row per (forecast, k, strategy): losses_kw, excursion_mvar, status, vmin.
     `forecast` is False (plain rules) or True (Algorithm 3 with the forecast rule above)."""
     net = load_case(case)
-    p_now = der_scale * net.der_rating_mw
-    scenarios = {
-        False: Scenario(net, [load_scale], [p_now]),
-        True: Scenario(net, [load_scale], [p_now], [forecast_p_mw(p_now, net.der_rating_mw, forecast_factor)]),
+    scenarios = {  # every DER at the same share of its rating, so the rule is a share too
+        False: Scenario.snapshot(net, load_scale, der_scale),
+        True: Scenario.snapshot(net, load_scale, der_scale, min(forecast_factor * der_scale, 1.0)),
     }
     rows = []
     for forecast, scenario in scenarios.items():
         for k in ks:
             for name in LOCAL_RULES:
-                options = {} if name == "no-action" else {"safe": safe}
+                options = {"safe": safe} if "safe" in STRATEGIES[name].options else {}
                 res = run_strategy(name, scenario, k, **options)
                 rows.append({"forecast": forecast, "k": float(k), "strategy": name,
                              "losses_kw": float(res.losses_kw[0]), "excursion_mvar": float(res.excursion_mvar[0]),
@@ -67,15 +69,19 @@ def format_table(table: pd.DataFrame) -> str:
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--case", default="paper33")
-    parser.add_argument("--load-scale", type=float, default=1.0)
-    parser.add_argument("--der-scale", type=float, default=0.8, help="P^C as a fraction of rating")
-    parser.add_argument("--forecast-factor", type=float, default=FORECAST_FACTOR,
+    parser = argparse.ArgumentParser(prog="python -m opfbench.strategies.table", description=__doc__.splitlines()[0])
+    parser.add_argument("--case", default="paper33", help="shipped case name or MATPOWER .m path")
+    parser.add_argument("--load-scale", type=fraction, default=1.0)
+    parser.add_argument("--der-scale", type=fraction, default=0.8, help="P^C as a fraction of rating, 0..1")
+    parser.add_argument("--forecast-factor", type=fraction, default=FORECAST_FACTOR,
                         help="P^F = min(factor · P^C, rating) (default 1.2)")
     parser.add_argument("--safe", action="store_true", help="clip to the physical capability at P^C")
     args = parser.parse_args(argv)
-    table = loss_table(args.case, PAPER_KS, args.load_scale, args.der_scale, args.forecast_factor, args.safe)
+    try:
+        table = loss_table(args.case, PAPER_KS, args.load_scale, args.der_scale, args.forecast_factor, args.safe)
+    except OpfbenchError as exc:
+        print(f"{parser.prog}: error: {exc}", file=sys.stderr)
+        return 2
     print(f"{args.case}: load ×{args.load_scale:g}, P^C = {args.der_scale:g}·P̄, "
           f"P^F = min({args.forecast_factor:g}·P^C, P̄){', safe' if args.safe else ''}\n")
     print(format_table(table))
