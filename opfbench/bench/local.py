@@ -6,22 +6,12 @@ rule run as one batch, and LFMA run snapshot by snapshot on a sample for compari
 
 from __future__ import annotations
 
-import time
-
 import numpy as np
 
 from opfbench.bench.profiles import paper_day_scenario
 from opfbench.registry import LOCAL_RULES, run_strategy
 from opfbench.scenario import Scenario
-
-
-def _best_ms(fn, repeats: int) -> tuple[float, object]:
-    best, out = np.inf, None
-    for _ in range(repeats):
-        t0 = time.perf_counter()
-        out = fn()
-        best = min(best, (time.perf_counter() - t0) * 1e3)
-    return best, out
+from opfbench.timing import best_ms
 
 
 def bench_local(scenario: Scenario, k: float = 0.4, repeats: int = 3, loop_sample: int = 60) -> dict:
@@ -31,14 +21,14 @@ def bench_local(scenario: Scenario, k: float = 0.4, repeats: int = 3, loop_sampl
     n = scenario.n_snapshots
     out: dict = {"case": scenario.net.name, "snapshots": n, "k": k, "repeats": repeats, "rules": {}}
     for name in LOCAL_RULES:
-        ms, res = _best_ms(lambda: run_strategy(name, scenario, k), repeats)
+        ms, res = best_ms(lambda name=name: run_strategy(name, scenario, k), repeats)
         out["rules"][name] = {
             "wall_ms": ms, "ms_per_snapshot": ms / n,
             "power_flows_per_snapshot": int(res.power_flows.max()), "ok": int((res.status == "ok").sum()),
             "energy_losses_kwh": float(np.nansum(res.losses_kw) * 24.0 / n),
         }
     m = min(loop_sample, n)
-    ms, _ = _best_ms(lambda: [run_strategy("lfma", scenario.take(slice(i, i + 1)), k) for i in range(m)], 1)
+    ms, _ = best_ms(lambda: [run_strategy("lfma", scenario.take(slice(i, i + 1)), k) for i in range(m)], 1)
     out["lfma_one_by_one_ms_extrapolated"] = ms * n / m
     out["ratio_batch_vs_one_by_one"] = out["lfma_one_by_one_ms_extrapolated"] / out["rules"]["lfma"]["wall_ms"]
     return out
