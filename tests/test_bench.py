@@ -13,6 +13,7 @@ import opfbench.bench.pf as bench_pf
 from opfbench.bench.pf_large import measure, scaling
 from opfbench.bench.profiles import paper_day_scenario
 from opfbench.cases import load_case
+from opfbench.errors import NetworkError
 from opfbench.matpower import load_case_file
 from opfbench.powerflow import bus_injections, solve_pf
 from test_powerflow import CASE4_PV
@@ -65,6 +66,8 @@ def test_pandapower_builder_keeps_taps_and_fixed_generators(tmp_path):
     bench_pf.set_injections(pnet, net, s)
     pp.runpp(pnet, tolerance_mva=1e-10, init="flat")
     assert np.abs(pnet.res_bus.vm_pu.to_numpy() - solve_pf(net, s).vm).max() < 1e-6
+    with pytest.raises(NetworkError, match="plain series lines"):
+        bench_pf._pgm_batch_ms(net, s[None, :])
 
 
 def test_local_bench_batched_equals_one_by_one():

@@ -17,6 +17,7 @@ import numpy as np
 
 from opfbench.bench.pandapower_opf import to_ppc
 from opfbench.bench.profiles import paper_day_scenario
+from opfbench.errors import NetworkError
 from opfbench.network import Network
 from opfbench.powerflow import bus_injections, solve_pf, solve_pf_batch
 from opfbench.timing import best_ms, elapsed_ms, now
@@ -69,7 +70,12 @@ def _pandapower_loop_ms(net: Network, s_mw: np.ndarray) -> tuple[float | None, f
 
 def _pgm_batch_ms(net: Network, s_mw: np.ndarray) -> tuple[float | None, float | None]:
     """(wall ms of power-grid-model's batch power flow, max |V| difference p.u.), or
-    (None, None) when power-grid-model is not installed."""
+    (None, None) when power-grid-model is not installed. The model is built from series
+    r/x only, so a case with line charging, taps, shunts or fixed generators is refused."""
+    plain = not (net.b.any() or (net.tap != 1).any() or net.shift.any() or net.gs_mw.any() or net.bs_mvar.any()
+                 or net.gen_bus.size)
+    if not plain:
+        raise NetworkError(f"{net.name}: the power-grid-model peer models plain series lines only")
     try:
         from power_grid_model import CalculationMethod, ComponentType, DatasetType, LoadGenType, PowerGridModel, initialize_array
     except ImportError:
