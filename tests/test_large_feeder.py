@@ -62,7 +62,7 @@ def test_feeder1k_batched_agrees_with_newton():
     batch = solve_pf_batch(day.net, s)
     assert batch.converged.all()
     for k in (0, 30, 48, 70):
-        single = solve_pf(day.net, s[k], tol=1e-12)  # tight: the laterals' 30× impedances amplify mismatch
+        single = solve_pf(day.net, s[k], tol=1e-10)  # tighter than default: the laterals' 30× impedances amplify mismatch
         assert np.abs(batch.v[k] - single.v).max() < 1e-8
 
 
@@ -92,7 +92,7 @@ def test_feeder10k_power_flow_batch_and_lfma():
     s = day.injections(np.zeros_like(day.der_p_mw))
     batch = solve_pf_batch(net, s)
     assert batch.converged.all()
-    single = solve_pf(net, s[48], tol=1e-12)
+    single = solve_pf(net, s[48], tol=1e-10)  # ~1e-11 p.u. is the rounding floor here
     assert single.converged and np.abs(batch.v[48] - single.v).max() < 1e-8
     res = run_strategy("lfma", day, 0.4)
     assert (res.status == "ok").all()
