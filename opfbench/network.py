@@ -14,6 +14,7 @@ from functools import cached_property
 from typing import Literal
 
 import numpy as np
+import scipy.sparse as sp
 
 from opfbench.errors import NetworkError
 
@@ -159,16 +160,24 @@ class Network:
 
     # ----- electrical matrices -----------------------------------------------------
     @cached_property
-    def ybus(self) -> np.ndarray:
-        """Dense complex bus admittance matrix (p.u.), MATPOWER's makeYbus conventions."""
+    def ybus_sparse(self) -> sp.csr_matrix:
+        """Sparse (CSR) complex bus admittance matrix (p.u.), MATPOWER's makeYbus
+        conventions; every diagonal entry is stored, even when zero."""
         yff, yft, ytf, ytt = self.branch_admittances
         n = self.n_bus
-        y = np.zeros((n, n), dtype=complex)
-        np.add.at(y, (self.f, self.f), yff)
-        np.add.at(y, (self.f, self.t), yft)
-        np.add.at(y, (self.t, self.f), ytf)
-        np.add.at(y, (self.t, self.t), ytt)
-        y[np.diag_indices(n)] += (self.gs_mw + 1j * self.bs_mvar) / self.base_mva
+        diag = np.arange(n)
+        rows = np.concatenate([self.f, self.f, self.t, self.t, diag])
+        cols = np.concatenate([self.f, self.t, self.f, self.t, diag])
+        vals = np.concatenate([yff, yft, ytf, ytt, (self.gs_mw + 1j * self.bs_mvar) / self.base_mva])
+        y = sp.csr_matrix((vals, (rows, cols)), shape=(n, n))  # duplicates are summed
+        y.sort_indices()
+        return y
+
+    @cached_property
+    def ybus(self) -> np.ndarray:
+        """Dense complex bus admittance matrix (p.u.), read-only; n_bus² entries, so only
+        for small feeders — large ones use `ybus_sparse`."""
+        y = self.ybus_sparse.toarray()
         y.setflags(write=False)
         return y
 

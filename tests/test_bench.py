@@ -1,11 +1,26 @@
-"""The benchmark modules report null for a peer that is not installed (JSON contract)."""
+"""The benchmark modules: JSON keys, a null for a peer that is not installed (JSON
+contract), and the correctness figures they carry — batched vs single solutions, the
+peers' voltages against ours, LFMA batched vs one snapshot at a time."""
 
 import builtins
 
+import numpy as np
 import pytest
 
+import opfbench.bench.local as bench_local
 import opfbench.bench.opf as bench_opf
 import opfbench.bench.pf as bench_pf
+from opfbench.bench.pf_large import measure, scaling
+from opfbench.bench.profiles import paper_day_scenario
+from opfbench.cases import load_case
+from opfbench.errors import NetworkError
+from opfbench.matpower import load_case_file
+from opfbench.powerflow import bus_injections, solve_pf
+from test_powerflow import CASE4_PV
+
+PF_KEYS = {"case", "snapshots", "single_ms", "batch_1440_ms", "batch_converged", "batch_max_iterations",
+           "batch_vs_single_max_dv_pu", "pandapower_loop_1440_ms", "ratio_vs_pandapower", "pandapower_max_dv_pu",
+           "pandapower_numba", "pgm_batch_1440_ms", "ratio_vs_pgm", "pgm_max_dv_pu"}
 
 
 @pytest.fixture
@@ -22,11 +37,60 @@ def no_peers(monkeypatch):
 
 def test_pf_bench_without_peers(no_peers, capsys):
     f = bench_pf.run()
+    assert set(f) == PF_KEYS
     for key in ("pandapower_loop_1440_ms", "ratio_vs_pandapower", "pgm_batch_1440_ms", "ratio_vs_pgm"):
         assert f[key] is None
     assert f["single_ms"] > 0 and f["batch_1440_ms"] > 0 and f["batch_converged"] == 1440
+    assert f["batch_vs_single_max_dv_pu"] < 1e-9
     bench_pf.print_table(f)
     assert "not installed" in capsys.readouterr().out
+
+
+def test_pf_peers_agree_with_us_on_the_paper_day(monkeypatch):
+    monkeypatch.setattr(bench_pf, "NUMBA", False)  # numba's first-call compilation takes a minute
+    day = paper_day_scenario("paper33")
+    s = day.injections(0.0)[::60]
+    assert bench_pf._pandapower_loop_ms(day.net, s)[1] < 1e-6
+    assert bench_pf._pgm_batch_ms(day.net, s)[1] < 1e-6
+
+
+def test_pandapower_builder_keeps_taps_and_fixed_generators(tmp_path):
+    """The one builder (to_ppc) on a case with an off-nominal tap and a PV generator."""
+    import pandapower as pp
+
+    path = tmp_path / "case4pv.m"
+    path.write_text(CASE4_PV)
+    net = load_case_file(path)
+    s = bus_injections(net, load_scale=0.7)
+    pnet = bench_pf.pandapower_net(net)
+    bench_pf.set_injections(pnet, net, s)
+    pp.runpp(pnet, tolerance_mva=1e-10, init="flat")
+    assert np.abs(pnet.res_bus.vm_pu.to_numpy() - solve_pf(net, s).vm).max() < 1e-6
+    with pytest.raises(NetworkError, match="plain series lines"):
+        bench_pf._pgm_batch_ms(net, s[None, :])
+
+
+def test_local_bench_batched_equals_one_by_one():
+    day = paper_day_scenario("paper33").take(slice(0, 1440, 60))
+    f = bench_local.bench_local(day, repeats=1, loop_sample=4)
+    assert set(f["rules"]) == {"no-action", "llma", "lfma"}
+    assert all(r["ok"] == day.n_snapshots for r in f["rules"].values())
+    assert f["rules"]["lfma"]["power_flows_per_snapshot"] == 4
+    assert f["lfma_one_by_one_max_dq_mvar"] < 1e-9
+    assert f["rules"]["lfma"]["energy_losses_kwh"] <= f["rules"]["no-action"]["energy_losses_kwh"]
+
+
+def test_large_measurement_runs_in_its_own_process():
+    r = measure("pf", "feeder1k")
+    assert r["error"] is None and r["ok"]
+    assert 0 < r["s"] <= r["first_s"] and r["mb"] >= r["baseline_mb"] > 0
+
+
+def test_scaling_fits_exponents():
+    rows, exponents = scaling(("paper33", "case141-der"))
+    assert [r["buses"] for r in rows.values()] == [33, 141]
+    assert set(exponents) == {"pf_s", "batch96_s", "lfma96_s"}
+    assert all(np.isfinite(e) for e in exponents.values())
 
 
 def test_opf_bench_without_peer(no_peers, capsys):
@@ -35,3 +99,7 @@ def test_opf_bench_without_peer(no_peers, capsys):
     assert f["solved"] == f["total"] == 6 and f["ipopt_ms"] > 0 and f["socp_ms"] > 0
     bench_opf.print_table(f)
     assert "pandapower not installed" in capsys.readouterr().out
+
+
+def test_load_case_names_the_large_feeders():
+    assert load_case("feeder1k").n_bus == 990

@@ -31,7 +31,7 @@ LOAD_Q = [0.0, 0.1, 0.1, 0.1, 0.35]
 
 def chain_scenario() -> Scenario:
     net = radial_feeder(parent=[0, 1, 2, 3], load_p_mw=[0.0, *P_NOW], load_q_mvar=LOAD_Q,
-                        ders=[(b, "PV", s) for b, s in zip((1, 2, 3, 4), RATING)], reversed_lines=[1, 3])
+                        ders=[(b, "PV", s) for b, s in zip((1, 2, 3, 4), RATING, strict=True)], reversed_lines=[1, 3])
     return Scenario(net, [1.0], [P_NOW])
 
 

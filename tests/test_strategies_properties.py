@@ -20,7 +20,7 @@ EPS = 1e-12  # MVAr: round-off allowance of the bound checks
 
 
 @st.composite
-def random_scenarios(draw, forecast=st.booleans()) -> Scenario:
+def random_scenarios(draw) -> Scenario:
     """A random radial feeder (3–10 buses, r and x up to 0.02 p.u. on 1 MVA, loads up to
     0.2 MW/MVAr per bus) with 1–4 DER units and SNAPSHOTS random operating points."""
     n = draw(st.integers(3, 10))
@@ -35,7 +35,7 @@ def random_scenarios(draw, forecast=st.booleans()) -> Scenario:
                         reversed_lines=reversed_lines)
     rating = net.der_rating_mw
     p_now = rng.uniform(0, 1, (SNAPSHOTS, len(ders))) * rating
-    p_fc = rng.uniform(0, 1, (SNAPSHOTS, len(ders))) * rating if draw(forecast) else None
+    p_fc = rng.uniform(0, 1, (SNAPSHOTS, len(ders))) * rating if draw(st.booleans()) else None
     return Scenario(net, rng.uniform(0, 1.5, SNAPSHOTS), p_now, p_fc)
 
 

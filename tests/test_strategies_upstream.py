@@ -77,7 +77,7 @@ def test_meshed_disagreements_are_reported_not_raised() -> None:
     for s in range(scenario.n_snapshots):
         detected = [largest_q_line(net, trace.flows[0], s, int(b)) for b in net.der_bus]
         np.testing.assert_array_equal(trace.upstream_branch[s], detected)
-        expected = [int(b) for b, d, p in zip(der_ids, detected, net.parent_branch[net.der_bus]) if d != p]
+        expected = [int(b) for b, d, p in zip(der_ids, detected, net.parent_branch[net.der_bus], strict=True) if d != p]
         assert res.extra["upstream_disagreements"][s] == expected
     # The comparison is not vacuous: on this meshed feeder the largest flow is not always
     # on the BFS parent line (e.g. bus 29 next to the 600 kVAr load at bus 30).

@@ -7,6 +7,9 @@
 - `paper33-meshed`: the same with the five tie lines closed.
 - `case69-der`, `case141-der`: DER placed by `place_ders` (rule below), to test the
   paper's claim that the rules work on any feeder.
+- `feeder1k`, `feeder10k`: large radial feeders (990 and 9 999 buses), copies of
+  case33bw on a stiff trunk with DER in every copy (`opfbench.cases.feeder`);
+  `feeder(c)` builds the same rule for any number of copies c.
 """
 
 from __future__ import annotations
@@ -17,6 +20,7 @@ from pathlib import Path
 
 import numpy as np
 
+from opfbench.cases.feeder import SHIPPED_COPIES, replicated_feeder
 from opfbench.errors import InputError
 from opfbench.matpower import load_case_file
 from opfbench.network import DER, Network
@@ -69,6 +73,13 @@ def place_ders(net: Network, name: str) -> Network:
     return _paper_limits(net.with_changes(name=name, ders=ders))
 
 
+def feeder(copies: int, name: str | None = None) -> Network:
+    """The large radial feeder of `copies` case33bw copies (rule: `opfbench.cases.feeder`);
+    33·copies buses, named `feeder-<copies>x` unless `name` is given."""
+    base = load_case_file(_matpower_file("case33bw"), "case33bw")
+    return replicated_feeder(base, place_ders(base, "case33bw-der"), copies, name or f"feeder-{copies}x")
+
+
 _BUILDERS = {
     "case33bw": lambda: load_case_file(_matpower_file("case33bw"), "case33bw"),
     "case69": lambda: load_case_file(_matpower_file("case69"), "case69"),
@@ -78,6 +89,7 @@ _BUILDERS = {
     "case69-der": lambda: place_ders(load_case_file(_matpower_file("case69")), "case69-der"),
     "case141-der": lambda: place_ders(load_case_file(_matpower_file("case141")), "case141-der"),
 }
+_BUILDERS |= {name: (lambda c=c, name=name: feeder(c, name)) for name, c in SHIPPED_COPIES.items()}
 
 CASE_NAMES = tuple(_BUILDERS)
 

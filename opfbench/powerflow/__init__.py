@@ -1,0 +1,219 @@
+"""AC power flow: Newton–Raphson in polar form (one snapshot) and a batched solver
+(many snapshots at once, arrays shaped snapshots × buses).
+
+Inputs are net complex bus injections in MW/MVAr (generation minus load, positive =
+into the grid); `bus_injections` builds them from loads, DER setpoints and the case's
+fixed generators. Results carry complex bus voltages (p.u.), branch flows at both ends
+(MW/MVAr, positive = leaving the bus into the branch) and total losses (kW).
+
+The batched solver is the implicit Z-bus (current-injection fixed-point) method:
+V = V₀ + Z·conj(S/V) with Z = Y_red⁻¹ factored once per network. On a radial feeder this
+is the matrix form of the backward/forward sweep; it works unchanged on meshed feeders.
+Every snapshot is iterated as one column of a matrix. Snapshots it cannot converge (or
+networks with PV buses) are handed to Newton–Raphson, one by one, and flagged exactly as
+NR reports.
+
+Dense or sparse: feeders below `SPARSE_MIN_BUSES` buses use dense kernels (`dense`: a
+dense Jacobian, Z as an explicit inverse, one mat-mul per step); larger ones sparse
+kernels (`sparse`: SuperLU factors of the sparse Jacobian and of Y_red, memory linear in
+the bus count). Both give the same answers to the solver tolerances.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from functools import lru_cache
+
+import numpy as np
+from threadpoolctl import ThreadpoolController
+
+from opfbench.network import Network
+from opfbench.powerflow.common import (
+    MAX_NR_ITER,
+    MAX_SWEEP_ITER,
+    MISMATCH_CHECK,
+    NR_TOLERANCE,
+    SPARSE_MIN_BUSES,
+    SWEEP_TOLERANCE,
+    PowerFlowResult,
+    bus_injections,
+    check_injections,
+    flat_start,
+    uses_sparse,
+)
+from opfbench.powerflow.dense import DenseNewton, DenseZbus
+from opfbench.powerflow.sparse import SparseNewton, SparseZbus
+
+__all__ = [
+    "MAX_NR_ITER", "MAX_SWEEP_ITER", "MISMATCH_CHECK", "NR_TOLERANCE", "SPARSE_MIN_BUSES", "SWEEP_TOLERANCE",
+    "PowerFlowResult", "bus_injections", "solve_pf", "solve_pf_batch", "uses_sparse",
+]
+
+# The batched mat-muls are small (n_bus² × S); multi-threaded BLAS only adds
+# synchronisation there, and is many times slower when the other core is busy.
+_BLAS = ThreadpoolController()
+
+
+@lru_cache(maxsize=16)
+def _newton(net: Network, sparse: bool) -> DenseNewton | SparseNewton:
+    return SparseNewton(net) if sparse else DenseNewton(net)
+
+
+def solve_pf(net: Network, s_mw: np.ndarray, v0: np.ndarray | None = None,
+             tol: float = NR_TOLERANCE, max_iter: int = MAX_NR_ITER,
+             sparse: bool | None = None) -> PowerFlowResult:
+    """Newton–Raphson, polar coordinates; dense Jacobian below SPARSE_MIN_BUSES buses,
+    sparse (SuperLU) from there on, or as `sparse` forces.
+
+    `s_mw`: net bus injections (n_bus,) complex MW; `v0` an optional start (warm start).
+    Converged when the largest P/Q mismatch is below `tol` p.u. Non-convergence
+    (divergence, singular Jacobian, iteration limit) returns `converged=False`; it never
+    raises.
+    """
+    s = check_injections(net, s_mw) / net.base_mva
+    system = _newton(net, uses_sparse(net) if sparse is None else sparse)
+    v = flat_start(net) if v0 is None else np.array(v0, dtype=complex)
+    v[net.slack] = net.v_slack * np.exp(1j * np.angle(v[net.slack]))
+    s_sub = s[system.pvpq]
+    n = len(system.pvpq)
+    f = system.mismatch(v, s_sub)
+    converged = bool(np.max(np.abs(f), initial=0.0) < tol)
+    it = 0
+    while not converged and it < max_iter:
+        it += 1
+        dx = system.step(v, f)
+        if dx is None:
+            break
+        va, vm = np.angle(v), np.abs(v)
+        va[system.pvpq] += dx[:n]
+        vm[system.pq] += dx[n:]
+        v = vm * np.exp(1j * va)
+        f = system.mismatch(v, s_sub)
+        if not np.all(np.isfinite(f)):
+            break
+        converged = bool(np.max(np.abs(f)) < tol)
+    return PowerFlowResult(net, v, np.bool_(converged), np.int64(it))
+
+
+@dataclass(frozen=True, eq=False)
+class _ZbusFactor:
+    """Per-network data for the batched fixed-point solver."""
+
+    keep: np.ndarray  # non-slack bus indices
+    z: DenseZbus | SparseZbus  # applies Y[keep, keep]⁻¹
+    v_noload: np.ndarray  # -Z·Y[keep, slack]·V_slack
+    v_noload_full: np.ndarray  # (n_bus,) no-load voltages including the slack
+
+
+@lru_cache(maxsize=16)
+def _zbus(net: Network, sparse: bool) -> _ZbusFactor:
+    keep = np.flatnonzero(np.arange(net.n_bus) != net.slack)
+    z = SparseZbus(net, keep) if sparse else DenseZbus(net, keep)
+    y_slack = net.ybus_sparse[:, [net.slack]].toarray()[keep]  # (m, 1)
+    v_noload = np.empty((len(keep), 1), dtype=complex)
+    z.apply(-y_slack * net.v_slack, v_noload)
+    full = np.full(net.n_bus, net.v_slack, dtype=complex)
+    full[keep] = v_noload[:, 0]
+    return _ZbusFactor(keep, z, v_noload[:, 0], full)
+
+
+@dataclass
+class _Sweep:
+    v: np.ndarray  # (m, S) complex voltages of the non-slack buses
+    iterations: np.ndarray  # (S,)
+    settled: np.ndarray  # (S,) bool: update fell below tol
+
+
+def _fixed_point(fac: _ZbusFactor, s_conj: np.ndarray, tol: float, max_iter: int,
+                 v_start: np.ndarray | None) -> _Sweep:
+    """Iterate V ← Z·conj(S/V) + V₀ on all columns of `s_conj` (conj(S), shape (m, S)),
+    starting from `v_start` (m, S) or, without it, from the no-load voltages.
+
+    Written with preallocated buffers and in-place ufuncs: at 1440 snapshots the
+    temporaries of the plain expression cost more than the mat-mul itself.
+    """
+    m, n_snap = s_conj.shape
+    order = fac.z.order  # memory layout the Z kernel works in without copies
+    start = np.repeat(fac.v_noload[:, None], n_snap, axis=1) if v_start is None else v_start
+    out = _Sweep(np.array(start, dtype=complex, order=order),
+                 np.zeros(n_snap, dtype=np.int64), np.zeros(n_snap, dtype=bool))
+    active = np.arange(n_snap)
+    v, s_act = out.v.copy(order=order), np.asarray(s_conj, order=order)
+    v_new, cur = np.empty_like(v), np.empty_like(v)
+    mag2, tmp = np.empty(v.shape), np.empty(v.shape)
+    v0 = fac.v_noload[:, None]
+    with np.errstate(all="ignore"):
+        for it in range(1, max_iter + 1):
+            np.square(v.real, out=mag2)
+            np.square(v.imag, out=tmp)
+            mag2 += tmp
+            np.reciprocal(mag2, out=mag2)
+            np.multiply(s_act, v, out=cur)
+            cur *= mag2  # conj(S/V) = conj(S)·V/|V|²
+            fac.z.apply(cur, v_new)
+            v_new += v0
+            np.subtract(v_new, v, out=cur)
+            np.square(cur.real, out=mag2)
+            np.square(cur.imag, out=tmp)
+            mag2 += tmp
+            step2 = mag2.max(axis=0)
+            v, v_new = v_new, v
+            out.iterations[active] = it
+            done = step2 < tol * tol
+            going = ~done & np.isfinite(step2)
+            if going.all():
+                continue
+            out.v[:, active] = v
+            out.settled[active[done]] = True
+            if not going.any():
+                return out
+            active = active[going]
+            v, s_act = np.asarray(v[:, going], order=order), np.asarray(s_act[:, going], order=order)
+            v_new, cur = np.empty_like(v), np.empty_like(v)
+            mag2, tmp = np.empty(v.shape), np.empty(v.shape)
+    out.v[:, active] = v
+    return out
+
+
+def solve_pf_batch(net: Network, s_mw: np.ndarray, v0: np.ndarray | None = None,
+                   tol: float = SWEEP_TOLERANCE, max_iter: int = MAX_SWEEP_ITER,
+                   sparse: bool | None = None) -> PowerFlowResult:
+    """Power flow for many snapshots at once; `s_mw` shaped (S, n_bus) complex MW; `v0`
+    (S, n_bus) complex p.u. an optional warm start (e.g. the previous solution of a
+    nearby operating point; non-finite rows fall back to the no-load start). Dense
+    kernels below SPARSE_MIN_BUSES buses, sparse from there on, or as `sparse` forces.
+
+    Returns a result with arrays shaped (S, n_bus) and per-snapshot `converged` and
+    `iterations`. A snapshot counts as solved when its fixed-point update is below `tol`
+    p.u. *and* its P/Q mismatch is below `MISMATCH_CHECK` p.u.; the others (and every
+    snapshot of a network with PV buses) are solved by Newton–Raphson individually and
+    carry NR's verdict and iteration count.
+    """
+    sparse = uses_sparse(net) if sparse is None else sparse
+    s = check_injections(net, np.atleast_2d(s_mw)) / net.base_mva
+    n_snap = s.shape[0]
+    if net.pv_buses.size:
+        results = [solve_pf(net, row * net.base_mva, sparse=sparse) for row in s]
+        return PowerFlowResult(net, np.array([r.v for r in results]),
+                               np.array([r.converged for r in results]), np.array([r.iterations for r in results]))
+    fac = _zbus(net, sparse)
+    with _BLAS.limit(limits=1, user_api="blas"):
+        start = None
+        if v0 is not None:
+            v0 = np.asarray(v0, dtype=complex).reshape(n_snap, net.n_bus)
+            start = np.where(np.isfinite(v0).all(axis=1, keepdims=True) & (np.abs(v0) > 0).all(axis=1, keepdims=True),
+                             v0, fac.v_noload_full)[:, fac.keep].T.copy()
+        sweep = _fixed_point(fac, np.conj(s[:, fac.keep]).T, tol, max_iter, start)
+        v = np.empty((n_snap, net.n_bus), dtype=complex)
+        v[:, fac.keep] = sweep.v.T
+        v[:, net.slack] = net.v_slack
+        # Certify: the power-flow equations themselves must hold, not only the fixed point.
+        with np.errstate(all="ignore"):
+            mismatch = np.abs(v[:, fac.keep] * np.conj(fac.z.currents(v)) - s[:, fac.keep]).max(axis=1)
+    iterations, settled = sweep.iterations, sweep.settled
+    settled &= mismatch < MISMATCH_CHECK
+    converged = settled.copy()
+    for k in np.flatnonzero(~settled):
+        r = solve_pf(net, s[k] * net.base_mva, sparse=sparse)
+        v[k], converged[k], iterations[k] = r.v, r.converged, r.iterations
+    return PowerFlowResult(net, v, converged, iterations)
