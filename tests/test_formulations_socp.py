@@ -9,7 +9,7 @@ import pytest
 from opfbench.cases import load_case
 from opfbench.errors import InputError, NetworkError
 from opfbench.formulations.acopf import run_acopf
-from opfbench.formulations.common import snapshot_data
+from opfbench.formulations.problem import snapshot_data
 from opfbench.formulations.socp import DistFlowSocp, JabrSocp, build_socp, run_socp
 from opfbench.scenario import Scenario
 
@@ -74,15 +74,15 @@ def test_jabr_and_distflow_agree_on_a_radial_feeder():
 def test_direct_clarabel_path_matches_cvxpy_solve(model):
     net = load_case("paper33")
     relax = build_socp(net, model=model)
-    assert relax.problem.is_dpp()
+    assert relax.cvxpy_problem.is_dpp()
     for scale in (0.5, 1.2):
         data = snapshot_data(Scenario.snapshot(net, scale, 0.7), 0.0)
         fast = relax.solve(data.s_fixed[0], data.q_limit[0])
         relax.p_fixed.value, relax.q_fixed.value = data.s_fixed[0].real, data.s_fixed[0].imag
         relax.q_limit.value = data.q_limit[0]
-        relax.problem.solve(solver=cp.CLARABEL)
-        assert relax.problem.status == "optimal"
-        assert fast.lower_bound_kw == pytest.approx(relax.problem.value, rel=1e-7)
+        relax.cvxpy_problem.solve(solver=cp.CLARABEL)
+        assert relax.cvxpy_problem.status == "optimal"
+        assert fast.lower_bound_kw == pytest.approx(relax.cvxpy_problem.value, rel=1e-7)
         np.testing.assert_allclose(fast.q_pu, relax.q.value, atol=1e-6)
 
 

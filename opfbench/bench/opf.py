@@ -24,7 +24,7 @@ import numpy as np
 from opfbench.cases import load_case
 from opfbench.bench.pandapower_opf import PandapowerOpf
 from opfbench.formulations.acopf import build_acopf
-from opfbench.formulations.common import snapshot_data
+from opfbench.formulations.problem import snapshot_data
 from opfbench.formulations.socp import build_socp
 from opfbench.network import Network
 from opfbench.powerflow import solve_pf_batch
