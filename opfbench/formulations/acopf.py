@@ -9,8 +9,8 @@ subject to the AC power balance (π model, `problem.PiBranches`) and the slack r
 
 `AcOpf` builds the NLP once per (network, slack_export) — fixed injections are NLP
 parameters, Q and |V| limits variable bounds — sparse throughout (CasADi SX, sparse
-incidence), with two IPOPT instances: a cold one (flat start, IPOPT's defaults) and a
-warm one (primal and dual start from a previous solution, `warm_start_init_point`,
+incidence), with two IPOPT instances, each created on first use: a cold one (flat
+start, IPOPT's defaults) and a warm one (primal and dual start from a previous solution, `warm_start_init_point`,
 small initial barrier). `bound_relax_factor = 0`: IPOPT's iterates stay within the Q
 and |V| bounds, so the reported objective cannot dip below the SOCP bound by a bound
 overshoot. Every solve returns its status, iterations and time from IPOPT's statistics.
@@ -178,14 +178,22 @@ class AcOpf:
         losses = mismatch_p[problem.slack] + ca.sum1(p_fixed) - ca.dot(ca.DM(problem.gsh), v2)
         nlp = {"x": ca.vertcat(theta_o, vm_o, q), "p": ca.vertcat(p_fixed, q_fixed),
                "f": problem.kw_per_pu * losses, "g": ca.vertcat(*(r.expr for r in rows))}
-        self._cold = ca.nlpsol("acopf_cold", "ipopt", nlp, IPOPT_OPTIONS)
-        self._warm = ca.nlpsol("acopf_warm", "ipopt", nlp, IPOPT_OPTIONS | WARM_OPTIONS)
+        self._nlp = nlp
+        self._solvers: dict[bool, ca.Function] = {}
         self._lbg = np.concatenate([r.lo for r in rows])
         self._ubg = np.concatenate([r.hi for r in rows])
         inf = np.full(m, np.inf)
         self._lbx_fixed = np.concatenate([-inf, problem.vm_min])
         self._ubx_fixed = np.concatenate([inf, problem.vm_max])
         self.flat_start = np.concatenate([np.zeros(m), np.ones(m), np.zeros(n_der)])
+
+    def _solver(self, warm: bool) -> ca.Function:
+        """The cold or warm IPOPT instance, created on first use (CasADi derives the
+        NLP's Jacobian and Hessian per instance: seconds on a 10 000-bus feeder)."""
+        if warm not in self._solvers:
+            options = IPOPT_OPTIONS | WARM_OPTIONS if warm else IPOPT_OPTIONS
+            self._solvers[warm] = ca.nlpsol("acopf_warm" if warm else "acopf_cold", "ipopt", self._nlp, options)
+        return self._solvers[warm]
 
     def solve(self, s_fixed: np.ndarray, q_limit: np.ndarray, start: IpoptSolve | None = None) -> IpoptSolve:
         """Solve one snapshot: fixed injections `s_fixed` (n_bus,) complex p.u., usable Q
@@ -198,11 +206,10 @@ class AcOpf:
             "lbg": self._lbg,
             "ubg": self._ubg,
         }
+        solver = self._solver(warm=start is not None)
         if start is None:
-            solver = self._cold
             out = solver(x0=self.flat_start, **args)
         else:
-            solver = self._warm
             out = solver(x0=start.x, lam_x0=start.lam_x, lam_g0=start.lam_g, **args)
         stats = solver.stats()
         x = np.asarray(out["x"]).ravel()

@@ -103,8 +103,9 @@ def _rows(row: Row) -> list[cp.Constraint]:
 class SocpRelaxation:
     """The relaxation of one `OpfProblem`, built once; `solve` per snapshot.
 
-    Parameters (cvxpy, DPP): p_fixed, q_fixed (n_bus,) fixed injections and q_limit
-    (n_der,) usable Q limit, all p.u. Subclasses add the network model.
+    Data (cvxpy variables that `conic.ParametricConeProgram` holds fixed per solve):
+    p_fixed, q_fixed (n_bus,) fixed injections and q_limit (n_der,) usable Q limit, all
+    p.u. Subclasses add the network model.
     """
 
     model: str = ""
@@ -113,9 +114,9 @@ class SocpRelaxation:
         self.problem = problem = OpfProblem.of(net, slack_export)
         self.net = net
         n = net.n_bus
-        self.p_fixed = cp.Parameter(n, name="p_fixed")
-        self.q_fixed = cp.Parameter(n, name="q_fixed")
-        self.q_limit = cp.Parameter(len(net.ders), nonneg=True, name="q_limit")
+        self.p_fixed = cp.Variable(n, name="p_fixed")
+        self.q_fixed = cp.Variable(n, name="q_fixed")
+        self.q_limit = cp.Variable(len(net.ders), name="q_limit")
         self.q = cp.Variable(len(net.ders), name="q_der")
         self.v = cp.Variable(n, name="v")  # |V|² p.u.²
         mismatch_p, mismatch_q, losses, constraints = self._network_model()
@@ -163,9 +164,7 @@ class SocpRelaxation:
             outcome = "infeasible" if conic_status(sol) in CONIC_INFEASIBLE else "failed"
             return SocpSolve(outcome, status, np.nan, None, np.nan, solve_ms, iterations)
 
-        def value(var: cp.Variable) -> np.ndarray:
-            return self.program.value(sol, var)
-
+        value = self.program.reader(sol)
         bound = min(sol.obj_val, sol.obj_val_dual)
         q_pu = np.clip(value(self.q), -q_limit, q_limit)  # within solver tolerance of the limits anyway
         return SocpSolve("optimal", status, float(bound), q_pu, self._cone_residual(value),
