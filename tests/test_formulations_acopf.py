@@ -194,3 +194,13 @@ def test_snapshot_cli_reports_infeasible_without_error(capsys):
     out = json.loads(capsys.readouterr().out)
     assert out["status"] == "infeasible" and out["fallback"] == "no-action"
     assert out["objective_kw"] is None  # NaN becomes null in JSON
+
+
+@pytest.mark.parametrize("solver, certified_by", [("auto", "socp"), ("ipopt", "ipopt")])
+def test_snapshot_cli_acopf_solver_flag(capsys, solver, certified_by):
+    assert main(["snapshot", "paper33", "--strategy", "acopf", "--json", "--acopf-solver", solver]) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert out["certified_by"] == certified_by and (out["iterations"] > 0) == (solver == "ipopt")
+    assert out["losses_kw"] == pytest.approx(33.23, abs=0.02)
+    assert main(["snapshot", "paper33", "--strategy", "socp", "--acopf-solver", solver]) == 2
+    assert "--acopf-solver applies to acopf" in capsys.readouterr().err

@@ -1,6 +1,6 @@
 """Cross-check: the AC OPF is never beaten by a feasible point.
 
-On a snapshot where IPOPT reached an optimum (status "ok" or "fallback-cold"), any other
+On a snapshot where the OPF reached an optimum (status "ok" or "fallback-cold"), any other
 strategy's setpoints that meet every limit of the OPF (AC-evaluated, `problem.ac_feasible`)
 must have losses ≥ the OPF's. On radial feeders the relaxation is exact, so the OPF is
 the global optimum and a violation is a bug; on meshed ones IPOPT's point is a local
