@@ -264,8 +264,17 @@ def ac_feasible(net: Network, pf: PowerFlowResult, s_fixed_pu: np.ndarray, slack
         ok &= np.all(vm >= net.vmin - VOLTAGE_TOLERANCE, axis=1) & np.all(vm <= net.vmax + VOLTAGE_TOLERANCE, axis=1)
         if not slack_export:
             fixed_at_slack = np.atleast_2d(s_fixed_pu)[:, net.slack].real * net.base_mva
-            ok &= np.atleast_1d(pf.slack_s_mva.real) - fixed_at_slack >= -SLACK_P_TOLERANCE
+            ok &= np.atleast_1d(slack_p_mw(net, pf)) - fixed_at_slack >= -SLACK_P_TOLERANCE
     return ok
+
+
+def slack_p_mw(net: Network, pf: PowerFlowResult) -> np.ndarray:
+    """Active power the slack bus injects into the grid (MW): the P flowing into its
+    in-service branches plus its shunt's — from branch flows, without the n×n Y-bus."""
+    at_slack_f, at_slack_t = net.f == net.slack, net.t == net.slack
+    vm2 = np.abs(pf.v[..., net.slack]) ** 2
+    return (pf.sf_mva.real[..., at_slack_f].sum(axis=-1) + pf.st_mva.real[..., at_slack_t].sum(axis=-1)
+            + net.gs_mw[net.slack] * vm2)
 
 
 def diagnostics(rows: Iterable[dict]) -> dict[str, np.ndarray]:
