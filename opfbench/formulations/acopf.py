@@ -276,9 +276,9 @@ class _Snapshot:
 class _Policy:
     """Settles snapshots with IPOPT one by one under a failure policy, carrying the warm start."""
 
-    def __init__(self, scenario: Scenario, k: float, data: SnapshotData, problem: OpfProblem, fallback: Fallback,
+    def __init__(self, data: SnapshotData, problem: OpfProblem, fallback: Fallback,
                  socp: tuple[SocpSolve, ...] | None):
-        self.scenario, self.k, self.data, self.problem = scenario, k, data, problem
+        self.data, self.problem = data, problem
         self.fallback, self.socp = fallback, socp
         self.net = problem.net
         self.start: IpoptSolve | None = None
@@ -377,7 +377,7 @@ def run_acopf(scenario: Scenario, k: float, *, slack_export: bool = True, fallba
     n = data.n_snapshots
     fast = _fast_path(scenario, problem, data, solves) if fast_path else None
     certified = fast.certified if fast else np.zeros(n, dtype=bool)
-    policy = _Policy(scenario, k, data, problem, fallback, solves)
+    policy = _Policy(data, problem, fallback, solves)
     settled = []
     for i in range(n):
         if certified[i]:
