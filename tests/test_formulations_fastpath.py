@@ -12,6 +12,7 @@ from opfbench.cases import load_case
 from opfbench.errors import InputError, NetworkError
 from opfbench.formulations import socp as socp_module
 from opfbench.formulations.acopf import CERTIFY_RTOL, ac_opf, run_acopf
+from opfbench.formulations.cache import PER_THREAD, per_thread
 from opfbench.formulations.socp import build_socp, relaxation, run_socp
 from opfbench.registry import run_strategy
 from opfbench.scenario import Scenario
@@ -128,3 +129,12 @@ def test_vmin_above_vmax_is_a_network_error_before_any_solve(run):
 def test_unknown_solver_option_is_refused():
     with pytest.raises(InputError, match="unknown AC OPF solver 'knitro'"):
         run_acopf(random_snapshots("paper33", 1), 0.0, solver="knitro")
+
+
+def test_per_thread_cache_keeps_the_most_recent_objects():
+    net = load_case("paper33")
+    first = per_thread(net, "probe-0", object)
+    assert per_thread(net, "probe-0", object) is first
+    for i in range(1, PER_THREAD + 1):
+        per_thread(net, f"probe-{i}", object)
+    assert per_thread(net, "probe-0", object) is not first  # dropped, built afresh

@@ -3,24 +3,26 @@
 - `per_thread(net, key, build)`: a solver object (an IPOPT or Clarabel instance, which
   keeps per-solve state) built once per (network, key) *per thread*, so concurrent
   tasks never share one; sequential callers in one thread reuse it (building is the
-  expensive part: CasADi derivatives, cvxpy canonicalization).
+  expensive part: CasADi derivatives, cvxpy canonicalization). The PER_THREAD most
+  recently used objects are kept (they hold their network).
 - `per_scenario(scenario, key, compute)`: results computed once per (Scenario object,
   key) — the SOCP solves that `acopf` (its bound, fast path and fallback) and `socp`
-  both need for the same scenario and k. Results are immutable records.
-
-Both are keyed weakly: an entry goes with its network or scenario.
+  both need for the same scenario and k. Keyed weakly: an entry goes with its scenario
+  (results are immutable records that do not refer to it).
 """
 
 from __future__ import annotations
 
 import threading
 import weakref
+from collections import OrderedDict
 from typing import Callable, Hashable, TypeVar
 
 from opfbench.network import Network
 from opfbench.scenario import Scenario
 
 T = TypeVar("T")
+PER_THREAD = 16  # solver objects kept per thread (least recently used dropped first)
 
 _local = threading.local()
 _scenario_lock = threading.Lock()
@@ -29,13 +31,17 @@ _per_scenario: "weakref.WeakKeyDictionary[Scenario, dict]" = weakref.WeakKeyDict
 
 def per_thread(net: Network, key: Hashable, build: Callable[[], T]) -> T:
     """`build()` once per (net, key) in the calling thread; later calls return that object."""
-    cache = getattr(_local, "cache", None)
+    cache: OrderedDict | None = getattr(_local, "cache", None)
     if cache is None:
-        cache = _local.cache = weakref.WeakKeyDictionary()
-    per_net = cache.setdefault(net, {})
-    if key not in per_net:
-        per_net[key] = build()
-    return per_net[key]
+        cache = _local.cache = OrderedDict()
+    entry = (net, key)  # Network hashes by identity
+    if entry in cache:
+        cache.move_to_end(entry)
+        return cache[entry]
+    cache[entry] = value = build()
+    if len(cache) > PER_THREAD:
+        cache.popitem(last=False)
+    return value
 
 
 def per_scenario(scenario: Scenario, key: Hashable, compute: Callable[[], T]) -> T:

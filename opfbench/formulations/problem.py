@@ -30,7 +30,6 @@ branch coefficients, and the result assembly shared by the formulations.
 
 from __future__ import annotations
 
-import weakref
 from dataclasses import dataclass
 from typing import Any, Callable, Iterable
 
@@ -155,16 +154,13 @@ class OpfProblem:
 
     @classmethod
     def of(cls, net: Network, slack_export: bool = True) -> "OpfProblem":
-        """The problem of `net` (cached per network object; immutable, so safe to share).
-        NetworkError for what the formulations do not model or inconsistent limits."""
-        per_net = _PROBLEMS.setdefault(net, {})
-        if slack_export not in per_net:
-            check_supported(net)
-            others = np.flatnonzero(np.arange(net.n_bus) != net.slack)
-            gsh, bsh = bus_shunts(net)
-            per_net[slack_export] = cls(net, bool(slack_export), others, net.vmin[others], net.vmax[others],
-                                        gsh, bsh, incidence(net.der_bus, net.n_bus), PiBranches.of(net))
-        return per_net[slack_export]
+        """The problem of `net`; NetworkError for what the formulations do not model or
+        inconsistent limits."""
+        check_supported(net)
+        others = np.flatnonzero(np.arange(net.n_bus) != net.slack)
+        gsh, bsh = bus_shunts(net)
+        return cls(net, bool(slack_export), others, net.vmin[others], net.vmax[others], gsh, bsh,
+                   incidence(net.der_bus, net.n_bus), PiBranches.of(net))
 
     @property
     def slack(self) -> int:
@@ -195,9 +191,6 @@ class OpfProblem:
         P ≥ −SLACK_P_TOLERANCE MW. `pf` holds one snapshot or a batch (S, n_bus);
         `s_fixed_pu` the matching fixed injections (p.u.). Returns a bool per snapshot."""
         return ac_feasible(self.net, pf, s_fixed_pu, self.slack_export)
-
-
-_PROBLEMS: "weakref.WeakKeyDictionary[Network, dict[bool, OpfProblem]]" = weakref.WeakKeyDictionary()
 
 
 def check_supported(net: Network) -> None:
