@@ -201,6 +201,8 @@ def print_table(f: dict) -> None:
         print(f"  pandapower runopp     {f['pandapower_runopp_ms']:.1f} ms median, {f['pandapower_failures']} failures, "
               f"agrees on {f['pandapower_agrees']} (max |Δ| {f['pandapower_max_loss_diff_kw']:.1e} kW)")
     print(f"  solved by both ours   {f['solved']}/{f['total']}   load average {f['loadavg_before']} → {f['loadavg_after']}")
+    if "acopf_step_ms" not in f:  # `bench_opf` alone (without `bench_paper_day`)
+        return
     print(f"paper day on {f['paper_day_case']}, {f['paper_day_steps']} steps, per step, everything included:")
     print(f"  acopf (fast path)     {f['acopf_step_ms']:.2f} ms  → {versus(f['ratio_acopf_step_vs_pandapower'])};"
           f" certified by the SOCP {f['certified_share']:.1%}, largest relative difference from IPOPT"
