@@ -337,7 +337,7 @@ def _fast_path(scenario: Scenario, problem: OpfProblem, data: SnapshotData,
     net = scenario.net
     n_der = len(net.ders)
     optimal = np.array([s.optimal for s in solves], dtype=bool)
-    q_pu = np.array([s.q_pu if s.optimal else np.zeros(n_der) for s in solves]).reshape(-1, n_der)
+    q_pu = np.array([s.q_pu if s.optimal else np.zeros(n_der) for s in solves]).reshape(len(solves), n_der)
     pf = solve_pf_batch(net, scenario.injections(q_pu * net.base_mva))
     bound = np.array([s.lower_bound_kw for s in solves])
     with np.errstate(invalid="ignore"):

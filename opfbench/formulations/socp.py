@@ -289,7 +289,7 @@ def run_socp(scenario: Scenario, k: float, *, slack_export: bool = True, model: 
     model = resolve_model(scenario.net, model)
     solves = socp_solves(scenario, k, slack_export, model, data)
     n_der = len(scenario.net.ders)
-    q_pu = np.array([s.q_pu if s.optimal else np.zeros(n_der) for s in solves]).reshape(-1, n_der)
+    q_pu = np.array([s.q_pu if s.optimal else np.zeros(n_der) for s in solves]).reshape(len(solves), n_der)
     status = np.array([OK if s.optimal else INFEASIBLE if s.outcome == "infeasible" else SOLVER_FAILED
                        for s in solves], dtype=object)
     extra = diagnostics(socp_diagnostics(s) | {"fallback": FROM_SOLVER if s.optimal else FROM_NO_ACTION,
