@@ -15,7 +15,7 @@ from opfbench.cli import main
 from opfbench.errors import InputError
 from opfbench.formulations import acopf
 from opfbench.formulations.acopf import AcOpf, build_acopf, run_acopf
-from opfbench.formulations.common import STATUSES, VOLTAGE_TOLERANCE, snapshot_data
+from opfbench.formulations.problem import STATUSES, VOLTAGE_TOLERANCE, snapshot_data
 from opfbench.formulations.socp import run_socp
 from opfbench.powerflow import solve_pf
 from opfbench.scenario import Scenario
@@ -28,7 +28,7 @@ def paper33():
 
 @pytest.fixture(scope="module")
 def nominal(paper33):
-    return run_acopf(Scenario.snapshot(paper33, 1.0, 0.8), 0.0)
+    return run_acopf(Scenario.snapshot(paper33, 1.0, 0.8), 0.0, solver="ipopt")
 
 
 def test_paper33_reference_optimum(paper33, nominal):
@@ -119,12 +119,12 @@ class _Failing:
 
 def _with_failing(monkeypatch, net, fail_cold):
     real = build_acopf(net, True)
-    monkeypatch.setattr(acopf, "build_acopf", lambda *_: _Failing(real, fail_cold))
+    monkeypatch.setattr(acopf, "ac_opf", lambda *_: _Failing(real, fail_cold))
 
 
 def test_chain_recovers_from_warm_failure_with_cold_start(paper33, monkeypatch):
     _with_failing(monkeypatch, paper33, fail_cold=False)
-    res = run_acopf(daily_scenario(paper33, 4), 0.0)
+    res = run_acopf(daily_scenario(paper33, 4), 0.0, solver="ipopt")
     assert list(res.status) == ["ok", "fallback-cold", "fallback-cold", "fallback-cold"]
     assert list(res.extra["fallback"]) == ["none", "cold", "cold", "cold"]
     assert list(res.extra["warm_start"]) == [False, True, True, True]
@@ -134,18 +134,18 @@ def test_chain_recovers_from_warm_failure_with_cold_start(paper33, monkeypatch):
 def test_chain_falls_back_to_socp_then_paper_to_no_action(paper33, monkeypatch, nominal):
     _with_failing(monkeypatch, paper33, fail_cold=True)
     scenario = Scenario.snapshot(paper33, 1.0, 0.8)
-    chain = run_acopf(scenario, 0.0)
+    chain = run_acopf(scenario, 0.0, solver="ipopt")
     assert chain.status[0] == "fallback-socp" and chain.extra["fallback"][0] == "socp"
     socp = run_socp(scenario, 0.0)
     np.testing.assert_allclose(chain.q_mvar, socp.q_mvar)
     assert chain.losses_kw[0] == pytest.approx(nominal.losses_kw[0], rel=1e-5)  # exact relaxation
-    paper = run_acopf(scenario, 0.0, fallback="paper")
+    paper = run_acopf(scenario, 0.0, fallback="paper", solver="ipopt")
     assert paper.status[0] == "fallback-no-action" and paper.extra["fallback"][0] == "no-action"
     assert np.all(paper.q_mvar == 0) and paper.losses_kw[0] > nominal.losses_kw[0] + 1
 
 
 def test_no_lower_bound_when_not_asked(paper33):
-    res = run_acopf(Scenario.snapshot(paper33, 1.0, 0.8), 0.0, lower_bound=False)
+    res = run_acopf(Scenario.snapshot(paper33, 1.0, 0.8), 0.0, lower_bound=False, solver="ipopt")
     assert np.isnan(res.lower_bound_kw[0]) and res.extra["socp_status"][0] == "not-run"
 
 
@@ -167,7 +167,7 @@ def test_warm_start_saves_iterations(paper33):
 
 
 def test_sequence_run_records_every_solve(paper33):
-    res = run_acopf(daily_scenario(paper33, 12), 0.2)
+    res = run_acopf(daily_scenario(paper33, 12), 0.2, solver="ipopt")
     assert set(res.status) <= set(STATUSES)
     assert list(res.status) == ["ok"] * 12
     assert list(res.extra["warm_start"]) == [False] + [True] * 11
@@ -194,3 +194,13 @@ def test_snapshot_cli_reports_infeasible_without_error(capsys):
     out = json.loads(capsys.readouterr().out)
     assert out["status"] == "infeasible" and out["fallback"] == "no-action"
     assert out["objective_kw"] is None  # NaN becomes null in JSON
+
+
+@pytest.mark.parametrize("solver, certified_by", [("auto", "socp"), ("ipopt", "ipopt")])
+def test_snapshot_cli_acopf_solver_flag(capsys, solver, certified_by):
+    assert main(["snapshot", "paper33", "--strategy", "acopf", "--json", "--acopf-solver", solver]) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert out["certified_by"] == certified_by and (out["iterations"] > 0) == (solver == "ipopt")
+    assert out["losses_kw"] == pytest.approx(33.23, abs=0.02)
+    assert main(["snapshot", "paper33", "--strategy", "socp", "--acopf-solver", solver]) == 2
+    assert "--acopf-solver applies to acopf" in capsys.readouterr().err

@@ -40,7 +40,7 @@ def to_ppc(net: Network) -> dict:
     # bus, Pg, Qg, Qmax, Qmin, Vg, mBase, status, Pmax, Pmin
     cols = [0, 1, 2, 3, 4, 5, 6, 7, 8, 9]
     gen[0, cols] = [net.slack + 1, 0, 0, 1e4, -1e4, net.v_slack, net.base_mva, 1, 1e4, -1e4]
-    for row, (b, p, q, vset) in enumerate(zip(net.gen_bus, net.gen_p_mw, net.gen_q_mvar, net.gen_vset), start=1):
+    for row, (b, p, q, vset) in enumerate(zip(net.gen_bus, net.gen_p_mw, net.gen_q_mvar, net.gen_vset, strict=True), start=1):
         gen[row, cols] = [b + 1, p, q, 1e4, -1e4, vset, net.base_mva, 1, p, p]
     branch = np.zeros((net.n_branch, 13))
     branch[:, 0], branch[:, 1] = net.f + 1, net.t + 1

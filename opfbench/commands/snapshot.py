@@ -23,6 +23,8 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="Algorithm 3: clip setpoints to the physical capability at the current P (local rules)")
     p.add_argument("--fallback", choices=("chain", "paper"), default=None,
                    help="AC OPF failure policy: chain (default) or paper (fall back to no action)")
+    p.add_argument("--acopf-solver", choices=("auto", "ipopt"), default=None,
+                   help="AC OPF: auto (default: SOCP-certified fast path, IPOPT for the rest) or ipopt (always)")
     p.add_argument("--no-slack-export", action="store_true",
                    help="formulations: forbid reverse power flow at the slack (slack P ≥ 0)")
     p.set_defaults(func=run)
@@ -34,7 +36,8 @@ def _options(args: argparse.Namespace) -> dict:
     spec = get_strategy(args.strategy)
     given = {"--safe": ("safe", True) if args.safe else None,
              "--fallback": ("fallback", args.fallback) if args.fallback is not None else None,
-             "--no-slack-export": ("slack_export", False) if args.no_slack_export else None}
+             "--no-slack-export": ("slack_export", False) if args.no_slack_export else None,
+             "--acopf-solver": ("solver", args.acopf_solver) if args.acopf_solver is not None else None}
     options = {}
     for flag, option in given.items():
         if option is None:

@@ -1,23 +1,33 @@
-"""Centralized AC OPF (polar form, CasADi + IPOPT) with a recorded failure policy.
+"""Centralized AC OPF (polar form, CasADi + IPOPT) with a certified fast path and a
+recorded failure policy.
 
-Problem per snapshot (per unit on `net.base_mva`):
-
-    minimize    branch losses = P_slack + Σ P_fixed − Σ Gsh·|V|²   (= slack P + DER P − load P
-                                                                    when there are no bus shunts)
-    over        Q of every DER, |V| and θ of every non-slack bus
-    subject to  AC power balance at every non-slack bus (π model, `common.PiBranches`),
-                |V_slack| = net.v_slack, θ_slack = 0, vmin ≤ |V| ≤ vmax elsewhere,
-                −(1 − k)·Qmax(P) ≤ Q ≤ (1 − k)·Qmax(P) with DER P fixed,
-                slack P ≥ 0 if `slack_export=False` (the paper's/pandapower's setup).
+The problem is `problem.OpfProblem` (per unit on `net.base_mva`): minimize branch losses
+= P_slack + Σ P_fixed − Σ Gsh·|V|² (kW) over the DER Q, |V| and θ of every non-slack bus,
+subject to the AC power balance (π model, `problem.PiBranches`) and the slack rule of
+`OpfProblem.balance`, |V_slack| = v_slack, θ_slack = 0, vmin ≤ |V| ≤ vmax elsewhere and
+−(1 − k)·Qmax(P) ≤ Q ≤ (1 − k)·Qmax(P) with DER P fixed.
 
 `AcOpf` builds the NLP once per (network, slack_export) — fixed injections are NLP
-parameters, Q limits are variable bounds — with two IPOPT instances: a cold one (flat
-start, IPOPT's defaults) and a warm one (primal and dual start from a previous solution,
-`warm_start_init_point`, small initial barrier). Every solve returns its status,
-iterations and time from IPOPT's statistics.
+parameters, Q and |V| limits variable bounds — sparse throughout (CasADi SX, sparse
+incidence), with two IPOPT instances, each created on first use: a cold one (flat
+start, IPOPT's defaults) and a warm one (primal and dual start from a previous solution, `warm_start_init_point`,
+small initial barrier). `bound_relax_factor = 0`: IPOPT's iterates stay within the Q
+and |V| bounds, so the reported objective cannot dip below the SOCP bound by a bound
+overshoot. Every solve returns its status, iterations and time from IPOPT's statistics.
 
-`run_acopf` solves every snapshot of a scenario in order, warm-starting each from the
-last successful solution, and applies a failure policy, recorded per snapshot:
+`run_acopf` settles every snapshot of a scenario. With `solver="auto"` (default) it
+first takes the certified fast path: the SOCP relaxation (`socp.socp_solves`, shared
+with the `socp` strategy on the same scenario and k) is solved on every snapshot and
+its setpoints are evaluated by ONE batched AC power flow; where they are AC-feasible
+(`OpfProblem.feasible`) and their AC losses lie within CERTIFY_RTOL (relative) of the
+relaxation's bound — a lower bound on every AC-feasible point's losses — they are the
+AC optimum up to that tolerance: recorded with status "ok", extra["certified_by"] =
+"socp", and IPOPT is skipped. IPOPT (warm-started from its last successful solution)
+solves only the other snapshots. `solver="ipopt"` solves every snapshot with IPOPT
+(the paper's question is how often a nonlinear OPF solver fails; the paper setup,
+registry entry `acopf-paper`, pins it).
+
+IPOPT's snapshots follow a failure policy, recorded per snapshot:
 
 - `chain` (default): warm IPOPT → cold IPOPT → the SOCP relaxation's setpoints if, AC
   evaluated, they are feasible → no action if feasible. Status "ok" / "fallback-cold" /
@@ -27,23 +37,22 @@ last successful solution, and applies a failure policy, recorded per snapshot:
 When no point is found feasible, the setpoints are those of no action (extra["fallback"]
 = "no-action", its AC losses reported) and the status is "infeasible" if IPOPT reported
 infeasibility or the SOCP relaxation is infeasible (which proves it), "solver-failed"
-otherwise. The SOCP relaxation is also solved for every snapshot (`lower_bound=True`,
-default): its optimum is the result's `lower_bound_kw`, which certifies the optimality
-gap of the OPF and of every other strategy on the same snapshot.
+otherwise. With `lower_bound=True` (default) the relaxation's optimum is the result's
+`lower_bound_kw`, which certifies the optimality gap of every strategy on the snapshot
+(the fast path solves the relaxation anyway, so its bound is reported then too).
 """
 
 from __future__ import annotations
 
-import time
 from dataclasses import dataclass
-from functools import lru_cache
 from typing import Literal
 
 import casadi as ca
 import numpy as np
+import scipy.sparse as sp
 
-from opfbench.errors import InputError
-from opfbench.formulations.common import (
+from opfbench.formulations.cache import per_thread
+from opfbench.formulations.problem import (
     FALLBACK_COLD,
     FALLBACK_NO_ACTION,
     FALLBACK_SOCP,
@@ -52,25 +61,25 @@ from opfbench.formulations.common import (
     FROM_SOCP,
     FROM_SOLVER,
     SOLVER_FAILED,
-    PiBranches,
+    OpfProblem,
     SnapshotData,
-    ac_feasible,
-    bus_shunts,
-    check_supported,
+    check_option,
     diagnostics,
     evaluated_result,
-    incidence,
-    kw_per_pu,
     snapshot_data,
 )
-from opfbench.formulations.socp import SocpRelaxation, SocpSolve, build_socp, socp_diagnostics
+from opfbench.formulations.socp import SocpSolve, relaxation, socp_diagnostics, socp_solves
 from opfbench.network import Network
-from opfbench.powerflow import solve_pf
+from opfbench.powerflow import PowerFlowResult, solve_pf, solve_pf_batch
 from opfbench.result import INFEASIBLE, OK, StrategyResult
 from opfbench.scenario import Scenario
+from opfbench.timing import elapsed_ms, now
 
 Fallback = Literal["chain", "paper"]
 FALLBACKS = ("chain", "paper")
+Solver = Literal["auto", "ipopt"]
+SOLVERS = ("auto", "ipopt")
+CERTIFY_RTOL = 1e-6  # fast path: AC losses of the SOCP point ≤ bound·(1 + this) (relative)
 
 TOLERANCE = 1e-10  # IPOPT tol (scaled NLP error; objective in kW)
 # IPOPT's gradient-based scaling shrinks the kW objective; without this extra factor the
@@ -86,7 +95,8 @@ IPOPT_OPTIONS = {
     "ipopt.tol": TOLERANCE,
     "ipopt.obj_scaling_factor": OBJECTIVE_SCALING,
     "ipopt.max_iter": MAX_ITER,
-    # The KKT systems are tiny: skip MUMPS' scaling and use AMD ordering (≈10 % faster).
+    "ipopt.bound_relax_factor": 0.0,  # iterates never leave the Q and |V| bounds
+    # The KKT systems are small and sparse: skip MUMPS' scaling, AMD ordering (≈10 % faster).
     "ipopt.mumps_permuting_scaling": 0,
     "ipopt.mumps_scaling": 0,
     "ipopt.mumps_pivot_order": 0,
@@ -101,14 +111,14 @@ WARM_OPTIONS = {
     "ipopt.warm_start_mult_bound_push": 1e-9,
 }
 IPOPT_INFEASIBLE = {"Infeasible_Problem_Detected"}
+CERTIFIED_BY_SOCP, CERTIFIED_BY_IPOPT = "socp", "ipopt"
 
 
 @dataclass(frozen=True)
 class IpoptSolve:
     """One IPOPT run. `status` is IPOPT's return status; `x`, `lam_x`, `lam_g` the final
     primal/dual point (the next warm start); `objective_kw` the OPF's own losses (kW);
-    `q_pu` the DER setpoints (p.u.), clipped to the Q limits (IPOPT's `bound_relax_factor`
-    lets the iterate exceed a bound by ~1e-8 relative)."""
+    `q_pu` the DER setpoints (p.u.)."""
 
     warm: bool
     success: bool
@@ -126,58 +136,64 @@ class IpoptSolve:
         return self.status in IPOPT_INFEASIBLE
 
 
+def _sparse_dm(m: sp.spmatrix) -> ca.DM:
+    """A scipy sparse matrix as a sparse CasADi DM (no dense n×n intermediate)."""
+    coo = sp.coo_matrix(m)
+    return ca.DM.triplet(coo.row.tolist(), coo.col.tolist(), ca.DM(coo.data), coo.shape[0], coo.shape[1])
+
+
 class AcOpf:
     """The polar AC OPF of one network, built once; `solve` per snapshot.
 
     Decision vector x = [θ (non-slack buses, rad), |V| (non-slack, p.u.), Q_DER (p.u.)].
     NLP parameters: fixed injections [P_fixed; Q_fixed] (2·n_bus, p.u.).
-    Constraints g = [P mismatch; Q mismatch] at the non-slack buses (= 0), then, with
-    `slack_export=False`, the slack's P (≥ 0).
+    Constraints g: the rows of `OpfProblem.balance` (P and Q mismatch at the non-slack
+    buses = 0, then, with `slack_export=False`, the slack's P ≥ 0).
     """
 
     def __init__(self, net: Network, slack_export: bool = True):
-        check_supported(net)
+        self.problem = problem = OpfProblem.of(net, slack_export)
         self.net, self.slack_export = net, slack_export
         n, n_der = net.n_bus, len(net.ders)
-        self.others = np.flatnonzero(np.arange(n) != net.slack)
+        self.others = problem.others
         m = self.others.size
         theta_o, vm_o, q = ca.SX.sym("theta", m), ca.SX.sym("vm", m), ca.SX.sym("q", n_der)
         p_fixed, q_fixed = ca.SX.sym("p_fixed", n), ca.SX.sym("q_fixed", n)
         theta, vm = ca.SX.zeros(n), ca.SX.zeros(n)
         theta[self.others.tolist()] = theta_o
         vm[self.others.tolist()] = vm_o
-        vm[net.slack] = net.v_slack
+        vm[problem.slack] = problem.v_slack
 
-        br = PiBranches.of(net)
+        br = problem.branches
         f, t = br.f.tolist(), br.t.tolist()
         vv = vm[f] * vm[t]
         c, s = vv * ca.cos(theta[f] - theta[t]), vv * ca.sin(theta[f] - theta[t])
         v2 = vm**2
         p_f, q_f, p_t, q_t = br.flows(v2[f], v2[t], c, s, lambda a, e: ca.DM(a) * e)
-        at_from, at_to = ca.DM(br.at_from), ca.DM(br.at_to)
-        gsh, bsh = bus_shunts(net)
-        mismatch_p = ca.mtimes(at_from, p_f) + ca.mtimes(at_to, p_t) + ca.DM(gsh) * v2 - p_fixed
-        mismatch_q = (ca.mtimes(at_from, q_f) + ca.mtimes(at_to, q_t) - ca.DM(bsh) * v2 - q_fixed
-                      - ca.mtimes(ca.DM(incidence(net.der_bus, n)), q))
-        others = self.others.tolist()
-        g = [mismatch_p[others], mismatch_q[others]]
-        slack_p = mismatch_p[net.slack]  # what the external grid injects
-        if not slack_export:
-            g.append(slack_p)
-        losses = slack_p + ca.sum1(p_fixed) - ca.dot(ca.DM(gsh), v2)
+        at_from, at_to = _sparse_dm(br.at_from), _sparse_dm(br.at_to)
+        mismatch_p = ca.mtimes(at_from, p_f) + ca.mtimes(at_to, p_t) + ca.DM(problem.gsh) * v2 - p_fixed
+        mismatch_q = (ca.mtimes(at_from, q_f) + ca.mtimes(at_to, q_t) - ca.DM(problem.bsh) * v2 - q_fixed
+                      - ca.mtimes(_sparse_dm(problem.der_at_bus), q))
+        rows = problem.balance(mismatch_p, mismatch_q, lambda e, i: e[i.tolist()])
+        losses = mismatch_p[problem.slack] + ca.sum1(p_fixed) - ca.dot(ca.DM(problem.gsh), v2)
         nlp = {"x": ca.vertcat(theta_o, vm_o, q), "p": ca.vertcat(p_fixed, q_fixed),
-               "f": kw_per_pu(net) * losses, "g": ca.vertcat(*g)}
-        self._cold = ca.nlpsol("acopf_cold", "ipopt", nlp, IPOPT_OPTIONS)
-        self._warm = ca.nlpsol("acopf_warm", "ipopt", nlp, IPOPT_OPTIONS | WARM_OPTIONS)
-        n_g = 2 * m + (0 if slack_export else 1)
-        self._lbg = np.zeros(n_g)
-        self._ubg = np.zeros(n_g)
-        if not slack_export:
-            self._ubg[-1] = np.inf
+               "f": problem.kw_per_pu * losses, "g": ca.vertcat(*(r.expr for r in rows))}
+        self._nlp = nlp
+        self._solvers: dict[bool, ca.Function] = {}
+        self._lbg = np.concatenate([r.lo for r in rows])
+        self._ubg = np.concatenate([r.hi for r in rows])
         inf = np.full(m, np.inf)
-        self._lbx_fixed = np.concatenate([-inf, net.vmin[self.others]])
-        self._ubx_fixed = np.concatenate([inf, net.vmax[self.others]])
+        self._lbx_fixed = np.concatenate([-inf, problem.vm_min])
+        self._ubx_fixed = np.concatenate([inf, problem.vm_max])
         self.flat_start = np.concatenate([np.zeros(m), np.ones(m), np.zeros(n_der)])
+
+    def _solver(self, warm: bool) -> ca.Function:
+        """The cold or warm IPOPT instance, created on first use (CasADi derives the
+        NLP's Jacobian and Hessian per instance: seconds on a 10 000-bus feeder)."""
+        if warm not in self._solvers:
+            options = IPOPT_OPTIONS | WARM_OPTIONS if warm else IPOPT_OPTIONS
+            self._solvers[warm] = ca.nlpsol("acopf_warm" if warm else "acopf_cold", "ipopt", self._nlp, options)
+        return self._solvers[warm]
 
     def solve(self, s_fixed: np.ndarray, q_limit: np.ndarray, start: IpoptSolve | None = None) -> IpoptSolve:
         """Solve one snapshot: fixed injections `s_fixed` (n_bus,) complex p.u., usable Q
@@ -190,11 +206,10 @@ class AcOpf:
             "lbg": self._lbg,
             "ubg": self._ubg,
         }
+        solver = self._solver(warm=start is not None)
         if start is None:
-            solver = self._cold
             out = solver(x0=self.flat_start, **args)
         else:
-            solver = self._warm
             out = solver(x0=start.x, lam_x0=start.lam_x, lam_g0=start.lam_g, **args)
         stats = solver.stats()
         x = np.asarray(out["x"]).ravel()
@@ -205,17 +220,21 @@ class AcOpf:
             iterations=int(stats["iter_count"]),
             solve_ms=float(stats["t_wall_total"]) * 1e3,
             objective_kw=float(out["f"]),
-            q_pu=np.clip(x[2 * self.others.size:], -q_limit, q_limit),  # IPOPT relaxes bounds by ~1e-8
+            q_pu=np.clip(x[2 * self.others.size:], -q_limit, q_limit),  # a no-op with bound_relax_factor 0
             x=x,
             lam_x=np.asarray(out["lam_x"]).ravel(),
             lam_g=np.asarray(out["lam_g"]).ravel(),
         )
 
 
-@lru_cache(maxsize=16)
 def build_acopf(net: Network, slack_export: bool = True) -> AcOpf:
-    """The AC OPF of `net` (cached per network object and option)."""
+    """A new AC OPF of `net` (the caller's own: its IPOPT instances keep per-solve state)."""
     return AcOpf(net, slack_export)
+
+
+def ac_opf(net: Network, slack_export: bool = True) -> AcOpf:
+    """The AC OPF of `net`, built once per network and option in this thread."""
+    return per_thread(net, ("acopf", bool(slack_export)), lambda: build_acopf(net, slack_export))
 
 
 @dataclass
@@ -227,23 +246,27 @@ class _Snapshot:
     fallback: str
     attempts: list[IpoptSolve]
     socp: SocpSolve | None
-    power_flows: int  # power flows the policy used to check fallback points
+    power_flows: int  # power flows the policy used to check points
+    certified_by: str
+    objective_kw: float = np.nan  # the point's losses where certified by the SOCP (kW)
 
     @property
     def accepted(self) -> IpoptSolve | None:
-        return self.attempts[-1] if self.attempts[-1].success else None
+        return self.attempts[-1] if self.attempts and self.attempts[-1].success else None
 
     def diagnostics(self) -> dict:
         acc = self.accepted
         socp = socp_diagnostics(self.socp) if self.socp else {"solve_ms": np.nan, "iterations": 0,
                                                                 "solver_status": "not-run", "relaxation_gap": np.nan}
+        by_socp = self.certified_by == CERTIFIED_BY_SOCP
         return {
-            "solver_status": " → ".join(a.status for a in self.attempts),
+            "solver_status": socp["solver_status"] if by_socp else " → ".join(a.status for a in self.attempts),
             "iterations": sum(a.iterations for a in self.attempts),
-            "solve_ms": sum(a.solve_ms for a in self.attempts),
-            "warm_start": self.attempts[0].warm,
-            "objective_kw": acc.objective_kw if acc else np.nan,
+            "solve_ms": socp["solve_ms"] if by_socp else sum(a.solve_ms for a in self.attempts),
+            "warm_start": bool(self.attempts and self.attempts[0].warm),
+            "objective_kw": self.objective_kw if by_socp else acc.objective_kw if acc else np.nan,
             "fallback": self.fallback,
+            "certified_by": self.certified_by,
             "relaxation_gap": socp["relaxation_gap"],
             "socp_status": socp["solver_status"],
             "socp_ms": socp["solve_ms"],
@@ -251,72 +274,128 @@ class _Snapshot:
 
 
 class _Policy:
-    """Settles snapshots one by one under a failure policy, carrying the warm start."""
+    """Settles snapshots with IPOPT one by one under a failure policy, carrying the warm start."""
 
-    def __init__(self, net: Network, data: SnapshotData, slack_export: bool, fallback: Fallback, lower_bound: bool):
-        self.net, self.data, self.slack_export = net, data, slack_export
-        self.fallback, self.lower_bound = fallback, lower_bound
-        self.opf = build_acopf(net, slack_export)
+    def __init__(self, data: SnapshotData, problem: OpfProblem, fallback: Fallback,
+                 socp: tuple[SocpSolve, ...] | None):
+        self.data, self.problem = data, problem
+        self.fallback, self.socp = fallback, socp
+        self.net = problem.net
         self.start: IpoptSolve | None = None
-        self._der_at_bus = incidence(net.der_bus, net.n_bus)
 
-    def _relaxation(self) -> SocpRelaxation:
-        return build_socp(self.net, self.slack_export)
+    @property
+    def opf(self) -> AcOpf:
+        return ac_opf(self.net, self.problem.slack_export)  # built on first use only
+
+    def _relaxed(self, i: int) -> SocpSolve:
+        if self.socp is not None:
+            return self.socp[i]
+        return relaxation(self.net, self.problem.slack_export).solve(self.data.s_fixed[i], self.data.q_limit[i])
 
     def _feasible(self, i: int, q_pu: np.ndarray) -> bool:
         s_fixed = self.data.s_fixed[i]
-        s_mw = (s_fixed + 1j * (self._der_at_bus @ q_pu)) * self.net.base_mva
-        return bool(ac_feasible(self.net, solve_pf(self.net, s_mw), s_fixed, self.slack_export)[0])
+        s_mw = (s_fixed + 1j * (self.problem.der_at_bus @ q_pu)) * self.net.base_mva
+        return bool(self.problem.feasible(solve_pf(self.net, s_mw), s_fixed)[0])
 
     def settle(self, i: int) -> _Snapshot:
         s_fixed, q_limit = self.data.s_fixed[i], self.data.q_limit[i]
+        socp = self.socp[i] if self.socp is not None else None
         attempts = [self.opf.solve(s_fixed, q_limit, self.start)]
         if not attempts[-1].success and self.fallback == "chain" and self.start is not None:
             attempts.append(self.opf.solve(s_fixed, q_limit, None))
-        socp = self._relaxation().solve(s_fixed, q_limit) if self.lower_bound else None
         if attempts[-1].success:
             self.start = attempts[-1]
             retried = len(attempts) > 1
             return _Snapshot(attempts[-1].q_pu, FALLBACK_COLD if retried else OK,
-                             FROM_COLD if retried else FROM_SOLVER, attempts, socp, 0)
+                             FROM_COLD if retried else FROM_SOLVER, attempts, socp, 0, CERTIFIED_BY_IPOPT)
         flows = 0
         if self.fallback == "chain":
-            socp = socp or self._relaxation().solve(s_fixed, q_limit)
+            socp = self._relaxed(i)
             if socp.optimal:
                 flows += 1
                 if self._feasible(i, socp.q_pu):
-                    return _Snapshot(socp.q_pu, FALLBACK_SOCP, FROM_SOCP, attempts, socp, flows)
+                    return _Snapshot(socp.q_pu, FALLBACK_SOCP, FROM_SOCP, attempts, socp, flows, "")
         no_action = np.zeros_like(q_limit)
         flows += 1
         if self._feasible(i, no_action):
-            return _Snapshot(no_action, FALLBACK_NO_ACTION, FROM_NO_ACTION, attempts, socp, flows)
+            return _Snapshot(no_action, FALLBACK_NO_ACTION, FROM_NO_ACTION, attempts, socp, flows, "")
         shown = any(a.infeasible for a in attempts) or (socp is not None and socp.outcome == "infeasible")
-        return _Snapshot(no_action, INFEASIBLE if shown else SOLVER_FAILED, FROM_NO_ACTION, attempts, socp, flows)
+        return _Snapshot(no_action, INFEASIBLE if shown else SOLVER_FAILED, FROM_NO_ACTION, attempts, socp, flows, "")
+
+
+@dataclass(frozen=True)
+class _FastPath:
+    """The SOCP setpoints of every snapshot, AC-evaluated by one batched power flow."""
+
+    q_pu: np.ndarray  # (S, n_der); zeros where the relaxation was not solved
+    pf: PowerFlowResult
+    certified: np.ndarray  # (S,) bool
+
+
+def _fast_path(scenario: Scenario, problem: OpfProblem, data: SnapshotData,
+               solves: tuple[SocpSolve, ...]) -> _FastPath:
+    net = scenario.net
+    n_der = len(net.ders)
+    optimal = np.array([s.optimal for s in solves], dtype=bool)
+    q_pu = np.array([s.q_pu if s.optimal else np.zeros(n_der) for s in solves]).reshape(len(solves), n_der)
+    pf = solve_pf_batch(net, scenario.injections(q_pu * net.base_mva))
+    bound = np.array([s.lower_bound_kw for s in solves])
+    with np.errstate(invalid="ignore"):
+        close = np.abs(pf.losses_kw - bound) <= CERTIFY_RTOL * np.abs(bound)
+    return _FastPath(q_pu, pf, optimal & problem.feasible(pf, data.s_fixed) & close)
+
+
+def _merge(fast: PowerFlowResult, rest: PowerFlowResult, rows: np.ndarray) -> PowerFlowResult:
+    """`fast` with the snapshots `rows` replaced by `rest`'s (in order)."""
+    v, conv, it = fast.v.copy(), np.array(fast.converged, copy=True), np.array(fast.iterations, copy=True)
+    v[rows], conv[rows], it[rows] = rest.v, rest.converged, rest.iterations
+    return PowerFlowResult(fast.net, v, conv, it)
 
 
 def run_acopf(scenario: Scenario, k: float, *, slack_export: bool = True, fallback: Fallback = "chain",
-              lower_bound: bool = True) -> StrategyResult:
-    """AC OPF on every snapshot of `scenario` (in order, warm-started) with reserve k.
+              lower_bound: bool = True, solver: Solver = "auto") -> StrategyResult:
+    """AC OPF on every snapshot of `scenario` with reserve k (see the module docstring).
 
-    Returns the setpoints evaluated by the AC power flow, with status and
-    extra["fallback"] per snapshot as described in the module docstring, and
-    lower_bound_kw from the SOCP relaxation (NaN where it was not solved). extra:
-    solver_status (IPOPT's return status of each attempt, "a → b"), iterations and
-    solve_ms (summed over the attempts), warm_start, objective_kw (the OPF's own
-    losses, NaN unless IPOPT solved it), fallback, relaxation_gap / socp_status /
-    socp_ms (the relaxation solve), ac_feasible (the reported point meets every limit).
+    Returns the setpoints evaluated by the AC power flow, with status per snapshot and
+    lower_bound_kw from the SOCP relaxation (NaN where it was not solved). extra (per
+    snapshot): certified_by ("socp" | "ipopt" | "" where neither certified the point),
+    solver_status (IPOPT's return status of each attempt, "a → b"; Clarabel's where
+    certified by the SOCP), iterations (IPOPT's, summed over attempts; 0 where certified
+    by the SOCP), solve_ms (the certifying solver's time: IPOPT's summed over attempts,
+    or the SOCP solve's), warm_start, objective_kw (the OPF's own losses, NaN unless
+    certified), fallback, relaxation_gap / socp_status / socp_ms (the relaxation solve),
+    ac_feasible (the reported point meets every limit).
     """
-    if fallback not in FALLBACKS:
-        raise InputError(f"unknown AC OPF failure policy {fallback!r}; choose {' or '.join(FALLBACKS)}")
-    start = time.perf_counter()
+    check_option("AC OPF failure policy", fallback, FALLBACKS)
+    check_option("AC OPF solver", solver, SOLVERS)
+    start = now()
     net = scenario.net
     data = snapshot_data(scenario, k)
-    policy = _Policy(net, data, slack_export, fallback, lower_bound)
-    settled = [policy.settle(i) for i in range(data.n_snapshots)]
-    wall_ms = (time.perf_counter() - start) * 1e3
+    problem = OpfProblem.of(net, slack_export)
+    fast_path = solver == "auto"
+    solves = socp_solves(scenario, k, slack_export, data=data) if lower_bound or fast_path else None
+    n = data.n_snapshots
+    fast = _fast_path(scenario, problem, data, solves) if fast_path else None
+    certified = fast.certified if fast else np.zeros(n, dtype=bool)
+    policy = _Policy(data, problem, fallback, solves)
+    settled = []
+    for i in range(n):
+        if certified[i]:
+            settled.append(_Snapshot(fast.q_pu[i], OK, FROM_SOLVER, [], solves[i], 0, CERTIFIED_BY_SOCP,
+                                     float(fast.pf.losses_kw[i])))
+        else:
+            s = policy.settle(i)
+            s.power_flows += int(fast_path)  # the fast path's flow; a certified one's is its evaluation
+            settled.append(s)
+    q_pu = np.array([s.q_pu for s in settled]).reshape(n, len(net.ders))
+    pf = None
+    if fast is not None:  # the certified snapshots' evaluation is done; evaluate the rest
+        rows = np.flatnonzero(~certified)
+        pf = fast.pf if rows.size == 0 else _merge(
+            fast.pf, solve_pf_batch(net, scenario.take(rows).injections(q_pu[rows] * net.base_mva)), rows)
     return evaluated_result(
-        "acopf", k, scenario, data, np.array([s.q_pu for s in settled]), slack_export, wall_ms,
+        "acopf", k, scenario, problem, data, q_pu, elapsed_ms(start),
         status=np.array([s.status for s in settled], dtype=object),
         lower_bound_kw=np.array([s.socp.lower_bound_kw if s.socp else np.nan for s in settled]),
         extra=diagnostics(s.diagnostics() for s in settled),
-        power_flows=np.array([s.power_flows for s in settled]))
+        power_flows=np.array([s.power_flows for s in settled]), pf=pf)

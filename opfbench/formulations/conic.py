@@ -1,26 +1,29 @@
-"""Re-solving a parametrized cvxpy problem with Clarabel at low overhead.
+"""Re-solving a cvxpy conic problem with Clarabel for new data at low overhead.
 
-cvxpy's DPP caching skips recompilation, but each `problem.solve()` still re-applies the
-parameters to the whole canonical program, rebuilds the Clarabel data and unpacks every
-variable: on the 33-bus SOCP that is ≈ 4 ms of overhead around a ≈ 1.5 ms solve. When
-the parameters enter the constraint offsets only (A and c fixed — true of the OPF
-relaxations, whose parameters are loads and limits), the canonical offset is affine,
-b(θ) = b₀ + B·θ. We read b₀ and B once from cvxpy's own canonicalization (public
-`get_problem_data`, evaluated at θ = 0 and at each unit vector), build one Clarabel
-solver, and each re-solve only updates b. Variable values are read at the columns cvxpy
-assigned them. The model is still cvxpy's; only the per-solve plumbing is bypassed.
+The OPF relaxations change only their data between snapshots — fixed injections and Q
+limits, vectors θ that enter the constraints linearly. They are written in cvxpy with
+those vectors as *variables* (`data_vars`) and compiled once, parameter-free, by cvxpy's
+own canonicalization (public `get_problem_data`): Clarabel's form A·x + s = b, s ∈ K.
+The data variables' columns are then moved into the offset: with x = [y; θ],
+
+    A_y·y + s = b − A_θ·θ,
+
+so each solve only updates b(θ) = b₀ + B·θ (B = −A_θ) of one persistent Clarabel solver.
+Variable values are read at the columns cvxpy assigned them. Compiling without cvxpy
+parameters matters on large feeders: cvxpy's parametrized tensor has (variables + 1)·
+(parameters + 1) columns, which its SOC restructuring turns into gigabytes at 10 000
+buses; the parameter-free compile is linear in the problem size.
 """
 
 from __future__ import annotations
 
-from typing import Sequence
+from typing import Callable, Sequence
 
 import clarabel
 import cvxpy as cp
 import numpy as np
 import scipy.sparse as sp
 
-AFFINE_CHECK_RTOL = 1e-9
 SOLVED = frozenset({"Solved", "AlmostSolved"})  # AlmostSolved: met Clarabel's reduced tolerances
 INFEASIBLE = frozenset({"PrimalInfeasible", "AlmostPrimalInfeasible"})
 ANSWERED = SOLVED | INFEASIBLE
@@ -45,27 +48,36 @@ def _cones(dims) -> list:
 
 
 class ParametricConeProgram:
-    """A DPP cvxpy problem (linear objective, SOC constraints) over 1-D parameters that
-    appear only in constraint offsets, solved by one persistent Clarabel instance."""
+    """A cvxpy problem (linear objective; zero, nonnegative and SOC constraints) whose
+    vector variables `data_vars` are data θ, fixed per solve (they must not enter the
+    objective), solved by one persistent Clarabel instance."""
 
-    def __init__(self, problem: cp.Problem, params: Sequence[cp.Parameter], settings: clarabel.DefaultSettings):
-        if not problem.is_dpp():
-            raise ValueError("the problem is not DPP: its parameters cannot be updated without recompiling")
-        if any(p.ndim != 1 for p in params):
-            raise ValueError("parameters must be vectors")
-        self.problem = problem
-        self.params = tuple(params)
-        self._sizes = [p.size for p in self.params]
-        n_theta = sum(self._sizes)
-        data0 = self._data(np.zeros(n_theta))
-        if data0.get("lower_bounds") is not None or data0.get("upper_bounds") is not None:
+    def __init__(self, problem: cp.Problem, data_vars: Sequence[cp.Variable], settings: clarabel.DefaultSettings):
+        if problem.parameters():
+            raise ValueError("write the data as variables (data_vars), not cvxpy parameters")
+        data, _, _ = problem.get_problem_data(cp.CLARABEL)
+        if data.get("lower_bounds") is not None or data.get("upper_bounds") is not None:
             raise ValueError("variable bounds attributes are not supported; write them as constraints")
-        self._a, self._c, self._b0 = data0["A"].tocsc(), np.asarray(data0["c"]), np.asarray(data0["b"])
-        cols = [self._data(np.eye(1, n_theta, j).ravel())["b"] - self._b0 for j in range(n_theta)]
-        self._b_theta = sp.csc_matrix(np.column_stack(cols)) if cols else sp.csc_matrix((self._b0.size, 0))
-        self._check_affine(np.random.default_rng(0).uniform(0.1, 1.0, n_theta))
-        self._var_col = data0["param_prob"].var_id_to_col
-        self._cones, self._settings = _cones(data0["dims"]), settings
+        var_col = data["param_prob"].var_id_to_col
+        a, c = data["A"].tocsc(), np.asarray(data["c"], dtype=float)
+        data_cols = [np.arange(var_col[v.id], var_col[v.id] + v.size) if v.id in var_col
+                     else np.full(v.size, -1) for v in data_vars]
+        self._sizes = [v.size for v in data_vars]
+        is_data = np.zeros(c.size, dtype=bool)
+        theta_cols = np.concatenate(data_cols) if data_cols else np.zeros(0, dtype=int)
+        is_data[theta_cols[theta_cols >= 0]] = True
+        if np.any(c[is_data] != 0):
+            raise ValueError("the data variables must not enter the objective")
+        # B = −A_θ = −A·S with S selecting the data columns (a data entry that appears
+        # nowhere has a zero column).
+        present = np.flatnonzero(theta_cols >= 0)
+        select = sp.csc_matrix((np.ones(present.size), (theta_cols[present], present)), shape=(c.size, theta_cols.size))
+        self._b_theta = (-(a @ select)).tocsc()
+        self._b0 = np.asarray(data["b"], dtype=float)
+        self._a, self._c = a[:, ~is_data], c[~is_data]
+        new_col = np.cumsum(~is_data) - 1
+        self._var_col = {vid: int(new_col[col]) for vid, col in var_col.items() if not is_data[col]}
+        self._cones, self._settings = _cones(data["dims"]), settings
         self.solver = self._fresh_solver(self._b0)
         if not self.solver.is_data_update_allowed():
             raise ValueError("Clarabel does not allow data updates for this problem (presolve or chordal decomposition)")
@@ -74,33 +86,22 @@ class ParametricConeProgram:
         n_x = self._c.size
         return clarabel.DefaultSolver(sp.csc_matrix((n_x, n_x)), self._c, self._a, b, self._cones, self._settings)
 
-    def _data(self, theta: np.ndarray) -> dict:
-        for p, chunk in zip(self.params, np.split(theta, np.cumsum(self._sizes)[:-1])):
-            p.value = chunk
-        data, _, _ = self.problem.get_problem_data(cp.CLARABEL)
-        return data
-
-    def _check_affine(self, theta: np.ndarray) -> None:
-        data = self._data(theta)
-        same_a = (data["A"].tocsc() != self._a).nnz == 0
-        same_c = np.array_equal(np.asarray(data["c"]), self._c)
-        b = self.offset(theta)
-        if not (same_a and same_c and np.allclose(data["b"], b, rtol=AFFINE_CHECK_RTOL, atol=AFFINE_CHECK_RTOL)):
-            raise ValueError("the parameters do not enter the constraint offsets affinely only")
-
     def offset(self, theta: np.ndarray) -> np.ndarray:
-        """The canonical constraint offset b(θ) = b₀ + B·θ."""
+        """The constraint offset b(θ) = b₀ + B·θ (θ: the data variables' values in order)."""
         return self._b0 + self._b_theta @ theta
 
     def solve(self, theta: np.ndarray) -> list[clarabel.DefaultSolution]:
-        """Solve at parameter vector θ (the parameters' values concatenated in order).
+        """Solve at data θ (the data variables' values concatenated in order).
 
         Returns the solutions of every attempt, the last one final: the persistent solver
         is updated in place; if it ends without an answer (neither solved nor certified
         infeasible — seen as InsufficientProgress where a solver set up afresh on the
         same data succeeds), a fresh solver is built on this b, kept for the next
         updates, and tried once more."""
-        b = self.offset(np.asarray(theta, dtype=float))
+        theta = np.asarray(theta, dtype=float)
+        if theta.size != sum(self._sizes):
+            raise ValueError(f"θ has {theta.size} entries, the data variables {sum(self._sizes)}")
+        b = self.offset(theta)
         self.solver.update(b=b)
         attempts = [self.solver.solve()]
         if conic_status(attempts[0]) not in ANSWERED:
@@ -108,9 +109,15 @@ class ParametricConeProgram:
             attempts.append(self.solver.solve())
         return attempts
 
-    def value(self, solution: clarabel.DefaultSolution, var: cp.Variable) -> np.ndarray:
-        """A (vector) variable's value in a solution."""
-        if var.size == 0:  # e.g. the DER setpoints of a case without DER
-            return np.zeros(0)
-        start = self._var_col[var.id]
-        return np.asarray(solution.x[start:start + var.size])
+    def reader(self, solution: clarabel.DefaultSolution) -> Callable[[cp.Variable], np.ndarray]:
+        """A function reading a (vector, non-data) variable's value in `solution` (the
+        solution vector is copied out of Clarabel once)."""
+        x = np.asarray(solution.x)
+
+        def value(var: cp.Variable) -> np.ndarray:
+            if var.size == 0:  # e.g. the DER setpoints of a case without DER
+                return np.zeros(0)
+            start = self._var_col[var.id]
+            return x[start:start + var.size]
+
+        return value

@@ -1,7 +1,7 @@
 """Cross-check: the AC OPF is never beaten by a feasible point.
 
-On a snapshot where IPOPT reached an optimum (status "ok" or "fallback-cold"), any other
-strategy's setpoints that meet every limit of the OPF (AC-evaluated, `common.ac_feasible`)
+On a snapshot where the OPF reached an optimum (status "ok" or "fallback-cold"), any other
+strategy's setpoints that meet every limit of the OPF (AC-evaluated, `problem.ac_feasible`)
 must have losses ≥ the OPF's. On radial feeders the relaxation is exact, so the OPF is
 the global optimum and a violation is a bug; on meshed ones IPOPT's point is a local
 optimum and a violation would show it. Snapshots where the other point is infeasible
@@ -15,7 +15,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from opfbench.errors import InputError
-from opfbench.formulations.common import FALLBACK_COLD, ac_feasible, snapshot_data
+from opfbench.formulations.problem import FALLBACK_COLD, ac_feasible, snapshot_data
 from opfbench.powerflow import solve_pf_batch
 from opfbench.result import OK, StrategyResult
 from opfbench.scenario import Scenario

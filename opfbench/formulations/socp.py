@@ -1,8 +1,8 @@
 """Second-order-cone relaxation of the loss-minimizing reactive dispatch (cvxpy + Clarabel).
 
-Same problem as the AC OPF (`acopf`): DER Q within ±(1 − k)·Qmax(P), DER P fixed, slack
-at `net.v_slack` (v_slack² = |V_slack|²), every other |V| in [vmin, vmax], optionally
-slack P ≥ 0; objective = branch losses. Two relaxations of the voltage coupling:
+The OPF problem of `problem.OpfProblem` (as the AC OPF solves it), in v = |V|²: DER Q
+within ±(1 − k)·Qmax(P), v_slack², vmin² ≤ v ≤ vmax², the power balance and slack rule
+of `OpfProblem.balance`; objective = branch losses. Two relaxations of the voltage coupling:
 
 - **DistFlow** (branch flow model, Baran–Wu / Farivar–Low), radial feeders. Per branch
   from parent i to child j: sending-end flow P + jQ into the series impedance r + jx,
@@ -24,42 +24,50 @@ solve that stalls after an in-place data update is retried once on a fresh solve
 `relaxation_gap` = max over branches of the cone residual at the optimum, in p.u.²:
 v_i·ℓ − P² − Q² for DistFlow (squared apparent power on base_mva), v_f·v_t − c² − s²
 for Jabr (squared voltage-product magnitude). 0 (in practice ≲ 1e-7, the solver's
-tolerance) means the relaxation is exact on every branch (for Jabr on a meshed feeder also the cycle condition would have to hold; the AC
-losses of the setpoints against the bound is the end-to-end measure).
+tolerance) means the relaxation is exact on every branch (for Jabr on a meshed feeder
+also the cycle condition would have to hold; the AC losses of the setpoints against the
+bound is the end-to-end measure).
+
+`socp_solves(scenario, k, ...)` solves every snapshot once per (Scenario object, k,
+options) and hands the same solves to every caller (`run_socp`, and `run_acopf` for its
+bound, certified fast path and fallback). The relaxation itself (cvxpy model + one
+Clarabel instance) is built once per network and options *per thread*
+(`cache.per_thread`); `build_socp` builds a new one for callers who want their own.
 """
 
 from __future__ import annotations
 
-import time
 from dataclasses import dataclass
-from functools import lru_cache
 from typing import Literal
 
 import clarabel
 import cvxpy as cp
 import numpy as np
 
-from opfbench.errors import InputError, NetworkError
-from opfbench.formulations.common import (
+from opfbench.errors import NetworkError
+from opfbench.formulations.cache import per_scenario, per_thread
+from opfbench.formulations.conic import INFEASIBLE as CONIC_INFEASIBLE
+from opfbench.formulations.conic import SOLVED, ParametricConeProgram, conic_status
+from opfbench.formulations.problem import (
     FROM_NO_ACTION,
     FROM_SOLVER,
     SOLVER_FAILED,
-    PiBranches,
-    bus_shunts,
-    check_supported,
-    incidence,
+    OpfProblem,
+    Row,
+    SnapshotData,
+    check_option,
     diagnostics,
     evaluated_result,
-    kw_per_pu,
+    incidence,
     snapshot_data,
 )
-from opfbench.formulations.conic import INFEASIBLE as CONIC_INFEASIBLE
-from opfbench.formulations.conic import SOLVED, ParametricConeProgram, conic_status
 from opfbench.network import Network
-from opfbench.result import INFEASIBLE, OK
+from opfbench.result import INFEASIBLE, OK, StrategyResult
 from opfbench.scenario import Scenario
+from opfbench.timing import elapsed_ms, now
 
 Model = Literal["auto", "distflow", "jabr"]
+MODELS = ("auto", "distflow", "jabr")
 TOLERANCE = 1e-8  # Clarabel gap and feasibility tolerances (objective in kW)
 MAX_ITER = 200
 
@@ -84,47 +92,54 @@ class SocpSolve:
         return self.outcome == "optimal"
 
 
-class SocpRelaxation:
-    """The relaxation built once per (network, slack_export); `solve` per snapshot.
+def _rows(row: Row) -> list[cp.Constraint]:
+    """A problem row lo ≤ expr ≤ hi as cvxpy constraints."""
+    if np.array_equal(row.lo, row.hi):
+        return [row.expr == row.lo]
+    return ([row.expr >= row.lo] if np.all(np.isfinite(row.lo)) else []) + \
+        ([row.expr <= row.hi] if np.all(np.isfinite(row.hi)) else [])
 
-    Parameters (cvxpy, DPP): p_fixed, q_fixed (n_bus,) fixed injections and q_limit
-    (n_der,) usable Q limit, all p.u. Subclasses add the network model.
+
+class SocpRelaxation:
+    """The relaxation of one `OpfProblem`, built once; `solve` per snapshot.
+
+    Data (cvxpy variables that `conic.ParametricConeProgram` holds fixed per solve):
+    p_fixed, q_fixed (n_bus,) fixed injections and q_limit (n_der,) usable Q limit, all
+    p.u. Subclasses add the network model.
     """
 
     model: str = ""
 
     def __init__(self, net: Network, slack_export: bool = True):
-        check_supported(net)
-        self.net, self.slack_export = net, slack_export
+        self.problem = problem = OpfProblem.of(net, slack_export)
+        self.net = net
         n = net.n_bus
-        self.p_fixed = cp.Parameter(n, name="p_fixed")
-        self.q_fixed = cp.Parameter(n, name="q_fixed")
-        self.q_limit = cp.Parameter(len(net.ders), nonneg=True, name="q_limit")
+        self.p_fixed = cp.Variable(n, name="p_fixed")
+        self.q_fixed = cp.Variable(n, name="q_fixed")
+        self.q_limit = cp.Variable(len(net.ders), name="q_limit")
         self.q = cp.Variable(len(net.ders), name="q_der")
         self.v = cp.Variable(n, name="v")  # |V|² p.u.²
-        mismatch_p, mismatch_q, losses, cone_constraints = self._network_model()
-        slack = net.slack
-        others = np.flatnonzero(np.arange(n) != slack)
-        constraints = cone_constraints + [
-            mismatch_p[others] == 0,
-            mismatch_q[others] == 0,
-            self.v[slack] == net.v_slack**2,
-            self.v[others] >= net.vmin[others] ** 2,
-            self.v[others] <= net.vmax[others] ** 2,
+        mismatch_p, mismatch_q, losses, constraints = self._network_model()
+        others = problem.others
+        for row in problem.balance(mismatch_p, mismatch_q, lambda e, i: e[i]):
+            constraints += _rows(row)
+        constraints += [
+            self.v[problem.slack] == problem.v_slack**2,
+            self.v[others] >= problem.vm_min**2,
+            self.v[others] <= problem.vm_max**2,
             self.q <= self.q_limit,
             self.q >= -self.q_limit,
         ]
-        if not slack_export:
-            constraints.append(mismatch_p[slack] >= 0)  # the external grid's P
-        self.problem = cp.Problem(cp.Minimize(kw_per_pu(net) * losses), constraints)
+        self.cvxpy_problem = cp.Problem(cp.Minimize(problem.kw_per_pu * losses), constraints)
         settings = clarabel.DefaultSettings()
         settings.verbose = False
         settings.max_iter = MAX_ITER
         settings.tol_gap_abs = settings.tol_gap_rel = settings.tol_feas = TOLERANCE
-        self.program = ParametricConeProgram(self.problem, (self.p_fixed, self.q_fixed, self.q_limit), settings)
+        self.program = ParametricConeProgram(self.cvxpy_problem, (self.p_fixed, self.q_fixed, self.q_limit),
+                                             settings)
 
     def _network_model(self) -> tuple[cp.Expression, cp.Expression, cp.Expression, list[cp.Constraint]]:
-        """(mismatch_p, mismatch_q, branch losses, model constraints), p.u., per `common`."""
+        """(mismatch_p, mismatch_q, branch losses, model constraints), p.u., per `problem`."""
         raise NotImplementedError
 
     def _cone_residual(self, value) -> float:
@@ -132,15 +147,15 @@ class SocpRelaxation:
         raise NotImplementedError
 
     def _der_q_at_buses(self) -> cp.Expression:
-        return incidence(self.net.der_bus, self.net.n_bus) @ self.q
+        return self.problem.der_at_bus @ self.q
 
     def solve(self, s_fixed: np.ndarray, q_limit: np.ndarray) -> SocpSolve:
         """Solve one snapshot: fixed injections `s_fixed` (n_bus,) complex p.u., usable
         Q limits `q_limit` (n_der,) p.u."""
         theta = np.concatenate([s_fixed.real, s_fixed.imag, q_limit])
-        start = time.perf_counter()
+        start = now()
         attempts = self.program.solve(theta)
-        solve_ms = (time.perf_counter() - start) * 1e3  # Clarabel's own solve_time is not used:
+        solve_ms = elapsed_ms(start)  # Clarabel's own solve_time is not used:
         # after an in-place update it reads ~0.2 ms above the wall time of update + solve.
         sol = attempts[-1]
         status = " → ".join(conic_status(a) for a in attempts)
@@ -149,9 +164,7 @@ class SocpRelaxation:
             outcome = "infeasible" if conic_status(sol) in CONIC_INFEASIBLE else "failed"
             return SocpSolve(outcome, status, np.nan, None, np.nan, solve_ms, iterations)
 
-        def value(var: cp.Variable) -> np.ndarray:
-            return self.program.value(sol, var)
-
+        value = self.program.reader(sol)
         bound = min(sol.obj_val, sol.obj_val_dual)
         q_pu = np.clip(value(self.q), -q_limit, q_limit)  # within solver tolerance of the limits anyway
         return SocpSolve("optimal", status, float(bound), q_pu, self._cone_residual(value),
@@ -175,12 +188,11 @@ class DistFlowSocp(SocpRelaxation):
                 f"{net.bus_ids[net.f[odd[0]]]}-{net.bus_ids[net.t[odd[0]]]} has tap {net.tap[odd[0]]:g}, "
                 f"shift {net.shift[odd[0]]:g}° (use the Jabr model)"
             )
-        child = np.array([j for j in net.bfs_order if j != net.slack], dtype=int)
+        child = net.bfs_order[net.bfs_order != net.slack]
         parent, branch = net.parent[child], net.parent_branch[child]
         n, m = net.n_bus, child.size
         at_child, at_parent = incidence(child, n), incidence(parent, n)
         r, x = net.r[branch], net.x[branch]
-        gsh, bsh = bus_shunts(net)
         charging = np.zeros(n)  # π-model line charging as bus shunts, b/2 at each end
         np.add.at(charging, net.f[on], net.b[on] / 2)
         np.add.at(charging, net.t[on], net.b[on] / 2)
@@ -188,20 +200,20 @@ class DistFlowSocp(SocpRelaxation):
         self.q_br = cp.Variable(m, name="q_branch")
         self.l_br = cp.Variable(m, name="l_branch")  # |I|² p.u.²
         v, p_br, q_br, l_br = self.v, self.p_br, self.q_br, self.l_br
-        v_parent = at_parent.T @ v
-        mismatch_p = at_parent @ p_br - at_child @ (p_br - cp.multiply(r, l_br)) + cp.multiply(gsh, v) - self.p_fixed
-        mismatch_q = (at_parent @ q_br - at_child @ (q_br - cp.multiply(x, l_br)) - cp.multiply(bsh + charging, v)
-                      - self.q_fixed - self._der_q_at_buses())
+        v_parent, v_child = v[parent], v[child]
+        mismatch_p = (at_parent @ p_br - at_child @ (p_br - cp.multiply(r, l_br))
+                      + cp.multiply(self.problem.gsh, v) - self.p_fixed)
+        mismatch_q = (at_parent @ q_br - at_child @ (q_br - cp.multiply(x, l_br))
+                      - cp.multiply(self.problem.bsh + charging, v) - self.q_fixed - self._der_q_at_buses())
         constraints = [
-            at_child.T @ v == v_parent - 2 * (cp.multiply(r, p_br) + cp.multiply(x, q_br))
-            + cp.multiply(r**2 + x**2, l_br),
+            v_child == v_parent - 2 * (cp.multiply(r, p_br) + cp.multiply(x, q_br)) + cp.multiply(r**2 + x**2, l_br),
             cp.SOC(v_parent + l_br, cp.vstack([2 * p_br, 2 * q_br, v_parent - l_br]), axis=0),
         ]
-        self._at_parent = at_parent
+        self._parent = parent
         return mismatch_p, mismatch_q, r @ l_br, constraints
 
     def _cone_residual(self, value) -> float:
-        v_par = self._at_parent.T @ value(self.v)
+        v_par = value(self.v)[self._parent]
         p, q, l_ = value(self.p_br), value(self.q_br), value(self.l_br)
         return float(np.max(v_par * l_ - p**2 - q**2, initial=0.0))
 
@@ -212,37 +224,54 @@ class JabrSocp(SocpRelaxation):
     model = "jabr"
 
     def _network_model(self):
-        br = PiBranches.of(self.net)
-        gsh, bsh = bus_shunts(self.net)
+        br = self.problem.branches
         self.c_br = cp.Variable(br.n_branch, name="c_branch")  # Re V_f·conj(V_t)
         self.s_br = cp.Variable(br.n_branch, name="s_branch")  # Im V_f·conj(V_t)
-        self._branches = br
-        vf, vt = br.at_from.T @ self.v, br.at_to.T @ self.v
+        vf, vt = self.v[br.f], self.v[br.t]
         p_f, q_f, p_t, q_t = br.flows(vf, vt, self.c_br, self.s_br, cp.multiply)
-        mismatch_p = br.at_from @ p_f + br.at_to @ p_t + cp.multiply(gsh, self.v) - self.p_fixed
-        mismatch_q = (br.at_from @ q_f + br.at_to @ q_t - cp.multiply(bsh, self.v) - self.q_fixed
+        mismatch_p = br.at_from @ p_f + br.at_to @ p_t + cp.multiply(self.problem.gsh, self.v) - self.p_fixed
+        mismatch_q = (br.at_from @ q_f + br.at_to @ q_t - cp.multiply(self.problem.bsh, self.v) - self.q_fixed
                       - self._der_q_at_buses())
         cone = cp.SOC(vf + vt, cp.vstack([2 * self.c_br, 2 * self.s_br, vf - vt]), axis=0)
         return mismatch_p, mismatch_q, cp.sum(p_f + p_t), [cone]
 
     def _cone_residual(self, value) -> float:
+        br = self.problem.branches
         v = value(self.v)
         c, s = value(self.c_br), value(self.s_br)
-        vf, vt = self._branches.at_from.T @ v, self._branches.at_to.T @ v
-        return float(np.max(vf * vt - c**2 - s**2, initial=0.0))
+        return float(np.max(v[br.f] * v[br.t] - c**2 - s**2, initial=0.0))
 
 
-@lru_cache(maxsize=16)
+def resolve_model(net: Network, model: Model) -> str:
+    """"auto" → DistFlow on radial feeders, Jabr on meshed ones."""
+    check_option("SOCP model", model, MODELS)
+    return ("jabr" if net.meshed else "distflow") if model == "auto" else model
+
+
 def build_socp(net: Network, slack_export: bool = True, model: Model = "auto") -> SocpRelaxation:
-    """The relaxation of `net` (cached per network object and options): "auto" picks
-    DistFlow on radial feeders and Jabr on meshed ones."""
-    if model == "auto":
-        model = "jabr" if net.meshed else "distflow"
-    if model == "distflow":
-        return DistFlowSocp(net, slack_export)
-    if model == "jabr":
-        return JabrSocp(net, slack_export)
-    raise InputError(f"unknown SOCP model {model!r}; choose auto, distflow or jabr")
+    """A new relaxation of `net` (the caller's own: its Clarabel instance is mutable)."""
+    return {"distflow": DistFlowSocp, "jabr": JabrSocp}[resolve_model(net, model)](net, slack_export)
+
+
+def relaxation(net: Network, slack_export: bool = True, model: Model = "auto") -> SocpRelaxation:
+    """The relaxation of `net`, built once per network and options in this thread."""
+    model = resolve_model(net, model)
+    return per_thread(net, ("socp", bool(slack_export), model), lambda: build_socp(net, slack_export, model))
+
+
+def socp_solves(scenario: Scenario, k: float, slack_export: bool = True, model: Model = "auto",
+                data: SnapshotData | None = None) -> tuple[SocpSolve, ...]:
+    """The relaxation solved on every snapshot of `scenario` with reserve k — once per
+    (scenario object, k, options); every later caller gets the same solves. `data`: the
+    scenario's `snapshot_data(scenario, k)` when the caller has it."""
+    model = resolve_model(scenario.net, model)
+    data = snapshot_data(scenario, k) if data is None else data
+
+    def solve_all() -> tuple[SocpSolve, ...]:
+        relax = relaxation(scenario.net, slack_export, model)
+        return tuple(relax.solve(data.s_fixed[i], data.q_limit[i]) for i in range(data.n_snapshots))
+
+    return per_scenario(scenario, ("socp", float(k), bool(slack_export), model), solve_all)
 
 
 def run_socp(scenario: Scenario, k: float, *, slack_export: bool = True, model: Model = "auto") -> StrategyResult:
@@ -251,20 +280,22 @@ def run_socp(scenario: Scenario, k: float, *, slack_export: bool = True, model: 
     Status "ok" where Clarabel solved it, "infeasible" where it certified infeasibility
     (then no action, Q = 0, which also proves the AC OPF infeasible), "solver-failed"
     otherwise (also Q = 0). lower_bound_kw: the relaxation bound (NaN where not solved).
+    extra: solve_ms, iterations, solver_status (Clarabel's), relaxation_gap, fallback,
+    certified_by ("" — the relaxation's point is not certified optimal for the AC OPF;
+    `run_acopf` does that), model.
     """
-    start = time.perf_counter()
+    start = now()
     data = snapshot_data(scenario, k)
-    relax = build_socp(scenario.net, slack_export, model)
-    solves = [relax.solve(data.s_fixed[i], data.q_limit[i]) for i in range(data.n_snapshots)]
+    model = resolve_model(scenario.net, model)
+    solves = socp_solves(scenario, k, slack_export, model, data)
     n_der = len(scenario.net.ders)
-    q_pu = np.array([s.q_pu if s.optimal else np.zeros(n_der) for s in solves])
+    q_pu = np.array([s.q_pu if s.optimal else np.zeros(n_der) for s in solves]).reshape(len(solves), n_der)
     status = np.array([OK if s.optimal else INFEASIBLE if s.outcome == "infeasible" else SOLVER_FAILED
                        for s in solves], dtype=object)
     extra = diagnostics(socp_diagnostics(s) | {"fallback": FROM_SOLVER if s.optimal else FROM_NO_ACTION,
-                                               "model": relax.model} for s in solves)
-    wall_ms = (time.perf_counter() - start) * 1e3
-    return evaluated_result("socp", k, scenario, data, q_pu, slack_export, wall_ms, status,
-                            np.array([s.lower_bound_kw for s in solves]), extra)
+                                               "certified_by": "", "model": model} for s in solves)
+    return evaluated_result("socp", k, scenario, OpfProblem.of(scenario.net, slack_export), data, q_pu,
+                            elapsed_ms(start), status, np.array([s.lower_bound_kw for s in solves]), extra)
 
 
 def socp_diagnostics(s: SocpSolve) -> dict:

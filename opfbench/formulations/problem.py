@@ -1,0 +1,305 @@
+"""The OPF problem, written once; every formulation (`acopf`, `socp`) models it.
+
+Per snapshot, per unit on `net.base_mva` (voltages p.u., powers p.u., squared
+magnitudes p.u.²; results are converted to MVAr and kW at the boundary; injections
+positive into the grid, DER Q positive = injected):
+
+    minimize    branch losses (series and charging, what `PowerFlowResult.losses_kw` reports)
+    over        Q of every DER (P fixed), the bus voltages
+    subject to  power balance at every non-slack bus,
+                |V_slack| = net.v_slack,  vmin ≤ |V| ≤ vmax at every other bus,
+                −(1 − k)·Qmax(P) ≤ Q ≤ (1 − k)·Qmax(P) for every DER,
+                slack P ≥ 0 when the slack may not export (`slack_export=False`,
+                the paper's and pandapower's setup).
+
+Every formulation writes the power balance through the same *bus mismatch*, the power a
+bus pushes into its branches and shunt minus what it is given:
+
+    mismatch_p[i] = Σ branch P leaving i + gsh_i·v_i − p_fixed_i
+    mismatch_q[i] = Σ branch Q leaving i − bsh_i·v_i − q_fixed_i − (DER Q at i)
+
+with v_i = |V_i|². `OpfProblem.balance` turns the two mismatch expressions into the
+constraint rows (zero at every non-slack bus; at the slack bus the mismatch is what the
+external grid injects, hence the slack rule), `OpfProblem.feasible` checks an AC
+power-flow solution against the same limits. A formulation supplies only its network
+model (how branch flows depend on its variables) and its objective expression.
+
+Also here: the per-snapshot inputs (`snapshot_data`), the status vocabulary, π-model
+branch coefficients, and the result assembly shared by the formulations.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any, Callable, Iterable
+
+import numpy as np
+import scipy.sparse as sp
+
+from opfbench.capability import usable_qmax
+from opfbench.errors import InputError, NetworkError
+from opfbench.network import Network
+from opfbench.powerflow import PowerFlowResult, solve_pf_batch
+from opfbench.result import INFEASIBLE, OK, StrategyResult
+from opfbench.scenario import Scenario
+from opfbench.strategies.limits import reserve
+
+# ----- status vocabulary (StrategyResult.status) -------------------------------------
+FALLBACK_COLD = "fallback-cold"  # warm IPOPT failed, cold IPOPT from a flat start solved it
+FALLBACK_SOCP = "fallback-socp"  # IPOPT failed; the SOCP's setpoints, AC-evaluated, are feasible
+FALLBACK_NO_ACTION = "fallback-no-action"  # nothing better found; Q = 0 is AC-feasible
+SOLVER_FAILED = "solver-failed"  # solver failed, no feasible fallback, infeasibility not shown
+STATUSES = (OK, FALLBACK_COLD, FALLBACK_SOCP, FALLBACK_NO_ACTION, INFEASIBLE, SOLVER_FAILED)
+
+# ----- which point a snapshot's setpoints come from (extra["fallback"]) ------------------
+FROM_SOLVER = "none"  # the formulation's own solution
+FROM_COLD = "cold"
+FROM_SOCP = "socp"
+FROM_NO_ACTION = "no-action"
+
+VOLTAGE_TOLERANCE = 1e-6  # p.u.: a point is within limits up to this
+SLACK_P_TOLERANCE = 1e-6  # MW: slack "does not export" up to this
+
+
+def kw_per_pu(net: Network) -> float:
+    """Factor from active power in p.u. on `net.base_mva` to kW."""
+    return net.base_mva * 1e3
+
+
+def incidence(rows: np.ndarray, n_rows: int) -> sp.csr_matrix:
+    """(n_rows, len(rows)) sparse 0/1 matrix with a 1 at (rows[k], k): sums column
+    quantities (branch ends, DER units) onto buses."""
+    rows = np.asarray(rows, dtype=int)
+    return sp.csr_matrix((np.ones(rows.size), (rows, np.arange(rows.size))), shape=(n_rows, rows.size))
+
+
+Mul = Callable[[np.ndarray, Any], Any]  # elementwise constant × expression of the modelling tool
+
+
+@dataclass(frozen=True, eq=False)
+class PiBranches:
+    """In-service π-model branches, flows written in the entries of W = V·Vᴴ.
+
+    For branch l from f to t, with v_f = |V_f|², v_t = |V_t|² and V_f·conj(V_t) = c + j·s:
+
+        P_f = gff·v_f + gft·c + bft·s        Q_f = −bff·v_f + gft·s − bft·c
+        P_t = gtt·v_t + gtf·c − btf·s        Q_t = −btt·v_t − gtf·s − btf·c
+
+    where yff = gff + j·bff, … are MATPOWER's branch admittances (taps, phase shifts and
+    line charging included), flows positive leaving the bus into the branch. The AC OPF
+    substitutes c = |V_f||V_t|·cos(θ_f − θ_t), s = |V_f||V_t|·sin(θ_f − θ_t); Jabr's
+    relaxation keeps c, s free subject to c² + s² ≤ v_f·v_t.
+    """
+
+    f: np.ndarray
+    t: np.ndarray
+    yff: np.ndarray
+    yft: np.ndarray
+    ytf: np.ndarray
+    ytt: np.ndarray
+    at_from: sp.csr_matrix  # (n_bus, n_br) 1 at (f[l], l)
+    at_to: sp.csr_matrix  # (n_bus, n_br) 1 at (t[l], l)
+
+    @classmethod
+    def of(cls, net: Network) -> "PiBranches":
+        on = np.flatnonzero(net.status)
+        f, t = net.f[on], net.t[on]
+        yff, yft, ytf, ytt = (y[on] for y in net.branch_admittances)
+        return cls(f, t, yff, yft, ytf, ytt, incidence(f, net.n_bus), incidence(t, net.n_bus))
+
+    @property
+    def n_branch(self) -> int:
+        return self.f.size
+
+    def flows(self, vf: Any, vt: Any, c: Any, s: Any, mul: Mul) -> tuple[Any, Any, Any, Any]:
+        """(P_f, Q_f, P_t, Q_t) p.u. as expressions of the modelling tool; `mul(a, x)` is
+        its elementwise product of a constant array and an expression."""
+        yff, yft, ytf, ytt = self.yff, self.yft, self.ytf, self.ytt
+        p_f = mul(yff.real, vf) + mul(yft.real, c) + mul(yft.imag, s)
+        q_f = mul(-yff.imag, vf) + mul(yft.real, s) - mul(yft.imag, c)
+        p_t = mul(ytt.real, vt) + mul(ytf.real, c) - mul(ytf.imag, s)
+        q_t = mul(-ytt.imag, vt) - mul(ytf.real, s) - mul(ytf.imag, c)
+        return p_f, q_f, p_t, q_t
+
+
+@dataclass(frozen=True)
+class Row:
+    """Constraint rows lo ≤ expr ≤ hi (elementwise; ±inf = no bound) of a formulation's
+    own modelling tool; `name` says what they are."""
+
+    name: str
+    expr: Any
+    lo: np.ndarray
+    hi: np.ndarray
+
+
+@dataclass(frozen=True, eq=False)
+class OpfProblem:
+    """The OPF problem on one network (see the module docstring), checked once.
+
+    slack: the slack bus; others: every other bus (internal indices); vm_min / vm_max:
+    |V| limits at `others` (p.u.); gsh / bsh: bus shunt conductance / susceptance (p.u.);
+    der_at_bus: (n_bus, n_der) incidence summing DER Q onto buses; branches: the π model.
+    """
+
+    net: Network
+    slack_export: bool
+    others: np.ndarray
+    vm_min: np.ndarray
+    vm_max: np.ndarray
+    gsh: np.ndarray
+    bsh: np.ndarray
+    der_at_bus: sp.csr_matrix
+    branches: PiBranches
+
+    @classmethod
+    def of(cls, net: Network, slack_export: bool = True) -> "OpfProblem":
+        """The problem of `net`; NetworkError for what the formulations do not model or
+        inconsistent limits."""
+        check_supported(net)
+        others = np.flatnonzero(np.arange(net.n_bus) != net.slack)
+        gsh, bsh = bus_shunts(net)
+        return cls(net, bool(slack_export), others, net.vmin[others], net.vmax[others], gsh, bsh,
+                   incidence(net.der_bus, net.n_bus), PiBranches.of(net))
+
+    @property
+    def slack(self) -> int:
+        return self.net.slack
+
+    @property
+    def v_slack(self) -> float:
+        return self.net.v_slack
+
+    @property
+    def kw_per_pu(self) -> float:
+        return kw_per_pu(self.net)
+
+    def balance(self, mismatch_p: Any, mismatch_q: Any, index: Callable[[Any, np.ndarray], Any]) -> list[Row]:
+        """The power-balance rows: mismatch_p = mismatch_q = 0 at every non-slack bus and,
+        when the slack may not export, slack P = mismatch_p[slack] ≥ 0. `index(expr, idx)`
+        selects entries of an expression of the formulation's tool."""
+        m = self.others.size
+        rows = [Row("P balance", index(mismatch_p, self.others), np.zeros(m), np.zeros(m)),
+                Row("Q balance", index(mismatch_q, self.others), np.zeros(m), np.zeros(m))]
+        if not self.slack_export:
+            rows.append(Row("slack P ≥ 0", index(mismatch_p, np.array([self.slack])), np.zeros(1), np.full(1, np.inf)))
+        return rows
+
+    def feasible(self, pf: PowerFlowResult, s_fixed_pu: np.ndarray) -> np.ndarray:
+        """Which AC power-flow solutions meet the limits: converged, every |V| within
+        [vmin, vmax] ± VOLTAGE_TOLERANCE and, when the slack may not export, slack
+        P ≥ −SLACK_P_TOLERANCE MW. `pf` holds one snapshot or a batch (S, n_bus);
+        `s_fixed_pu` the matching fixed injections (p.u.). Returns a bool per snapshot."""
+        return ac_feasible(self.net, pf, s_fixed_pu, self.slack_export)
+
+
+def check_supported(net: Network) -> None:
+    """Refuse what the formulations do not model, and inconsistent limits, with the reason."""
+    if net.pv_buses.size:
+        ids = ", ".join(str(b) for b in net.bus_ids[net.pv_buses])
+        raise NetworkError(f"{net.name}: the OPF formulations do not model voltage-controlled (PV) buses ({ids})")
+    if np.any(net.der_bus == net.slack):
+        raise NetworkError(f"{net.name}: a DER at the slack bus has no effect on the network; move it or drop it")
+    bad = np.flatnonzero(~(np.isfinite(net.vmin) & np.isfinite(net.vmax) & (net.vmin >= 0) & (net.vmin <= net.vmax)))
+    bad = bad[bad != net.slack]  # the slack's |V| is fixed at v_slack
+    if bad.size:
+        i = bad[0]
+        raise NetworkError(f"{net.name}: bus {net.bus_ids[i]} has voltage limits vmin {net.vmin[i]:g} p.u., "
+                           f"vmax {net.vmax[i]:g} p.u.; the OPF needs 0 ≤ vmin ≤ vmax, both finite"
+                           + (f" ({bad.size} such buses)" if bad.size > 1 else ""))
+
+
+@dataclass(frozen=True)
+class SnapshotData:
+    """The OPF inputs of every snapshot, per unit on the network's base.
+
+    s_fixed (S, n_bus) complex: every injection the OPF does not decide — fixed
+    generators + DER active power − load_scale·load (positive into the grid).
+    q_limit (S, n_der) ≥ 0: usable (1 − k)·Qmax; each DER's Q lies in [−q_limit, q_limit].
+    """
+
+    s_fixed: np.ndarray
+    q_limit: np.ndarray
+
+    @property
+    def n_snapshots(self) -> int:
+        return self.s_fixed.shape[0]
+
+
+def snapshot_data(scenario: Scenario, k: float) -> SnapshotData:
+    """Per-unit inputs of `scenario` with reserve coefficient k (InputError unless one
+    number in [0, 1])."""
+    k = reserve(k)
+    net = scenario.net
+    check_supported(net)
+    zero_q = np.zeros_like(scenario.der_p_mw)
+    s_fixed = scenario.injections(zero_q) / net.base_mva
+    q_limit = usable_qmax(net.der_kinds, scenario.der_p_mw, net.der_rating_mw, k) / net.base_mva
+    return SnapshotData(s_fixed, q_limit)
+
+
+def check_option(name: str, value: object, allowed: tuple) -> None:
+    """InputError naming the option unless `value` is one of `allowed`."""
+    if value not in allowed:
+        raise InputError(f"unknown {name} {value!r}; choose {', '.join(map(str, allowed))}")
+
+
+def bus_shunts(net: Network) -> tuple[np.ndarray, np.ndarray]:
+    """(gsh, bsh) per bus, p.u.: the bus shunt admittance from Gs/Bs (MW/MVAr at 1 p.u.)."""
+    return net.gs_mw / net.base_mva, net.bs_mvar / net.base_mva
+
+
+def ac_feasible(net: Network, pf: PowerFlowResult, s_fixed_pu: np.ndarray, slack_export: bool) -> np.ndarray:
+    """`OpfProblem.feasible` for any network (also one the formulations cannot model)."""
+    vm = np.atleast_2d(pf.vm)
+    ok = np.atleast_1d(np.asarray(pf.converged, dtype=bool)).copy()
+    with np.errstate(invalid="ignore"):
+        ok &= np.all(vm >= net.vmin - VOLTAGE_TOLERANCE, axis=1) & np.all(vm <= net.vmax + VOLTAGE_TOLERANCE, axis=1)
+        if not slack_export:
+            fixed_at_slack = np.atleast_2d(s_fixed_pu)[:, net.slack].real * net.base_mva
+            ok &= np.atleast_1d(slack_p_mw(net, pf)) - fixed_at_slack >= -SLACK_P_TOLERANCE
+    return ok
+
+
+def slack_p_mw(net: Network, pf: PowerFlowResult) -> np.ndarray:
+    """Active power the slack bus injects into the grid (MW): the P flowing into its
+    in-service branches plus its shunt's — from branch flows, without the n×n Y-bus."""
+    at_slack_f, at_slack_t = net.f == net.slack, net.t == net.slack
+    vm2 = np.abs(pf.v[..., net.slack]) ** 2
+    return (pf.sf_mva.real[..., at_slack_f].sum(axis=-1) + pf.st_mva.real[..., at_slack_t].sum(axis=-1)
+            + net.gs_mw[net.slack] * vm2)
+
+
+def diagnostics(rows: Iterable[dict]) -> dict[str, np.ndarray]:
+    """Per-snapshot diagnostic dicts (same keys) → one array per key for `StrategyResult.extra`
+    (bool, int64, object for strings, float otherwise)."""
+    rows = list(rows)
+    out: dict[str, np.ndarray] = {}
+    for key in rows[0] if rows else ():
+        values = [r[key] for r in rows]
+        if all(isinstance(v, (bool, np.bool_)) for v in values):
+            out[key] = np.array(values, dtype=bool)
+        elif all(isinstance(v, (int, np.integer)) for v in values):
+            out[key] = np.array(values, dtype=np.int64)
+        elif all(isinstance(v, str) for v in values):
+            out[key] = np.array(values, dtype=object)
+        else:
+            out[key] = np.array(values, dtype=float)
+    return out
+
+
+def evaluated_result(strategy: str, k: float, scenario: Scenario, problem: OpfProblem, data: SnapshotData,
+                     q_pu: np.ndarray, wall_ms: float, status: np.ndarray, lower_bound_kw: np.ndarray,
+                     extra: dict[str, np.ndarray], power_flows: np.ndarray | int = 0,
+                     pf: PowerFlowResult | None = None) -> StrategyResult:
+    """A formulation's result: setpoints `q_pu` (S, n_der) evaluated by the batched AC power
+    flow (or `pf`, that evaluation already done), with extra["ac_feasible"] (the point
+    meets every limit, `OpfProblem.feasible`) and the scalar extra["slack_export"]."""
+    net = scenario.net
+    q_mvar = np.asarray(q_pu, dtype=float).reshape(scenario.n_snapshots, len(net.ders)) * net.base_mva
+    if pf is None:
+        pf = solve_pf_batch(net, scenario.injections(q_mvar))
+    extra = extra | {"ac_feasible": problem.feasible(pf, data.s_fixed), "slack_export": problem.slack_export}
+    flows = np.asarray(power_flows, dtype=np.int64) + 1
+    return StrategyResult.from_setpoints(strategy, k, scenario, q_mvar, wall_ms, power_flows=flows, pf=pf,
+                                         status=status, lower_bound_kw=lower_bound_kw, extra=extra)

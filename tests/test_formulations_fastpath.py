@@ -1,0 +1,141 @@
+"""The certified fast path of the AC OPF, the shared SOCP solves, and the problem's checks."""
+
+from __future__ import annotations
+
+import threading
+
+import numpy as np
+import pytest
+
+from opfbench.capability import usable_qmax
+from opfbench.cases import load_case
+from opfbench.errors import InputError, NetworkError
+from opfbench.formulations import socp as socp_module
+from opfbench.formulations.acopf import CERTIFY_RTOL, ac_opf, run_acopf
+from opfbench.formulations.cache import PER_THREAD, per_thread
+from opfbench.formulations.socp import build_socp, relaxation, run_socp
+from opfbench.registry import run_strategy
+from opfbench.scenario import Scenario
+
+
+def random_snapshots(case: str, n: int, seed: int = 7) -> Scenario:
+    """n independent snapshots: load scale U[0.2, 1.2], each DER's P U[0, rating]."""
+    net = load_case(case)
+    rng = np.random.default_rng(seed)
+    return Scenario(net, rng.uniform(0.2, 1.2, n), rng.uniform(0.0, 1.0, (n, len(net.ders))) * net.der_rating_mw)
+
+
+def _compare(scenario: Scenario, k: float) -> float:
+    """Fast path vs IPOPT on every snapshot: same statuses, losses within 1e-6 relative,
+    every fast-path point certified by one of the two solvers. Returns the certified share."""
+    fast = run_acopf(scenario, k)
+    ipopt = run_acopf(scenario, k, solver="ipopt")
+    assert list(fast.status) == list(ipopt.status)
+    ok = fast.status == "ok"
+    np.testing.assert_allclose(fast.losses_kw[ok], ipopt.losses_kw[ok], rtol=1e-6, atol=0)
+    by = fast.extra["certified_by"]
+    assert set(by[ok]) <= {"socp", "ipopt"} and set(ipopt.extra["certified_by"][ok]) == {"ipopt"}
+    socp = by == "socp"
+    assert np.all(fast.extra["iterations"][socp] == 0) and np.all(fast.extra["iterations"][by == "ipopt"] > 0)
+    assert np.all(fast.losses_kw[socp] <= fast.lower_bound_kw[socp] * (1 + CERTIFY_RTOL))
+    assert np.all(fast.extra["ac_feasible"][ok])
+    return float(socp.mean())
+
+
+@pytest.mark.parametrize("case, n", [("paper33", 30), ("case69-der", 20), ("case141-der", 8)])
+def test_fast_path_equals_ipopt_on_random_snapshots(case, n):
+    share = _compare(random_snapshots(case, n), 0.0)
+    assert share > 0.5, share  # the relaxation is exact on these radial feeders
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("case", ["paper33", "case69-der", "case141-der"])
+def test_fast_path_equals_ipopt_on_100_random_snapshots_and_the_paper_day(case):
+    from opfbench.bench.profiles import paper_day_scenario
+
+    shares = {"random": _compare(random_snapshots(case, 100, seed=11), 0.0),
+              "paper day": _compare(paper_day_scenario(case), 0.0)}
+    print(case, "certified by the SOCP:", shares)
+    assert shares["paper day"] >= 0.99, shares
+
+
+def test_reported_objective_never_below_the_bound():
+    """IPOPT with bound_relax_factor 0: its Q stays within the limits, so neither its own
+    objective nor the AC-evaluated losses fall below the SOCP's bound by more than the
+    bound's own accuracy (Clarabel's tolerances, ~1e-8 relative)."""
+    scenario = random_snapshots("case69-der", 15, seed=3)
+    res = run_acopf(scenario, 0.3, solver="ipopt")
+    tol = 5e-8 * np.abs(res.lower_bound_kw)
+    assert np.all(res.extra["objective_kw"] >= res.lower_bound_kw - tol)
+    assert np.all(res.losses_kw >= res.lower_bound_kw - tol)
+    usable = usable_qmax(scenario.net.der_kinds, scenario.der_p_mw, scenario.net.der_rating_mw, 0.3)
+    assert np.all(np.abs(res.q_mvar) <= usable)
+
+
+def test_acopf_and_socp_share_one_clarabel_solve_per_snapshot(monkeypatch):
+    calls = []
+    real = socp_module.SocpRelaxation.solve
+
+    def counting(self, s_fixed, q_limit):
+        calls.append(1)
+        return real(self, s_fixed, q_limit)
+
+    monkeypatch.setattr(socp_module.SocpRelaxation, "solve", counting)
+    scenario = random_snapshots("paper33", 6)
+    acopf = run_strategy("acopf", scenario, 0.2)
+    socp = run_strategy("socp", scenario, 0.2)
+    assert len(calls) == 6
+    np.testing.assert_array_equal(acopf.lower_bound_kw, socp.lower_bound_kw)
+    run_strategy("socp", scenario, 0.4)  # another k: another problem
+    run_strategy("acopf-paper", scenario, 0.2)  # the paper setup: slack may not export
+    assert len(calls) == 18
+    run_strategy("socp", Scenario(scenario.net, scenario.load_scale, scenario.der_p_mw), 0.2)  # a new scenario
+    assert len(calls) == 24
+
+
+def test_paper_setup_solves_every_step_with_ipopt():
+    res = run_strategy("acopf-paper", random_snapshots("paper33", 4), 0.0)
+    assert np.all(res.extra["iterations"] > 0)
+    assert set(res.extra["certified_by"]) <= {"ipopt", ""}
+
+
+def test_solver_objects_are_not_shared_between_threads_or_callers():
+    net = load_case("paper33")
+    assert build_socp(net) is not build_socp(net)
+    assert relaxation(net) is relaxation(net) and ac_opf(net) is ac_opf(net)
+    other = {}
+    thread = threading.Thread(target=lambda: other.update(socp=relaxation(net), opf=ac_opf(net)))
+    thread.start()
+    thread.join()
+    assert other["socp"] is not relaxation(net) and other["opf"] is not ac_opf(net)
+
+
+@pytest.mark.parametrize("run", [run_acopf, run_socp])
+def test_k_as_an_array_is_refused(run):
+    with pytest.raises(InputError, match="one number"):
+        run(random_snapshots("paper33", 2), np.array([0.1, 0.2]))
+
+
+@pytest.mark.parametrize("run", [run_acopf, run_socp])
+def test_vmin_above_vmax_is_a_network_error_before_any_solve(run):
+    """Refused with the bus and both limits named — by the network itself where it checks
+    its limits, else by the OPF problem before any model is built."""
+    net = load_case("paper33")
+    vmin = net.vmin.copy()
+    vmin[7] = net.vmax[7] + 0.05
+    with pytest.raises(NetworkError, match=rf"bus {net.bus_ids[7]} has .*1\.15.*1\.1"):
+        run(Scenario.snapshot(net.with_changes(vmin=vmin)), 0.0)
+
+
+def test_unknown_solver_option_is_refused():
+    with pytest.raises(InputError, match="unknown AC OPF solver 'knitro'"):
+        run_acopf(random_snapshots("paper33", 1), 0.0, solver="knitro")
+
+
+def test_per_thread_cache_keeps_the_most_recent_objects():
+    net = load_case("paper33")
+    first = per_thread(net, "probe-0", object)
+    assert per_thread(net, "probe-0", object) is first
+    for i in range(1, PER_THREAD + 1):
+        per_thread(net, f"probe-{i}", object)
+    assert per_thread(net, "probe-0", object) is not first  # dropped, built afresh
