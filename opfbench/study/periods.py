@@ -51,7 +51,7 @@ class Period:
         keys = self.index.tz_localize(None).to_period(_CHUNK_FREQ[chunk]).asi8
         cuts = np.flatnonzero(np.diff(keys)) + 1
         bounds = [0, *cuts.tolist(), len(keys)]
-        return [slice(a, b) for a, b in zip(bounds[:-1], bounds[1:])]
+        return [slice(a, b) for a, b in zip(bounds[:-1], bounds[1:], strict=True)]
 
     def as_dict(self) -> dict:
         return {"start": self.index[0].isoformat(), "end": self.index[-1].isoformat(),
