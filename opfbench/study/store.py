@@ -151,6 +151,8 @@ class RunStore:
         if fresh:
             self._discard()
         self.tasks_dir.mkdir(exist_ok=True)
+        for stale in (*self.out.glob(".*.tmp"), *self.tasks_dir.glob(".*.tmp")):  # left by a killed run
+            stale.unlink()
         done = {t.id for t in tasks if (self.out / t.file).exists()}
         self.manifest = {
             "schema": SCHEMA, "opfbench_version": _version(), "git_commit": _git_commit(), "command": command,
