@@ -3,6 +3,7 @@ ones, run the rest (in process or on Dask), assemble the tables."""
 
 from __future__ import annotations
 
+import os
 import sys
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -12,7 +13,7 @@ import pandas as pd
 from opfbench.cases import load_case
 from opfbench.registry import FORMULATIONS
 from opfbench.study.config import StudyConfig
-from opfbench.study.execution import execute
+from opfbench.study.execution import STOPPED, execute
 from opfbench.study.periods import Period, resolve_period
 from opfbench.study.progress import Progress
 from opfbench.study.store import RunStore
@@ -77,8 +78,15 @@ def run_study(config: StudyConfig, out: Path, *, workers: int = 1, scheduler: st
             run.task_wall[result.task.id] = result.wall_s
             progress.update(result)
 
+        def stop() -> None:  # Ctrl-C in the in-process path: every finished task is on disk
+            progress.close()
+            store.lock.unlink(missing_ok=True)
+            print(f"\nstopped; {run.kept} tasks kept in {store.out}; rerun the same command to resume",
+                  file=sys.stderr, flush=True)
+            os._exit(STOPPED)
+
         try:
-            execute(pending, save, workers, scheduler)
+            execute(pending, save, workers, scheduler, stop)
         finally:
             progress.close()
             run.wall_s = elapsed_ms(start) / 1e3
