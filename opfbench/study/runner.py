@@ -87,11 +87,9 @@ def run_study(config: StudyConfig, out: Path, *, workers: int = 1, scheduler: st
 
         try:
             execute(pending, save, workers, scheduler, stop)
-        finally:
+        finally:  # also after an interrupt: the manifest marks the finished tasks
             progress.close()
-            run.wall_s = elapsed_ms(start) / 1e3
-            store.finish_manifest(run.wall_s, 1 if scheduler is None and workers <= 1 else workers, scheduler,
-                                  run.task_wall)
+            store.finish_manifest(None, workers, scheduler, run.task_wall)
         run.summary = store.assemble(tasks, bool(config.detail))
         run.wall_s = elapsed_ms(start) / 1e3
         store.finish_manifest(run.wall_s, workers, scheduler, run.task_wall)
