@@ -4,7 +4,9 @@ per-unit profiles on them, the night hours, and its split into chunks.
 - `paper-day` (default): the paper's day, 1440 × 1 min, PV from the BSRN-driven 10 kW
   plant at Payerne (`opfbench.data.paper_day`).
 - `year`: 2016 at SimBench's native 15 min (35 136 steps), PV = SimBench PV3, wind =
-  SimBench WP4, load = SimBench semi-urban MV load.
+  SimBench WP4, load = SimBench semi-urban MV load. With `step_minutes` (e.g. 1) the
+  profiles are interpolated linearly between quarter hours, up to the last one
+  (2016-12-31 23:45; 527 026 steps at 1 min).
 - `START..END` (local times, END excluded, e.g. `2016-06-28T10:00..2016-06-28T12:00`):
   1-min steps with the BSRN plant's PV when the window lies in June 2016 (the BSRN month),
   otherwise 15-min steps with SimBench PV3; `step_minutes` overrides the step.
@@ -69,11 +71,10 @@ def _parse_time(text: str) -> pd.Timestamp:
 def _window(period: str, step_minutes: float | None) -> tuple[pd.DatetimeIndex, str]:
     if period == "paper-day":
         return pd.date_range(PAPER_DAY, periods=1440, freq="1min", tz=PAPER_DAY_TZ), "bsrn"
-    if period == "year":
+    if period == "year":  # up to SimBench's last quarter hour (no extrapolation at finer steps)
         start = pd.Timestamp(f"{YEAR}-01-01", tz=PAPER_DAY_TZ)
-        end = pd.Timestamp(f"{int(YEAR) + 1}-01-01", tz=PAPER_DAY_TZ)
-        step = pd.Timedelta(minutes=step_minutes or 15)
-        return pd.date_range(start, end - step, freq=step), "simbench"
+        last = pd.Timestamp(f"{YEAR}-12-31 23:45", tz=PAPER_DAY_TZ)
+        return pd.date_range(start, last, freq=pd.Timedelta(minutes=step_minutes or 15)), "simbench"
     first, sep, last = period.partition("..")
     if not sep:
         raise InputError(f"period must be 'paper-day', 'year' or 'START..END', got {period!r}")
