@@ -178,7 +178,7 @@ class RunStore:
         for t in self.manifest["tasks"]:
             t["done"] = (self.out / t["file"]).exists()
             t["wall_s"] = task_wall.get(t["id"], t["wall_s"])
-        self.manifest["timings"] = {"wall_s": wall_s, "workers": workers, "scheduler": scheduler}
+        self.manifest["timings"] = {"wall_s": wall_s, "workers": workers, "scheduler": scheduler} | _peak_rss_mb()
         write_json(self.out / "manifest.json", self.manifest)
 
     # ----- checkpoints --------------------------------------------------------------------
@@ -217,6 +217,15 @@ class RunStore:
         summary.to_csv(buf, index=False, float_format="%.6g")
         write_atomic(self.out / "summary.csv", buf.getvalue())
         return summary
+
+
+def _peak_rss_mb() -> dict:
+    """Peak resident memory (MiB) of this process and of the largest finished child
+    process (local Dask workers, once shut down)."""
+    import resource
+
+    kib = {"peak_rss_mb": resource.RUSAGE_SELF, "worker_peak_rss_mb": resource.RUSAGE_CHILDREN}
+    return {key: resource.getrusage(who).ru_maxrss / 1024 for key, who in kib.items()}
 
 
 def _version() -> str:
