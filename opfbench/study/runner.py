@@ -45,6 +45,12 @@ def prepare(config: StudyConfig) -> tuple[StudyConfig, Period, list[Task]]:
     period = resolve_period(config.period, config.night, config.step_minutes)
     detail = config.detail if config.detail is not None else period.step_h * len(period.index) <= DETAIL_MAX_H
     config = config.with_period(period.step_h * 60, detail)
+    models = [s for s in config.forecast if s not in ("off", "oracle") and config.strategies_for(s)]
+    if models:  # a missing or incomplete forecast file is refused here, not in a worker
+        from opfbench.forecasting import load_forecast
+
+        for model in models:
+            load_forecast(config.forecast_dir, "pv", model)
     for case in config.cases:
         net = load_case(case)
         if any(s in FORMULATIONS for s in config.strategies) and "off" in config.forecast:
