@@ -11,7 +11,6 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from opfbench.capability import qmax
 from opfbench.jsonio import json_safe
 from opfbench.network import Network
 from opfbench.powerflow import PowerFlowResult, solve_pf_batch
@@ -70,7 +69,7 @@ class StrategyResult:
         st = np.full(q.shape[0], OK, dtype=object) if status is None else np.asarray(status, dtype=object).copy()
         st[~conv] = PF_DIVERGED
         losses = np.where(conv, np.atleast_1d(pf.losses_kw), np.nan)
-        physical = qmax(scenario.net.der_kinds, scenario.der_p_mw, scenario.net.der_rating_mw)
+        physical = scenario.qmax_mvar()
         excursion = np.maximum(np.abs(q) - physical, 0.0).max(axis=1, initial=0.0)
         return cls(strategy, float(k), scenario.net, q, losses, np.atleast_2d(pf.vm), st, flows,
                    float(wall_ms), excursion, **kw)

@@ -10,6 +10,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from opfbench.capability import qmax
 from opfbench.errors import InputError
 from opfbench.network import Network
 from opfbench.powerflow import bus_injections
@@ -23,12 +24,15 @@ class Scenario:
     against the network (a transposed array is an error, never reshaped), that values
     are real and finite, loads ≥ 0 and 0 ≤ P ≤ rating — for the forecast P^F too: a
     forecast outside the plant's range is refused, never clipped here (a caller that
-    turns a forecaster's output into P^F clips it explicitly)."""
+    turns a forecaster's output into P^F clips it explicitly). pv_night_q (S,) bool or None:
+    snapshots where PV units have the S-limited "Q at night" capability (night mode
+    "connected-q")."""
 
     net: Network
     load_scale: np.ndarray
     der_p_mw: np.ndarray
     der_p_forecast_mw: np.ndarray | None = None
+    pv_night_q: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         n_der = len(self.net.ders)
@@ -49,6 +53,11 @@ class Scenario:
             _check_finite("der_p_forecast_mw", pf)
             self._check_range("der_p_forecast_mw", pf)
             object.__setattr__(self, "der_p_forecast_mw", _frozen(pf))
+        if self.pv_night_q is not None:
+            mask = np.array(self.pv_night_q, dtype=bool)
+            if mask.shape != ls.shape:
+                raise InputError(f"scenario: pv_night_q must have shape (S,) = {ls.shape}, got {mask.shape}")
+            object.__setattr__(self, "pv_night_q", _frozen(mask))
 
     def _check_range(self, label: str, p: np.ndarray) -> None:
         """0 ≤ P ≤ rating (MW) per DER, up to round-off."""
@@ -113,7 +122,24 @@ class Scenario:
     def take(self, rows: np.ndarray | slice) -> "Scenario":
         """The sub-scenario of some snapshots."""
         fc = None if self.der_p_forecast_mw is None else self.der_p_forecast_mw[rows]
-        return Scenario(self.net, self.load_scale[rows], self.der_p_mw[rows], fc)
+        night_q = None if self.pv_night_q is None else self.pv_night_q[rows]
+        return Scenario(self.net, self.load_scale[rows], self.der_p_mw[rows], fc, night_q)
+
+    # ----- "Q at night" (night mode connected-q) -------------------------------------------
+    def with_night_q(self, mask: np.ndarray) -> "Scenario":
+        """This scenario with PV units S-limited (|Q| ≤ √(S̄² − P²), no PF limit) at the
+        snapshots where `mask` (S,) is True."""
+        return Scenario(self.net, self.load_scale, self.der_p_mw, self.der_p_forecast_mw, mask)
+
+    def qmax_mvar(self, p_mw: np.ndarray | None = None) -> np.ndarray:
+        """(S, n_der) physical Qmax at active power `p_mw` (default P^C), MVAr, with the
+        "Q at night" capability for PV units at the `pv_night_q` snapshots."""
+        p = self.der_p_mw if p_mw is None else p_mw
+        kinds, rating = self.net.der_kinds, self.net.der_rating_mw
+        day = qmax(kinds, p, rating)
+        if self.pv_night_q is None or not self.pv_night_q.any():
+            return day
+        return np.where(self.pv_night_q[:, None], qmax(kinds, p, rating, pv_night_q=True), day)
 
 
 def _real_array(label: str, value: object) -> np.ndarray:

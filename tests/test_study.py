@@ -1,96 +1,222 @@
-"""The benchmark runner on the paper day (local rules only, to stay fast)."""
+"""The study runner: grid checks, periods, scenarios per night mode and forecast, the run
+folder (resume, refusal, lock) and the tables (local rules only, to stay fast, except one
+whole day under every strategy)."""
+
+import json
+import os
 
 import numpy as np
+import pandas as pd
 import pytest
 
-from opfbench.study import BenchmarkConfig, day_scenarios, run_benchmark, summarize
+from opfbench.cli import main
 from opfbench.errors import DataError, InputError
+from opfbench.study import StudyConfig, resolve_period, run_study
+from opfbench.study.scenarios import chunk_scenario
+
+LOCAL = ("no-action", "llma", "lfma")
+HOURS = "2016-06-28T18:00..2016-06-29T02:00"  # evening PV, the night window and midnight
 
 
 @pytest.fixture(scope="module")
-def table():
-    config = BenchmarkConfig(strategies=("no-action", "llma", "lfma"), ks=(0.0, 0.8), night="20:00-05:00")
-    return run_benchmark(config, progress=lambda msg: None)
+def day_run(tmp_path_factory):
+    config = StudyConfig(strategies=LOCAL, ks=(0.0, 0.8), night_modes=("connected", "disconnected"))
+    return run_study(config, tmp_path_factory.mktemp("day"), quiet=True)
 
 
-def test_table_is_tidy_and_complete(table):
+def test_table_is_tidy_and_complete(day_run):
+    table = pd.read_parquet(day_run.out / "steps.parquet")
     assert len(table) == 3 * 2 * 2 * 2 * 1440  # strategies × k × night modes × forecast × steps
     assert (table.status == "ok").all()
-    assert table.groupby(["strategy", "k", "night_mode", "forecast"]).size().eq(1440).all()
+    assert table.groupby(["case", "strategy", "k", "night_mode", "forecast"]).size().eq(1440).all()
+    assert table.step_h.eq(1 / 60).all() and table.time.dt.tz is not None
+    assert (table.night == (table.time.dt.hour >= 20) | (table.time.dt.hour < 5)).all()
+    assert table.solver_ms.isna().all() and table.wall_ms.gt(0).all() and (table.certified_by == "").all()
+    manifest = json.loads((day_run.out / "manifest.json").read_text())
+    assert manifest["period"]["steps"] == 1440 and all(t["done"] for t in manifest["tasks"])
+    assert manifest["cases"]["paper33"]["ders"][0] == {"bus": 10, "kind": "PV", "rating_mw": 0.6}
+    assert manifest["config"]["detail"] is True and (day_run.out / "der_q.parquet").exists()
 
 
-def test_summary_orders_rules_and_reserve(table):
-    s = summarize(table).set_index(["strategy", "k", "night_mode", "forecast"])
+def test_summary_orders_rules_and_reserve(day_run):
+    csv = pd.read_csv(day_run.out / "summary.csv")
+    np.testing.assert_allclose(csv.energy_kwh, day_run.summary.energy_kwh, rtol=1e-5)
+    s = day_run.summary.set_index(["strategy", "k", "night_mode", "forecast"])
     for k in (0.0, 0.8):
-        row = lambda name: s.loc[(name, k, "connected", "off")]  # noqa: E731
+        row = lambda name, k=k: s.loc[(name, k, "connected", "off")]  # noqa: E731
         assert row("lfma").energy_kwh < row("llma").energy_kwh < row("no-action").energy_kwh
         assert row("no-action").savings_pct == pytest.approx(0.0)
+        assert row("lfma").no_action_kwh == row("no-action").energy_kwh
     assert s.loc[("lfma", 0.0, "connected", "off")].energy_kwh < s.loc[("lfma", 0.8, "connected", "off")].energy_kwh
-    # energy = average kW × 24 h for a whole day of 1-min steps
     row = s.loc[("no-action", 0.0, "connected", "off")]
-    assert row.energy_kwh == pytest.approx(row.avg_loss_kw * 24.0)
+    assert row.hours == pytest.approx(24.0) and row.energy_kwh == pytest.approx(row.avg_loss_kw * 24.0)
+    assert np.isnan(row.lower_bound_kwh)  # no SOCP in this grid
 
 
-def test_disconnecting_pv_in_the_clock_window_removes_evening_output():
-    index, scenarios = day_scenarios(BenchmarkConfig(night="20:00-05:00", forecast=("off",)))
-    on, off = scenarios["connected", "off"], scenarios["disconnected", "off"]
-    evening = (index.hour >= 20)
+def test_detail_tables_match_the_steps(day_run):
+    steps = pd.read_parquet(day_run.out / "steps.parquet")
+    q = pd.read_parquet(day_run.out / "der_q.parquet")
+    assert len(q) == len(steps) * 5 and len(pd.read_parquet(day_run.out / "bus_v.parquet")) == len(steps) * 33
+    total = q.groupby(["strategy", "k", "night_mode", "forecast", "time"], sort=False).q_mvar.sum().to_numpy()
+    np.testing.assert_allclose(total, steps.q_total_mvar.to_numpy(), atol=1e-12)
+
+
+def _scenario(mode, forecast="off", period=HOURS, forecast_dir="."):
+    p = resolve_period(period, "20:00-05:00")
+    return p, chunk_scenario("paper33", mode, forecast, p.profiles, p.night, len(p.index), p.index[1] - p.index[0],
+                             forecast_dir)
+
+
+def test_night_modes():
+    p, on = _scenario("connected")
+    _, off = _scenario("disconnected")
+    _, night_q = _scenario("connected-q")
     pv = np.array([kind == "PV" for kind in on.net.der_kinds])
+    evening = p.night & (p.index.hour >= 20)
     assert on.der_p_mw[evening][:, pv].sum() > 0 and off.der_p_mw[evening][:, pv].sum() == 0
     np.testing.assert_array_equal(on.der_p_mw[:, ~pv], off.der_p_mw[:, ~pv])
+    np.testing.assert_array_equal(on.der_p_mw, night_q.der_p_mw)
+    # at night PV units offer √(S̄² − P²) ≈ their rating, by day the usual capability
+    dark = p.night & (on.der_p_mw[:, pv].sum(axis=1) == 0)
+    assert np.all(on.qmax_mvar()[dark][:, pv] == 0)
+    np.testing.assert_allclose(night_q.qmax_mvar()[dark][:, pv], 0.6)
+    np.testing.assert_array_equal(night_q.qmax_mvar()[~p.night], on.qmax_mvar()[~p.night])
+
+
+def test_night_q_lowers_night_losses(tmp_path):
+    config = StudyConfig(strategies=("lfma",), ks=(0.0,), night_modes=("connected", "connected-q"),
+                         forecast=("off",), period=HOURS)
+    steps = pd.read_parquet(run_study(config, tmp_path, quiet=True).out / "steps.parquet")
+    wide = steps.pivot_table(index="time", columns="night_mode", values="losses_kw")
+    night = steps.groupby("time").night.first()
+    assert (wide["connected-q"][night] < wide["connected"][night] - 1e-3).all()
+    # by day the same setpoints (the batched power flow iterates the whole batch: round-off differs)
+    np.testing.assert_allclose(wide["connected-q"][~night], wide["connected"][~night], rtol=1e-12)
+
+
+def test_periods():
+    day = resolve_period("paper-day", "sun")
+    assert len(day.index) == 1440 and day.step_h == pytest.approx(1 / 60) and "BSRN" in day.sources[1]
+    year = resolve_period("year", "20:00-05:00")
+    assert len(year.index) == 35136 and year.step_h == 0.25 and "PV3" in year.sources[1]
+    assert len(year.chunks("month")) == 12 and len(year.chunks("day")) == 366
+    assert [len(range(*c.indices(35136))) for c in year.chunks("month")][:2] == [31 * 96, 29 * 96]
+    window = resolve_period("2016-03-01T00:00..2016-03-01T06:00", "sun")
+    assert len(window.index) == 24 and window.step_h == 0.25  # outside June: SimBench at 15 min
+    for bad in ("tomorrow", "2016-06-28T12:00..2016-06-28T10:00", "2019-01-01..2019-01-02"):
+        with pytest.raises(InputError):
+            resolve_period(bad, "sun")
+
+
+def test_chunking_does_not_change_local_rules(tmp_path):
+    kw = dict(strategies=LOCAL, ks=(0.4,), night_modes=("disconnected",), period="2016-06-28T22:00..2016-06-29T02:00")
+    a = run_study(StudyConfig(chunk="day", **kw), tmp_path / "a", quiet=True)
+    b = run_study(StudyConfig(chunk="month", **kw), tmp_path / "b", quiet=True)
+    assert len(a.tasks) == 2 * len(b.tasks)
+    cols = ["strategy", "forecast", "time"]
+    ta = pd.read_parquet(a.out / "steps.parquet").sort_values(cols, kind="stable").drop(columns="wall_ms")
+    tb = pd.read_parquet(b.out / "steps.parquet").sort_values(cols, kind="stable").drop(columns="wall_ms")
+    # equal up to round-off: the batched power flow iterates a whole chunk together
+    pd.testing.assert_frame_equal(ta.reset_index(drop=True), tb.reset_index(drop=True), check_exact=False, rtol=1e-12)
 
 
 @pytest.mark.parametrize("kwargs, message", [
     ({"strategies": ("magic",)}, "unknown strategy"),
     ({"night_modes": ("sometimes",)}, "unknown night mode"),
     ({"ks": ()}, "nothing to run"),
+    ({"ks": (1.5,)}, "k must lie"),
+    ({"strategies": ("acopf", "socp"), "forecast": ("oracle",)}, "nothing to run"),
+    ({"night": "20:00-05:00+09:00"}, "night must be"),
+    ({"night": "dusk"}, "night must be"),
+    ({"night": "20:00-20:00"}, "night must be"),
+    ({"chunk": "year"}, "unknown chunk"),
 ])
 def test_bad_configuration(kwargs, message):
     with pytest.raises(InputError, match=message):
-        BenchmarkConfig(**kwargs)
+        StudyConfig(**kwargs)
+
+
+def test_duplicates_dropped_with_a_note():
+    c = StudyConfig.build(ks=[0, 0, 0.2], strategies=["lfma", "lfma"])
+    assert c.ks == (0.0, 0.2) and c.strategies == ("lfma",)
+    assert any("k values" in n for n in c.notes) and any("strategies" in n for n in c.notes)
 
 
 def test_missing_model_forecast_is_a_clear_error(tmp_path):
     with pytest.raises(DataError, match="no forecast file"):
-        day_scenarios(BenchmarkConfig(forecast=("wavelet-cnn-lstm",), forecast_dir=str(tmp_path)))
+        _scenario("connected", "wavelet-cnn-lstm", "paper-day", str(tmp_path))
 
 
-def test_bad_night_window():
-    with pytest.raises(InputError, match="night"):
-        day_scenarios(BenchmarkConfig(night="dusk"))
+def _forecast_file(tmp_path, start, end, scale):
+    from opfbench.data import load_pv_minute
+
+    pv = load_pv_minute()["pv_ac_kw"].loc[start:end]
+    frame = pv.to_frame("actual").assign(mymodel=scale * pv)
+    frame.index = frame.index.strftime("%Y-%m-%dT%H:%M:%S%z").rename("timestamp")
+    frame.to_csv(tmp_path / "forecast_pv.csv")
+    return pv
 
 
 def test_model_forecast_feeds_algorithm_3_one_step_ahead(tmp_path):
     """A forecast file indexed by target time: P^F at step t is the forecast for t + 1."""
-    from opfbench.data import load_pv_minute, paper_day
+    from opfbench.data import load_pv_minute
 
-    pv = load_pv_minute()["pv_ac_kw"]
-    window = pv.loc["2016-06-28 00:00":"2016-06-28 23:00"]  # the test split starts at UTC midnight
-    frame = window.to_frame("actual").assign(mymodel=0.5 * window)
-    frame.index = frame.index.strftime("%Y-%m-%dT%H:%M:%S%z").rename("timestamp")
-    frame.to_csv(tmp_path / "forecast_pv.csv")
-    config = BenchmarkConfig(forecast=("mymodel",), night_modes=("connected",), forecast_dir=str(tmp_path))
-    index, scenarios = day_scenarios(config)
-    sc = scenarios["connected", "mymodel"]
+    window = _forecast_file(tmp_path, "2016-06-28 00:00", "2016-06-28 23:00", 0.5)  # starts at UTC midnight
+    p, sc = _scenario("connected", "mymodel", "paper-day", str(tmp_path))
+    index = p.index
     pv_units = np.array([kind == "PV" for kind in sc.net.der_kinds])
-    ahead = pv.reindex((index + (index[1] - index[0])).tz_convert("UTC")).to_numpy() / 10.0
-    covered = (index + (index[1] - index[0])).tz_convert("UTC") >= window.index[0]
-    expected = np.where(covered, 0.5 * ahead, paper_day()["pv"].to_numpy())  # uncovered night: P^F = P^C (= 0)
+    targets = (index + (index[1] - index[0])).tz_convert("UTC")
+    ahead = load_pv_minute()["pv_ac_kw"].reindex(targets).to_numpy() / 10.0
+    covered = targets >= window.index[0]
+    expected = np.where(covered, 0.5 * ahead, p.profiles.pv.to_numpy())  # uncovered night: P^F = P^C (= 0)
     assert (~covered).sum() == 119 and np.all(expected[~covered] == 0)
     np.testing.assert_allclose(sc.der_p_forecast_mw[:, pv_units], expected[:, None] * sc.net.der_rating_mw[pv_units])
     np.testing.assert_array_equal(sc.der_p_forecast_mw[:, ~pv_units], sc.der_p_mw[:, ~pv_units])  # DFIG: P^F = P^C
-    np.testing.assert_allclose(sc.der_p_mw[:, pv_units][:, 0], paper_day()["pv"].to_numpy() * 0.6)
 
 
 def test_model_forecast_not_covering_the_day_is_refused(tmp_path):
-    from opfbench.data import load_pv_minute
-
-    pv = load_pv_minute()["pv_ac_kw"].loc["2016-06-28 03:00":"2016-06-28 12:00"]
-    frame = pv.to_frame("actual").assign(mymodel=pv)
-    frame.index = frame.index.strftime("%Y-%m-%dT%H:%M:%S%z").rename("timestamp")
-    frame.to_csv(tmp_path / "forecast_pv.csv")
+    _forecast_file(tmp_path, "2016-06-28 03:00", "2016-06-28 12:00", 1.0)
     with pytest.raises(DataError, match="daylight step"):
-        day_scenarios(BenchmarkConfig(forecast=("mymodel",), forecast_dir=str(tmp_path)))
+        _scenario("connected", "mymodel", "paper-day", str(tmp_path))
+
+
+# ----- the run folder ------------------------------------------------------------------------
+SMALL = ["run", "--period", "2016-06-28T10:00..2016-06-28T10:20", "--strategies", "no-action", "lfma",
+         "--k", "0", "--night-modes", "connected", "--workers", "1", "--quiet"]
+
+
+def test_resume_refuse_fresh(tmp_path, capsys):
+    out = str(tmp_path / "run")
+    assert main([*SMALL, "--out", out]) == 0
+    first = pd.read_parquet(tmp_path / "run" / "steps.parquet")
+    assert "(2 run now, 0 kept)" in capsys.readouterr().out
+    assert main([*SMALL, "--out", out]) == 0  # everything kept
+    assert "(0 run now, 2 kept)" in capsys.readouterr().out
+    pd.testing.assert_frame_equal(first, pd.read_parquet(tmp_path / "run" / "steps.parquet"))
+    assert main([*SMALL, "--k", "0.2", "--out", out]) == 2
+    assert "another configuration (differs in: ks)" in capsys.readouterr().err
+    assert main([*SMALL, "--k", "0.2", "--out", out, "--fresh"]) == 0
+    assert set(pd.read_parquet(tmp_path / "run" / "steps.parquet").k) == {0.2}
+
+
+def test_out_and_lock_checks(tmp_path, capsys):
+    (tmp_path / "file").write_text("x")
+    assert main([*SMALL, "--out", str(tmp_path / "file")]) == 2
+    assert "not a folder" in capsys.readouterr().err
+    (tmp_path / "busy").mkdir()
+    (tmp_path / "busy" / ".lock").write_text(f"{os.getppid()} {os.uname().nodename}\n")  # a live process
+    assert main([*SMALL, "--out", str(tmp_path / "busy")]) == 2
+    assert "in use by another run" in capsys.readouterr().err
+    (tmp_path / "busy" / ".lock").write_text(f"{2 ** 22 + 12345} {os.uname().nodename}\n")  # no such process
+    assert main([*SMALL, "--out", str(tmp_path / "busy")]) == 0
+    assert not (tmp_path / "busy" / ".lock").exists()
+
+
+def test_json_without_no_action_has_no_nan(tmp_path, capsys):
+    args = [a for a in SMALL if a != "no-action"]
+    assert main([*args, "--out", str(tmp_path), "--json"]) == 0
+    rows = json.loads(capsys.readouterr().out)
+    assert rows[0]["strategy"] == "lfma" and rows[0]["savings_pct"] is None and rows[0]["no_action_kwh"] is None
 
 
 def _check_day(table):
@@ -101,7 +227,7 @@ def _check_day(table):
     bound = bound.reindex(wide.index)
     for name in wide.columns:
         assert (bound <= wide[name] + 1e-3).all(), name
-        if name not in ("acopf", "socp"):
+        if name not in ("acopf", "acopf-paper", "socp"):
             assert (wide["acopf"] <= wide[name] + 1e-3).all(), name
     energy = table.groupby(["strategy", "k", "night_mode"]).losses_kw.sum()
     for k in table.k.unique():
@@ -110,16 +236,21 @@ def _check_day(table):
             assert e["acopf"] <= e["lfma"] < e["llma"] < e["no-action"]
 
 
-def test_whole_day_every_strategy_at_k0():
-    table = run_benchmark(BenchmarkConfig(ks=(0.0,), night_modes=("connected",), forecast=("off",)),
-                          progress=lambda msg: None)
-    assert (table.status == "ok").all() and (table.voltage_violation < 1e-6).all()
+def test_whole_day_every_strategy_at_k0(tmp_path):
+    run = run_study(StudyConfig(ks=(0.0,), night_modes=("connected",), forecast=("off",), detail=False),
+                    tmp_path, quiet=True)
+    table = pd.read_parquet(run.out / "steps.parquet")
+    assert (table.status == "ok").all() and (table.voltage_violation_pu < 1e-6).all()
     _check_day(table)
+    s = run.summary.set_index("strategy")
+    assert s.loc["acopf", "certified_share"] == 1.0 and s.loc["lfma", "gap_kwh"] > 0
+    assert s.loc["acopf", "lower_bound_kwh"] == s.loc["lfma", "lower_bound_kwh"] <= s.loc["acopf", "energy_kwh"]
 
 
 @pytest.mark.slow
-def test_whole_default_grid():
+def test_whole_default_grid(tmp_path):
     """The main job's full grid (`opfbench run` defaults): every step solved, orderings hold."""
-    table = run_benchmark(BenchmarkConfig(), progress=lambda msg: None)
+    run = run_study(StudyConfig(), tmp_path, workers=os.cpu_count() or 1, quiet=True)
+    table = pd.read_parquet(run.out / "steps.parquet")
     assert (table.status == "ok").all()
     _check_day(table[table.forecast == "off"])

@@ -10,6 +10,8 @@ With `--large` the large-feeder figures of `opfbench.bench.pf_large` are added.
 
 from __future__ import annotations
 
+import argparse
+
 import importlib.util
 import warnings
 
@@ -114,8 +116,13 @@ def _pgm_batch_ms(net: Network, s_mw: np.ndarray) -> tuple[float | None, float |
     return ms, float(np.abs(vm - np.abs(solve_pf_batch(net, s_mw).v)).max())
 
 
-def run(large: bool = False) -> dict:
-    """The paper33 figures; with `large`, also the large-feeder ones (`pf_large.run_large`)."""
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--large", action="store_true", help="add the large-feeder figures (feeder10k)")
+
+
+def run(args: argparse.Namespace | None = None) -> dict:
+    """The paper33 figures; with `--large`, also the large-feeder ones (`pf_large.run_large`)."""
+    large = bool(args is not None and args.large)
     day = paper_day_scenario("paper33")
     net = day.net
     s_one = bus_injections(net, 0.8 * net.der_rating_mw)

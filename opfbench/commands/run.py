@@ -1,46 +1,112 @@
-"""`opfbench run`: the benchmark on the paper day — every strategy × k × night mode ×
-forecast — writing the per-step table and the summary."""
+"""`opfbench run`: the study — every case × strategy × k × night mode × forecast over a
+period — split into tasks, run on every core (Dask) or a Dask cluster, resumable, writing
+the run folder (manifest, tasks/, steps.parquet, summary.csv; see the run-folder contract)."""
 
 from __future__ import annotations
 
 import argparse
+import os
+import sys
 from pathlib import Path
 
-from opfbench.study import NIGHT_MODES, BenchmarkConfig, run_benchmark, summarize
-from opfbench.commands.common import fraction, print_json
+from opfbench.commands.common import fraction
+from opfbench.jsonio import print_json
 from opfbench.registry import STRATEGY_NAMES
+from opfbench.report.price import DEFAULT_CURRENCY, DEFAULT_PRICE_PER_KWH, DEFAULT_PRICE_SOURCE
+from opfbench.study import NIGHT_MODES, StudyConfig, StudyRun, run_study
+from opfbench.study.config import CHUNKS, DEFAULT_KS, DEFAULT_NIGHT
+
+
+
+def _workers(text: str) -> int:
+    try:
+        n = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"not a whole number: {text!r}") from None
+    if n < 1:
+        raise argparse.ArgumentTypeError(f"must be ≥ 1, got {n}")
+    return n
+
+
+def _minutes(text: str) -> float:
+    value = fraction(text)
+    if value <= 0:
+        raise argparse.ArgumentTypeError(f"must be > 0, got {text}")
+    return value
 
 
 def register(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser("run", help="run the benchmark on the paper day (the main job)")
-    p.add_argument("--case", default="paper33", help="shipped case name or MATPOWER .m path (default paper33)")
-    p.add_argument("--strategies", nargs="+", default=list(STRATEGY_NAMES), choices=STRATEGY_NAMES)
-    p.add_argument("--k", nargs="+", type=fraction, default=[0.0, 0.2, 0.4, 0.6, 0.8], help="reserve coefficients")
+    p = sub.add_parser("run", help="run the study (default: the paper day on paper33, every strategy)")
+    p.add_argument("--case", nargs="+", default=["paper33"],
+                   help="shipped case names or MATPOWER .m paths, e.g. paper33 case69-der case141-der paper33-meshed")
+    p.add_argument("--strategies", nargs="+", default=list(STRATEGY_NAMES), choices=STRATEGY_NAMES,
+                   help="default: every registered strategy")
+    p.add_argument("--k", nargs="+", type=fraction, default=list(DEFAULT_KS), help="reserve coefficients in [0, 1]")
     p.add_argument("--night-modes", nargs="+", default=list(NIGHT_MODES), choices=NIGHT_MODES)
-    p.add_argument("--night", default="20:00-05:00",
-                   help="night hours: a clock window (default the paper's 20:00-05:00) or 'sun' (sunset→sunrise)")
+    p.add_argument("--night", default=DEFAULT_NIGHT,
+                   help="night hours: a clock window HH:MM-HH:MM (default the paper's 20:00-05:00) or 'sun'")
     p.add_argument("--forecast", nargs="+", default=["off", "oracle"],
                    help="forecast sources: off, oracle (next step's actual) and/or a model name whose PV "
                         "forecasts `opfbench forecast --dataset pv --out DIR` wrote (default: off oracle)")
     p.add_argument("--forecast-dir", default="reports/forecast", help="where model forecasts are (default reports/forecast)")
-    p.add_argument("--out", type=Path, default=Path("reports/run"), help="output folder (default reports/run)")
+    p.add_argument("--fault-dir", type=Path, default=Path("reports/fault"),
+                   help="a fault study's folder (`opfbench fault ... --out DIR`) for the report's fault section "
+                        "(default reports/fault, when it holds one)")
+    p.add_argument("--period", default="paper-day",
+                   help="paper-day (default; 1 min, BSRN PV), year (2016 at 15 min, SimBench PV3) or START..END "
+                        "(local times, END excluded)")
+    p.add_argument("--step-minutes", type=_minutes, default=None, help="override the period's step (minutes)")
+    p.add_argument("--chunk", choices=CHUNKS, default="month",
+                   help="steps per task: a local day, week or month (default month; fixed, independent of workers)")
+    p.add_argument("--detail", action=argparse.BooleanOptionalAction, default=None,
+                   help="also write per-DER Q and per-bus V tables (default: on for periods of ≤ 2 days)")
+    p.add_argument("--workers", type=_workers, default=os.cpu_count() or 1,
+                   help="local worker processes (default: every core; 1 runs in this process)")
+    p.add_argument("--scheduler", default=None, help="run on an existing Dask cluster, e.g. tcp://HOST:8786")
+    p.add_argument("--price", type=fraction, default=DEFAULT_PRICE_PER_KWH,
+                   help=f"price of lost energy per kWh for the report (default {DEFAULT_PRICE_PER_KWH} {DEFAULT_CURRENCY}, Eurostat 2023-H2 non-household)")
+    p.add_argument("--currency", default=DEFAULT_CURRENCY)
+    p.add_argument("--out", type=Path, default=Path("reports/run"), help="run folder (default reports/run)")
+    p.add_argument("--fresh", action="store_true", help="discard a previous run of another configuration in --out")
+    p.add_argument("--quiet", action="store_true", help="no progress output")
     p.add_argument("--json", action="store_true", help="print the summary as JSON")
     p.set_defaults(func=run)
 
 
 def run(args: argparse.Namespace) -> int:
-    config = BenchmarkConfig(args.case, tuple(args.strategies), tuple(args.k), tuple(args.night_modes),
-                             args.night, tuple(args.forecast), args.forecast_dir)
-    table = run_benchmark(config)
-    summary = summarize(table)
-    args.out.mkdir(parents=True, exist_ok=True)
-    table.to_parquet(args.out / "steps.parquet", index=False)
-    summary.to_csv(args.out / "summary.csv", index=False, float_format="%.6g")
+    source = DEFAULT_PRICE_SOURCE if args.price == DEFAULT_PRICE_PER_KWH else "--price"
+    config = StudyConfig.build(
+        cases=args.case, strategies=args.strategies, ks=args.k, night_modes=args.night_modes, night=args.night,
+        forecast=args.forecast, period=args.period, step_minutes=args.step_minutes, chunk=args.chunk,
+        detail=args.detail, forecast_dir=args.forecast_dir, price_per_kwh=args.price, currency=args.currency,
+        price_source=source)
+    try:
+        result = run_study(config, args.out, workers=args.workers, scheduler=args.scheduler, fresh=args.fresh,
+                           quiet=args.quiet, command=["opfbench", *sys.argv[1:]])
+    except KeyboardInterrupt:
+        kept = [f for f in (args.out / "tasks").glob("*.parquet") if not f.name.endswith(("der_q.parquet", "bus_v.parquet"))]
+        print(f"\nopfbench run: stopped; {len(kept)} tasks kept in {args.out}; rerun the same command to resume",
+              file=sys.stderr)
+        return 130
+    return finish_run(result, args)
+
+
+def finish_run(result: StudyRun, args: argparse.Namespace) -> int:
+    """The end of a run: steps.parquet and summary.csv are assembled; report and print."""
+    from opfbench.report import write_report
+
+    forecast_dir = Path(args.forecast_dir)
+    has_forecasts = any((forecast_dir / f"forecast_{d}.json").is_file() for d in ("pv", "wind"))
+    report = write_report(result.out, forecast_dir=forecast_dir if has_forecasts else None,
+                          fault_dir=args.fault_dir if (args.fault_dir / "fault.parquet").is_file() else None)
+    summary = result.summary
     if args.json:
         print_json(summary.to_dict(orient="records"))
         return 0
-    cols = ["strategy", "k", "night_mode", "forecast", "avg_loss_kw", "energy_kwh", "savings_pct",
-            "not_ok_steps", "voltage_violation_steps", "max_excursion_mvar"]
+    cols = ["case", "strategy", "k", "night_mode", "forecast", "avg_loss_kw", "energy_kwh", "savings_pct",
+            "not_ok_steps", "voltage_violation_steps", "gap_pct"]
     print(summary[cols].to_string(index=False, float_format=lambda v: f"{v:.3f}"))
-    print(f"\nper-step table: {args.out / 'steps.parquet'}   summary: {args.out / 'summary.csv'}")
+    print(f"\n{len(result.tasks)} tasks ({result.ran} run now, {len(result.tasks) - result.ran} kept), "
+          f"{result.wall_s:.1f} s; per-step table: {result.out / 'steps.parquet'}   summary: {result.out / 'summary.csv'}")
+    print(f"report: {report}")
     return 0

@@ -36,7 +36,6 @@ from typing import Any, Callable, Iterable
 import numpy as np
 import scipy.sparse as sp
 
-from opfbench.capability import usable_qmax
 from opfbench.errors import InputError, NetworkError
 from opfbench.network import Network
 from opfbench.powerflow import PowerFlowResult, solve_pf_batch
@@ -234,7 +233,7 @@ def snapshot_data(scenario: Scenario, k: float) -> SnapshotData:
     check_supported(net)
     zero_q = np.zeros_like(scenario.der_p_mw)
     s_fixed = scenario.injections(zero_q) / net.base_mva
-    q_limit = usable_qmax(net.der_kinds, scenario.der_p_mw, net.der_rating_mw, k) / net.base_mva
+    q_limit = (1.0 - k) * scenario.qmax_mvar() / net.base_mva  # "Q at night" where the scenario says
     return SnapshotData(s_fixed, q_limit)
 
 

@@ -7,13 +7,8 @@ from opfbench.report import plots, tables
 from opfbench.report.claims import claims
 from opfbench.report.inputs import Inputs
 from opfbench.report.page import Block, Section, table
+from opfbench.report.price import DEFAULT_CURRENCY, DEFAULT_PRICE_PER_KWH, DEFAULT_PRICE_SOURCE
 
-DEFAULT_PRICE_PER_KWH = 0.20
-DEFAULT_CURRENCY = "EUR"
-DEFAULT_PRICE_SOURCE = ("Eurostat, EU average electricity price for non-household consumers, second half of 2023, "
-                        "excluding VAT and recoverable taxes (≈ 0.20 EUR/kWh; dataset nrg_pc_205, "
-                        "Statistics Explained 'Electricity price statistics', April 2024)")
-"""Default energy price for the money rows: the price a DSO-sized buyer pays for the energy it loses."""
 
 
 def _missing(inputs: Inputs, *names: str) -> list[Block]:

@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from opfbench.capability import check_reserve, qmax
+from opfbench.capability import check_reserve
 from opfbench.errors import InputError
 from opfbench.scenario import Scenario
 
@@ -28,17 +28,15 @@ def reserve(k: float) -> float:
 
 def physical_limit(scenario: Scenario) -> np.ndarray:
     """(S, n_der) MVAr: each DER's capability Qmax at its current active power P^C."""
-    net = scenario.net
-    return qmax(net.der_kinds, scenario.der_p_mw, net.der_rating_mw)
+    return scenario.qmax_mvar()
 
 
 def reactive_limit(scenario: Scenario, k: float, safe: bool = False) -> np.ndarray:
     """(S, n_der) MVAr: the bound L ≥ 0 of |Q| for the local rules (see module docstring)."""
-    net = scenario.net
     now = physical_limit(scenario)
     capability = now
     if scenario.der_p_forecast_mw is not None:
-        capability = np.maximum(now, qmax(net.der_kinds, scenario.der_p_forecast_mw, net.der_rating_mw))
+        capability = np.maximum(now, scenario.qmax_mvar(scenario.der_p_forecast_mw))
     limit = (1.0 - reserve(k)) * capability
     return np.minimum(limit, now) if safe else limit
 

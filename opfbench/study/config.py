@@ -1,0 +1,121 @@
+"""What a study runs: the grid {case} × {strategy} × {k} × {night mode} × {forecast} over a
+period, checked before any work (unknown names, malformed night windows, empty grids) and
+with duplicated grid values dropped (each drop is reported as a note).
+
+Night modes: "connected" keeps PV inverters on the grid at night with whatever small
+output the data show (Q limited by the usual capability, so ≈ 0); "disconnected" sets PV
+active power to 0 during the night hours (no P, no Q); "connected-q" keeps them connected
+at night with the S-limited "Q at night" capability |Q| ≤ √(S̄² − P²) (beyond the paper).
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import re
+from dataclasses import asdict, dataclass, field, replace
+
+from opfbench.errors import InputError
+from opfbench.registry import FORMULATIONS, STRATEGY_NAMES
+
+NIGHT_MODES = ("connected", "disconnected", "connected-q")
+DEFAULT_KS = (0.0, 0.2, 0.4, 0.6, 0.8)
+DEFAULT_NIGHT = "20:00-05:00"
+CHUNKS = ("day", "week", "month")
+_WINDOW = re.compile(r"^([01]\d|2[0-3]):([0-5]\d)-([01]\d|2[0-3]):([0-5]\d)$")
+#: Config fields that do not change any result (they only label the report); a run folder
+#: resumes across changes of these.
+LABEL_FIELDS = ("price_per_kwh", "currency", "price_source")
+
+
+def check_night(night: str) -> str:
+    """`night` must be "sun" or a clock window "HH:MM-HH:MM" (24 h, not empty)."""
+    m = _WINDOW.match(night)
+    if night != "sun" and (m is None or m.group(1, 2) == m.group(3, 4)):
+        raise InputError(f"night must be 'sun' or a non-empty clock window 'HH:MM-HH:MM' (e.g. 20:00-05:00), got {night!r}")
+    return night
+
+
+def _unique(label: str, values: tuple, notes: list[str]) -> tuple:
+    out = tuple(dict.fromkeys(values))
+    if len(out) < len(values):
+        dropped = [v for i, v in enumerate(values) if v in values[:i]]
+        notes.append(f"note: duplicated {label} dropped: {', '.join(str(v) for v in dropped)}")
+    return out
+
+
+@dataclass(frozen=True)
+class StudyConfig:
+    """The grid and period of a run (see the module docstring; periods in
+    `opfbench.study.periods`). `forecast` lists forecast sources for Algorithm 3: "off",
+    "oracle" (P^F = the next step's actual output) or a forecasting model's name whose PV
+    forecasts `opfbench forecast --dataset pv --out DIR` wrote to `forecast_dir`.
+    Formulations run only with forecast "off" (they always see the current P^C).
+    `chunk`: the length of one task's slice of the period (day/week/month, local time),
+    fixed by the config and never by the number of workers. `detail`: also write per-DER
+    Q and per-bus V (None: on for periods of ≤ 2 days). Price fields only label the report."""
+
+    cases: tuple[str, ...] = ("paper33",)
+    strategies: tuple[str, ...] = STRATEGY_NAMES
+    ks: tuple[float, ...] = DEFAULT_KS
+    night_modes: tuple[str, ...] = NIGHT_MODES
+    night: str = DEFAULT_NIGHT
+    forecast: tuple[str, ...] = ("off", "oracle")
+    period: str = "paper-day"
+    step_minutes: float | None = None
+    chunk: str = "month"
+    detail: bool | None = None
+    forecast_dir: str = "reports/forecast"
+    price_per_kwh: float = 0.30
+    currency: str = "EUR"
+    price_source: str = ""
+    notes: tuple[str, ...] = field(default=(), compare=False)
+
+    def __post_init__(self) -> None:
+        for name in self.strategies:
+            if name not in STRATEGY_NAMES:
+                raise InputError(f"unknown strategy {name!r}; choose from {', '.join(STRATEGY_NAMES)}")
+        for mode in self.night_modes:
+            if mode not in NIGHT_MODES:
+                raise InputError(f"unknown night mode {mode!r}; choose from {', '.join(NIGHT_MODES)}")
+        for k in self.ks:
+            if not 0.0 <= float(k) <= 1.0:
+                raise InputError(f"reserve coefficient k must lie in [0, 1], got {k}")
+        if self.chunk not in CHUNKS:
+            raise InputError(f"unknown chunk {self.chunk!r}; choose from {', '.join(CHUNKS)}")
+        check_night(self.night)
+        if not (self.cases and self.strategies and self.ks and self.night_modes and self.forecast):
+            raise InputError("nothing to run: give at least one case, strategy, k, night mode and forecast")
+        if not any(self.strategies_for(source) for source in self.forecast):
+            raise InputError(f"nothing to run: the formulations ({', '.join(FORMULATIONS)}) run only with forecast "
+                             f"'off', and the grid has no local rule for forecast {', '.join(self.forecast)}")
+
+    @classmethod
+    def build(cls, **fields) -> "StudyConfig":
+        """A config with duplicated grid values dropped; `notes` say what was dropped."""
+        notes: list[str] = []
+        for key, label in (("cases", "cases"), ("strategies", "strategies"), ("ks", "k values"),
+                           ("night_modes", "night modes"), ("forecast", "forecast sources")):
+            if key in fields:
+                values = tuple(float(v) for v in fields[key]) if key == "ks" else tuple(fields[key])
+                fields[key] = _unique(label, values, notes)
+        return cls(**fields, notes=tuple(notes))
+
+    def strategies_for(self, forecast: str) -> tuple[str, ...]:
+        """The strategies a forecast source runs: all with "off", local rules otherwise."""
+        return tuple(s for s in self.strategies if forecast == "off" or s not in FORMULATIONS)
+
+    def as_dict(self) -> dict:
+        """The manifest's `config` (JSON-ready)."""
+        out = asdict(self)
+        out.pop("notes")
+        return {key: list(v) if isinstance(v, tuple) else v for key, v in out.items()}
+
+    def digest(self) -> str:
+        """Hash of everything that changes results (not the price labels)."""
+        body = {k: v for k, v in self.as_dict().items() if k not in LABEL_FIELDS}
+        return hashlib.sha256(json.dumps(body, sort_keys=True).encode()).hexdigest()[:16]
+
+    def with_period(self, step_minutes: float, detail: bool) -> "StudyConfig":
+        """The config with the period's resolved step and detail flag filled in."""
+        return replace(self, step_minutes=step_minutes, detail=detail)

@@ -1,0 +1,121 @@
+"""The run's tables (columns in docs: the run-folder contract): per-step rows of one
+strategy result, the optional detail tables (per-DER Q, per-bus V), and the summary,
+built from per-task partial sums so that a year never has to sit in memory at once.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pandas as pd
+
+from opfbench.result import OK, StrategyResult
+
+KEYS = ["case", "strategy", "k", "night_mode", "forecast"]
+VIOLATION_PU = 1e-6  # a step violates the voltage limits beyond this
+EXCURSION_MVAR = 1e-9  # a step's setpoint exceeds the physical capability beyond this
+#: Which strategies carry the SOCP bound with the slack allowed to export (contract:
+#: lower_bound_kwh), in order of preference.
+BOUND_FROM = ("socp", "acopf")
+
+
+def _certified_by(res: StrategyResult) -> np.ndarray:
+    """Per step: "ipopt" where the AC OPF's own solution was accepted, "socp" where the
+    relaxation's point is reported (socp, or the AC OPF's SOCP fallback), "" otherwise."""
+    n = res.n_snapshots
+    if "certified_by" in res.extra:
+        return np.asarray(res.extra["certified_by"], dtype=object)
+    fallback = res.extra.get("fallback")
+    if fallback is None:
+        return np.full(n, "", dtype=object)
+    ok = np.isin(res.status.astype(str), ("ok", "fallback-cold", "fallback-socp"))
+    if res.extra.get("model") is not None:  # the SOCP strategy
+        return np.where(ok, "socp", "").astype(object)
+    fb = np.asarray(fallback, dtype=str)
+    return np.where(ok & np.isin(fb, ("none", "cold")), "ipopt", np.where(ok & (fb == "socp"), "socp", "")).astype(object)
+
+
+def step_rows(case: str, night_mode: str, forecast: str, time: pd.DatetimeIndex, step_h: float,
+              night: np.ndarray, res: StrategyResult) -> pd.DataFrame:
+    """One row per step of `res` (see the contract for the columns)."""
+    n = res.n_snapshots
+    nan = np.full(n, np.nan)
+    extra = res.extra
+    local = "fallback" not in extra
+    lb = res.lower_bound_kw if res.lower_bound_kw is not None else nan
+    return pd.DataFrame({
+        "case": case, "strategy": res.strategy, "k": float(res.k), "night_mode": night_mode, "forecast": forecast,
+        "time": time, "step_h": step_h, "night": np.asarray(night, dtype=bool), "status": res.status.astype(str),
+        "losses_kw": res.losses_kw, "vmin_pu": res.vmin, "vmax_pu": res.vmax,
+        "voltage_violation_pu": res.voltage_violation(), "q_total_mvar": res.q_mvar.sum(axis=1),
+        "excursion_mvar": res.excursion_mvar, "lower_bound_kw": np.asarray(lb, dtype=float),
+        "power_flows": np.asarray(res.power_flows, dtype=np.int64),
+        "wall_ms": res.wall_ms / n, "solver_ms": np.asarray(extra.get("solve_ms", nan), dtype=float),
+        "iterations": np.asarray(extra.get("iterations", nan), dtype=float),
+        "certified_by": _certified_by(res).astype(str),
+        "fallback": np.full(n, "") if local else np.asarray(extra["fallback"], dtype=str),
+        "solver_status": np.full(n, "") if local else np.asarray(extra["solver_status"], dtype=str),
+    })
+
+
+def detail_rows(case: str, night_mode: str, forecast: str, time: pd.DatetimeIndex,
+                res: StrategyResult) -> tuple[pd.DataFrame, pd.DataFrame]:
+    """Long tables: per-DER setpoints (bus id, kind, q_mvar) and per-bus |V| (p.u.)."""
+    net = res.net
+    n, n_der, n_bus = res.n_snapshots, len(net.ders), net.n_bus
+    label = {"case": case, "strategy": res.strategy, "k": float(res.k), "night_mode": night_mode, "forecast": forecast}
+    der_q = pd.DataFrame(label | {
+        "time": np.repeat(time, n_der), "bus": np.tile(net.bus_ids[net.der_bus], n).astype(np.int64),
+        "kind": np.tile(np.asarray(net.der_kinds, dtype=object), n).astype(str), "q_mvar": res.q_mvar.reshape(-1)})
+    bus_v = pd.DataFrame(label | {
+        "time": np.repeat(time, n_bus), "bus": np.tile(net.bus_ids, n).astype(np.int64), "v_pu": res.vm.reshape(-1)})
+    return der_q, bus_v
+
+
+def partial_summary(steps: pd.DataFrame) -> pd.DataFrame:
+    """Sums, counts and extremes per configuration of one task's rows (combined by
+    `summarize`)."""
+    s = steps.assign(
+        energy=steps.losses_kw * steps.step_h, lb_energy=steps.lower_bound_kw * steps.step_h,
+        lb_missing=steps.lower_bound_kw.isna().astype(np.int64), not_ok=(steps.status != OK).astype(np.int64),
+        vv=(steps.voltage_violation_pu > VIOLATION_PU).astype(np.int64),
+        exc=(steps.excursion_mvar > EXCURSION_MVAR).astype(np.int64),
+        solver_known=steps.solver_ms.notna().astype(np.int64), certified=(steps.certified_by != "").astype(np.int64))
+    g = s.groupby(KEYS, sort=False)
+    return pd.DataFrame({
+        "steps": g.size(), "hours": g.step_h.sum(), "energy_kwh": g.energy.sum(), "not_ok_steps": g.not_ok.sum(),
+        "voltage_violation_steps": g.vv.sum(), "vmin_pu": g.vmin_pu.min(), "vmax_pu": g.vmax_pu.max(),
+        "max_excursion_mvar": g.excursion_mvar.max(), "excursion_steps": g.exc.sum(),
+        "lower_bound_kwh": g.lb_energy.sum(), "lb_missing": g.lb_missing.sum(), "wall_s": g.wall_ms.sum() / 1e3,
+        "solver_s": g.solver_ms.sum() / 1e3, "solver_known": g.solver_known.sum(), "certified": g.certified.sum(),
+    }).reset_index()
+
+
+def summarize(partials: list[pd.DataFrame], order: list[tuple]) -> pd.DataFrame:
+    """The summary (one row per configuration, in `order` of KEYS tuples) from
+    `partial_summary` frames. no_action_kwh: no action's energy for the same case, k and
+    night mode with forecast off; lower_bound_kwh: the SOCP bound (slack may export) over
+    the same steps, from the socp rows (else the acopf rows), NaN unless every step has one."""
+    p = pd.concat(partials, ignore_index=True)
+    g = p.groupby(KEYS, sort=False)
+    sums = g[["steps", "hours", "energy_kwh", "not_ok_steps", "voltage_violation_steps", "excursion_steps",
+              "lower_bound_kwh", "lb_missing", "wall_s", "solver_s", "solver_known", "certified"]].sum()
+    out = sums.join(g.vmin_pu.min()).join(g.vmax_pu.max()).join(g.max_excursion_mvar.max())
+    out = out.reindex(pd.MultiIndex.from_tuples(order, names=KEYS)).reset_index()
+    out["avg_loss_kw"] = out.energy_kwh / out.hours
+    out["solver_s"] = out.solver_s.where(out.solver_known > 0)
+    out["certified_share"] = out.certified / out.steps
+    base = out[(out.strategy == "no-action") & (out.forecast == "off")].set_index(["case", "k", "night_mode"]).energy_kwh
+    out["no_action_kwh"] = pd.MultiIndex.from_frame(out[["case", "k", "night_mode"]]).map(base.to_dict().get).astype(float)
+    out["savings_pct"] = 100 * (1 - out.energy_kwh / out.no_action_kwh)
+    bound = out[out.strategy.isin(BOUND_FROM) & (out.lb_missing == 0)].copy()
+    bound["rank"] = bound.strategy.map(BOUND_FROM.index)
+    bound = bound.sort_values("rank").drop_duplicates(["case", "k", "night_mode"]).set_index(["case", "k", "night_mode"])
+    out["lower_bound_kwh"] = pd.MultiIndex.from_frame(out[["case", "k", "night_mode"]]).map(
+        bound.lower_bound_kwh.to_dict().get).astype(float)
+    out["gap_kwh"] = out.energy_kwh - out.lower_bound_kwh
+    out["gap_pct"] = 100 * out.gap_kwh / out.lower_bound_kwh
+    cols = ["steps", "hours", "avg_loss_kw", "energy_kwh", "no_action_kwh", "savings_pct", "not_ok_steps",
+            "voltage_violation_steps", "vmin_pu", "vmax_pu", "max_excursion_mvar", "excursion_steps",
+            "lower_bound_kwh", "gap_kwh", "gap_pct", "wall_s", "solver_s", "certified_share"]
+    ints = ["steps", "not_ok_steps", "voltage_violation_steps", "excursion_steps"]
+    return out[KEYS + cols].astype({c: np.int64 for c in ints})

@@ -1,0 +1,126 @@
+"""Tasks: the grid split into independent pieces of work.
+
+A task is (case, night mode, forecast, k, chunk of steps) and runs every requested
+strategy of that group on ONE Scenario object (so `acopf` and `socp` can share a SOCP
+solve). Its input carries its slice of the period's profiles, so it runs the same in
+this process, in a local worker process or on a remote Dask worker; the AC OPF starts
+cold at each chunk and warm-starts inside it — the same whatever the number of workers.
+"""
+
+from __future__ import annotations
+
+import re
+from dataclasses import asdict, dataclass
+
+import numpy as np
+import pandas as pd
+from threadpoolctl import threadpool_limits
+
+from opfbench.registry import run_strategy
+from opfbench.study.config import StudyConfig
+from opfbench.study.periods import Period
+from opfbench.study.scenarios import chunk_scenario
+from opfbench.study.tables import detail_rows, step_rows
+
+
+@dataclass(frozen=True)
+class Task:
+    """One piece of work; `start`/`end` are the first and last step (ISO, local time)."""
+
+    id: str
+    case: str
+    night_mode: str
+    forecast: str
+    k: float
+    strategies: tuple[str, ...]
+    start: str
+    end: str
+
+    @property
+    def file(self) -> str:
+        return f"tasks/{self.id}.parquet"
+
+    def as_dict(self) -> dict:
+        return asdict(self) | {"strategies": list(self.strategies), "file": self.file}
+
+
+@dataclass(frozen=True)
+class TaskInput:
+    """Everything a worker needs: the task, its profiles (the chunk plus, when the
+    period goes on, the next step), the night mask on those rows, the step."""
+
+    task: Task
+    profiles: pd.DataFrame
+    night: np.ndarray
+    n_steps: int
+    step_h: float
+    forecast_dir: str
+    detail: bool
+
+
+@dataclass
+class TaskOutput:
+    """A finished task's tables (detail tables None unless requested) and wall time (s)."""
+
+    task: Task
+    steps: pd.DataFrame
+    der_q: pd.DataFrame | None
+    bus_v: pd.DataFrame | None
+    wall_s: float
+
+
+def _slug(text: str) -> str:
+    return re.sub(r"[^A-Za-z0-9.]+", "-", text).strip("-")
+
+
+def plan_tasks(config: StudyConfig, period: Period) -> list[Task]:
+    """Every task of the grid, in a fixed order (case, night mode, forecast, k, chunk).
+    A forecast source with no strategy to run (only formulations asked) adds none."""
+    tasks = []
+    chunks = period.chunks(config.chunk)
+    for case in config.cases:
+        for mode in config.night_modes:
+            for source in config.forecast:
+                names = config.strategies_for(source)
+                if not names:
+                    continue
+                for k in config.ks:
+                    for rows in chunks:
+                        t0, t1 = period.index[rows.start], period.index[rows.stop - 1]
+                        ident = f"{_slug(case)}_{mode}_{_slug(source)}_k{k:g}_{t0:%Y%m%dT%H%M}"
+                        tasks.append(Task(ident, case, mode, source, float(k), names, t0.isoformat(), t1.isoformat()))
+    return tasks
+
+
+def task_input(task: Task, config: StudyConfig, period: Period) -> TaskInput:
+    """The task's input: its rows of the period, plus the next step when there is one."""
+    index = period.index
+    first = index.get_loc(pd.Timestamp(task.start))
+    last = index.get_loc(pd.Timestamp(task.end))
+    stop = min(last + 2, len(index))
+    return TaskInput(task, period.profiles.iloc[first:stop][["load", "pv", "wind"]], period.night[first:stop],
+                     last + 1 - first, period.step_h, config.forecast_dir, bool(config.detail))
+
+
+def run_task(inp: TaskInput) -> TaskOutput:
+    """Run every strategy of the task on one scenario (single-threaded BLAS, so results
+    are bit-identical wherever it runs)."""
+    from opfbench.timing import elapsed_ms, now
+
+    start = now()
+    t = inp.task
+    with threadpool_limits(1):
+        step = pd.Timedelta(hours=inp.step_h)
+        scenario = chunk_scenario(t.case, t.night_mode, t.forecast, inp.profiles, inp.night, inp.n_steps, step,
+                                  inp.forecast_dir)
+        time, night = inp.profiles.index[:inp.n_steps], inp.night[:inp.n_steps]
+        steps, der_q, bus_v = [], [], []
+        for name in t.strategies:
+            res = run_strategy(name, scenario, t.k)
+            steps.append(step_rows(t.case, t.night_mode, t.forecast, time, inp.step_h, night, res))
+            if inp.detail:
+                q, v = detail_rows(t.case, t.night_mode, t.forecast, time, res)
+                der_q.append(q)
+                bus_v.append(v)
+    cat = (lambda frames: pd.concat(frames, ignore_index=True) if frames else None)
+    return TaskOutput(t, cat(steps), cat(der_q), cat(bus_v), elapsed_ms(start) / 1e3)
