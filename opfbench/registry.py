@@ -15,13 +15,15 @@ from __future__ import annotations
 import dataclasses
 import importlib
 from dataclasses import dataclass, field
-from typing import Callable, Literal
+from typing import TYPE_CHECKING, Callable, Literal
 
 from opfbench.errors import InputError
-from opfbench.result import StrategyResult
-from opfbench.scenario import Scenario
 
-Runner = Callable[..., StrategyResult]
+if TYPE_CHECKING:
+    from opfbench.result import StrategyResult
+    from opfbench.scenario import Scenario
+
+Runner = Callable[..., "StrategyResult"]
 Kind = Literal["local", "formulation"]
 
 

@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import argparse
 
-from opfbench.cases import CASE_NAMES, load_case
 from opfbench.commands.common import print_json
 
 
@@ -15,6 +14,8 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from opfbench.cases import CASE_NAMES, load_case
+
     rows = [load_case(name).summary() for name in CASE_NAMES]
     if args.json:
         print_json(rows)

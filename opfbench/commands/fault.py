@@ -12,10 +12,8 @@ from pathlib import Path
 
 import numpy as np
 
-from opfbench.cases import load_case
 from opfbench.commands.common import fraction
-from opfbench.dynamics.params import SENSITIVITY_VARIANTS, FaultParams, ModelParams
-from opfbench.dynamics.study import FORECASTS, StudyConfig, operating_point, run_study, write_study
+from opfbench.dynamics.params import FORECASTS, SENSITIVITY_VARIANTS, FaultParams, ModelParams
 from opfbench.errors import InputError
 from opfbench.jsonio import print_json
 from opfbench.registry import STRATEGY_NAMES
@@ -79,6 +77,9 @@ def _params(args: argparse.Namespace) -> ModelParams:
 
 
 def run(args: argparse.Namespace) -> int:
+    from opfbench.cases import load_case  # the simulation (numba) loads only when a study runs
+    from opfbench.dynamics.study import StudyConfig, operating_point, run_study, write_study
+
     net = load_case(args.case)
     if args.duration_ms < 0:
         raise InputError(f"--duration-ms must be ≥ 0, got {args.duration_ms:g}")

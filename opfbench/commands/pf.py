@@ -4,10 +4,8 @@ from __future__ import annotations
 
 import argparse
 
-from opfbench.cases import load_case
 from opfbench.commands.common import add_operating_point, print_json
 from opfbench.errors import InputError
-from opfbench.powerflow import bus_injections, solve_pf
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -18,6 +16,9 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from opfbench.cases import load_case
+    from opfbench.powerflow import bus_injections, solve_pf
+
     if args.der_scale > 1:
         raise InputError(f"--der-scale is a fraction of rating and must be ≤ 1, got {args.der_scale}")
     net = load_case(args.case)

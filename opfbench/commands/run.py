@@ -8,13 +8,16 @@ import argparse
 import os
 import sys
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from opfbench.commands.common import fraction
 from opfbench.jsonio import print_json
 from opfbench.registry import STRATEGY_NAMES
 from opfbench.report.price import DEFAULT_CURRENCY, DEFAULT_PRICE_PER_KWH, DEFAULT_PRICE_SOURCE
-from opfbench.study import NIGHT_MODES, StudyConfig, StudyRun, run_study
-from opfbench.study.config import CHUNKS, DEFAULT_KS, DEFAULT_NIGHT
+from opfbench.study.config import CHUNKS, DEFAULT_KS, DEFAULT_NIGHT, NIGHT_MODES, StudyConfig
+
+if TYPE_CHECKING:
+    from opfbench.study.runner import StudyRun
 
 
 
@@ -75,6 +78,8 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 def run(args: argparse.Namespace) -> int:
     source = DEFAULT_PRICE_SOURCE if args.price == DEFAULT_PRICE_PER_KWH else "--price"
+    from opfbench.study.runner import run_study
+
     config = StudyConfig.build(
         cases=args.case, strategies=args.strategies, ks=args.k, night_modes=args.night_modes, night=args.night,
         forecast=args.forecast, period=args.period, step_minutes=args.step_minutes, chunk=args.chunk,

@@ -4,11 +4,9 @@ from __future__ import annotations
 
 import argparse
 
-from opfbench.cases import load_case
 from opfbench.commands.common import add_operating_point, fraction, print_json
 from opfbench.errors import InputError
 from opfbench.registry import STRATEGIES, STRATEGY_NAMES, get_strategy, run_strategy
-from opfbench.scenario import Scenario
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -53,6 +51,9 @@ def _options(args: argparse.Namespace) -> dict:
 
 
 def run(args: argparse.Namespace) -> int:
+    from opfbench.cases import load_case
+    from opfbench.scenario import Scenario
+
     options = _options(args)
     net = load_case(args.case)
     scenario = Scenario.snapshot(net, args.load_scale, args.der_scale, args.forecast_der_scale)

@@ -21,6 +21,8 @@ from typing import Literal
 
 from opfbench.errors import InputError
 
+FORECASTS = ("off", "oracle")  # pre-fault setpoints without / with Algorithm 3's oracle forecast
+
 EmfMode = Literal["reset", "held", "given"]
 TorqueLaw = Literal["quadratic", "constant"]
 ActivePowerMode = Literal["constant-power", "ramp"]

@@ -21,7 +21,7 @@ import numpy as np
 import pandas as pd
 
 from opfbench.dynamics.model import build_model, prefault_flow
-from opfbench.dynamics.params import FaultParams, ModelParams
+from opfbench.dynamics.params import FORECASTS, FaultParams, ModelParams
 from opfbench.dynamics.simulate import DIVERGED, NOT_RECOVERED, RECOVERED, Simulation, check_fault, simulate
 from opfbench.errors import InputError
 from opfbench.jsonio import write_atomic, write_json
@@ -30,7 +30,6 @@ from opfbench.registry import get_strategy, run_strategy
 from opfbench.scenario import Scenario
 from opfbench.timing import elapsed_ms, now
 
-FORECASTS = ("off", "oracle")
 
 
 @dataclass(frozen=True)

@@ -4,7 +4,15 @@ checkpointed in a run folder (resumable) → per-step table + summary (`opfbench
 Not to be confused with `opfbench.bench`, the speed benchmarks."""
 
 from opfbench.study.config import NIGHT_MODES, StudyConfig
-from opfbench.study.periods import Period, resolve_period
-from opfbench.study.runner import StudyRun, prepare, run_study
 
 __all__ = ["NIGHT_MODES", "Period", "StudyConfig", "StudyRun", "prepare", "resolve_period", "run_study"]
+_LAZY = {"Period": "periods", "resolve_period": "periods", "StudyRun": "runner", "prepare": "runner",
+         "run_study": "runner"}  # pandas and the solvers load on first use, not with the CLI
+
+
+def __getattr__(name: str):
+    if name in _LAZY:
+        import importlib
+
+        return getattr(importlib.import_module(f"opfbench.study.{_LAZY[name]}"), name)
+    raise AttributeError(f"module 'opfbench.study' has no attribute {name!r}")
