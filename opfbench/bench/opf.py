@@ -61,9 +61,7 @@ def daily_scenario(net: Network, n: int = 200) -> Scenario:
     load = 0.6 + 0.4 * 0.5 * (1 - np.cos(2 * np.pi * (t - 4) / 24))
     pv = 0.9 * np.exp(-(((t - 12.5) / 2.8) ** 2))
     wind = 0.55 + 0.3 * np.sin(2 * np.pi * t / 24 + 1)
-    is_pv = np.array([kind == "PV" for kind in net.der_kinds])
-    share = np.where(is_pv[None, :], pv[:, None], wind[:, None])
-    return Scenario(net, load, share * net.der_rating_mw)
+    return Scenario.from_profiles(net, load, pv, wind)
 
 
 def bench_opf(n: int = 200, case: str = "paper33", k: float = 0.0) -> dict:

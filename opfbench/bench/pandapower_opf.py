@@ -12,13 +12,13 @@ for an equal-accuracy comparison.
 
 from __future__ import annotations
 
-import time
 import warnings
 from dataclasses import dataclass
 
 import numpy as np
 
 from opfbench.network import Network
+from opfbench.timing import elapsed_ms, now
 
 PIPS_TOLERANCE = 1e-10
 PIPS_OPTIONS = {f"PDIPM_{name}TOL": PIPS_TOLERANCE for name in ("GRAD", "COMP", "COST", "FEAS")}
@@ -93,7 +93,7 @@ class PandapowerOpf:
         pnet.sgen.loc[self._sgens, "max_p_mw"] = der_p_mw
         pnet.sgen.loc[self._sgens, "min_q_mvar"] = -q_limit_mvar
         pnet.sgen.loc[self._sgens, "max_q_mvar"] = q_limit_mvar
-        start = time.perf_counter()
+        start = now()
         try:
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore")
@@ -101,7 +101,7 @@ class PandapowerOpf:
             converged = bool(pnet.OPF_converged)
         except self._pp.OPFNotConverged:
             converged = False
-        wall_ms = (time.perf_counter() - start) * 1e3
+        wall_ms = elapsed_ms(start)
         if not converged:
             return RunoppOutcome(False, np.nan, np.full(len(self._sgens), np.nan), wall_ms)
         losses = (pnet.res_line.pl_mw.sum() + pnet.res_trafo.pl_mw.sum()) * 1e3

@@ -1,4 +1,4 @@
-"""RMS (phasor) fault ride-through simulation of a feeder (SPEC §5, paper §IV): the
+"""RMS (phasor) fault ride-through simulation of a feeder (paper §IV): the
 network behind an upstream Thevenin source, static loads, third-order induction motors,
 current-controlled inverters with the Danish LVRT reactive current; recovery times per
 bus × strategy × k × forecast.

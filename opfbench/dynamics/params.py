@@ -1,4 +1,4 @@
-"""Parameters of the RMS fault model (SPEC §5, issue 13). Every default is the reference
+"""Parameters of the RMS fault model (paper §IV; see the README's fault study). Every default is the reference
 scenario; every field is an option. Per unit on the case's MVA base unless stated.
 
 Sources:

@@ -1,4 +1,4 @@
-"""Centralized formulations of the DER reactive-power dispatch (SPEC §3).
+"""Centralized formulations of the DER reactive-power dispatch (paper §III; README "What is inside").
 
 - `problem`: the OPF problem written once — limits, slack rule, power-balance rows,
   AC feasibility of a point, per-snapshot inputs, status vocabulary, π-model branches.

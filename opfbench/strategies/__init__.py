@@ -1,4 +1,4 @@
-"""Communication-free local reactive-power rules (paper §III, SPEC §3).
+"""Communication-free local reactive-power rules (paper §III).
 
 - `local`: the runners `no_action`, `llma` (Algorithm 1) and `lfma` (Algorithm 2), each
   with Algorithm 3 (forecast-aware limits) when the scenario carries a forecast.

@@ -16,7 +16,6 @@ to steps 2, 3 and 4 — the last one is the evaluation of the final setpoints).
 
 from __future__ import annotations
 
-import time
 from dataclasses import dataclass
 
 import numpy as np
@@ -24,6 +23,7 @@ import numpy as np
 from opfbench.powerflow import PowerFlowResult, solve_pf_batch
 from opfbench.result import StrategyResult
 from opfbench.scenario import Scenario
+from opfbench.timing import elapsed_ms, now
 from opfbench.strategies.limits import clip, reactive_limit, reserve
 from opfbench.strategies.meters import LocalMeters
 
@@ -35,19 +35,16 @@ BACK_TO_LLMA = 3  # Q_up and Q_do both changed sign (or Q_do hit zero): Q^F = Q^
 STOPPED = 4  # a power flow of this snapshot diverged earlier: setpoint frozen
 
 
-def _elapsed_ms(t0: float) -> float:
-    return (time.perf_counter() - t0) * 1e3
-
 
 def _evaluate(name: str, k: float, scenario: Scenario, q_mvar: np.ndarray, t0: float) -> StrategyResult:
     """One batched power flow at the final setpoints, timed with the rule itself."""
     pf = solve_pf_batch(scenario.net, scenario.injections(q_mvar))
-    return StrategyResult.from_setpoints(name, k, scenario, q_mvar, _elapsed_ms(t0), power_flows=1, pf=pf)
+    return StrategyResult.from_setpoints(name, k, scenario, q_mvar, elapsed_ms(t0), power_flows=1, pf=pf)
 
 
 def no_action(scenario: Scenario, k: float = 0.0) -> StrategyResult:
     """Every DER at Q = 0 MVAr (k is validated and recorded, and otherwise unused)."""
-    t0 = time.perf_counter()
+    t0 = now()
     k = reserve(k)
     q = np.zeros(scenario.der_p_mw.shape)
     return _evaluate("no-action", k, scenario, q, t0)
@@ -60,7 +57,7 @@ def llma_setpoints(scenario: Scenario, limit_mvar: np.ndarray) -> np.ndarray:
 
 def llma(scenario: Scenario, k: float = 0.0, safe: bool = False) -> StrategyResult:
     """LLMA (Algorithm 1) with the bound L of `reactive_limit` (reserve k, forecast, safe)."""
-    t0 = time.perf_counter()
+    t0 = now()
     k = reserve(k)
     q = llma_setpoints(scenario, reactive_limit(scenario, k, safe))
     return _evaluate("llma", k, scenario, q, t0)
@@ -169,11 +166,11 @@ def lfma(scenario: Scenario, k: float = 0.0, safe: bool = False) -> StrategyResu
     """LFMA (Algorithm 2) with the bound L of `reactive_limit`. Snapshots whose power flow
     diverged at any step get status "pf-diverged" and NaN losses. extra: `diverged_step`
     (S,) and `upstream_disagreements` (S,) (see `upstream_disagreements`)."""
-    t0 = time.perf_counter()
+    t0 = now()
     k = reserve(k)
     trace = lfma_trace(scenario, k, safe)
     final = trace.flows[-1]
     completed = PowerFlowResult(final.net, final.v, trace.diverged_step == 0, final.iterations)
     extra = {"diverged_step": trace.diverged_step, "upstream_disagreements": upstream_disagreements(scenario, trace)}
-    return StrategyResult.from_setpoints("lfma", k, scenario, trace.q_final, _elapsed_ms(t0),
+    return StrategyResult.from_setpoints("lfma", k, scenario, trace.q_final, elapsed_ms(t0),
                                          power_flows=len(trace.flows), pf=completed, extra=extra)
