@@ -66,7 +66,7 @@ def test_out_of_memory_is_one_message_naming_the_case(capsys, monkeypatch):
     def too_big(name):
         raise MemoryError
 
-    monkeypatch.setattr("opfbench.commands.pf.load_case", too_big)
+    monkeypatch.setattr("opfbench.cases.load_case", too_big)  # the command imports it when it runs
     code, err = _cli(capsys, ["pf", "case10000"])
     assert code == 2 and err == ("opfbench pf: error: out of memory on case 'case10000': the problem is too large "
                                  "for this machine's memory (a smaller case, or fewer snapshots)\n")
