@@ -77,7 +77,7 @@ def forecast_savings(inputs: Inputs) -> Claim:
     if inputs.summary is None:
         return _missing(claim, figure, inputs, "summary.csv")
     s = inputs.summary
-    aware = s[(s["forecast"] != "off") & s["strategy"].isin(["llma", "lfma"])]
+    aware = s[(s["forecast"] != "off") & s["strategy"].isin(["llma", "lfma"])].dropna(subset=["savings_pct"])
     if aware.empty:
         return Claim(claim, figure, "—", NA, "the run has no forecast-aware (forecast ≠ off) LLMA/LFMA configuration")
     best = aware.loc[aware["savings_pct"].idxmax()]

@@ -54,7 +54,7 @@ def prepare(config: StudyConfig) -> tuple[StudyConfig, Period, list[Task]]:
     for case in config.cases:
         net = load_case(case)
         if any(s in FORMULATIONS for s in config.strategies) and "off" in config.forecast:
-            from opfbench.formulations.common import check_supported
+            from opfbench.formulations.problem import check_supported
 
             check_supported(net)
     return config, period, plan_tasks(config, period)
