@@ -11,6 +11,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from opfbench.commands.common import fraction
+from opfbench.errors import InputError
 from opfbench.jsonio import print_json
 from opfbench.registry import STRATEGY_NAMES
 from opfbench.report.price import DEFAULT_CURRENCY, DEFAULT_PRICE_PER_KWH, DEFAULT_PRICE_SOURCE
@@ -52,7 +53,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="forecast sources: off, oracle (next step's actual) and/or a model name whose PV "
                         "forecasts `opfbench forecast --dataset pv --out DIR` wrote (default: off oracle)")
     p.add_argument("--forecast-dir", default="reports/forecast", help="where model forecasts are (default reports/forecast)")
-    p.add_argument("--fault-dir", type=Path, default=Path("reports/fault"),
+    p.add_argument("--fault-dir", type=Path, default=None,
                    help="a fault study's folder (`opfbench fault ... --out DIR`) for the report's fault section "
                         "(default reports/fault, when it holds one)")
     p.add_argument("--period", default="paper-day",
@@ -78,8 +79,12 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 def run(args: argparse.Namespace) -> int:
     source = DEFAULT_PRICE_SOURCE if args.price == DEFAULT_PRICE_PER_KWH else "--price"
+    from opfbench.report.sources import holds_fault_study
     from opfbench.study.runner import run_study
 
+    if args.fault_dir is not None and not holds_fault_study(args.fault_dir):
+        raise InputError(f"--fault-dir {args.fault_dir} holds no fault study (fault.parquet); "
+                         f"write one with `opfbench fault CASE --out {args.fault_dir}`")
     config = StudyConfig.build(
         cases=args.case, strategies=args.strategies, ks=args.k, night_modes=args.night_modes, night=args.night,
         forecast=args.forecast, period=args.period, step_minutes=args.step_minutes, chunk=args.chunk,
@@ -99,11 +104,11 @@ def run(args: argparse.Namespace) -> int:
 def finish_run(result: StudyRun, args: argparse.Namespace) -> int:
     """The end of a run: steps.parquet and summary.csv are assembled; report and print."""
     from opfbench.report import write_report
+    from opfbench.report.sources import holds_forecasts, report_sources
 
     forecast_dir = Path(args.forecast_dir)
-    has_forecasts = any((forecast_dir / f"forecast_{d}.json").is_file() for d in ("pv", "wind"))
-    report = write_report(result.out, forecast_dir=forecast_dir if has_forecasts else None,
-                          fault_dir=args.fault_dir if (args.fault_dir / "fault.parquet").is_file() else None)
+    report = write_report(result.out, *report_sources(forecast_dir if holds_forecasts(forecast_dir) else None,
+                                                      args.fault_dir))
     summary = result.summary
     if args.json:
         print_json(summary.to_dict(orient="records"))

@@ -11,6 +11,10 @@ from opfbench.report.price import DEFAULT_CURRENCY, DEFAULT_PRICE_PER_KWH, DEFAU
 
 
 
+def _seconds(value: object) -> str:
+    return f"{float(value):.1f} s" if isinstance(value, (int, float)) else "not recorded"
+
+
 def _missing(inputs: Inputs, *names: str) -> list[Block]:
     return [Block("missing", text=name, command=inputs.missing[name]) for name in names if name in inputs.missing]
 
@@ -47,7 +51,7 @@ def metadata(inputs: Inputs, price: tuple[float, str, str]) -> Section:
         ("opfbench", f"{m.get('opfbench_version')} (git commit {m.get('git_commit') or 'not available'})"),
         ("versions", versions),
         ("machine", f"{machine.get('cores')} cores, {machine.get('platform')}"),
-        ("wall time", f"{timings.get('wall_s')} s total, {timings.get('workers')} workers, "
+        ("wall time", f"{_seconds(timings.get('wall_s'))} total, {timings.get('workers')} workers, "
                       f"scheduler {timings.get('scheduler') or 'local'}"),
     ]
     sec.add(Block("meta", items=items))
@@ -96,7 +100,7 @@ def convergence(inputs: Inputs) -> Section:
         return sec.add(Block("note", text="The run has no formulation (acopf, acopf-paper, socp)."))
     sec.add(table(conv, "Steps per status"))
     sec.add(table(tables.failure_reasons(inputs.steps), "Steps not ok: status, solver return status and fallback used"))
-    sec.add(table(tables.solver_stats(inputs.steps), "IPOPT iterations and solve times (ms)"))
+    sec.add(table(tables.solver_stats(inputs.steps), "Solver iterations and solve times (ms): IPOPT for acopf/acopf-paper (0 iterations where the SOCP certified the step), Clarabel for socp"))
     sec.blocks += _plots(plots.solve_times(inputs.steps))
     if inputs.summary is not None:
         setup = tables.paper_setup(inputs.summary, inputs.steps)

@@ -85,7 +85,7 @@ def failure_reasons(steps: pd.DataFrame) -> pd.DataFrame:
 
 
 def solver_stats(steps: pd.DataFrame) -> pd.DataFrame:
-    """IPOPT iterations and solve times (ms) per case × formulation: median, 90th percentile, max."""
+    """Solver iterations and solve times (ms) per case × formulation: median, 90th percentile, max."""
     sub = formulation_steps(steps)
     if sub.empty:
         return pd.DataFrame()
