@@ -254,3 +254,16 @@ def test_whole_default_grid(tmp_path):
     table = pd.read_parquet(run.out / "steps.parquet")
     assert (table.status == "ok").all()
     _check_day(table[table.forecast == "off"])
+
+
+def test_acopf_solver_ipopt_runs_ipopt_on_every_step(tmp_path):
+    """--acopf-solver ipopt: no step certified by the SOCP; auto: the same losses, most steps certified."""
+    tables = {}
+    for solver in ("auto", "ipopt"):
+        config = StudyConfig.build(strategies=["acopf"], ks=[0.0], night_modes=["connected"], forecast=["off"],
+                                   period="2016-06-28T11:00..2016-06-28T11:20", acopf_solver=solver)
+        run_study(config, tmp_path / solver, workers=1, quiet=True)
+        tables[solver] = pd.read_parquet(tmp_path / solver / "steps.parquet")
+    assert set(tables["ipopt"]["certified_by"]) == {"ipopt"}
+    assert (tables["auto"]["certified_by"] == "socp").mean() > 0.5
+    assert np.allclose(tables["auto"]["losses_kw"], tables["ipopt"]["losses_kw"], rtol=1e-6)

@@ -15,7 +15,7 @@ from opfbench.errors import InputError
 from opfbench.jsonio import print_json
 from opfbench.registry import STRATEGY_NAMES
 from opfbench.report.price import DEFAULT_CURRENCY, DEFAULT_PRICE_PER_KWH, DEFAULT_PRICE_SOURCE
-from opfbench.study.config import CHUNKS, DEFAULT_KS, DEFAULT_NIGHT, NIGHT_MODES, StudyConfig
+from opfbench.study.config import ACOPF_SOLVERS, CHUNKS, DEFAULT_KS, DEFAULT_NIGHT, NIGHT_MODES, StudyConfig
 
 if TYPE_CHECKING:
     from opfbench.study.runner import StudyRun
@@ -53,6 +53,9 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="forecast sources: off, oracle (next step's actual) and/or a model name whose PV "
                         "forecasts `opfbench forecast --dataset pv --out DIR` wrote (default: off oracle)")
     p.add_argument("--forecast-dir", default="reports/forecast", help="where model forecasts are (default reports/forecast)")
+    p.add_argument("--acopf-solver", choices=ACOPF_SOLVERS, default="auto",
+                   help="auto (default): the SOCP certifies the AC optimum where it can, IPOPT solves the rest; "
+                        "ipopt: IPOPT on every step (its own convergence record)")
     p.add_argument("--fault-dir", type=Path, default=None,
                    help="a fault study's folder (`opfbench fault ... --out DIR`) for the report's fault section "
                         "(default reports/fault, when it holds one)")
@@ -88,7 +91,8 @@ def run(args: argparse.Namespace) -> int:
     config = StudyConfig.build(
         cases=args.case, strategies=args.strategies, ks=args.k, night_modes=args.night_modes, night=args.night,
         forecast=args.forecast, period=args.period, step_minutes=args.step_minutes, chunk=args.chunk,
-        detail=args.detail, forecast_dir=args.forecast_dir, price_per_kwh=args.price, currency=args.currency,
+        detail=args.detail, acopf_solver=args.acopf_solver,
+        forecast_dir=args.forecast_dir, price_per_kwh=args.price, currency=args.currency,
         price_source=source)
     try:
         result = run_study(config, args.out, workers=args.workers, scheduler=args.scheduler, fresh=args.fresh,

@@ -16,6 +16,7 @@ import re
 from dataclasses import asdict, dataclass, field, replace
 
 from opfbench.errors import InputError
+from opfbench.report.price import DEFAULT_CURRENCY, DEFAULT_PRICE_PER_KWH, DEFAULT_PRICE_SOURCE
 from opfbench.registry import FORMULATIONS, STRATEGY_NAMES
 
 NIGHT_MODES = ("connected", "disconnected", "connected-q")
@@ -43,6 +44,8 @@ def _unique(label: str, values: tuple, notes: list[str]) -> tuple:
         notes.append(f"note: duplicated {label} dropped: {', '.join(str(v) for v in dropped)}")
     return out
 
+ACOPF_SOLVERS = ("auto", "ipopt")  # formulations.acopf.SOLVERS, kept light for the CLI
+
 
 @dataclass(frozen=True)
 class StudyConfig:
@@ -53,7 +56,9 @@ class StudyConfig:
     Formulations run only with forecast "off" (they always see the current P^C).
     `chunk`: the length of one task's slice of the period (day/week/month, local time),
     fixed by the config and never by the number of workers. `detail`: also write per-DER
-    Q and per-bus V (None: on for periods of ≤ 2 days). Price fields only label the report."""
+    Q and per-bus V (None: on for periods of ≤ 2 days). Price fields only label the report.
+    `acopf_solver`: "auto" (the SOCP certifies the AC optimum where it can, IPOPT solves the
+    rest) or "ipopt" (IPOPT on every step: the solver's own outcomes, as the paper asks)."""
 
     cases: tuple[str, ...] = ("paper33",)
     strategies: tuple[str, ...] = STRATEGY_NAMES
@@ -65,10 +70,11 @@ class StudyConfig:
     step_minutes: float | None = None
     chunk: str = "month"
     detail: bool | None = None
+    acopf_solver: str = "auto"
     forecast_dir: str = "reports/forecast"
-    price_per_kwh: float = 0.30
-    currency: str = "EUR"
-    price_source: str = ""
+    price_per_kwh: float = DEFAULT_PRICE_PER_KWH
+    currency: str = DEFAULT_CURRENCY
+    price_source: str = DEFAULT_PRICE_SOURCE
     notes: tuple[str, ...] = field(default=(), compare=False)
 
     def __post_init__(self) -> None:
@@ -84,6 +90,8 @@ class StudyConfig:
         if self.chunk not in CHUNKS:
             raise InputError(f"unknown chunk {self.chunk!r}; choose from {', '.join(CHUNKS)}")
         check_night(self.night)
+        if self.acopf_solver not in ACOPF_SOLVERS:
+            raise InputError(f"unknown AC OPF solver {self.acopf_solver!r}; choose from {', '.join(ACOPF_SOLVERS)}")
         if not (self.cases and self.strategies and self.ks and self.night_modes and self.forecast):
             raise InputError("nothing to run: give at least one case, strategy, k, night mode and forecast")
         if not any(self.strategies_for(source) for source in self.forecast):

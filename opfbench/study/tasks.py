@@ -16,7 +16,7 @@ import numpy as np
 import pandas as pd
 from threadpoolctl import threadpool_limits
 
-from opfbench.registry import run_strategy
+from opfbench.registry import get_strategy, run_strategy
 from opfbench.study.config import StudyConfig
 from opfbench.study.periods import Period
 from opfbench.study.scenarios import chunk_scenario
@@ -56,6 +56,7 @@ class TaskInput:
     step_h: float
     forecast_dir: str
     detail: bool
+    acopf_solver: str = "auto"
 
 
 @dataclass
@@ -99,7 +100,7 @@ def task_input(task: Task, config: StudyConfig, period: Period) -> TaskInput:
     last = index.get_loc(pd.Timestamp(task.end))
     stop = min(last + 2, len(index))
     return TaskInput(task, period.profiles.iloc[first:stop][["load", "pv", "wind"]], period.night[first:stop],
-                     last + 1 - first, period.step_h, config.forecast_dir, bool(config.detail))
+                     last + 1 - first, period.step_h, config.forecast_dir, bool(config.detail), config.acopf_solver)
 
 
 def run_task(inp: TaskInput) -> TaskOutput:
@@ -116,7 +117,8 @@ def run_task(inp: TaskInput) -> TaskOutput:
         time, night = inp.profiles.index[:inp.n_steps], inp.night[:inp.n_steps]
         steps, der_q, bus_v = [], [], []
         for name in t.strategies:
-            res = run_strategy(name, scenario, t.k)
+            takes_solver = "solver" in get_strategy(name).options  # acopf; acopf-paper pins IPOPT
+            res = run_strategy(name, scenario, t.k, **({"solver": inp.acopf_solver} if takes_solver else {}))
             steps.append(step_rows(t.case, t.night_mode, t.forecast, time, inp.step_h, night, res))
             if inp.detail:
                 q, v = detail_rows(t.case, t.night_mode, t.forecast, time, res)
