@@ -208,7 +208,7 @@ def fault(inputs: Inputs) -> Section:
 
 def paper_claims(inputs: Inputs) -> Section:
     sec = Section("claims", "The paper's claims",
-                  "Each claim with the paper's figure, ours, and a verdict computed from the tables above.")
+                  "Each claim with the paper's figure, ours, and a verdict computed from the run's tables (the sections below show them).")
     return sec.add(Block("claims", claims=claims(inputs)))
 
 
