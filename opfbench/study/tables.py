@@ -19,19 +19,10 @@ BOUND_FROM = ("socp", "acopf")
 
 
 def _certified_by(res: StrategyResult) -> np.ndarray:
-    """Per step: "ipopt" where the AC OPF's own solution was accepted, "socp" where the
-    relaxation's point is reported (socp, or the AC OPF's SOCP fallback), "" otherwise."""
-    n = res.n_snapshots
+    """Per step: the formulations' own record ("socp" | "ipopt" | ""); "" for the local rules."""
     if "certified_by" in res.extra:
         return np.asarray(res.extra["certified_by"], dtype=object)
-    fallback = res.extra.get("fallback")
-    if fallback is None:
-        return np.full(n, "", dtype=object)
-    ok = np.isin(res.status.astype(str), ("ok", "fallback-cold", "fallback-socp"))
-    if res.extra.get("model") is not None:  # the SOCP strategy
-        return np.where(ok, "socp", "").astype(object)
-    fb = np.asarray(fallback, dtype=str)
-    return np.where(ok & np.isin(fb, ("none", "cold")), "ipopt", np.where(ok & (fb == "socp"), "socp", "")).astype(object)
+    return np.full(res.n_snapshots, "", dtype=object)
 
 
 def step_rows(case: str, night_mode: str, forecast: str, time: pd.DatetimeIndex, step_h: float,
