@@ -70,7 +70,7 @@ STRATEGIES: dict[str, StrategySpec] = {s.name: s for s in (
                  options={"fallback": "chain", "slack_export": True, "solver": "auto"}),
     StrategySpec("acopf-paper", "formulation", "opfbench.formulations.acopf:run_acopf",
                  "AC OPF under the paper's setup: slack may not export, failure → no action",
-                 fixed={"fallback": "paper", "slack_export": False, "solver": "ipopt"}),
+                 options={"solver": "auto"}, fixed={"fallback": "paper", "slack_export": False}),
     StrategySpec("socp", "formulation", "opfbench.formulations.socp:run_socp",
                  "SOCP relaxation (Clarabel): certified lower bound; its Q evaluated by AC power flow",
                  options={"slack_export": True}),

@@ -24,8 +24,8 @@ relaxation's bound — a lower bound on every AC-feasible point's losses — the
 AC optimum up to that tolerance: recorded with status "ok", extra["certified_by"] =
 "socp", and IPOPT is skipped. IPOPT (warm-started from its last successful solution)
 solves only the other snapshots. `solver="ipopt"` solves every snapshot with IPOPT
-(the paper's question is how often a nonlinear OPF solver fails; the paper setup,
-registry entry `acopf-paper`, pins it).
+(the paper's question is how often a nonlinear OPF solver fails: `opfbench run
+--acopf-solver ipopt` answers it for `acopf` and `acopf-paper`).
 
 IPOPT's snapshots follow a failure policy, recorded per snapshot:
 

@@ -8,7 +8,8 @@ The data variables' columns are then moved into the offset: with x = [y; θ],
 
     A_y·y + s = b − A_θ·θ,
 
-so each solve only updates b(θ) = b₀ + B·θ (B = −A_θ) of one persistent Clarabel solver.
+so each solve only updates b(θ) = b₀ + B·θ (B = −A_θ, computed for many θ at once by
+`offsets`) of one persistent Clarabel solver.
 Variable values are read at the columns cvxpy assigned them. Compiling without cvxpy
 parameters matters on large feeders: cvxpy's parametrized tensor has (variables + 1)·
 (parameters + 1) columns, which its SOC restructuring turns into gigabytes at 10 000
@@ -82,26 +83,31 @@ class ParametricConeProgram:
         if not self.solver.is_data_update_allowed():
             raise ValueError("Clarabel does not allow data updates for this problem (presolve or chordal decomposition)")
 
+    @property
+    def n_x(self) -> int:
+        """Length of the solution vector x."""
+        return self._c.size
+
     def _fresh_solver(self, b: np.ndarray) -> clarabel.DefaultSolver:
         n_x = self._c.size
         return clarabel.DefaultSolver(sp.csc_matrix((n_x, n_x)), self._c, self._a, b, self._cones, self._settings)
 
-    def offset(self, theta: np.ndarray) -> np.ndarray:
-        """The constraint offset b(θ) = b₀ + B·θ (θ: the data variables' values in order)."""
-        return self._b0 + self._b_theta @ theta
+    def offsets(self, thetas: np.ndarray) -> np.ndarray:
+        """The constraint offsets b(θ) = b₀ + B·θ, one row per row of `thetas` (S, n_θ): the
+        data variables' values concatenated in order."""
+        thetas = np.atleast_2d(np.asarray(thetas, dtype=float))
+        if thetas.shape[1] != sum(self._sizes):
+            raise ValueError(f"θ has {thetas.shape[1]} entries, the data variables {sum(self._sizes)}")
+        return self._b0 + (self._b_theta @ thetas.T).T
 
-    def solve(self, theta: np.ndarray) -> list[clarabel.DefaultSolution]:
-        """Solve at data θ (the data variables' values concatenated in order).
+    def solve(self, b: np.ndarray) -> list[clarabel.DefaultSolution]:
+        """Solve at the constraint offset `b` (a row of `offsets`).
 
         Returns the solutions of every attempt, the last one final: the persistent solver
         is updated in place; if it ends without an answer (neither solved nor certified
         infeasible — seen as InsufficientProgress where a solver set up afresh on the
         same data succeeds), a fresh solver is built on this b, kept for the next
         updates, and tried once more."""
-        theta = np.asarray(theta, dtype=float)
-        if theta.size != sum(self._sizes):
-            raise ValueError(f"θ has {theta.size} entries, the data variables {sum(self._sizes)}")
-        b = self.offset(theta)
         self.solver.update(b=b)
         attempts = [self.solver.solve()]
         if conic_status(attempts[0]) not in ANSWERED:
@@ -109,15 +115,15 @@ class ParametricConeProgram:
             attempts.append(self.solver.solve())
         return attempts
 
-    def reader(self, solution: clarabel.DefaultSolution) -> Callable[[cp.Variable], np.ndarray]:
-        """A function reading a (vector, non-data) variable's value in `solution` (the
-        solution vector is copied out of Clarabel once)."""
-        x = np.asarray(solution.x)
+    def reader(self, x: np.ndarray) -> Callable[[cp.Variable], np.ndarray]:
+        """A function reading a (vector, non-data) variable's value from solution vectors
+        `x` (n_x,) or stacked (S, n_x): the last axis holds the variable's entries."""
+        x = np.asarray(x)
 
         def value(var: cp.Variable) -> np.ndarray:
             if var.size == 0:  # e.g. the DER setpoints of a case without DER
-                return np.zeros(0)
+                return x[..., :0]
             start = self._var_col[var.id]
-            return x[start:start + var.size]
+            return x[..., start:start + var.size]
 
         return value
