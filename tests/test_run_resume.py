@@ -8,16 +8,18 @@ import time
 
 import pandas as pd
 
+from opfbench.formulations import socp
 from opfbench.study import StudyConfig, run_study
 
-# 2 k × 2 night modes × 2 chunks (one per local day) = 8 tasks with the AC OPF, ~0.5 s each
-CONFIG = StudyConfig(strategies=("no-action", "lfma", "acopf"), ks=(0.0, 0.5), night_modes=("connected", "disconnected"),
+# 4 k × 2 chunks (one per local day) = 8 tasks (each with 2 night modes) with the AC OPF
+CONFIG = StudyConfig(strategies=("no-action", "lfma", "acopf"), ks=(0.0, 0.25, 0.5, 0.75), night_modes=("connected", "disconnected"),
                      forecast=("off",), period="2016-06-28T23:30..2016-06-29T00:30", chunk="day", detail=False)
 TIMING = ["wall_ms", "solver_ms"]
 KEYS = ["case", "strategy", "k", "night_mode", "forecast", "time"]
 
 
 def _child(out):
+    socp.forget_solves()  # a fresh process would not have the parent's solves
     run_study(CONFIG, out, quiet=True)
 
 
@@ -47,6 +49,6 @@ def test_sigkill_at_random_moments_then_resume(tmp_path):
     assert resumed.kept == 8 and (finished or resumed.ran == 8 - kept)
     a = pd.read_parquet(ref.out / "steps.parquet").drop(columns=TIMING)
     b = pd.read_parquet(out / "steps.parquet").drop(columns=TIMING)
-    assert not b.duplicated(KEYS).any() and len(b) == 3 * 2 * 2 * 60
+    assert not b.duplicated(KEYS).any() and len(b) == 3 * 4 * 2 * 60
     pd.testing.assert_frame_equal(a, b, check_exact=True)
     assert not list(out.glob(".*")) and not list((out / "tasks").glob(".*"))  # no lock, no temporary files

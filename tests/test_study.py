@@ -20,7 +20,7 @@ HOURS = "2016-06-28T18:00..2016-06-29T02:00"  # evening PV, the night window and
 
 @pytest.fixture(scope="module")
 def day_run(tmp_path_factory):
-    config = StudyConfig(strategies=LOCAL, ks=(0.0, 0.8), night_modes=("connected", "disconnected"))
+    config = StudyConfig(strategies=LOCAL, ks=(0.0, 0.8), night_modes=("connected", "disconnected"), detail=True)
     return run_study(config, tmp_path_factory.mktemp("day"), quiet=True)
 
 
@@ -267,3 +267,12 @@ def test_acopf_solver_ipopt_runs_ipopt_on_every_step(tmp_path):
     assert set(tables["ipopt"]["certified_by"]) == {"ipopt"}
     assert (tables["auto"]["certified_by"] == "socp").mean() > 0.5
     assert np.allclose(tables["auto"]["losses_kw"], tables["ipopt"]["losses_kw"], rtol=1e-6)
+
+
+def test_default_detail_is_the_der_q_table_on_short_periods(tmp_path):
+    config = StudyConfig(strategies=("no-action", "llma"), ks=(0.0,), night_modes=("connected",), forecast=("off",),
+                         period="2016-06-28T10:00..2016-06-28T11:00")
+    run = run_study(config, tmp_path / "run", quiet=True)
+    assert run.config.detail_tables == ("der_q",)
+    assert len(pd.read_parquet(run.out / "der_q.parquet")) == 2 * 60 * 5 and not (run.out / "bus_v.parquet").exists()
+    assert pd.read_parquet(run.out / "der_q.parquet")["strategy"].dtype == object  # text, not categorical

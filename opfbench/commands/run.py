@@ -66,7 +66,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--chunk", choices=CHUNKS, default="month",
                    help="steps per task: a local day, week or month (default month; fixed, independent of workers)")
     p.add_argument("--detail", action=argparse.BooleanOptionalAction, default=None,
-                   help="also write per-DER Q and per-bus V tables (default: on for periods of ≤ 2 days)")
+                   help="also write the long tables of per-DER Q and per-bus V (default: per-DER Q only, and only "
+                        "for periods of ≤ 2 days: the report plots it)")
     p.add_argument("--workers", type=_workers, default=os.cpu_count() or 1,
                    help="local worker processes (default: every core; 1 runs in this process)")
     p.add_argument("--scheduler", default=None, help="run on an existing Dask cluster, e.g. tcp://HOST:8786")

@@ -70,7 +70,7 @@ class PowerFlowResult:
         """Complex power entering each branch at its to end (MW + jMVAr)."""
         return self._flows[1]
 
-    @property
+    @cached_property
     def losses_kw(self) -> np.ndarray:
         """Total series + charging active losses over all branches (kW)."""
         sf, st = self._flows

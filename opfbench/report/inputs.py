@@ -29,7 +29,6 @@ class Inputs:
     steps: pd.DataFrame | None = None
     summary: pd.DataFrame | None = None
     der_q: pd.DataFrame | None = None
-    bus_v: pd.DataFrame | None = None
     forecast: dict[str, dict] = field(default_factory=dict)  # dataset -> forecast_<dataset>.json
     forecast_dir: Path | None = None
     fault: pd.DataFrame | None = None
@@ -60,13 +59,11 @@ def load_inputs(run_dir: str | Path, forecast_dir: str | Path | None = None,
         summary = pd.read_csv(run / "summary.csv", dtype={"case": str, "strategy": str, "night_mode": str, "forecast": str})
         inp.summary = summary if len(summary) else None
     inp.der_q = _parquet(run / "der_q.parquet")
-    inp.bus_v = _parquet(run / "bus_v.parquet")
     for name, frame in (("manifest.json", inp.manifest), ("steps.parquet", inp.steps), ("summary.csv", inp.summary)):
         if frame is None:
             inp.missing[name] = RUN_COMMAND.format(dir=run)
-    for name, frame in (("der_q.parquet", inp.der_q), ("bus_v.parquet", inp.bus_v)):
-        if frame is None:
-            inp.missing[name] = DETAIL_COMMAND.format(dir=run)
+    if inp.der_q is None:  # the report plots the DER setpoints (the per-bus |V| table it does not read)
+        inp.missing["der_q.parquet"] = DETAIL_COMMAND.format(dir=run)
 
     inp.forecast_dir = Path(forecast_dir) if forecast_dir is not None else DOCS_FORECAST
     for dataset in ("pv", "wind"):

@@ -55,8 +55,9 @@ class StudyConfig:
     forecasts `opfbench forecast --dataset pv --out DIR` wrote to `forecast_dir`.
     Formulations run only with forecast "off" (they always see the current P^C).
     `chunk`: the length of one task's slice of the period (day/week/month, local time),
-    fixed by the config and never by the number of workers. `detail`: also write per-DER
-    Q and per-bus V (None: on for periods of ≤ 2 days). Price fields only label the report.
+    fixed by the config and never by the number of workers. `detail`: also write the long
+    tables of per-DER Q and per-bus V (None: per-DER Q alone for periods of ≤ 2 days, which
+    the report plots); `detail_tables` the names resolved from it (`with_period`). Price fields only label the report.
     `acopf_solver`: "auto" (the SOCP certifies the AC optimum where it can, IPOPT solves the
     rest) or "ipopt" (IPOPT on every step: the solver's own outcomes, as the paper asks)."""
 
@@ -70,6 +71,7 @@ class StudyConfig:
     step_minutes: float | None = None
     chunk: str = "month"
     detail: bool | None = None
+    detail_tables: tuple[str, ...] = ()
     acopf_solver: str = "auto"
     forecast_dir: str = "reports/forecast"
     price_per_kwh: float = DEFAULT_PRICE_PER_KWH
@@ -124,6 +126,6 @@ class StudyConfig:
         body = {k: v for k, v in self.as_dict().items() if k not in LABEL_FIELDS}
         return hashlib.sha256(json.dumps(body, sort_keys=True).encode()).hexdigest()[:16]
 
-    def with_period(self, step_minutes: float, detail: bool) -> "StudyConfig":
-        """The config with the period's resolved step and detail flag filled in."""
-        return replace(self, step_minutes=step_minutes, detail=detail)
+    def with_period(self, step_minutes: float, detail_tables: tuple[str, ...]) -> "StudyConfig":
+        """The config with the period's resolved step and long tables filled in."""
+        return replace(self, step_minutes=step_minutes, detail_tables=tuple(detail_tables))

@@ -36,7 +36,6 @@ from opfbench.study.tasks import Task, TaskOutput
 
 SCHEMA = 1
 RUN_FILES = ("steps.parquet", "summary.csv", "der_q.parquet", "bus_v.parquet", "report.html", "manifest.json")
-DETAIL = ("der_q", "bus_v")
 
 
 def check_out_dir(out: Path) -> Path:
@@ -185,18 +184,16 @@ class RunStore:
     def save(self, result: TaskOutput) -> None:
         """Write a finished task atomically (detail files first, the main file last)."""
         base = self.out / result.task.file
-        for name in DETAIL:
-            frame = getattr(result, name)
-            if frame is not None:
-                _write_parquet(base.with_suffix(f".{name}.parquet"), frame)
+        for name, frame in result.detail.items():
+            _write_parquet(base.with_suffix(f".{name}.parquet"), frame)
         _write_parquet(base, result.steps)
 
     # ----- assembly -----------------------------------------------------------------------
-    def assemble(self, tasks: list[Task], detail: bool) -> pd.DataFrame:
+    def assemble(self, tasks: list[Task], detail: tuple[str, ...]) -> pd.DataFrame:
         """steps.parquet (+ detail tables) and summary.csv from the task files; returns
         the summary."""
         partials, order = [], []
-        names = ["steps", *DETAIL] if detail else ["steps"]
+        names = ["steps", *detail]
         writers = {name: _AtomicParquet(self.out / f"{name}.parquet") for name in names}
         try:
             for t in tasks:
@@ -205,8 +202,8 @@ class RunStore:
                 writers["steps"].write(steps)
                 partials.append(partial_summary(steps))
                 order.extend(dict.fromkeys(map(tuple, steps[KEYS].drop_duplicates().itertuples(index=False))))
-                for name in names[1:]:
-                    writers[name].write(pd.read_parquet(base.with_suffix(f".{name}.parquet")))
+                for name in names[1:]:  # the long tables go through as arrow tables, never pandas
+                    writers[name].write(pq.read_table(base.with_suffix(f".{name}.parquet")))
             for w in writers.values():
                 w.commit()
         finally:
@@ -234,9 +231,17 @@ def _version() -> str:
     return __version__
 
 
+def _arrow(frame: pd.DataFrame | pa.Table) -> pa.Table:
+    """The frame as an arrow table whose categorical columns are plain strings (the files
+    hold text; categoricals only make building and writing the long tables fast)."""
+    table = frame if isinstance(frame, pa.Table) else pa.Table.from_pandas(frame, preserve_index=False)
+    fields = [pa.field(f.name, f.type.value_type) if pa.types.is_dictionary(f.type) else f for f in table.schema]
+    return table.cast(pa.schema(fields)) if fields != list(table.schema) else table
+
+
 def _write_parquet(path: Path, frame: pd.DataFrame) -> None:
     buf = io.BytesIO()
-    frame.to_parquet(buf, index=False)
+    pq.write_table(_arrow(frame), buf)
     write_atomic(path, buf.getvalue())
 
 
@@ -247,8 +252,8 @@ class _AtomicParquet:
         self.path, self.tmp = path, path.with_name(f".{path.name}.{os.getpid()}.tmp")
         self.writer: pq.ParquetWriter | None = None
 
-    def write(self, frame: pd.DataFrame) -> None:
-        table = pa.Table.from_pandas(frame, preserve_index=False)
+    def write(self, frame: pd.DataFrame | pa.Table) -> None:
+        table = _arrow(frame)
         if self.writer is None:
             self.writer = pq.ParquetWriter(self.tmp, table.schema)
         self.writer.write_table(table.cast(self.writer.schema))

@@ -1,8 +1,10 @@
 """Tasks: the grid split into independent pieces of work.
 
-A task is (case, night mode, forecast, k, chunk of steps) and runs every requested
-strategy of that group on ONE Scenario object (so `acopf` and `socp` can share a SOCP
-solve). Its input carries its slice of the period's profiles, so it runs the same in
+A task is (case, forecast, k, chunk of steps) and runs every requested strategy and
+night mode of that group, the strategies of one night mode on ONE Scenario object (so
+`acopf`, `acopf-paper` and `socp` share SOCP solves). The night modes differ only in the
+night hours, so their daytime snapshots are the same problems: one task solves each once
+(`socp.socp_solves` reuses a solve of identical data in the same process). Its input carries its slice of the period's profiles, so it runs the same in
 this process, in a local worker process or on a remote Dask worker; the AC OPF starts
 cold at each chunk and warm-starts inside it — the same whatever the number of workers.
 """
@@ -29,7 +31,7 @@ class Task:
 
     id: str
     case: str
-    night_mode: str
+    night_modes: tuple[str, ...]
     forecast: str
     k: float
     strategies: tuple[str, ...]
@@ -41,7 +43,8 @@ class Task:
         return f"tasks/{self.id}.parquet"
 
     def as_dict(self) -> dict:
-        return asdict(self) | {"strategies": list(self.strategies), "file": self.file}
+        return asdict(self) | {"night_modes": list(self.night_modes), "strategies": list(self.strategies),
+                               "file": self.file}
 
 
 @dataclass(frozen=True)
@@ -55,18 +58,17 @@ class TaskInput:
     n_steps: int
     step_h: float
     forecast_dir: str
-    detail: bool
+    detail: tuple[str, ...]  # the long tables to write (`tables.DETAIL_TABLES`)
     acopf_solver: str = "auto"
 
 
 @dataclass
 class TaskOutput:
-    """A finished task's tables (detail tables None unless requested) and wall time (s)."""
+    """A finished task's tables (`detail`: the requested long tables by name) and wall time (s)."""
 
     task: Task
     steps: pd.DataFrame
-    der_q: pd.DataFrame | None
-    bus_v: pd.DataFrame | None
+    detail: dict[str, pd.DataFrame]
     wall_s: float
 
 
@@ -75,21 +77,21 @@ def _slug(text: str) -> str:
 
 
 def plan_tasks(config: StudyConfig, period: Period) -> list[Task]:
-    """Every task of the grid, in a fixed order (case, night mode, forecast, k, chunk).
-    A forecast source with no strategy to run (only formulations asked) adds none."""
+    """Every task of the grid, in a fixed order (case, forecast, k, chunk). A forecast
+    source with no strategy to run (only formulations asked) adds none."""
     tasks = []
     chunks = period.chunks(config.chunk)
     for case in config.cases:
-        for mode in config.night_modes:
-            for source in config.forecast:
-                names = config.strategies_for(source)
-                if not names:
-                    continue
-                for k in config.ks:
-                    for rows in chunks:
-                        t0, t1 = period.index[rows.start], period.index[rows.stop - 1]
-                        ident = f"{_slug(case)}_{mode}_{_slug(source)}_k{k:g}_{t0:%Y%m%dT%H%M}"
-                        tasks.append(Task(ident, case, mode, source, float(k), names, t0.isoformat(), t1.isoformat()))
+        for source in config.forecast:
+            names = config.strategies_for(source)
+            if not names:
+                continue
+            for k in config.ks:
+                for rows in chunks:
+                    t0, t1 = period.index[rows.start], period.index[rows.stop - 1]
+                    ident = f"{_slug(case)}_{_slug(source)}_k{k:g}_{t0:%Y%m%dT%H%M}"
+                    tasks.append(Task(ident, case, config.night_modes, source, float(k), names, t0.isoformat(),
+                                      t1.isoformat()))
     return tasks
 
 
@@ -100,29 +102,29 @@ def task_input(task: Task, config: StudyConfig, period: Period) -> TaskInput:
     last = index.get_loc(pd.Timestamp(task.end))
     stop = min(last + 2, len(index))
     return TaskInput(task, period.profiles.iloc[first:stop][["load", "pv", "wind"]], period.night[first:stop],
-                     last + 1 - first, period.step_h, config.forecast_dir, bool(config.detail), config.acopf_solver)
+                     last + 1 - first, period.step_h, config.forecast_dir, config.detail_tables, config.acopf_solver)
 
 
 def run_task(inp: TaskInput) -> TaskOutput:
-    """Run every strategy of the task on one scenario (single-threaded BLAS, so results
-    are bit-identical wherever it runs)."""
+    """Run every night mode and strategy of the task, the strategies of a night mode on one
+    scenario (single-threaded BLAS, so results are bit-identical wherever it runs)."""
     from opfbench.timing import elapsed_ms, now
 
     start = now()
     t = inp.task
     with threadpool_limits(1):
         step = pd.Timedelta(hours=inp.step_h)
-        scenario = chunk_scenario(t.case, t.night_mode, t.forecast, inp.profiles, inp.night, inp.n_steps, step,
-                                  inp.forecast_dir)
         time, night = inp.profiles.index[:inp.n_steps], inp.night[:inp.n_steps]
-        steps, der_q, bus_v = [], [], []
-        for name in t.strategies:
-            takes_solver = "solver" in get_strategy(name).options  # acopf; acopf-paper pins IPOPT
-            res = run_strategy(name, scenario, t.k, **({"solver": inp.acopf_solver} if takes_solver else {}))
-            steps.append(step_rows(t.case, t.night_mode, t.forecast, time, inp.step_h, night, res))
-            if inp.detail:
-                q, v = detail_rows(t.case, t.night_mode, t.forecast, time, res)
-                der_q.append(q)
-                bus_v.append(v)
-    cat = (lambda frames: pd.concat(frames, ignore_index=True) if frames else None)
-    return TaskOutput(t, cat(steps), cat(der_q), cat(bus_v), elapsed_ms(start) / 1e3)
+        steps, detail = [], {name: [] for name in inp.detail}
+        for mode in t.night_modes:
+            scenario = chunk_scenario(t.case, mode, t.forecast, inp.profiles, inp.night, inp.n_steps, step,
+                                      inp.forecast_dir)
+            for name in t.strategies:
+                takes_solver = "solver" in get_strategy(name).options  # the AC OPF entries
+                res = run_strategy(name, scenario, t.k, **({"solver": inp.acopf_solver} if takes_solver else {}))
+                steps.append(step_rows(t.case, mode, t.forecast, time, inp.step_h, night, res))
+                for name, frame in detail_rows(t.case, mode, t.forecast, time, res, inp.detail).items():
+                    detail[name].append(frame)
+    return TaskOutput(t, pd.concat(steps, ignore_index=True),
+                      {name: pd.concat(frames, ignore_index=True) for name, frames in detail.items()},
+                      elapsed_ms(start) / 1e3)
