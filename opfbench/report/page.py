@@ -75,7 +75,7 @@ def _digits(column: str) -> int:
 def _cell(value: object, digits: int) -> str:
     if isinstance(value, (float, np.floating)):
         return "—" if not math.isfinite(value) else f"{value:,.{digits}f}"
-    return "—" if value is None else str(value)
+    return "—" if value is None or value is pd.NA else str(value)
 
 
 def table_html(frame: pd.DataFrame) -> str:

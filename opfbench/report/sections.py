@@ -98,6 +98,14 @@ def convergence(inputs: Inputs) -> Section:
     conv = tables.convergence(inputs.steps)
     if conv.empty:
         return sec.add(Block("note", text="The run has no formulation (acopf, acopf-paper, socp)."))
+    solver = (inputs.manifest or {}).get("config", {}).get("acopf_solver", "auto")
+    sec.add(Block("note", text=(
+        "AC OPF solver 'auto': where the SOCP relaxation's point is AC-feasible and its losses lie within 1e-6 of "
+        "the relaxation's lower bound it is the certified AC optimum and IPOPT is not run; IPOPT solves the other "
+        "steps. IPOPT's own failure rate on every step (the paper's question): opfbench run --acopf-solver ipopt."
+        if solver == "auto" else
+        "AC OPF solver 'ipopt': IPOPT solved every step of acopf and acopf-paper (the paper's question: how often "
+        "does a nonlinear OPF solver fail?).")))
     sec.add(table(conv, "Steps per status"))
     sec.add(table(tables.failure_reasons(inputs.steps), "Steps not ok: status, solver return status and fallback used"))
     sec.add(table(tables.solver_stats(inputs.steps), "Solver iterations and solve times (ms): IPOPT for acopf/acopf-paper (0 iterations where the SOCP certified the step), Clarabel for socp"))

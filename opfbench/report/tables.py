@@ -71,6 +71,11 @@ def convergence(steps: pd.DataFrame) -> pd.DataFrame:
     out = counts.copy()
     out.insert(0, "steps", total)
     out["not ok %"] = 100.0 * (total - counts["ok"]) / total
+    ac = sub["strategy"] != "socp"  # who certified the AC OPF's ok steps
+    for solver in ("socp", "ipopt"):
+        picked = sub[ac & (sub["status"] == "ok") & (sub["certified_by"] == solver)]
+        out[f"ok, certified by {solver}"] = picked.groupby(["case", "strategy", "k"]).size().reindex(
+            out.index, fill_value=0).where(out.index.get_level_values("strategy") != "socp").astype("Int64")
     return order(out.reset_index())
 
 
