@@ -89,7 +89,7 @@ def summary_table(steps: pd.DataFrame) -> pd.DataFrame:
     return out
 
 
-def write_run(directory: Path, case: str = "paper33", detail: bool = True) -> Path:
+def write_run(directory: Path, case: str = "paper33", detail: bool = True, period: str = "paper-day") -> Path:
     """A run folder per the run-folder contract (manifest, steps, summary, der_q, bus_v)."""
     directory.mkdir(parents=True, exist_ok=True)
     steps = steps_table(case)
@@ -108,7 +108,7 @@ def write_run(directory: Path, case: str = "paper33", detail: bool = True) -> Pa
         "schema": 1, "opfbench_version": "0.1.0", "git_commit": "0123abc", "command": ["opfbench", "run"],
         "created_utc": "2026-11-23T19:00:00+00:00",
         "config": {"cases": [case], "strategies": list(STRATEGIES), "ks": list(KS), "night_modes": list(NIGHT_MODES),
-                   "night": "20:00-05:00", "forecast": ["off", "oracle"], "period": "paper-day", "step_minutes": 10.0,
+                   "night": "20:00-05:00", "forecast": ["off", "oracle"], "period": period, "step_minutes": 10.0,
                    "price_per_kwh": 0.25, "currency": "EUR", "price_source": "fixture", "chunk": "day", "detail": detail},
         "period": {"start": str(time[0]), "end": str(time[-1]), "steps": len(time), "step_h": 1 / 6},
         "data_sources": ["BSRN Payerne (PV, 1 min)", "SimBench (load, wind)"],
@@ -116,7 +116,8 @@ def write_run(directory: Path, case: str = "paper33", detail: bool = True) -> Pa
         "machine": {"cores": 2, "platform": "linux"},
         "cases": {case: {"buses": 33, "ders": [{"bus": b, "kind": kd, "rating_mw": 0.6} for b, kd in DER],
                          "vmin_pu": 0.9, "vmax_pu": 1.1}},
-        "tasks": [], "timings": {"wall_s": 12.5, "workers": 2, "scheduler": None},
+        "tasks": [], "timings": {"wall_s": 12.5, "workers": 2, "scheduler": None, "peak_rss_mb": 321.0,
+                                 "worker_peak_rss_mb": 654.0},
     })
     return directory
 

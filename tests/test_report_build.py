@@ -13,13 +13,14 @@ from opfbench.report import build_html, write_report
 from opfbench.report.claims import FAILS, HOLDS, NA, claims
 from opfbench.report.inputs import load_inputs
 
-SECTIONS = ("claims", "metadata", "losses", "convergence", "night", "gap", "voltage", "forecasting", "fault")
+SECTIONS = ("claims", "metadata", "losses", "convergence", "year", "night", "gap", "voltage", "forecasting", "fault")
 EVIL = "<img src=x onerror=alert(1)>.m"
 
 
 @pytest.fixture(scope="module")
 def folders(tmp_path_factory):
     root = tmp_path_factory.mktemp("report")
+    write_run(root / "year", detail=False, period="year")
     return write_run(root / "run"), write_fault(root / "fault")
 
 
@@ -29,22 +30,25 @@ def _verdicts(inputs) -> dict[str, str]:
 
 def test_full_report_has_every_section_and_no_missing_input(folders):
     run, fault = folders
-    html = build_html(load_inputs(run, fault_dir=fault))
+    html = build_html(load_inputs(run, fault_dir=fault, year_dir=run.parent / "year"))
     for section in SECTIONS:
         assert f'<section id="{section}" class="report-section">' in html
     assert "Not available" not in html and "could not be built" not in html
+    year = html[html.index('id="year"'):html.index('id="night"')]
+    assert "321 MB (main process), 654 MB (largest worker process)" in year and "Energy losses over the year" in year
     assert html.count("<script>") == 2  # plotly.js once, the drawing loop once
     assert html.count('class="plot"') == html.count('type="application/json"') >= 10
     assert "<script src=" not in html and "<link" not in html
 
 
 def test_missing_inputs_name_the_command(tmp_path):
-    out = write_report(tmp_path, forecast_dir=tmp_path, out=tmp_path / "r.html")
+    out = write_report(tmp_path, forecast_dir=tmp_path, out=tmp_path / "r.html", year_dir=tmp_path)
     html = out.read_text()
     for section in SECTIONS:
         assert f'id="{section}"' in html
     assert f"opfbench run --out {tmp_path}" in html
     assert "opfbench forecast --dataset pv --out DIR" in html and "opfbench fault CASE --out DIR" in html
+    assert "opfbench run --period year --out reports/year" in html
     assert set(_verdicts(load_inputs(tmp_path, forecast_dir=tmp_path)).values()) == {NA}
 
 
@@ -84,3 +88,8 @@ def test_report_command_rebuilds_the_page(folders, tmp_path, capsys):
     assert again.read_text() == html  # rebuilding from the same files gives the same page
     assert main(["report", str(tmp_path / "absent")]) == 2
     assert "opfbench run --out" in capsys.readouterr().err
+    assert main(["report", str(run), "--year-dir", str(run)]) == 2  # a paper-day run is not a year run
+    assert "holds no finished year run" in capsys.readouterr().err
+    year = run.parent / "year"
+    assert main(["report", str(run), "--year-dir", str(year), "--out", str(tmp_path / "y.html")]) == 0
+    assert f"{year} (created" in (tmp_path / "y.html").read_text()

@@ -19,6 +19,9 @@ def register(sub: argparse._SubParsersAction) -> None:
                                                      "committed docs/forecast metrics)")
     p.add_argument("--fault-dir", type=Path, help="folder written by `opfbench fault ... --out DIR` "
                                                   "(default reports/fault when it holds one)")
+    p.add_argument("--year-dir", type=Path, help="folder written by `opfbench run --period year --out DIR` "
+                                                 "(default reports/year when it holds one, else the committed "
+                                                 "docs/year summary)")
     p.add_argument("--out", type=Path, help="report file (default RUN_DIR/report.html)")
     p.add_argument("--price", type=float, help="energy price per kWh for the money rows "
                                                "(default: the run's manifest, else 0.20 EUR/kWh, Eurostat 2023-H2)")
@@ -27,17 +30,20 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from opfbench.report import write_report
-    from opfbench.report.sources import report_sources
+    from opfbench.report.sources import holds_year_run, report_sources
 
     if not args.run_dir.is_dir():
         raise InputError(f"run folder {args.run_dir} does not exist; write it with `opfbench run --out {args.run_dir}`")
-    for name in ("forecast_dir", "fault_dir"):
+    for name in ("forecast_dir", "fault_dir", "year_dir"):
         folder = getattr(args, name)
         if folder is not None and not folder.is_dir():
             raise InputError(f"--{name.replace('_', '-')} {folder} does not exist")
     if args.price is not None and not (math.isfinite(args.price) and args.price >= 0):
         raise InputError(f"--price must be a finite number ≥ 0, got {args.price}")
-    forecast_dir, fault_dir = report_sources(args.forecast_dir, args.fault_dir)
-    path = write_report(args.run_dir, forecast_dir, fault_dir, args.out, args.price)
+    forecast_dir, fault_dir, year_dir = report_sources(args.forecast_dir, args.fault_dir, args.year_dir)
+    if args.year_dir is not None and not holds_year_run(args.year_dir):
+        raise InputError(f"--year-dir {args.year_dir} holds no finished year run (manifest.json with period "
+                         f"'year' and summary.csv); write one with `opfbench run --period year --out {args.year_dir}`")
+    path = write_report(args.run_dir, forecast_dir, fault_dir, args.out, args.price, year_dir)
     print(f"wrote {path}", file=sys.stderr)
     return 0

@@ -59,6 +59,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--fault-dir", type=Path, default=None,
                    help="a fault study's folder (`opfbench fault ... --out DIR`) for the report's fault section "
                         "(default reports/fault, when it holds one)")
+    p.add_argument("--year-dir", type=Path, default=None,
+                   help="a year run's folder (`opfbench run --period year --out DIR`) for the report's year section "
+                        "(default reports/year when it holds one, else the committed docs/year summary)")
     p.add_argument("--period", default="paper-day",
                    help="paper-day (default; 1 min, BSRN PV), year (2016 at 15 min, SimBench PV3) or START..END "
                         "(local times, END excluded)")
@@ -83,12 +86,15 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 def run(args: argparse.Namespace) -> int:
     source = DEFAULT_PRICE_SOURCE if args.price == DEFAULT_PRICE_PER_KWH else "--price"
-    from opfbench.report.sources import holds_fault_study
+    from opfbench.report.sources import holds_fault_study, holds_year_run
     from opfbench.study.runner import run_study
 
     if args.fault_dir is not None and not holds_fault_study(args.fault_dir):
         raise InputError(f"--fault-dir {args.fault_dir} holds no fault study (fault.parquet); "
                          f"write one with `opfbench fault CASE --out {args.fault_dir}`")
+    if args.year_dir is not None and not holds_year_run(args.year_dir):
+        raise InputError(f"--year-dir {args.year_dir} holds no finished year run (manifest.json with period "
+                         f"'year' and summary.csv); write one with `opfbench run --period year --out {args.year_dir}`")
     config = StudyConfig.build(
         cases=args.case, strategies=args.strategies, ks=args.k, night_modes=args.night_modes, night=args.night,
         forecast=args.forecast, period=args.period, step_minutes=args.step_minutes, chunk=args.chunk,
@@ -112,8 +118,9 @@ def finish_run(result: StudyRun, args: argparse.Namespace) -> int:
     from opfbench.report.sources import holds_forecasts, report_sources
 
     forecast_dir = Path(args.forecast_dir)
-    report = write_report(result.out, *report_sources(forecast_dir if holds_forecasts(forecast_dir) else None,
-                                                      args.fault_dir))
+    forecast, fault, year = report_sources(forecast_dir if holds_forecasts(forecast_dir) else None, args.fault_dir,
+                                           args.year_dir)
+    report = write_report(result.out, forecast, fault, year_dir=year)
     summary = result.summary
     if args.json:
         print_json(summary.to_dict(orient="records"))

@@ -22,13 +22,14 @@ def build_html(inputs: Inputs, price: float | None = None) -> str:
 
 
 def write_report(run_dir: str | Path, forecast_dir: str | Path | None = None, fault_dir: str | Path | None = None,
-                 out: str | Path | None = None, price: float | None = None) -> Path:
+                 out: str | Path | None = None, price: float | None = None, year_dir: str | Path | None = None) -> Path:
     """Write the report of `run_dir` to `out` (default `run_dir/report.html`), atomically.
 
     `forecast_dir`: a forecast run's folder (default: the committed docs/forecast JSONs);
     `fault_dir`: a fault study's folder (default: none — the section says how to make one);
+    `year_dir`: a year run's folder (default: the committed docs/year summary);
     `price`: energy price per kWh (default: the manifest's config.price_per_kwh)."""
-    inputs = load_inputs(run_dir, forecast_dir, fault_dir)
+    inputs = load_inputs(run_dir, forecast_dir, fault_dir, year_dir)
     target = Path(out) if out is not None else Path(run_dir) / "report.html"
     target.parent.mkdir(parents=True, exist_ok=True)
     write_atomic(target, build_html(inputs, price))

@@ -16,8 +16,11 @@ RUN_COMMAND = "opfbench run --out {dir}"
 DETAIL_COMMAND = "opfbench run --detail --out {dir} (default on for periods of ≤ 2 days)"
 FORECAST_COMMAND = "opfbench forecast --dataset pv --out DIR and opfbench forecast --dataset wind --out DIR"
 FAULT_COMMAND = "opfbench fault CASE --out DIR (then opfbench report RUN_DIR --fault-dir DIR)"
+YEAR_COMMAND = "opfbench run --period year --out reports/year (then opfbench report RUN_DIR --year-dir reports/year)"
 DOCS_FORECAST = Path(opfbench.__file__).resolve().parents[1] / "docs" / "forecast"
 """The committed forecast JSONs, read when no forecast folder is given (a source checkout only)."""
+DOCS_YEAR = Path(opfbench.__file__).resolve().parents[1] / "docs" / "year"
+"""The committed year run's summary and manifest, read when no year folder is given."""
 
 
 @dataclass
@@ -35,6 +38,9 @@ class Inputs:
     traces: pd.DataFrame | None = None
     fault_manifest: dict | None = None
     fault_dir: Path | None = None
+    year_summary: pd.DataFrame | None = None
+    year_manifest: dict | None = None
+    year_dir: Path | None = None
     missing: dict[str, str] = field(default_factory=dict)  # input name -> how to produce it
 
 
@@ -48,16 +54,21 @@ def _json(path: Path) -> dict | None:
     return json.loads(path.read_text()) if path.is_file() else None
 
 
+def _summary(path: Path) -> pd.DataFrame | None:
+    if not path.is_file():
+        return None
+    summary = pd.read_csv(path, dtype={"case": str, "strategy": str, "night_mode": str, "forecast": str})
+    return summary if len(summary) else None
+
+
 def load_inputs(run_dir: str | Path, forecast_dir: str | Path | None = None,
-                fault_dir: str | Path | None = None) -> Inputs:
+                fault_dir: str | Path | None = None, year_dir: str | Path | None = None) -> Inputs:
     """Read what exists; record how to produce what does not."""
     run = Path(run_dir)
     inp = Inputs(run_dir=run)
     inp.manifest = _json(run / "manifest.json")
     inp.steps = _parquet(run / "steps.parquet")
-    if (run / "summary.csv").is_file():
-        summary = pd.read_csv(run / "summary.csv", dtype={"case": str, "strategy": str, "night_mode": str, "forecast": str})
-        inp.summary = summary if len(summary) else None
+    inp.summary = _summary(run / "summary.csv")
     inp.der_q = _parquet(run / "der_q.parquet")
     for name, frame in (("manifest.json", inp.manifest), ("steps.parquet", inp.steps), ("summary.csv", inp.summary)):
         if frame is None:
@@ -82,4 +93,10 @@ def load_inputs(run_dir: str | Path, forecast_dir: str | Path | None = None,
         inp.missing["fault.parquet"] = FAULT_COMMAND
     if inp.traces is None:
         inp.missing["traces.parquet"] = FAULT_COMMAND
+
+    inp.year_dir = Path(year_dir) if year_dir is not None else DOCS_YEAR
+    inp.year_summary = _summary(inp.year_dir / "summary.csv")
+    inp.year_manifest = _json(inp.year_dir / "manifest.json")
+    if inp.year_summary is None or inp.year_manifest is None:
+        inp.missing["year run"] = YEAR_COMMAND
     return inp

@@ -74,7 +74,7 @@ def losses_day(steps: pd.DataFrame) -> list[Plot]:
     return out
 
 
-def energy_vs_k(summary: pd.DataFrame) -> list[Plot]:
+def energy_vs_k(summary: pd.DataFrame, pid: str = "energy-k", period: str = "") -> list[Plot]:
     out = []
     for i, case in enumerate(_cases(summary)):
         sub = summary[(summary["case"] == case) & (summary["night_mode"] == REFERENCE_NIGHT)]
@@ -84,7 +84,7 @@ def energy_vs_k(summary: pd.DataFrame) -> list[Plot]:
             name = strategy if forecast == "off" else f"{strategy} (forecast {forecast})"
             fig.add_scatter(x=grp["k"], y=grp["energy_kwh"], mode="lines+markers", name=escape(name),
                             line=dict(dash="solid" if forecast == "off" else "dot"))
-        out.append(plot_json(f"energy-k-{i}", f"{case}: energy losses vs reserve k (night connected)", fig,
+        out.append(plot_json(f"{pid}-{i}", f"{case}: energy losses vs reserve k{period} (night connected)", fig,
                          "reserve coefficient k", "energy losses (kWh)"))
     return out
 

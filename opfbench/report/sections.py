@@ -123,6 +123,40 @@ def convergence(inputs: Inputs) -> Section:
     return sec
 
 
+def year(inputs: Inputs, price: tuple[float, str, str]) -> Section:
+    sec = Section("year", "A year (2016 at 15 min)",
+                  "The whole grid over the year 2016 at SimBench's native 15 min: energy per strategy and k, savings vs "
+                  "no action, and what the run cost (wall time, peak memory).")
+    if (inputs.manifest or {}).get("config", {}).get("period") == "year":
+        return sec.add(Block("note", text="This run is the year run: the sections above show it."))
+    if inputs.year_summary is None or inputs.year_manifest is None:
+        return sec.add(*_missing(inputs, "year run"))
+    m, s = inputs.year_manifest, inputs.year_summary
+    period, timings = m.get("period", {}), m.get("timings") or {}
+    sec.add(Block("meta", items=[
+        ("run folder", f"{inputs.year_dir} (created {m.get('created_utc')}, opfbench {m.get('opfbench_version')})"),
+        ("command", " ".join(str(a) for a in m.get("command") or [])),
+        ("period", f"{period.get('start')} → {period.get('end')}, {period.get('steps')} steps of "
+                   f"{m.get('config', {}).get('step_minutes')} min; {len(m.get('tasks', []))} tasks"),
+        ("wall time", f"{_seconds(timings.get('wall_s'))} on {timings.get('workers')} worker process(es) "
+                      f"({(m.get('machine') or {}).get('cores')} cores)"),
+        ("peak memory", f"{timings.get('peak_rss_mb', float('nan')):.0f} MB (main process), "
+                        f"{timings.get('worker_peak_rss_mb', float('nan')):.0f} MB (largest worker process)"),
+    ]))
+    for mode in [m for m in ("connected", "disconnected", "connected-q") if m in set(s["night_mode"])]:
+        sec.add(table(tables.energy_pivot(s, mode), f"Energy losses over the year (kWh) per strategy and k, PV {mode} "
+                                                    "at night", collapse_over=60))
+    sec.add(table(tables.energy_pivot(s, tables.REFERENCE_NIGHT, "savings_pct"),
+                  "Savings vs no action over the year (%), PV connected at night", collapse_over=60))
+    money = tables.losses(s, price[0])
+    sec.add(table(tables.energy_pivot(money, tables.REFERENCE_NIGHT, "money_per_year"),
+                  f"Money saved per year vs no action ({price[1]} at {price[0]:g}/kWh), PV connected at night",
+                  collapse_over=60))
+    sec.add(table(tables.convergence_summary(s), "Steps not ok over the year per formulation and k (all night modes)"))
+    sec.blocks += _plots(plots.energy_vs_k(s, "year-energy-k", " over the year"))
+    return sec
+
+
 def night(inputs: Inputs) -> Section:
     sec = Section("night", "Night hours",
                   "PV inverters connected vs disconnected at night, and connected-q: connected with the S-limited "
@@ -220,12 +254,12 @@ def paper_claims(inputs: Inputs) -> Section:
     return sec.add(Block("claims", claims=claims(inputs)))
 
 
-PRICED = {metadata, losses}
+PRICED = {metadata, losses, year}
 """Builders that also take the energy price (currency per kWh, currency, source)."""
 SECTIONS = (
     ("claims", "The paper's claims", paper_claims), ("metadata", "Run metadata", metadata),
     ("losses", "Losses and savings", losses), ("convergence", "Convergence of the formulations", convergence),
-    ("night", "Night hours", night), ("gap", "Optimality gap", gap), ("voltage", "Voltage compliance", voltage),
+    ("year", "A year (2016 at 15 min)", year), ("night", "Night hours", night), ("gap", "Optimality gap", gap), ("voltage", "Voltage compliance", voltage),
     ("forecasting", "Forecasting", forecasting), ("fault", "Fault ride-through", fault),
 )
 """(id, title, builder) in page order."""
