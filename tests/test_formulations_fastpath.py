@@ -188,3 +188,16 @@ def test_per_thread_cache_keeps_the_most_recent_objects():
     for i in range(1, PER_THREAD + 1):
         per_thread(net, f"probe-{i}", object)
     assert per_thread(net, "probe-0", object) is not first  # dropped, built afresh
+
+
+def test_an_infeasible_relaxation_settles_the_step_without_ipopt():
+    """Twice the nominal load and no Q (k = 1) pull paper33 below 0.9 p.u.: the SOCP proves
+    the AC OPF infeasible, so the fast path records it without IPOPT; IPOPT agrees."""
+    net = load_case("paper33")
+    scenario = Scenario(net, np.array([1.0, 2.0, 3.0]), np.zeros((3, len(net.ders))))
+    fast = run_acopf(scenario, 1.0)
+    assert list(fast.status) == ["ok", "infeasible", "infeasible"]
+    assert list(fast.extra["solver_status"][1:]) == ["PrimalInfeasible"] * 2
+    assert np.all(fast.extra["iterations"][1:] == 0) and np.all(fast.q_mvar[1:] == 0)
+    ipopt = run_acopf(Scenario(net, scenario.load_scale, scenario.der_p_mw), 1.0, solver="ipopt")
+    assert list(ipopt.status) == list(fast.status) and np.all(ipopt.extra["iterations"][1:] > 0)

@@ -18,7 +18,8 @@ overshoot. Every solve returns its status, iterations and time from IPOPT's stat
 `run_acopf` settles every snapshot of a scenario. With `solver="auto"` (default) it
 first takes the certified fast path: the SOCP relaxation (`socp.socp_solves`, shared
 with the `socp` strategy on the same scenario and k) is solved on every snapshot and
-its setpoints are evaluated by ONE batched AC power flow; where they are AC-feasible
+its setpoints are evaluated by ONE batched AC power flow; where the relaxation is
+infeasible the AC OPF is too (status "infeasible", no action, IPOPT not run); where they are AC-feasible
 (`OpfProblem.feasible`) and their AC losses lie within CERTIFY_RTOL (relative) of the
 relaxation's bound — a lower bound on every AC-feasible point's losses — they are the
 AC optimum up to that tolerance: recorded with status "ok", extra["certified_by"] =
@@ -260,7 +261,8 @@ class _Snapshot:
                                                                 "solver_status": "not-run", "relaxation_gap": np.nan}
         by_socp = self.certified_by == CERTIFIED_BY_SOCP
         return {
-            "solver_status": socp["solver_status"] if by_socp else " → ".join(a.status for a in self.attempts),
+            "solver_status": socp["solver_status"] if by_socp or not self.attempts
+            else " → ".join(a.status for a in self.attempts),
             "iterations": sum(a.iterations for a in self.attempts),
             "solve_ms": socp["solve_ms"] if by_socp else sum(a.solve_ms for a in self.attempts),
             "warm_start": bool(self.attempts and self.attempts[0].warm),
@@ -383,6 +385,8 @@ def run_acopf(scenario: Scenario, k: float, *, slack_export: bool = True, fallba
         if certified[i]:
             settled.append(_Snapshot(fast.q_pu[i], OK, FROM_SOLVER, [], solves[i], 0, CERTIFIED_BY_SOCP,
                                      float(fast.pf.losses_kw[i])))
+        elif fast_path and solves[i].outcome == "infeasible":  # the relaxation proves it: no IPOPT
+            settled.append(_Snapshot(np.zeros(len(net.ders)), INFEASIBLE, FROM_NO_ACTION, [], solves[i], 1, ""))
         else:
             s = policy.settle(i)
             s.power_flows += int(fast_path)  # the fast path's flow; a certified one's is its evaluation
