@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 from dataclasses import replace
 
+import casadi as ca
 import numpy as np
 import pytest
 
@@ -147,6 +148,21 @@ def test_chain_falls_back_to_socp_then_paper_to_no_action(paper33, monkeypatch, 
 def test_no_lower_bound_when_not_asked(paper33):
     res = run_acopf(Scenario.snapshot(paper33, 1.0, 0.8), 0.0, lower_bound=False, solver="ipopt")
     assert np.isnan(res.lower_bound_kw[0]) and res.extra["socp_status"][0] == "not-run"
+
+
+def test_mx_and_sx_models_agree(paper33, monkeypatch):
+    """The NLP in CasADi MX (large feeders) is the SX one's: same optimum and setpoints."""
+    scenario = daily_scenario(paper33, 4)
+    data = snapshot_data(scenario, 0.3)
+    sx = build_acopf(paper33)
+    monkeypatch.setattr(acopf, "MX_MIN_BUSES", 0)
+    mx = build_acopf(paper33)
+    assert isinstance(mx._nlp["x"], ca.MX) and isinstance(sx._nlp["x"], ca.SX)
+    for i in range(4):
+        a, b = (o.solve(data.s_fixed[i], data.q_limit[i]) for o in (sx, mx))
+        assert a.success and b.success
+        assert b.objective_kw == pytest.approx(a.objective_kw, rel=1e-8)
+        np.testing.assert_allclose(b.q_pu, a.q_pu, atol=1e-7)
 
 
 def test_warm_start_saves_iterations(paper33):
