@@ -81,15 +81,16 @@ def test_input_strings_are_escaped(tmp_path):
 def test_report_command_rebuilds_the_page(folders, tmp_path, capsys):
     run, fault = folders
     out = tmp_path / "report.html"
-    assert main(["report", str(run), "--fault-dir", str(fault), "--out", str(out), "--price", "0.5"]) == 0
+    year = run.parent / "year"
+    assert main(["report", str(run), "--fault-dir", str(fault), "--year-dir", str(year), "--out", str(out),
+                 "--price", "0.5"]) == 0
     html = out.read_text()
     assert "0.5 EUR/kWh — given with --price" in html
-    again = write_report(run, fault_dir=fault, out=tmp_path / "again.html", price=0.5)
+    again = write_report(run, fault_dir=fault, out=tmp_path / "again.html", price=0.5, year_dir=year)
     assert again.read_text() == html  # rebuilding from the same files gives the same page
     assert main(["report", str(tmp_path / "absent")]) == 2
     assert "opfbench run --out" in capsys.readouterr().err
     assert main(["report", str(run), "--year-dir", str(run)]) == 2  # a paper-day run is not a year run
     assert "holds no finished year run" in capsys.readouterr().err
-    year = run.parent / "year"
     assert main(["report", str(run), "--year-dir", str(year), "--out", str(tmp_path / "y.html")]) == 0
     assert f"{year} (created" in (tmp_path / "y.html").read_text()

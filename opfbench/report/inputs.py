@@ -9,8 +9,12 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import pandas as pd
+import pyarrow as pa
+import pyarrow.parquet as pq
 
 import opfbench
+from opfbench.registry import FORMULATIONS
+from opfbench.report.tables import REFERENCE_NIGHT
 
 RUN_COMMAND = "opfbench run --out {dir}"
 DETAIL_COMMAND = "opfbench run --detail --out {dir} (default on for periods of ≤ 2 days)"
@@ -54,6 +58,37 @@ def _json(path: Path) -> dict | None:
     return json.loads(path.read_text()) if path.is_file() else None
 
 
+STEP_COLUMNS = ("case", "strategy", "k", "night_mode", "forecast", "time", "status", "losses_kw", "vmin_pu", "vmax_pu",
+                "solver_ms", "iterations", "certified_by", "fallback", "solver_status")
+"""The columns of steps.parquet the report uses."""
+
+
+def reference_setting(summary: pd.DataFrame) -> tuple[str, float] | None:
+    """(night mode, k) of the report's per-step plots: night connected (else the first
+    mode), forecast off, the smallest k; None without a forecast-off row."""
+    modes = list(dict.fromkeys(summary["night_mode"]))
+    mode = REFERENCE_NIGHT if REFERENCE_NIGHT in modes else modes[0]
+    off = summary[(summary["night_mode"] == mode) & (summary["forecast"] == "off")]
+    return (mode, float(off["k"].min())) if len(off) else None
+
+
+def _steps(path: Path, summary: pd.DataFrame | None) -> pd.DataFrame | None:
+    """The per-step rows the report uses — every formulation's (convergence tables) and the
+    reference setting's (plots) — with only the columns it uses, text as arrow strings:
+    read with parquet filters, so a year's table need not fit in memory."""
+    if not path.is_file():
+        return None
+    names = pq.read_schema(path).names
+    filters = None
+    reference = reference_setting(summary) if summary is not None else None
+    if reference is not None:
+        filters = [[("strategy", "in", list(FORMULATIONS))],
+                   [("night_mode", "==", reference[0]), ("forecast", "==", "off"), ("k", "==", reference[1])]]
+    table = pq.read_table(path, columns=[c for c in STEP_COLUMNS if c in names], filters=filters)
+    frame = table.to_pandas(types_mapper={pa.string(): pd.StringDtype("pyarrow")}.get)
+    return frame if len(frame) else None
+
+
 def _summary(path: Path) -> pd.DataFrame | None:
     if not path.is_file():
         return None
@@ -67,8 +102,8 @@ def load_inputs(run_dir: str | Path, forecast_dir: str | Path | None = None,
     run = Path(run_dir)
     inp = Inputs(run_dir=run)
     inp.manifest = _json(run / "manifest.json")
-    inp.steps = _parquet(run / "steps.parquet")
     inp.summary = _summary(run / "summary.csv")
+    inp.steps = _steps(run / "steps.parquet", inp.summary)
     inp.der_q = _parquet(run / "der_q.parquet")
     for name, frame in (("manifest.json", inp.manifest), ("steps.parquet", inp.steps), ("summary.csv", inp.summary)):
         if frame is None:
