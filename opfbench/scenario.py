@@ -59,6 +59,20 @@ class Scenario:
                 raise InputError(f"scenario: pv_night_q must have shape (S,) = {ls.shape}, got {mask.shape}")
             object.__setattr__(self, "pv_night_q", _frozen(mask))
 
+    def same_data(self, other: "Scenario") -> bool:
+        """The same network object and the same snapshots — loads, DER P, forecast and the
+        "Q at night" mask (a mask set nowhere counts as none) — so that every strategy, a
+        deterministic function of these, gives the same result on both."""
+        def night_q(s: Scenario) -> np.ndarray | None:
+            return s.pv_night_q if s.pv_night_q is not None and s.pv_night_q.any() else None
+
+        def equal(a: np.ndarray | None, b: np.ndarray | None) -> bool:
+            return (a is None and b is None) or (a is not None and b is not None and np.array_equal(a, b))
+
+        return (self.net is other.net and equal(self.load_scale, other.load_scale)
+                and equal(self.der_p_mw, other.der_p_mw) and equal(self.der_p_forecast_mw, other.der_p_forecast_mw)
+                and equal(night_q(self), night_q(other)))
+
     def _check_range(self, label: str, p: np.ndarray) -> None:
         """0 ≤ P ≤ rating (MW) per DER, up to round-off."""
         rating = self.net.der_rating_mw

@@ -276,3 +276,16 @@ def test_default_detail_is_the_der_q_table_on_short_periods(tmp_path):
     assert run.config.detail_tables == ("der_q",)
     assert len(pd.read_parquet(run.out / "der_q.parquet")) == 2 * 60 * 5 and not (run.out / "bus_v.parquet").exists()
     assert pd.read_parquet(run.out / "der_q.parquet")["strategy"].dtype == object  # text, not categorical
+
+
+def test_a_night_mode_with_the_same_scenario_takes_the_results_of_the_first(tmp_path):
+    """A winter night with no PV output: connected and disconnected are the same scenario,
+    so the second mode's rows are the first's (wall time 0); connected-q differs."""
+    config = StudyConfig(strategies=("no-action", "lfma", "acopf"), ks=(0.2,), forecast=("off",),
+                         period="2016-01-10T22:00..2016-01-10T23:00")
+    steps = pd.read_parquet(run_study(config, tmp_path / "run", quiet=True).out / "steps.parquet")
+    by_mode = {m: g.drop(columns=["night_mode"]).reset_index(drop=True) for m, g in steps.groupby("night_mode")}
+    on, off, night_q = by_mode["connected"], by_mode["disconnected"], by_mode["connected-q"]
+    pd.testing.assert_frame_equal(on.drop(columns=["wall_ms"]), off.drop(columns=["wall_ms"]), check_exact=True)
+    assert (off.wall_ms == 0).all() and (on.wall_ms > 0).all() and (night_q.wall_ms > 0).all()
+    assert not np.allclose(on.losses_kw[on.strategy == "acopf"], night_q.losses_kw[night_q.strategy == "acopf"])

@@ -4,13 +4,16 @@ A task is (case, forecast, k, chunk of steps) and runs every requested strategy 
 night mode of that group, the strategies of one night mode on ONE Scenario object (so
 `acopf`, `acopf-paper` and `socp` share SOCP solves). The night modes differ only in the
 night hours, so their daytime snapshots are the same problems: one task solves each once
-(`socp.socp_solves` reuses a solve of identical data in the same process). Its input carries its slice of the period's profiles, so it runs the same in
+(`socp.socp_solves` reuses a solve of identical data in the same process); and where two
+night modes give the very same scenario (no PV output in the night hours of the chunk), the
+second takes the first's results (`Scenario.same_data`) with its wall time 0. Its input carries its slice of the period's profiles, so it runs the same in
 this process, in a local worker process or on a remote Dask worker; the AC OPF starts
 cold at each chunk and warm-starts inside it — the same whatever the number of workers.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import re
 from dataclasses import asdict, dataclass
 
@@ -19,6 +22,8 @@ import pandas as pd
 from threadpoolctl import threadpool_limits
 
 from opfbench.registry import get_strategy, run_strategy
+from opfbench.result import StrategyResult
+from opfbench.scenario import Scenario
 from opfbench.study.config import StudyConfig
 from opfbench.study.periods import Period
 from opfbench.study.scenarios import chunk_scenario
@@ -116,15 +121,21 @@ def run_task(inp: TaskInput) -> TaskOutput:
         step = pd.Timedelta(hours=inp.step_h)
         time, night = inp.profiles.index[:inp.n_steps], inp.night[:inp.n_steps]
         steps, detail = [], {name: [] for name in inp.detail}
+        ran: list[tuple[Scenario, dict[str, StrategyResult]]] = []
         for mode in t.night_modes:
             scenario = chunk_scenario(t.case, mode, t.forecast, inp.profiles, inp.night, inp.n_steps, step,
                                       inp.forecast_dir)
+            same = next((results for earlier, results in ran if earlier.same_data(scenario)), None)
+            results = {}
             for name in t.strategies:
                 takes_solver = "solver" in get_strategy(name).options  # the AC OPF entries
-                res = run_strategy(name, scenario, t.k, **({"solver": inp.acopf_solver} if takes_solver else {}))
+                res = results[name] = dataclasses.replace(same[name], wall_ms=0.0) if same is not None else \
+                    run_strategy(name, scenario, t.k, **({"solver": inp.acopf_solver} if takes_solver else {}))
                 steps.append(step_rows(t.case, mode, t.forecast, time, inp.step_h, night, res))
                 for name, frame in detail_rows(t.case, mode, t.forecast, time, res, inp.detail).items():
                     detail[name].append(frame)
+            if same is None:
+                ran.append((scenario, results))
     return TaskOutput(t, pd.concat(steps, ignore_index=True),
                       {name: pd.concat(frames, ignore_index=True) for name, frames in detail.items()},
                       elapsed_ms(start) / 1e3)
