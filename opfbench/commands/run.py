@@ -66,8 +66,9 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="paper-day (default; 1 min, BSRN PV), year (2016 at 15 min, SimBench PV3) or START..END "
                         "(local times, END excluded)")
     p.add_argument("--step-minutes", type=_minutes, default=None, help="override the period's step (minutes)")
-    p.add_argument("--chunk", choices=CHUNKS, default="month",
-                   help="steps per task: a local day, week or month (default month; fixed, independent of workers)")
+    p.add_argument("--chunk", choices=CHUNKS, default="auto",
+                   help="steps per task: a local quarter day (6h), day, week or month; auto (default): 6h for "
+                        "periods of up to two days, else month (fixed by the config, independent of workers)")
     p.add_argument("--detail", action=argparse.BooleanOptionalAction, default=None,
                    help="also write the long tables of per-DER Q and per-bus V (default: per-DER Q only, and only "
                         "for periods of ≤ 2 days: the report plots it)")

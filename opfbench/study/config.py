@@ -18,11 +18,13 @@ from dataclasses import asdict, dataclass, field, replace
 from opfbench.errors import InputError
 from opfbench.report.price import DEFAULT_CURRENCY, DEFAULT_PRICE_PER_KWH, DEFAULT_PRICE_SOURCE
 from opfbench.registry import FORMULATIONS, STRATEGY_NAMES
+from opfbench.study.tables import DETAIL_TABLES
 
 NIGHT_MODES = ("connected", "disconnected", "connected-q")
 DEFAULT_KS = (0.0, 0.2, 0.4, 0.6, 0.8)
 DEFAULT_NIGHT = "20:00-05:00"
-CHUNKS = ("day", "week", "month")
+CHUNKS = ("auto", "6h", "day", "week", "month")
+SHORT_PERIOD_H = 48.0  # periods up to two days: 6-hour chunks ("auto") and the per-DER Q table by default
 _WINDOW = re.compile(r"^([01]\d|2[0-3]):([0-5]\d)-([01]\d|2[0-3]):([0-5]\d)$")
 #: Config fields that do not change any result (they only label the report); a run folder
 #: resumes across changes of these.
@@ -54,8 +56,9 @@ class StudyConfig:
     "oracle" (P^F = the next step's actual output) or a forecasting model's name whose PV
     forecasts `opfbench forecast --dataset pv --out DIR` wrote to `forecast_dir`.
     Formulations run only with forecast "off" (they always see the current P^C).
-    `chunk`: the length of one task's slice of the period (day/week/month, local time),
-    fixed by the config and never by the number of workers. `detail`: also write the long
+    `chunk`: the length of one task's slice of the period (6h/day/week/month, local time;
+    "auto": 6h for periods of up to two days, so the paper day's tasks spread over the
+    workers, month otherwise), fixed by the config and never by the number of workers. `detail`: also write the long
     tables of per-DER Q and per-bus V (None: per-DER Q alone for periods of ≤ 2 days, which
     the report plots); `detail_tables` the names resolved from it (`with_period`). Price fields only label the report.
     `acopf_solver`: "auto" (the SOCP certifies the AC optimum where it can, IPOPT solves the
@@ -69,7 +72,7 @@ class StudyConfig:
     forecast: tuple[str, ...] = ("off", "oracle")
     period: str = "paper-day"
     step_minutes: float | None = None
-    chunk: str = "month"
+    chunk: str = "auto"
     detail: bool | None = None
     detail_tables: tuple[str, ...] = ()
     acopf_solver: str = "auto"
@@ -126,6 +129,10 @@ class StudyConfig:
         body = {k: v for k, v in self.as_dict().items() if k not in LABEL_FIELDS}
         return hashlib.sha256(json.dumps(body, sort_keys=True).encode()).hexdigest()[:16]
 
-    def with_period(self, step_minutes: float, detail_tables: tuple[str, ...]) -> "StudyConfig":
-        """The config with the period's resolved step and long tables filled in."""
-        return replace(self, step_minutes=step_minutes, detail_tables=tuple(detail_tables))
+    def with_period(self, step_minutes: float, hours: float) -> "StudyConfig":
+        """The config with what the period decides filled in: its step, the long tables
+        (`detail`) and the chunk ("auto"), for a period of `hours`."""
+        short = hours <= SHORT_PERIOD_H
+        tables = DETAIL_TABLES if self.detail else ("der_q",) if self.detail is None and short else ()
+        chunk = ("6h" if short else "month") if self.chunk == "auto" else self.chunk
+        return replace(self, step_minutes=step_minutes, detail_tables=tables, chunk=chunk)

@@ -31,6 +31,7 @@ from opfbench.errors import InputError
 
 YEAR = "2016"
 _CHUNK_FREQ = {"day": "D", "week": "W", "month": "M"}
+CHUNK_6H = "6h"
 
 
 @dataclass(frozen=True)
@@ -49,8 +50,10 @@ class Period:
         return self.profiles.index
 
     def chunks(self, chunk: str) -> list[slice]:
-        """Consecutive slices of the steps, one per local calendar day/week/month."""
-        keys = self.index.tz_localize(None).to_period(_CHUNK_FREQ[chunk]).asi8
+        """Consecutive slices of the steps, one per local quarter day (00-06-12-18 h), day,
+        week or month."""
+        local = self.index.tz_localize(None)
+        keys = local.floor(CHUNK_6H).asi8 if chunk == CHUNK_6H else local.to_period(_CHUNK_FREQ[chunk]).asi8
         cuts = np.flatnonzero(np.diff(keys)) + 1
         bounds = [0, *cuts.tolist(), len(keys)]
         return [slice(a, b) for a, b in zip(bounds[:-1], bounds[1:], strict=True)]

@@ -17,11 +17,9 @@ from opfbench.study.execution import STOPPED, execute
 from opfbench.study.periods import Period, resolve_period
 from opfbench.study.progress import Progress
 from opfbench.study.store import RunStore
-from opfbench.study.tables import DETAIL_TABLES
 from opfbench.study.tasks import Task, TaskOutput, plan_tasks, task_input
 from opfbench.timing import elapsed_ms, now
 
-DETAIL_MAX_H = 48.0  # the per-DER Q table (the report plots it) by default for periods up to two days
 
 
 @dataclass
@@ -44,9 +42,7 @@ def prepare(config: StudyConfig) -> tuple[StudyConfig, Period, list[Task]]:
     """Resolve the period, load the cases, plan the tasks — everything that can refuse the
     input, before any work."""
     period = resolve_period(config.period, config.night, config.step_minutes)
-    short = period.step_h * len(period.index) <= DETAIL_MAX_H
-    tables = DETAIL_TABLES if config.detail else ("der_q",) if config.detail is None and short else ()
-    config = config.with_period(period.step_h * 60, tables)
+    config = config.with_period(period.step_h * 60, period.step_h * len(period.index))
     models = [s for s in config.forecast if s not in ("off", "oracle") and config.strategies_for(s)]
     if models:  # a missing or incomplete forecast file is refused here, not in a worker
         from opfbench.forecasting import load_forecast
