@@ -18,12 +18,13 @@ from dataclasses import asdict, dataclass, field, replace
 from opfbench.errors import InputError
 from opfbench.report.price import DEFAULT_CURRENCY, DEFAULT_PRICE_PER_KWH, DEFAULT_PRICE_SOURCE
 from opfbench.registry import FORMULATIONS, STRATEGY_NAMES
-from opfbench.study.tables import DETAIL_TABLES
 
 NIGHT_MODES = ("connected", "disconnected", "connected-q")
 DEFAULT_KS = (0.0, 0.2, 0.4, 0.6, 0.8)
 DEFAULT_NIGHT = "20:00-05:00"
 CHUNKS = ("auto", "6h", "day", "week", "month")
+#: The optional long tables (`study.tables.detail_rows`), in the order they are written.
+DETAIL_TABLES = ("der_q", "bus_v")
 SHORT_PERIOD_H = 48.0  # periods up to two days: 6-hour chunks ("auto") and the per-DER Q table by default
 _WINDOW = re.compile(r"^([01]\d|2[0-3]):([0-5]\d)-([01]\d|2[0-3]):([0-5]\d)$")
 #: Config fields that do not change any result (they only label the report); a run folder

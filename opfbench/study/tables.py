@@ -9,10 +9,9 @@ import numpy as np
 import pandas as pd
 
 from opfbench.result import OK, StrategyResult
+from opfbench.study.config import DETAIL_TABLES
 
 KEYS = ["case", "strategy", "k", "night_mode", "forecast"]
-#: The optional long tables, in the order they are written.
-DETAIL_TABLES = ("der_q", "bus_v")
 DETAIL_COLUMNS = {"der_q": [*KEYS, "time", "bus", "kind", "q_mvar"], "bus_v": [*KEYS, "time", "bus", "v_pu"]}
 VIOLATION_PU = 1e-6  # a step violates the voltage limits beyond this
 EXCURSION_MVAR = 1e-9  # a step's setpoint exceeds the physical capability beyond this
