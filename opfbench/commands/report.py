@@ -30,7 +30,7 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from opfbench.report import write_report
-    from opfbench.report.sources import holds_year_run, report_sources
+    from opfbench.report.sources import check_year_dir, report_sources
 
     if not args.run_dir.is_dir():
         raise InputError(f"run folder {args.run_dir} does not exist; write it with `opfbench run --out {args.run_dir}`")
@@ -40,10 +40,8 @@ def run(args: argparse.Namespace) -> int:
             raise InputError(f"--{name.replace('_', '-')} {folder} does not exist")
     if args.price is not None and not (math.isfinite(args.price) and args.price >= 0):
         raise InputError(f"--price must be a finite number ≥ 0, got {args.price}")
+    check_year_dir(args.year_dir)
     forecast_dir, fault_dir, year_dir = report_sources(args.forecast_dir, args.fault_dir, args.year_dir)
-    if args.year_dir is not None and not holds_year_run(args.year_dir):
-        raise InputError(f"--year-dir {args.year_dir} holds no finished year run (manifest.json with period "
-                         f"'year' and summary.csv); write one with `opfbench run --period year --out {args.year_dir}`")
     path = write_report(args.run_dir, forecast_dir, fault_dir, args.out, args.price, year_dir)
     print(f"wrote {path}", file=sys.stderr)
     return 0

@@ -87,15 +87,13 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 def run(args: argparse.Namespace) -> int:
     source = DEFAULT_PRICE_SOURCE if args.price == DEFAULT_PRICE_PER_KWH else "--price"
-    from opfbench.report.sources import holds_fault_study, holds_year_run
+    from opfbench.report.sources import check_year_dir, holds_fault_study
     from opfbench.study.runner import run_study
 
     if args.fault_dir is not None and not holds_fault_study(args.fault_dir):
         raise InputError(f"--fault-dir {args.fault_dir} holds no fault study (fault.parquet); "
                          f"write one with `opfbench fault CASE --out {args.fault_dir}`")
-    if args.year_dir is not None and not holds_year_run(args.year_dir):
-        raise InputError(f"--year-dir {args.year_dir} holds no finished year run (manifest.json with period "
-                         f"'year' and summary.csv); write one with `opfbench run --period year --out {args.year_dir}`")
+    check_year_dir(args.year_dir)
     config = StudyConfig.build(
         cases=args.case, strategies=args.strategies, ks=args.k, night_modes=args.night_modes, night=args.night,
         forecast=args.forecast, period=args.period, step_minutes=args.step_minutes, chunk=args.chunk,

@@ -3,11 +3,16 @@ input: the section says which command produces it."""
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 from opfbench.report import plots, tables
 from opfbench.report.claims import claims
 from opfbench.report.inputs import Inputs
 from opfbench.report.page import Block, Section, table
 from opfbench.report.price import DEFAULT_CURRENCY, DEFAULT_PRICE_PER_KWH, DEFAULT_PRICE_SOURCE
+
+if TYPE_CHECKING:
+    import pandas as pd
 
 
 
@@ -60,6 +65,21 @@ def metadata(inputs: Inputs, price: tuple[float, str, str]) -> Section:
     return sec
 
 
+def _energy_tables(s: pd.DataFrame, price: tuple[float, str, str], over: str = "") -> list[Block]:
+    """Energy per strategy × k for each night mode, then savings % and money saved per year
+    vs no action with PV connected at night; `over` qualifies the period (e.g. " over the year")."""
+    out = [table(tables.energy_pivot(s, mode), f"Energy losses{over} (kWh) per strategy and k, PV {mode} at night",
+                 collapse_over=60)
+           for mode in ("connected", "disconnected", "connected-q") if mode in set(s["night_mode"])]
+    out.append(table(tables.energy_pivot(s, tables.REFERENCE_NIGHT, "savings_pct"),
+                     f"Savings vs no action{over} (%), PV connected at night", collapse_over=60))
+    money = tables.losses(s, price[0])
+    out.append(table(tables.energy_pivot(money, tables.REFERENCE_NIGHT, "money_per_year"),
+                     f"Money saved per year vs no action ({price[1]} at {price[0]:g}/kWh), PV connected at night",
+                     collapse_over=60))
+    return out
+
+
 def losses(inputs: Inputs, price: tuple[float, str, str]) -> Section:
     sec = Section("losses", "Losses and savings",
                   f"Average losses (kW), energy (kWh), savings vs no action (same case, k and night mode, forecast off) and "
@@ -68,14 +88,8 @@ def losses(inputs: Inputs, price: tuple[float, str, str]) -> Section:
     if inputs.summary is None:
         return sec.add(*_missing(inputs, "summary.csv"))
     s = inputs.summary
-    for mode in [m for m in ("connected", "disconnected", "connected-q") if m in set(s["night_mode"])]:
-        sec.add(table(tables.energy_pivot(s, mode), f"Energy losses (kWh) per strategy and k, PV {mode} at night",
-                      collapse_over=60))
-    sec.add(table(tables.energy_pivot(s, tables.REFERENCE_NIGHT, "savings_pct"),
-                  "Savings vs no action (%), PV connected at night", collapse_over=60))
+    sec.blocks += _energy_tables(s, price)
     money = tables.losses(s, price[0])
-    sec.add(table(tables.energy_pivot(money, tables.REFERENCE_NIGHT, "money_per_year"),
-                  f"Money saved per year vs no action ({price[1]}), PV connected at night", collapse_over=60))
     full = money.rename(columns={"money_per_day": f"{price[1]} per day", "money_per_year": f"{price[1]} per year"})
     sec.add(table(full, "Every configuration", collapse_over=0))
     if inputs.steps is not None:
@@ -143,15 +157,7 @@ def year(inputs: Inputs, price: tuple[float, str, str]) -> Section:
         ("peak memory", f"{timings.get('peak_rss_mb', float('nan')):.0f} MB (main process), "
                         f"{timings.get('worker_peak_rss_mb', float('nan')):.0f} MB (largest worker process)"),
     ]))
-    for mode in [m for m in ("connected", "disconnected", "connected-q") if m in set(s["night_mode"])]:
-        sec.add(table(tables.energy_pivot(s, mode), f"Energy losses over the year (kWh) per strategy and k, PV {mode} "
-                                                    "at night", collapse_over=60))
-    sec.add(table(tables.energy_pivot(s, tables.REFERENCE_NIGHT, "savings_pct"),
-                  "Savings vs no action over the year (%), PV connected at night", collapse_over=60))
-    money = tables.losses(s, price[0])
-    sec.add(table(tables.energy_pivot(money, tables.REFERENCE_NIGHT, "money_per_year"),
-                  f"Money saved per year vs no action ({price[1]} at {price[0]:g}/kWh), PV connected at night",
-                  collapse_over=60))
+    sec.blocks += _energy_tables(s, price, " over the year")
     sec.add(table(tables.convergence_summary(s), "Steps not ok over the year per formulation and k (all night modes)"))
     sec.blocks += _plots(plots.energy_vs_k(s, "year-energy-k", " over the year"))
     return sec

@@ -11,6 +11,8 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
+from opfbench.errors import InputError
+
 DEFAULT_FORECAST_DIR = Path("reports/forecast")
 DEFAULT_FAULT_DIR = Path("reports/fault")
 DEFAULT_YEAR_DIR = Path("reports/year")
@@ -31,6 +33,13 @@ def holds_year_run(folder: Path) -> bool:
     except (OSError, ValueError):
         return False
     return manifest.get("config", {}).get("period") == "year" and (folder / "summary.csv").is_file()
+
+
+def check_year_dir(folder: Path | None) -> None:
+    """A `--year-dir` given on the command line must hold a finished year run."""
+    if folder is not None and not holds_year_run(folder):
+        raise InputError(f"--year-dir {folder} holds no finished year run (manifest.json with period 'year' and "
+                         f"summary.csv); write one with `opfbench run --period year --out {folder}`")
 
 
 def report_sources(forecast_dir: Path | None, fault_dir: Path | None,
