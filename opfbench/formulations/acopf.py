@@ -19,9 +19,9 @@ overshoot. Every solve returns its status, iterations and time from IPOPT's stat
 `run_acopf` settles every snapshot of a scenario. With `solver="auto"` (default) it
 first takes the certified fast path: the SOCP relaxation (`socp.socp_solves`, shared
 with the `socp` strategy on the same scenario and k) is solved on every snapshot and
-its setpoints are evaluated by ONE batched AC power flow; where the relaxation is
-infeasible the AC OPF is too (status "infeasible", no action, IPOPT not run); where they are AC-feasible
-(`OpfProblem.feasible`) and their AC losses lie within CERTIFY_RTOL (relative) of the
+its setpoints are evaluated by ONE batched AC power flow. Where the relaxation is
+infeasible the AC OPF is too (status "infeasible", no action, IPOPT not run); where its
+setpoints are AC-feasible (`OpfProblem.feasible`) and their AC losses lie within CERTIFY_RTOL (relative) of the
 relaxation's bound — a lower bound on every AC-feasible point's losses — they are the
 AC optimum up to that tolerance: recorded with status "ok", extra["certified_by"] =
 "socp", and IPOPT is skipped. IPOPT (warm-started from its last successful solution)

@@ -6,16 +6,16 @@ night mode of that group, the strategies of one night mode on ONE Scenario objec
 night hours, so their daytime snapshots are the same problems: one task solves each once
 (`socp.socp_solves` reuses a solve of identical data in the same process); and where two
 night modes give the very same scenario (no PV output in the night hours of the chunk), the
-second takes the first's results (`Scenario.same_data`) with its wall time 0. Its input carries its slice of the period's profiles, so it runs the same in
-this process, in a local worker process or on a remote Dask worker; the AC OPF starts
-cold at each chunk and warm-starts inside it — the same whatever the number of workers.
+second takes the first's results (`Scenario.same_data`) with its wall time 0. Its input
+carries its slice of the period's profiles, so it runs the same in this process, in a
+local worker process or on a remote Dask worker; the AC OPF starts cold at each chunk and
+warm-starts inside it — the same whatever the number of workers.
 """
 
 from __future__ import annotations
 
-import dataclasses
 import re
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, replace
 
 import numpy as np
 import pandas as pd
@@ -129,7 +129,7 @@ def run_task(inp: TaskInput) -> TaskOutput:
             results = {}
             for name in t.strategies:
                 takes_solver = "solver" in get_strategy(name).options  # the AC OPF entries
-                res = results[name] = dataclasses.replace(same[name], wall_ms=0.0) if same is not None else \
+                res = results[name] = replace(same[name], wall_ms=0.0) if same is not None else \
                     run_strategy(name, scenario, t.k, **({"solver": inp.acopf_solver} if takes_solver else {}))
                 steps.append(step_rows(t.case, mode, t.forecast, time, inp.step_h, night, res))
                 for name, frame in detail_rows(t.case, mode, t.forecast, time, res, inp.detail).items():
