@@ -11,6 +11,7 @@ from pathlib import Path
 import pytest
 
 from opfbench.study import StudyConfig, run_study
+from opfbench.study.store import finished_tasks
 
 ROOT = Path(__file__).resolve().parents[1]
 PERIOD = "2016-06-28T10:00..2016-06-28T11:00"
@@ -29,7 +30,7 @@ def test_ctrl_c_stops_keeps_and_resumes(tmp_path):
                             preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
     try:
         deadline = time.monotonic() + 240
-        while not list(out.glob("tasks/*.parquet")):
+        while not finished_tasks(out):
             assert proc.poll() is None and time.monotonic() < deadline, proc.stderr.read()
             time.sleep(0.05)
         proc.send_signal(signal.SIGINT)  # the second task is solving
@@ -38,7 +39,7 @@ def test_ctrl_c_stops_keeps_and_resumes(tmp_path):
     finally:
         proc.kill()
     assert proc.returncode == 130 and time.monotonic() - sent < 30
-    kept = len(list(out.glob("tasks/*.parquet")))
+    kept = finished_tasks(out)
     assert 1 <= kept < len(KS) and f"stopped; {kept} tasks kept" in err
     assert not (out / ".lock").exists()
     config = StudyConfig(strategies=("no-action", "acopf"), ks=tuple(float(k) for k in KS), night_modes=("connected",),

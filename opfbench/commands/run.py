@@ -89,6 +89,7 @@ def run(args: argparse.Namespace) -> int:
     source = DEFAULT_PRICE_SOURCE if args.price == DEFAULT_PRICE_PER_KWH else "--price"
     from opfbench.report.sources import check_year_dir, holds_fault_study
     from opfbench.study.runner import run_study
+    from opfbench.study.store import finished_tasks
 
     if args.fault_dir is not None and not holds_fault_study(args.fault_dir):
         raise InputError(f"--fault-dir {args.fault_dir} holds no fault study (fault.parquet); "
@@ -104,8 +105,7 @@ def run(args: argparse.Namespace) -> int:
         result = run_study(config, args.out, workers=args.workers, scheduler=args.scheduler, fresh=args.fresh,
                            quiet=args.quiet, command=["opfbench", *sys.argv[1:]])
     except KeyboardInterrupt:
-        kept = [f for f in (args.out / "tasks").glob("*.parquet") if not f.name.endswith(("der_q.parquet", "bus_v.parquet"))]
-        print(f"\nopfbench run: stopped; {len(kept)} tasks kept in {args.out}; rerun the same command to resume",
+        print(f"\nopfbench run: stopped; {finished_tasks(args.out)} tasks kept in {args.out}; rerun the same command to resume",
               file=sys.stderr)
         return 130
     return finish_run(result, args)

@@ -74,6 +74,7 @@ def run_study(config: StudyConfig, out: Path, *, workers: int = 1, scheduler: st
         pending = [task_input(t, config, period) for t in tasks if t.id not in done]
         progress = Progress(len(tasks), len(done), quiet)
         run.kept = len(done)
+        assembly = store.assembly(tasks, config.detail_tables)
 
         def save(result: TaskOutput) -> None:
             store.save(result)
@@ -81,20 +82,27 @@ def run_study(config: StudyConfig, out: Path, *, workers: int = 1, scheduler: st
             run.ran += 1
             run.task_wall[result.task.id] = result.wall_s
             progress.update(result)
+            assembly.advance()
 
         def stop() -> None:  # Ctrl-C in the in-process path: every finished task is on disk
             progress.close()
+            assembly.abort()
             store.lock.unlink(missing_ok=True)
             print(f"\nstopped; {run.kept} tasks kept in {store.out}; rerun the same command to resume",
                   file=sys.stderr, flush=True)
             os._exit(STOPPED)
 
         try:
-            execute(pending, save, workers, scheduler, stop)
-        finally:  # also after an interrupt: the manifest marks the finished tasks
-            progress.close()
-            store.finish_manifest(None, workers, scheduler, run.task_wall)
-        run.summary = store.assemble(tasks, config.detail_tables)
+            assembly.advance()  # the tasks kept from before
+            try:
+                workers_exited = execute(pending, save, workers, scheduler, stop)
+            finally:  # also after an interrupt: the manifest marks the finished tasks
+                progress.close()
+                store.finish_manifest(None, workers, scheduler, run.task_wall)
+            run.summary = assembly.finish()
+        finally:
+            assembly.abort()
+        workers_exited()  # before the manifest records the worker processes' peak memory
         run.wall_s = elapsed_ms(start) / 1e3
         store.finish_manifest(run.wall_s, workers, scheduler, run.task_wall)
     return run

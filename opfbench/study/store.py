@@ -7,10 +7,12 @@ assembled from them (layout: the run-folder contract).
   skipped); another config is refused unless `fresh` (which deletes the previous run's
   files, and only those).
 - Checkpoints: `tasks/<id>.parquet` written atomically (temporary file + os.replace);
-  detail tables beside it (`tasks/<id>.der_q.parquet`, `.bus_v.parquet`) are written
-  first, so a task counts as finished only once its main file exists.
+  its partial sums (`tasks/<id>.summary.parquet`) and detail tables (`.der_q.parquet`,
+  `.bus_v.parquet`) beside it are written first, so a task counts as finished only once
+  its main file exists.
 - Assembly: `steps.parquet` (and the detail tables) streamed task by task in the planned
-  order, `summary.csv` from per-task partial sums; all written atomically.
+  order as arrow tables while the run goes on, `summary.csv` from the per-task partial
+  sums; all written atomically.
 """
 
 from __future__ import annotations
@@ -29,13 +31,20 @@ import pyarrow.parquet as pq
 
 from opfbench.errors import InputError
 from opfbench.jsonio import write_atomic, write_json
-from opfbench.study.config import LABEL_FIELDS, StudyConfig
+from opfbench.study.config import DETAIL_TABLES, LABEL_FIELDS, StudyConfig
 from opfbench.study.periods import Period
-from opfbench.study.tables import KEYS, partial_summary, summarize
+from opfbench.study.tables import KEYS, summarize
 from opfbench.study.tasks import Task, TaskOutput
 
 SCHEMA = 1
 RUN_FILES = ("steps.parquet", "summary.csv", "der_q.parquet", "bus_v.parquet", "report.html", "manifest.json")
+SIDE_FILES = ("summary", *DETAIL_TABLES)  # tasks/<id>.<side>.parquet beside tasks/<id>.parquet
+
+
+def finished_tasks(out: Path) -> int:
+    """How many finished tasks the run folder `out` holds (their main files)."""
+    side = tuple(f".{name}.parquet" for name in SIDE_FILES)
+    return sum(not f.name.endswith(side) for f in (out / "tasks").glob("*.parquet"))
 
 
 def check_out_dir(out: Path) -> Path:
@@ -184,36 +193,54 @@ class RunStore:
     def save(self, result: TaskOutput) -> None:
         """Write a finished task atomically (detail files first, the main file last)."""
         base = self.out / result.task.file
-        for name, frame in result.detail.items():
+        for name, frame in (result.detail | {"summary": result.summary}).items():
             _write_parquet(base.with_suffix(f".{name}.parquet"), frame)
         _write_parquet(base, result.steps)
 
     # ----- assembly -----------------------------------------------------------------------
-    def assemble(self, tasks: list[Task], detail: tuple[str, ...]) -> pd.DataFrame:
-        """steps.parquet (+ detail tables) and summary.csv from the task files; returns
-        the summary."""
-        partials, order = [], []
-        names = ["steps", *detail]
-        writers = {name: _AtomicParquet(self.out / f"{name}.parquet") for name in names}
-        try:
-            for t in tasks:
-                base = self.out / t.file
-                steps = pd.read_parquet(base)
-                writers["steps"].write(steps)
-                partials.append(partial_summary(steps))
-                order.extend(dict.fromkeys(map(tuple, steps[KEYS].drop_duplicates().itertuples(index=False))))
-                for name in names[1:]:  # the long tables go through as arrow tables, never pandas
-                    writers[name].write(pq.read_table(base.with_suffix(f".{name}.parquet")))
-            for w in writers.values():
-                w.commit()
-        finally:
-            for w in writers.values():
-                w.abort()
-        summary = summarize(partials, list(dict.fromkeys(order)))
+    def assembly(self, tasks: list[Task], detail: tuple[str, ...]) -> Assembly:
+        """The run's tables, assembled from the task files of `tasks` as they are written."""
+        return Assembly(self.out, tasks, detail)
+
+
+class Assembly:
+    """steps.parquet (+ the detail tables) and summary.csv from the task files, streamed in
+    the planned order while the run goes on: `advance` adds every next task whose file
+    is written (call it after each), `finish` adds the rest and commits, `abort` drops
+    the temporary files. The tables go through as arrow tables, never pandas."""
+
+    def __init__(self, out: Path, tasks: list[Task], detail: tuple[str, ...]):
+        self.out, self.tasks, self.added = out, tasks, 0
+        self.writers = {name: _AtomicParquet(out / f"{name}.parquet") for name in ("steps", *detail)}
+        self.partials: list[pd.DataFrame] = []
+        self.order: list[tuple] = []
+
+    def advance(self) -> None:
+        while self.added < len(self.tasks) and (self.out / self.tasks[self.added].file).exists():
+            base = self.out / self.tasks[self.added].file
+            for name, writer in self.writers.items():
+                writer.write(pq.read_table(base if name == "steps" else base.with_suffix(f".{name}.parquet")))
+            partial = pd.read_parquet(base.with_suffix(".summary.parquet"))
+            self.partials.append(partial)
+            self.order.extend(map(tuple, partial[KEYS].itertuples(index=False)))
+            self.added += 1
+
+    def finish(self) -> pd.DataFrame:
+        """Commit the tables once every task is added; returns the summary."""
+        self.advance()
+        if self.added < len(self.tasks):
+            raise RuntimeError(f"task {self.tasks[self.added].id} has no file in {self.out / 'tasks'}")
+        for w in self.writers.values():
+            w.commit()
+        summary = summarize(self.partials, list(dict.fromkeys(self.order)))
         buf = io.StringIO()
         summary.to_csv(buf, index=False, float_format="%.6g")
         write_atomic(self.out / "summary.csv", buf.getvalue())
         return summary
+
+    def abort(self) -> None:
+        for w in self.writers.values():
+            w.abort()
 
 
 def _peak_rss_mb() -> dict:

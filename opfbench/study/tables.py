@@ -12,6 +12,9 @@ from opfbench.result import OK, StrategyResult
 from opfbench.study.config import DETAIL_TABLES
 
 KEYS = ["case", "strategy", "k", "night_mode", "forecast"]
+STEP_COLUMNS = [*KEYS, "time", "step_h", "night", "status", "losses_kw", "vmin_pu", "vmax_pu", "voltage_violation_pu",
+                "q_total_mvar", "excursion_mvar", "lower_bound_kw", "power_flows", "wall_ms", "solver_ms",
+                "iterations", "certified_by", "fallback", "solver_status"]
 DETAIL_COLUMNS = {"der_q": [*KEYS, "time", "bus", "kind", "q_mvar"], "bus_v": [*KEYS, "time", "bus", "v_pu"]}
 VIOLATION_PU = 1e-6  # a step violates the voltage limits beyond this
 EXCURSION_MVAR = 1e-9  # a step's setpoint exceeds the physical capability beyond this
@@ -27,55 +30,76 @@ def _certified_by(res: StrategyResult) -> np.ndarray:
     return np.full(res.n_snapshots, "", dtype=object)
 
 
+Columns = dict[str, object]  # column name → array of the part's rows, or one value for all of them
+
+
 def step_rows(case: str, night_mode: str, forecast: str, time: pd.DatetimeIndex, step_h: float,
-              night: np.ndarray, res: StrategyResult) -> pd.DataFrame:
-    """One row per step of `res` (see the contract for the columns)."""
+              night: np.ndarray, res: StrategyResult) -> Columns:
+    """The columns of one row per step of `res` (see the contract), for `stack`."""
     n = res.n_snapshots
     nan = np.full(n, np.nan)
     extra = res.extra
     local = "fallback" not in extra
     lb = res.lower_bound_kw if res.lower_bound_kw is not None else nan
-    return pd.DataFrame({
+    return {
         "case": case, "strategy": res.strategy, "k": float(res.k), "night_mode": night_mode, "forecast": forecast,
-        "time": time, "step_h": step_h, "night": np.asarray(night, dtype=bool), "status": res.status.astype(str),
-        "losses_kw": res.losses_kw, "vmin_pu": res.vmin, "vmax_pu": res.vmax,
+        "time": time, "step_h": float(step_h), "night": np.asarray(night, dtype=bool),
+        "status": res.status.astype(str), "losses_kw": res.losses_kw, "vmin_pu": res.vmin, "vmax_pu": res.vmax,
         "voltage_violation_pu": res.voltage_violation(), "q_total_mvar": res.q_mvar.sum(axis=1),
         "excursion_mvar": res.excursion_mvar, "lower_bound_kw": np.asarray(lb, dtype=float),
         "power_flows": np.asarray(res.power_flows, dtype=np.int64),
         "wall_ms": res.wall_ms / n, "solver_ms": np.asarray(extra.get("solve_ms", nan), dtype=float),
         "iterations": np.asarray(extra.get("iterations", nan), dtype=float),
         "certified_by": _certified_by(res).astype(str),
-        "fallback": np.full(n, "") if local else np.asarray(extra["fallback"], dtype=str),
-        "solver_status": np.full(n, "") if local else np.asarray(extra["solver_status"], dtype=str),
-    })
+        "fallback": "" if local else np.asarray(extra["fallback"], dtype=str),
+        "solver_status": "" if local else np.asarray(extra["solver_status"], dtype=str),
+    }
 
 
 def detail_rows(case: str, night_mode: str, forecast: str, time: pd.DatetimeIndex,
-                res: StrategyResult, tables: tuple[str, ...] = DETAIL_TABLES) -> dict[str, pd.DataFrame]:
-    """The long tables named in `tables`: "der_q" per-DER setpoints (bus id, kind, q_mvar),
-    "bus_v" per-bus |V| (p.u.). Their text columns are categorical (one value, or a few, repeated on every row): written and
-    read as dictionary-encoded parquet columns, many times faster than strings."""
+                res: StrategyResult, tables: tuple[str, ...] = DETAIL_TABLES) -> dict[str, Columns]:
+    """The columns of the long tables named in `tables`, for `stack`: "der_q" per-DER
+    setpoints (bus id, kind, q_mvar), "bus_v" per-bus |V| (p.u.)."""
     net = res.net
-    n, n_der, n_bus = res.n_snapshots, len(net.ders), net.n_bus
+    n = res.n_snapshots
+    label = {"case": case, "strategy": res.strategy, "k": float(res.k), "night_mode": night_mode,
+             "forecast": forecast}
 
-    def label(rows: int) -> dict:
-        text = {"case": case, "strategy": res.strategy, "night_mode": night_mode, "forecast": forecast}
-        return {key: pd.Categorical.from_codes(np.zeros(rows, dtype=np.int8), [value]) for key, value in text.items()} | {
-            "k": np.full(rows, float(res.k))}
+    def der_q() -> Columns:
+        n_der = len(net.ders)
+        return label | {"time": np.repeat(time.asi8, n_der), "bus": np.tile(net.bus_ids[net.der_bus], n).astype(np.int64),
+                        "kind": np.tile(np.asarray(net.der_kinds, dtype=str), n), "q_mvar": res.q_mvar.reshape(-1)}
 
-    def der_q() -> pd.DataFrame:
-        kinds = pd.Categorical(np.asarray(net.der_kinds, dtype=str))
-        return pd.DataFrame(label(n * n_der) | {
-            "time": np.repeat(time, n_der), "bus": np.tile(net.bus_ids[net.der_bus], n).astype(np.int64),
-            "kind": pd.Categorical.from_codes(np.tile(kinds.codes, n), kinds.categories),
-            "q_mvar": res.q_mvar.reshape(-1)})
-
-    def bus_v() -> pd.DataFrame:
-        return pd.DataFrame(label(n * n_bus) | {
-            "time": np.repeat(time, n_bus), "bus": np.tile(net.bus_ids, n).astype(np.int64), "v_pu": res.vm.reshape(-1)})
+    def bus_v() -> Columns:
+        return label | {"time": np.repeat(time.asi8, net.n_bus), "bus": np.tile(net.bus_ids, n).astype(np.int64),
+                        "v_pu": res.vm.reshape(-1)}
 
     build = {"der_q": der_q, "bus_v": bus_v}
-    return {name: build[name]()[DETAIL_COLUMNS[name]] for name in tables}
+    return {name: build[name]() for name in tables}
+
+
+def stack(parts: list[Columns], columns: list[str], tz) -> pd.DataFrame:
+    """One frame of `columns` from parts (`step_rows`, `detail_rows`), each as many rows
+    as its arrays are long: one value for a part is repeated; text is categorical (one value, or a few, repeated
+    on every row: many times faster to build and to hand between processes; the files
+    hold plain text, `store._arrow`); "time" (DatetimeIndex or UTC ns) gets the zone `tz`."""
+    rows = [max(len(v) for v in part.values() if np.ndim(v)) for part in parts]
+    data = {}
+    for name in columns:
+        values = [part[name] for part in parts]
+        if all(isinstance(v, str) for v in values):
+            categories = list(dict.fromkeys(values))
+            codes = np.repeat(np.array([categories.index(v) for v in values], dtype=np.int32), rows)
+            data[name] = pd.Categorical.from_codes(codes, categories)
+        elif name == "time":
+            ns = np.concatenate([v.asi8 if isinstance(v, pd.DatetimeIndex) else v for v in values])
+            data[name] = pd.DatetimeIndex(ns.view("datetime64[ns]")).tz_localize("UTC").tz_convert(tz)
+        else:
+            arrays = [np.full(r, v) if np.ndim(v) == 0 else np.asarray(v) for v, r in zip(values, rows, strict=True)]
+            column = np.concatenate(arrays) if arrays else np.zeros(0)
+            is_text = column.dtype.kind in "UO"
+            data[name] = pd.Categorical(column) if is_text else column
+    return pd.DataFrame(data, columns=columns)
 
 
 def partial_summary(steps: pd.DataFrame) -> pd.DataFrame:
@@ -87,7 +111,7 @@ def partial_summary(steps: pd.DataFrame) -> pd.DataFrame:
         vv=(steps.voltage_violation_pu > VIOLATION_PU).astype(np.int64),
         exc=(steps.excursion_mvar > EXCURSION_MVAR).astype(np.int64),
         solver_known=steps.solver_ms.notna().astype(np.int64), certified=(steps.certified_by != "").astype(np.int64))
-    g = s.groupby(KEYS, sort=False)
+    g = s.groupby(KEYS, sort=False, observed=True)
     return pd.DataFrame({
         "steps": g.size(), "hours": g.step_h.sum(), "energy_kwh": g.energy.sum(), "not_ok_steps": g.not_ok.sum(),
         "voltage_violation_steps": g.vv.sum(), "vmin_pu": g.vmin_pu.min(), "vmax_pu": g.vmax_pu.max(),

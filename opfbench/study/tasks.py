@@ -27,7 +27,7 @@ from opfbench.scenario import Scenario
 from opfbench.study.config import StudyConfig
 from opfbench.study.periods import Period
 from opfbench.study.scenarios import chunk_scenario
-from opfbench.study.tables import detail_rows, step_rows
+from opfbench.study.tables import DETAIL_COLUMNS, STEP_COLUMNS, detail_rows, partial_summary, stack, step_rows
 
 
 @dataclass(frozen=True)
@@ -69,10 +69,12 @@ class TaskInput:
 
 @dataclass
 class TaskOutput:
-    """A finished task's tables (`detail`: the requested long tables by name) and wall time (s)."""
+    """A finished task's tables (`summary`: its partial sums, `tables.partial_summary`;
+    `detail`: the requested long tables by name) and wall time (s)."""
 
     task: Task
     steps: pd.DataFrame
+    summary: pd.DataFrame
     detail: dict[str, pd.DataFrame]
     wall_s: float
 
@@ -132,10 +134,11 @@ def run_task(inp: TaskInput) -> TaskOutput:
                 res = results[name] = replace(same[name], wall_ms=0.0) if same is not None else \
                     run_strategy(name, scenario, t.k, **({"solver": inp.acopf_solver} if takes_solver else {}))
                 steps.append(step_rows(t.case, mode, t.forecast, time, inp.step_h, night, res))
-                for name, frame in detail_rows(t.case, mode, t.forecast, time, res, inp.detail).items():
-                    detail[name].append(frame)
+                for table, columns in detail_rows(t.case, mode, t.forecast, time, res, inp.detail).items():
+                    detail[table].append(columns)
             if same is None:
                 ran.append((scenario, results))
-    return TaskOutput(t, pd.concat(steps, ignore_index=True),
-                      {name: pd.concat(frames, ignore_index=True) for name, frames in detail.items()},
+        table = stack(steps, STEP_COLUMNS, time.tz)
+    return TaskOutput(t, table, partial_summary(table),
+                      {name: stack(parts, DETAIL_COLUMNS[name], time.tz) for name, parts in detail.items()},
                       elapsed_ms(start) / 1e3)
