@@ -37,7 +37,9 @@ def test_full_report_has_every_section_and_no_missing_input(folders):
     year = html[html.index('id="year"'):html.index('id="night"')]
     assert "321 MB (main process), 654 MB (largest worker process)" in year and "Energy losses over the year" in year
     assert html.count("<script>") == 2  # plotly.js once, the drawing loop once
-    assert html.count('class="plot"') == html.count('type="application/json"') >= 10
+    # one JSON element per figure, and the template they share once
+    assert html.count('class="plot"') + 1 == html.count('type="application/json"') and html.count('class="plot"') >= 10
+    assert html.count('id="plot-template"') == 1 and html.count("plotly_white") == 0
     assert "<script src=" not in html and "<link" not in html
 
 

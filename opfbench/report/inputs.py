@@ -58,6 +58,7 @@ def _json(path: Path) -> dict | None:
     return json.loads(path.read_text()) if path.is_file() else None
 
 
+TRACE_BUS = 27  # the fault traces plotted: at the paper's DFIG
 STEP_COLUMNS = ("case", "strategy", "k", "night_mode", "forecast", "time", "status", "losses_kw", "vmin_pu", "vmax_pu",
                 "solver_ms", "iterations", "certified_by", "fallback", "solver_status")
 """The columns of steps.parquet the report uses."""
@@ -72,21 +73,33 @@ def reference_setting(summary: pd.DataFrame) -> tuple[str, float] | None:
     return (mode, float(off["k"].min())) if len(off) else None
 
 
-def _steps(path: Path, summary: pd.DataFrame | None) -> pd.DataFrame | None:
-    """The per-step rows the report uses — every formulation's (convergence tables) and the
-    reference setting's (plots) — with only the columns it uses, text as arrow strings:
-    read with parquet filters, so a year's table need not fit in memory."""
+def _filtered(path: Path, columns: tuple[str, ...] | None, filters: list | None) -> pd.DataFrame | None:
+    """The rows of a run table matching `filters` (parquet filters: a year's table need not
+    fit in memory) with only `columns` (those present; None: all), text as arrow strings;
+    None when the file is absent or no row matches."""
     if not path.is_file():
         return None
     names = pq.read_schema(path).names
-    filters = None
-    reference = reference_setting(summary) if summary is not None else None
-    if reference is not None:
-        filters = [[("strategy", "in", list(FORMULATIONS))],
-                   [("night_mode", "==", reference[0]), ("forecast", "==", "off"), ("k", "==", reference[1])]]
-    table = pq.read_table(path, columns=[c for c in STEP_COLUMNS if c in names], filters=filters)
+    table = pq.read_table(path, columns=None if columns is None else [c for c in columns if c in names],
+                          filters=filters)
     frame = table.to_pandas(types_mapper={pa.string(): pd.StringDtype("pyarrow")}.get)
     return frame if len(frame) else None
+
+
+def _reference_filter(summary: pd.DataFrame | None) -> list | None:
+    """Parquet filter for the rows of the reference setting (`reference_setting`)."""
+    reference = reference_setting(summary) if summary is not None else None
+    if reference is None:
+        return None
+    return [("night_mode", "==", reference[0]), ("forecast", "==", "off"), ("k", "==", reference[1])]
+
+
+def _steps(path: Path, summary: pd.DataFrame | None) -> pd.DataFrame | None:
+    """The per-step rows the report uses — every formulation's (convergence tables) and the
+    reference setting's (plots) — with only the columns it uses."""
+    reference = _reference_filter(summary)
+    filters = None if reference is None else [[("strategy", "in", list(FORMULATIONS))], reference]
+    return _filtered(path, STEP_COLUMNS, filters)
 
 
 def _summary(path: Path) -> pd.DataFrame | None:
@@ -104,7 +117,7 @@ def load_inputs(run_dir: str | Path, forecast_dir: str | Path | None = None,
     inp.manifest = _json(run / "manifest.json")
     inp.summary = _summary(run / "summary.csv")
     inp.steps = _steps(run / "steps.parquet", inp.summary)
-    inp.der_q = _parquet(run / "der_q.parquet")
+    inp.der_q = _filtered(run / "der_q.parquet", None, _reference_filter(inp.summary))  # plotted: the reference rows
     for name, frame in (("manifest.json", inp.manifest), ("steps.parquet", inp.steps), ("summary.csv", inp.summary)):
         if frame is None:
             inp.missing[name] = RUN_COMMAND.format(dir=run)
@@ -122,7 +135,8 @@ def load_inputs(run_dir: str | Path, forecast_dir: str | Path | None = None,
     if fault_dir is not None:
         inp.fault_dir = Path(fault_dir)
         inp.fault = _parquet(inp.fault_dir / "fault.parquet")
-        inp.traces = _parquet(inp.fault_dir / "traces.parquet")
+        inp.traces = _filtered(inp.fault_dir / "traces.parquet", None,  # plotted: one bus, forecast off
+                               [("bus", "==", TRACE_BUS), ("forecast", "==", "off")])
         inp.fault_manifest = _json(inp.fault_dir / "manifest.json")
     if inp.fault is None:
         inp.missing["fault.parquet"] = FAULT_COMMAND

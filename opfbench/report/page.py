@@ -13,7 +13,7 @@ import numpy as np
 import pandas as pd
 
 from opfbench import __version__
-from opfbench.report.plots import Plot
+from opfbench.report.plots import Plot, plot_template
 
 
 @dataclass
@@ -60,7 +60,8 @@ def plotly_js() -> str:
 def render(template: str, title: str, subtitle: str = "", plots: bool = False, **context: object) -> str:
     """Render `template` (extends page.html.j2) into a complete, self-contained page."""
     return environment().get_template(template).render(
-        title=title, subtitle=subtitle, version=__version__, plotly_js=plotly_js() if plots else "", **context)
+        title=title, subtitle=subtitle, version=__version__, plotly_js=plotly_js() if plots else "",
+        plot_template=plot_template() if plots else "", **context)
 
 
 def _digits(column: str) -> int:

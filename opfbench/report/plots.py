@@ -7,14 +7,18 @@ Plotly, whose text rendering understands a few HTML tags."""
 
 from __future__ import annotations
 
+import json
 from dataclasses import dataclass
+from functools import lru_cache
 from html import escape
 
 import numpy as np
 import pandas as pd
 import plotly.graph_objects as go
+import plotly.io as pio
 from plotly.subplots import make_subplots
 
+from opfbench.report.inputs import TRACE_BUS
 from opfbench.report.tables import REFERENCE_NIGHT, order
 
 MAX_POINTS = 1440
@@ -29,23 +33,48 @@ class Plot:
     json: str
 
 
+def script_json(text: str) -> str:
+    """JSON text safe to embed in a <script type="application/json"> element (<, > and &
+    escaped as \\u003c, \\u003e, \\u0026)."""
+    return text.replace("<", "\\u003c").replace(">", "\\u003e").replace("&", "\\u0026")
+
+
+@lru_cache(maxsize=1)
+def plot_template() -> str:
+    """Plotly's "plotly_white" template as JSON, embedded once per page and given to every
+    figure there (the figures carry none: copying it into each cost ~25 ms a figure)."""
+    return script_json(json.dumps(pio.templates["plotly_white"].to_plotly_json()))
+
+
+def _figure() -> go.Figure:
+    """A figure without a template: the page gives every figure one (`page.plot_template`)."""
+    return go.Figure(layout={"template": "none"})
+
+
+def _subplots(**options: object) -> go.Figure:
+    return make_subplots(figure=_figure(), **options)
+
+
 def plot_json(pid: str, title: str, fig: go.Figure, xtitle: str, ytitle: str, height: int = HEIGHT) -> Plot:
-    fig.update_layout(template="plotly_white", height=height, title=escape(title), margin=dict(l=60, r=20, t=50, b=50),
+    fig.update_layout(height=height, title=escape(title), margin=dict(l=60, r=20, t=50, b=50),
                       legend=dict(orientation="v"))
     if xtitle:
         fig.update_xaxes(title_text=xtitle)
     if ytitle:
         fig.update_yaxes(title_text=ytitle)
-    text = fig.to_json(engine="json")
-    return Plot(pid, title, text.replace("<", "\\u003c").replace(">", "\\u003e").replace("&", "\\u0026"))
+    return Plot(pid, title, script_json(fig.to_json(engine="json")))
 
 
 def _decimate(frame: pd.DataFrame, value: str) -> pd.DataFrame:
-    """Mean of `value` in at most MAX_POINTS equal bins of rows (rows sorted by time)."""
-    if len(frame) <= MAX_POINTS:
-        return frame[["time", value]]
-    bins = np.arange(len(frame)) * MAX_POINTS // len(frame)
-    return frame.groupby(bins).agg(time=("time", "first"), **{value: (value, "mean")})
+    """Mean of `value` in at most MAX_POINTS equal bins of rows (rows sorted by time); the
+    time as local wall-clock text, which is what plotly.js shows (it ignores zone offsets;
+    formatted once here rather than per element by Plotly: 50 ms a 1440-point trace)."""
+    if len(frame) > MAX_POINTS:
+        bins = np.arange(len(frame)) * MAX_POINTS // len(frame)
+        frame = frame.groupby(bins).agg(time=("time", "first"), **{value: (value, "mean")})
+    time = pd.DatetimeIndex(frame["time"])
+    wall_clock = time.tz_localize(None) if time.tz is not None else time
+    return pd.DataFrame({"time": np.datetime_as_string(wall_clock.to_numpy(), unit="s"), value: frame[value].to_numpy()})
 
 
 def _reference(frame: pd.DataFrame) -> tuple[pd.DataFrame, float]:
@@ -65,7 +94,7 @@ def losses_day(steps: pd.DataFrame) -> list[Plot]:
     out = []
     for i, case in enumerate(_cases(steps)):
         sub, k = _reference(steps[steps["case"] == case])
-        fig = go.Figure()
+        fig = _figure()
         for strategy in order(sub[["strategy"]].drop_duplicates())["strategy"]:
             d = _decimate(sub[sub["strategy"] == strategy].sort_values("time"), "losses_kw")
             fig.add_scatter(x=d["time"], y=d["losses_kw"], mode="lines", name=escape(strategy))
@@ -78,7 +107,7 @@ def energy_vs_k(summary: pd.DataFrame, pid: str = "energy-k", period: str = "") 
     out = []
     for i, case in enumerate(_cases(summary)):
         sub = summary[(summary["case"] == case) & (summary["night_mode"] == REFERENCE_NIGHT)]
-        fig = go.Figure()
+        fig = _figure()
         for (strategy, forecast), grp in order(sub).groupby(["strategy", "forecast"], sort=False):
             grp = grp.sort_values("k")
             name = strategy if forecast == "off" else f"{strategy} (forecast {forecast})"
@@ -96,7 +125,7 @@ def der_q_day(der_q: pd.DataFrame) -> list[Plot]:
         strategies = [s for s in order(sub[["strategy"]].drop_duplicates())["strategy"] if s != "no-action"]
         if not strategies:
             continue
-        fig = make_subplots(rows=len(strategies), cols=1, shared_xaxes=True, subplot_titles=[escape(s) for s in strategies],
+        fig = _subplots(rows=len(strategies), cols=1, shared_xaxes=True, subplot_titles=[escape(s) for s in strategies],
                             vertical_spacing=0.06)
         for row, strategy in enumerate(strategies, start=1):
             for bus, grp in sub[sub["strategy"] == strategy].groupby("bus"):
@@ -114,7 +143,7 @@ def voltage_envelope(steps: pd.DataFrame, limits: dict[str, tuple[float, float]]
     out = []
     for i, case in enumerate(_cases(steps)):
         sub, k = _reference(steps[steps["case"] == case])
-        fig = go.Figure()
+        fig = _figure()
         for j, strategy in enumerate(order(sub[["strategy"]].drop_duplicates())["strategy"]):
             grp = sub[sub["strategy"] == strategy].sort_values("time")
             lo, hi = _decimate(grp, "vmin_pu"), _decimate(grp, "vmax_pu")
@@ -138,7 +167,7 @@ def gap_vs_k(summary: pd.DataFrame) -> list[Plot]:
         sub = sub.dropna(subset=["gap_pct"])
         if sub.empty:
             continue
-        fig = go.Figure()
+        fig = _figure()
         for strategy, grp in order(sub).groupby("strategy", sort=False):
             grp = grp.sort_values("k")
             fig.add_scatter(x=grp["k"], y=grp["gap_pct"], mode="lines+markers", name=escape(strategy),
@@ -154,7 +183,7 @@ def night_bars(summary: pd.DataFrame) -> list[Plot]:
         sub = summary[(summary["case"] == case) & (summary["forecast"] == "off")]
         k = float(sub["k"].min())
         sub = order(sub[np.isclose(sub["k"], k)])
-        fig = go.Figure()
+        fig = _figure()
         for mode, grp in sub.groupby("night_mode", sort=True):
             fig.add_bar(x=[escape(s) for s in grp["strategy"]], y=grp["energy_kwh"], name=f"PV {escape(mode)} at night")
         fig.update_layout(barmode="group")
@@ -167,7 +196,7 @@ def solve_times(steps: pd.DataFrame) -> list[Plot]:
     sub = steps.dropna(subset=["solver_ms"])
     if sub.empty:
         return []
-    fig = go.Figure()
+    fig = _figure()
     for (case, strategy), grp in order(sub).groupby(["case", "strategy"], sort=False):
         # the box's statistics computed here, not every step's time shipped to the page
         ms = grp["solver_ms"].to_numpy(dtype=float)
@@ -185,7 +214,7 @@ def recovery_per_bus(rec: pd.DataFrame) -> list[Plot]:
         return []
     k = float(sub["k"].min())
     sub = order(sub[np.isclose(sub["k"], k) & (sub["forecast"] == "off")])
-    fig = go.Figure()
+    fig = _figure()
     for strategy, grp in sub.groupby("strategy", sort=False):
         fig.add_bar(x=[escape(f"{c} bus {b}") for c, b in zip(grp["case"], grp["fault_bus"], strict=True)],
                     y=grp["recovery_ms"], name=escape(strategy))
@@ -199,7 +228,7 @@ def recovery_vs_k(rec: pd.DataFrame) -> list[Plot]:
     sub = sub[sub["forecast"] == "off"]
     if sub.empty:
         return []
-    fig = go.Figure()
+    fig = _figure()
     for (case, bus, strategy), grp in order(sub).groupby(["case", "fault_bus", "strategy"], sort=False):
         grp = grp.sort_values("k")
         fig.add_scatter(x=grp["k"], y=grp["recovery_ms"], mode="lines+markers", name=escape(f"{strategy}, {case} fault at {bus}"),
@@ -208,7 +237,7 @@ def recovery_vs_k(rec: pd.DataFrame) -> list[Plot]:
                   "reserve coefficient k", "recovery time (ms)")]
 
 
-def fault_traces(traces: pd.DataFrame, bus: int = 27) -> list[Plot]:
+def fault_traces(traces: pd.DataFrame, bus: int = TRACE_BUS) -> list[Plot]:
     """|V| and Q at `bus` (the paper's DFIG) through the fault, per strategy: the fault at
     `bus` when simulated, else the first fault bus; smallest k, forecast off, reference model."""
     sub = traces[(traces["bus"] == bus) & (traces["forecast"] == "off")]
@@ -222,7 +251,7 @@ def fault_traces(traces: pd.DataFrame, bus: int = 27) -> list[Plot]:
     sub = sub[sub["case"] == case]
     k = float(sub["k"].min())
     sub = sub[np.isclose(sub["k"], k)]
-    fig = make_subplots(rows=2, cols=1, shared_xaxes=True, subplot_titles=("|V| (p.u.)", "Q (MVAr)"), vertical_spacing=0.1)
+    fig = _subplots(rows=2, cols=1, shared_xaxes=True, subplot_titles=("|V| (p.u.)", "Q (MVAr)"), vertical_spacing=0.1)
     for j, (strategy, grp) in enumerate(order(sub).groupby("strategy", sort=False)):
         grp = grp.sort_values("t_s")
         color = _COLORS[j % len(_COLORS)]
