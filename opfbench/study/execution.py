@@ -25,12 +25,18 @@ Save = Callable[[TaskOutput], None]
 
 
 STOPPED = 130  # exit code after Ctrl-C (128 + SIGINT)
-#: The local cluster's workers without Dask's statistical profiler (it samples the task
-#: thread's stack every 10 ms) and with slower event-loop ticks and system monitor (20 ms
-#: and 0.5 s by default). Measured on the paper day, 2 workers: the tasks' summed wall
-#: time fell from ~32 s to ~28.5 s (3 runs each), nothing else changed.
-LOCAL_CLUSTER_CONFIG = {"distributed.worker.profile.enabled": False, "distributed.admin.tick.interval": "1s",
-                        "distributed.admin.system-monitor.interval": "5s"}
+#: The local cluster's workers:
+#: - with glibc's default heap trimming: Dask's MALLOC_TRIM_THRESHOLD_=65536 (it returns
+#:   freed memory to the OS at once) made the tasks ~15-25 % slower than in this process
+#:   (12 paper-day tasks on one worker: 8.2-10.0 s with it, 7.6-7.7 s without, 7.8 s
+#:   in-process); the single-threaded BLAS settings are kept;
+#: - without the statistical profiler (it samples the task thread's stack every 10 ms),
+#:   with slower event-loop ticks and system monitor (20 ms and 0.5 s by default): the
+#:   tasks' summed wall time on the paper day, 2 workers, fell from ~32 s to ~28.5 s.
+LOCAL_CLUSTER_CONFIG = {
+    "distributed.nanny.pre-spawn-environ": {"OMP_NUM_THREADS": 1, "MKL_NUM_THREADS": 1, "OPENBLAS_NUM_THREADS": 1},
+    "distributed.worker.profile.enabled": False, "distributed.admin.tick.interval": "1s",
+    "distributed.admin.system-monitor.interval": "5s"}
 
 
 class _SigintWatcher:

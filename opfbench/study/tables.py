@@ -80,9 +80,10 @@ def detail_rows(case: str, night_mode: str, forecast: str, time: pd.DatetimeInde
 
 def stack(parts: list[Columns], columns: list[str], tz) -> pd.DataFrame:
     """One frame of `columns` from parts (`step_rows`, `detail_rows`), each as many rows
-    as its arrays are long: one value for a part is repeated; text is categorical (one value, or a few, repeated
-    on every row: many times faster to build and to hand between processes; the files
-    hold plain text, `store._arrow`); "time" (DatetimeIndex or UTC ns) gets the zone `tz`."""
+    as its arrays are long; one value for a part is repeated. Text is categorical (one
+    value, or a few, repeated on every row: many times faster to build and to hand
+    between processes; the files hold plain text, `store._arrow`); "time" (DatetimeIndex
+    or UTC ns) gets the zone `tz`."""
     rows = [max(len(v) for v in part.values() if np.ndim(v)) for part in parts]
     data = {}
     for name in columns:
