@@ -96,3 +96,19 @@ def test_report_command_rebuilds_the_page(folders, tmp_path, capsys):
     assert "holds no finished year run" in capsys.readouterr().err
     assert main(["report", str(run), "--year-dir", str(year), "--out", str(tmp_path / "y.html")]) == 0
     assert f"{year} (created" in (tmp_path / "y.html").read_text()
+
+
+def test_a_der_keeps_its_colour_in_every_panel(folders):
+    """The per-DER Q figure has one panel per strategy and the legend only in the first:
+    each DER must be drawn in the same colour in all of them."""
+    import json
+
+    from opfbench.report.plots import der_q_day
+
+    run, _ = folders
+    fig = json.loads(der_q_day(load_inputs(run).der_q)[0].json)
+    colour = {}
+    for trace in fig["data"]:
+        colour.setdefault(trace["legendgroup"], set()).add(trace["line"]["color"])
+    assert len(colour) >= 2 and all(len(c) == 1 for c in colour.values())
+    assert len({next(iter(c)) for c in colour.values()}) == len(colour)  # and DERs differ

@@ -125,14 +125,16 @@ def der_q_day(der_q: pd.DataFrame) -> list[Plot]:
         strategies = [s for s in order(sub[["strategy"]].drop_duplicates())["strategy"] if s != "no-action"]
         if not strategies:
             continue
+        buses = sorted(sub["bus"].unique())
         fig = _subplots(rows=len(strategies), cols=1, shared_xaxes=True, subplot_titles=[escape(s) for s in strategies],
-                            vertical_spacing=0.06)
+                        vertical_spacing=0.06)
         for row, strategy in enumerate(strategies, start=1):
             for bus, grp in sub[sub["strategy"] == strategy].groupby("bus"):
                 d = _decimate(grp.sort_values("time"), "q_mvar")
                 kind = escape(str(grp["kind"].iloc[0]))
+                color = _COLORS[buses.index(bus) % len(_COLORS)]  # a DER keeps its colour in every panel
                 fig.add_scatter(x=d["time"], y=d["q_mvar"], mode="lines", name=f"bus {bus} ({kind})",
-                                legendgroup=str(bus), showlegend=row == 1, row=row, col=1)
+                                line=dict(color=color), legendgroup=str(bus), showlegend=row == 1, row=row, col=1)
             fig.update_yaxes(title_text="Q (MVAr)", row=row, col=1)
         out.append(plot_json(f"der-q-{i}", f"{case}: DER Q setpoints through the day (k={k:g}, night connected, "
                          "forecast off)", fig, "", "", height=max(HEIGHT, 220 * len(strategies))))
