@@ -112,3 +112,12 @@ def test_a_der_keeps_its_colour_in_every_panel(folders):
         colour.setdefault(trace["legendgroup"], set()).add(trace["line"]["color"])
     assert len(colour) >= 2 and all(len(c) == 1 for c in colour.values())
     assert len({next(iter(c)) for c in colour.values()}) == len(colour)  # and DERs differ
+
+
+def test_year_convergence_leaves_the_socp_uncertified(folders):
+    """The socp point is the bound's, never a certified AC optimum: "—", not 0 %."""
+    from opfbench.report.tables import convergence_summary
+
+    run, _ = folders
+    table = convergence_summary(load_inputs(run).summary).set_index("strategy")["certified optimal %"]
+    assert table.loc["socp"].isna().all() and table.loc["acopf"].notna().all()
