@@ -195,6 +195,9 @@ def test_resume_refuse_fresh(tmp_path, capsys):
     assert "(2 run now, 0 kept)" in capsys.readouterr().out
     assert main([*SMALL, "--out", out]) == 0  # everything kept
     assert "(0 run now, 2 kept)" in capsys.readouterr().out
+    # nothing left to run: no scheduler is contacted (this address answers nothing)
+    assert main([*SMALL, "--out", out, "--scheduler", "tcp://127.0.0.1:9"]) == 0
+    assert "(0 run now, 2 kept)" in capsys.readouterr().out
     pd.testing.assert_frame_equal(first, pd.read_parquet(tmp_path / "run" / "steps.parquet"))
     assert main([*SMALL, "--k", "0.2", "--out", out]) == 2
     assert "another configuration (differs in: ks)" in capsys.readouterr().err

@@ -48,12 +48,6 @@ class Inputs:
     missing: dict[str, str] = field(default_factory=dict)  # input name -> how to produce it
 
 
-def _parquet(path: Path) -> pd.DataFrame | None:
-    """The table, or None when the file is absent or has no rows (nothing to report either way)."""
-    frame = pd.read_parquet(path) if path.is_file() else None
-    return frame if frame is not None and len(frame) else None
-
-
 def _json(path: Path) -> dict | None:
     return json.loads(path.read_text()) if path.is_file() else None
 
@@ -139,7 +133,7 @@ def load_inputs(run_dir: str | Path, forecast_dir: str | Path | None = None,
 
     if fault_dir is not None:
         inp.fault_dir = Path(fault_dir)
-        inp.fault = _parquet(inp.fault_dir / "fault.parquet")
+        inp.fault = _filtered(inp.fault_dir / "fault.parquet", None, None)
         inp.traces = _filtered(inp.fault_dir / "traces.parquet", None,  # plotted: one bus, forecast off
                                [("bus", "==", TRACE_BUS), ("forecast", "==", "off")])
         inp.fault_manifest = _json(inp.fault_dir / "manifest.json")

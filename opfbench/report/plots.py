@@ -47,7 +47,7 @@ def plot_template() -> str:
 
 
 def _figure() -> go.Figure:
-    """A figure without a template: the page gives every figure one (`page.plot_template`)."""
+    """A figure without a template: the page gives every figure one (`plot_template`)."""
     return go.Figure(layout={"template": "none"})
 
 

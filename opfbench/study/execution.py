@@ -126,7 +126,9 @@ def execute(inputs: list[TaskInput], save: Save, workers: int, scheduler: str | 
     """Run `inputs`, calling `save` with each finished task (in completion order);
     `on_stop` ends the process on Ctrl-C in the in-process path. Returns a function that
     waits until every local worker process has exited (`run_dask`)."""
-    if scheduler is None and (workers <= 1 or len(inputs) <= 1):
+    if not inputs:  # every task kept from before: no cluster to start or reach
+        return _done
+    if scheduler is None and (workers <= 1 or len(inputs) == 1):
         run_in_process(inputs, save, on_stop)
         return _done
     return run_dask(inputs, save, workers, scheduler)

@@ -191,7 +191,7 @@ class RunStore:
 
     # ----- checkpoints --------------------------------------------------------------------
     def save(self, result: TaskOutput) -> None:
-        """Write a finished task atomically (detail files first, the main file last)."""
+        """Write a finished task atomically (its side files first, the main file last)."""
         base = self.out / result.task.file
         for name, frame in (result.detail | {"summary": result.summary}).items():
             _write_parquet(base.with_suffix(f".{name}.parquet"), frame)

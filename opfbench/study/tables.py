@@ -43,7 +43,7 @@ def step_rows(case: str, night_mode: str, forecast: str, time: pd.DatetimeIndex,
     lb = res.lower_bound_kw if res.lower_bound_kw is not None else nan
     return {
         "case": case, "strategy": res.strategy, "k": float(res.k), "night_mode": night_mode, "forecast": forecast,
-        "time": time, "step_h": float(step_h), "night": np.asarray(night, dtype=bool),
+        "time": time.asi8, "step_h": float(step_h), "night": np.asarray(night, dtype=bool),
         "status": res.status.astype(str), "losses_kw": res.losses_kw, "vmin_pu": res.vmin, "vmax_pu": res.vmax,
         "voltage_violation_pu": res.voltage_violation(), "q_total_mvar": res.q_mvar.sum(axis=1),
         "excursion_mvar": res.excursion_mvar, "lower_bound_kw": np.asarray(lb, dtype=float),
@@ -82,8 +82,8 @@ def stack(parts: list[Columns], columns: list[str], tz) -> pd.DataFrame:
     """One frame of `columns` from parts (`step_rows`, `detail_rows`), each as many rows
     as its arrays are long; one value for a part is repeated. Text is categorical (one
     value, or a few, repeated on every row: many times faster to build and to hand
-    between processes; the files hold plain text, `store._arrow`); "time" (DatetimeIndex
-    or UTC ns) gets the zone `tz`."""
+    between processes; the files hold plain text, `store._arrow`); "time" (UTC ns) gets
+    the zone `tz`."""
     rows = [max(len(v) for v in part.values() if np.ndim(v)) for part in parts]
     data = {}
     for name in columns:
@@ -93,8 +93,7 @@ def stack(parts: list[Columns], columns: list[str], tz) -> pd.DataFrame:
             codes = np.repeat(np.array([categories.index(v) for v in values], dtype=np.int32), rows)
             data[name] = pd.Categorical.from_codes(codes, categories)
         elif name == "time":
-            ns = np.concatenate([v.asi8 if isinstance(v, pd.DatetimeIndex) else v for v in values])
-            data[name] = pd.DatetimeIndex(ns.view("datetime64[ns]")).tz_localize("UTC").tz_convert(tz)
+            data[name] = pd.DatetimeIndex(np.concatenate(values).view("datetime64[ns]")).tz_localize("UTC").tz_convert(tz)
         else:
             arrays = [np.full(r, v) if np.ndim(v) == 0 else np.asarray(v) for v, r in zip(values, rows, strict=True)]
             column = np.concatenate(arrays) if arrays else np.zeros(0)
