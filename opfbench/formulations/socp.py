@@ -40,8 +40,9 @@ bound, certified fast path and fallback). Two further shares, each exact:
 - identical data, one solve: a snapshot whose data (fixed injections, Q limits) equal a
   snapshot solved before in this process, under the same network and options, gets that
   solve (`SolveMemo`; e.g. the daytime steps of the three night modes). The solve is a
-  function of its data alone (one Clarabel setup, updated in place), so this changes no
-  digit.
+  function of its data alone (Clarabel setups updated in place; bound screening answers
+  with the snapshot's own active set whatever was solved before, `conic`), so this changes
+  no digit.
 - the paper's slack rule from the unrestricted problem: the problem with slack P ≥ 0 is
   the unrestricted one with one more constraint, so where the unrestricted optimum already
   imports (slack P ≥ 0) it is the restricted optimum too, and where the unrestricted
@@ -67,7 +68,7 @@ import numpy as np
 from opfbench.errors import NetworkError
 from opfbench.formulations.cache import per_scenario, per_thread
 from opfbench.formulations.conic import INFEASIBLE as CONIC_INFEASIBLE
-from opfbench.formulations.conic import SOLVED, ParametricConeProgram, conic_status
+from opfbench.formulations.conic import ParametricConeProgram
 from opfbench.formulations.problem import (
     FROM_NO_ACTION,
     FROM_SOLVER,
@@ -96,7 +97,8 @@ MAX_ITER = 200
 class SocpSolve:
     """One snapshot's relaxation solve. outcome: "optimal" | "infeasible" (certified by
     Clarabel) | "failed"; solver_status: Clarabel's own status; solve_ms: wall time of
-    Clarabel's data update and solve(s); iterations: summed over attempts; slack_p_pu: the
+    Clarabel's data updates and solves; iterations: the answering Clarabel solve's; solves:
+    every Clarabel solve the answer took (`conic.ConeSolve`); slack_p_pu: the
     slack bus's active injection at the optimum (p.u., positive = import from the upstream
     grid). Where not optimal, lower_bound_kw, relaxation_gap and slack_p_pu are NaN and
     q_pu is None."""
@@ -108,6 +110,7 @@ class SocpSolve:
     relaxation_gap: float
     solve_ms: float
     iterations: int
+    solves: int
     slack_p_pu: float = np.nan
 
     @property
@@ -191,16 +194,14 @@ class SocpRelaxation:
         raw = []
         for b in self.program.offsets(thetas):
             start = now()
-            attempts = self.program.solve(b)
-            raw.append((attempts, elapsed_ms(start)))  # Clarabel's own solve_time is not used:
-            # after an in-place update it reads ~0.2 ms above the wall time of update + solve.
-        statuses = [[conic_status(a) for a in attempts] for attempts, _ in raw]
-        solved = np.array([s[-1] in SOLVED for s in statuses], dtype=bool)
+            raw.append((self.program.solve(b), elapsed_ms(start)))  # Clarabel's own solve_time is not
+            # used: after an in-place update it reads ~0.2 ms above the wall time of update + solve.
+        solved = np.array([a.solved for a, _ in raw], dtype=bool)
         n_x = self.program.n_x
-        final = [attempts[-1] for (attempts, _), ok in zip(raw, solved, strict=True) if ok]
-        x = np.array([sol.x for sol in final]).reshape(-1, n_x)
-        primal = np.array([sol.obj_val for sol in final])
-        dual = np.array([sol.obj_val_dual for sol in final])
+        final = [a for (a, _), ok in zip(raw, solved, strict=True) if ok]
+        x = np.array([a.x for a in final]).reshape(-1, n_x)
+        primal = np.array([a.primal for a in final])
+        dual = np.array([a.dual for a in final])
         value = self.program.reader(x)
         n, q_limit = self.net.n_bus, thetas[solved, 2 * self.net.n_bus:]
         q_pu = np.clip(value(self.q), -q_limit, q_limit)  # within solver tolerance of the limits anyway
@@ -209,14 +210,13 @@ class SocpRelaxation:
         slack_p = primal / self.problem.kw_per_pu + value(self.v) @ self.problem.gsh - thetas[solved, :n].sum(axis=1)
         gap = self._cone_residual(value)
         out, j = [], 0
-        for (attempts, solve_ms), status, ok in zip(raw, statuses, solved, strict=True):
-            iterations = sum(a.iterations for a in attempts)
+        for (a, solve_ms), ok in zip(raw, solved, strict=True):
             if not ok:
-                outcome = "infeasible" if status[-1] in CONIC_INFEASIBLE else "failed"
-                out.append(SocpSolve(outcome, " → ".join(status), np.nan, None, np.nan, solve_ms, iterations))
+                outcome = "infeasible" if a.status.split(" → ")[-1] in CONIC_INFEASIBLE else "failed"
+                out.append(SocpSolve(outcome, a.status, np.nan, None, np.nan, solve_ms, a.iterations, a.solves))
                 continue
-            out.append(SocpSolve("optimal", " → ".join(status), float(min(primal[j], dual[j])), q_pu[j],
-                                 float(gap[j]), solve_ms, iterations, float(slack_p[j])))
+            out.append(SocpSolve("optimal", a.status, float(min(primal[j], dual[j])), q_pu[j],
+                                 float(gap[j]), solve_ms, a.iterations, a.solves, float(slack_p[j])))
             j += 1
         return out
 
@@ -435,7 +435,7 @@ def run_socp(scenario: Scenario, k: float, *, slack_export: bool = True, model: 
     Status "ok" where Clarabel solved it, "infeasible" where it certified infeasibility
     (then no action, Q = 0, which also proves the AC OPF infeasible), "solver-failed"
     otherwise (also Q = 0). lower_bound_kw: the relaxation bound (NaN where not solved).
-    extra: solve_ms, iterations, solver_status (Clarabel's), relaxation_gap, fallback,
+    extra: solve_ms, iterations, solves, solver_status (Clarabel's), relaxation_gap, fallback,
     certified_by ("" — the relaxation's point is not certified optimal for the AC OPF;
     `run_acopf` does that), model.
     """
@@ -455,5 +455,5 @@ def run_socp(scenario: Scenario, k: float, *, slack_export: bool = True, model: 
 
 def socp_diagnostics(s: SocpSolve) -> dict:
     """The per-snapshot diagnostics a relaxation solve contributes to a result's `extra`."""
-    return {"solve_ms": s.solve_ms, "iterations": int(s.iterations), "solver_status": s.solver_status,
-            "relaxation_gap": s.relaxation_gap}
+    return {"solve_ms": s.solve_ms, "iterations": int(s.iterations), "solves": int(s.solves),
+            "solver_status": s.solver_status, "relaxation_gap": s.relaxation_gap}
