@@ -45,6 +45,9 @@ def replicated_feeder(copies: int) -> Network:
 
 
 def test_replicated_feeder_ac_opf_is_paper33s_per_copy():
+    """Losses to 1e-6 relative; Q to 5e-5 MVAr (of 0.2 MVAr setpoints): the losses are
+    flat in Q near the optimum, and the SOCP's and IPOPT's optima differ there by up to
+    1.4e-5 MVAr within their tolerances."""
     copies = 3
     net = replicated_feeder(copies)
     assert net.n_bus == 1 + 32 * copies and not net.meshed and len(net.ders) == 5 * copies
@@ -53,7 +56,7 @@ def test_replicated_feeder_ac_opf_is_paper33s_per_copy():
         res = run_acopf(Scenario.snapshot(net, 1.0, 0.8), 0.0, solver=solver)
         assert res.status[0] == "ok"
         assert res.losses_kw[0] == pytest.approx(copies * single.losses_kw[0], rel=1e-6)
-        np.testing.assert_allclose(res.q_mvar[0], np.tile(single.q_mvar[0], copies), atol=1e-5)
+        np.testing.assert_allclose(res.q_mvar[0], np.tile(single.q_mvar[0], copies), atol=5e-5)
 
 
 def test_models_are_sparse():

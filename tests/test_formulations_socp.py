@@ -75,8 +75,9 @@ def test_direct_clarabel_path_matches_cvxpy_solve(model):
     """The data-as-offset path (the full program) equals cvxpy's own solve with the data
     variables pinned; the screened answer has the same optimum: its bound within 5e-7
     relative (Clarabel's tolerances on two different programs; measured 4e-8 for
-    DistFlow, 3e-7 for Jabr) and its Q within 1e-5 p.u. (the losses are flat in Q near
-    the optimum: 1e-8 in the objective leaves Q to ~1e-6)."""
+    DistFlow, 3e-7 for Jabr). Q within 1e-5 p.u. for both: the losses are flat in Q near
+    the optimum, so 1e-8 in the objective leaves Q to ~1e-6 (measured up to 1.3e-6 between
+    our settings and cvxpy's defaults)."""
     net = load_case("paper33")
     relax = build_socp(net, model=model)
     program = relax.program
@@ -91,7 +92,7 @@ def test_direct_clarabel_path_matches_cvxpy_solve(model):
         full, statuses, _ = program.full.solve(b)
         assert statuses == ["Solved"]
         assert min(full.obj_val, full.obj_val_dual) == pytest.approx(pinned.value, rel=1e-7)
-        np.testing.assert_allclose(program.reader(np.array(full.x))(relax.q), relax.q.value, atol=1e-6)
+        np.testing.assert_allclose(program.reader(np.array(full.x))(relax.q), relax.q.value, atol=1e-5)
         answer = relax.solve(data.s_fixed[0], data.q_limit[0])
         assert answer.lower_bound_kw == pytest.approx(pinned.value, rel=5e-7)
         np.testing.assert_allclose(answer.q_pu, relax.q.value, atol=1e-5)

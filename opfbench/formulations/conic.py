@@ -144,10 +144,9 @@ class _BoundState:
         self.rhs = b[program._bounds]
         up, lo = program._pairs  # a variable's upper and lower bound rows
         equal = self.rhs[up] / program._bound_coef[up] == self.rhs[lo] / program._bound_coef[lo]
-        self.any_fixed = bool(equal.any())
         self.fixed = np.zeros(self.rhs.size, dtype=bool)
         self.lower_of_fixed = np.zeros(self.rhs.size, dtype=bool)
-        if self.any_fixed:
+        if equal.any():
             self.fixed[up[equal]] = True
             self.lower_of_fixed[lo[equal]] = True
 
@@ -156,15 +155,14 @@ class _BoundState:
 
     def check(self, kept: np.ndarray, x: np.ndarray, z: Sequence[float]) -> tuple[bool, tuple]:
         """(does the screened solution (x, z) with the bounds `kept` as equalities answer the
-        full program, the corrected guess)."""
+        full program, the corrected guess). A dropped bound whose opposite is kept needs no
+        check: its slack is the box's width."""
         n_zero, n_kept = self.p._n_zero, len(z) - self.p._n_rest - self.p._n_zero
         slack = self.slack(x)
         mult = np.asarray(z[n_zero:n_zero + n_kept])
-        if self.any_fixed:
-            need_slack = ~kept & ~(self.lower_of_fixed & kept[self.p._opposite])
-            ok = (slack[need_slack] >= MARGIN).all() and (mult[~self.fixed[kept]] >= MARGIN).all()
-        else:
-            ok = (slack[~kept] >= MARGIN).all() and (mult >= MARGIN).all()
+        opposite = self.p._opposite
+        need_slack = ~kept & ~((opposite >= 0) & kept[opposite])
+        ok = (slack[need_slack] >= MARGIN).all() and (mult[~self.fixed[kept]] >= MARGIN).all()
         if ok:
             return True, ()
         signed = np.zeros(kept.size)
@@ -174,8 +172,14 @@ class _BoundState:
 
     def active(self, x: np.ndarray) -> tuple:
         """The bounds active at the full program's solution x: slack below MARGIN, a fixed
-        variable by its upper row."""
-        return tuple(np.flatnonzero(((self.slack(x) < MARGIN) | self.fixed) & ~self.lower_of_fixed).tolist())
+        variable by its upper row; of a box narrower than MARGIN, the nearer end only."""
+        slack = self.slack(x)
+        active = ((slack < MARGIN) | self.fixed) & ~self.lower_of_fixed
+        up, lo = self.p._pairs
+        both = active[up] & active[lo]
+        if both.any():
+            active[np.where(slack[up] <= slack[lo], lo, up)[both]] = False
+        return tuple(np.flatnonzero(active).tolist())
 
 
 class ParametricConeProgram:
