@@ -212,8 +212,8 @@ class ParametricConeProgram:
         self._a, self._c = a[:, ~is_data], c[~is_data]
         new_col = np.cumsum(~is_data) - 1
         self._var_col = {vid: int(new_col[col]) for vid, col in var_col.items() if not is_data[col]}
-        self._settings = settings
-        self._screening(data["dims"])
+        self._settings, self._dims = settings, data["dims"]
+        self._screening(self._dims)
         self.full = _Clarabel(self._a, self._c, np.arange(self._b0.size), _cones(data["dims"]), self._b0, settings)
         self._screens: OrderedDict[tuple, _Clarabel] = OrderedDict()
         self._guess: tuple | None = None
@@ -229,9 +229,11 @@ class ParametricConeProgram:
         self._bounds = nonneg[single]
         self._bound_col = rows.indices[rows.indptr[:-1][single]]
         self._bound_coef = rows.data[rows.indptr[:-1][single]]
-        same = (self._bound_col[:, None] == self._bound_col[None, :]) & \
-            (self._bound_coef[:, None] * self._bound_coef[None, :] < 0)
-        self._opposite = np.where(same.any(axis=1), same.argmax(axis=1), -1)
+        upper = self._bound_coef > 0
+        row_of = np.full((2, self._c.size), -1)  # [upper, lower] bound row of each variable
+        row_of[0, self._bound_col[upper]] = np.flatnonzero(upper)
+        row_of[1, self._bound_col[~upper]] = np.flatnonzero(~upper)
+        self._opposite = np.where(upper, row_of[1, self._bound_col], row_of[0, self._bound_col])
         up = np.flatnonzero((self._opposite >= 0) & (self._bound_coef > 0))
         self._pairs = (up, self._opposite[up])
         self._other_nonneg = nonneg[~single]
