@@ -120,7 +120,7 @@ class _Clarabel:
         infeasible — seen as InsufficientProgress where a solver set up afresh on the same
         data succeeds), a fresh solver is built on this b, kept, and tried once more."""
         b = b[self.rows]
-        self.solver.update(b=b)
+        self.solver.update(b=b.tolist())  # a list: Clarabel's numpy conversion costs 3× more
         solution = self.solver.solve()
         statuses, iterations = [conic_status(solution)], solution.iterations
         if statuses[0] not in ANSWERED:
