@@ -71,7 +71,8 @@ def test_models_are_sparse():
     assert program._a.nnz < 25 * net.n_bus
     assert program._b_theta.nnz <= 2 * net.n_bus + 2 * len(net.ders)
     # The bound screening's own data is linear in the bound rows too (a pairing by
-    # broadcasting, 3·rows² bytes, took 5 GB on feeder10k): 8 bytes per row and per variable.
+    # broadcasting, 3·rows² bytes, took 5 GB on feeder10k): a few index arrays, at most
+    # 64 bytes per row and per variable.
     tracemalloc.start()
     program._screening(program._dims)
     peak = tracemalloc.get_traced_memory()[1]

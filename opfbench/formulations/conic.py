@@ -19,20 +19,21 @@ buses; the parameter-free compile is linear in the problem size.
 Bound screening. Most nonnegative rows are variable bounds a·x_j ≤ b_r (a single nonzero:
 v within its limits, DER Q within ±its limit), and at an optimum only a few are active. A
 screened program keeps the zero, other nonnegative and SOC rows, writes a set S of bound
-rows as equalities and drops the other bounds: fewer rows and barrier terms (paper33, paper
-day, k = 0: 9.4 instead of 12.3 Clarabel iterations, each cheaper). Its solution (x, z) answers
-the full program when every dropped bound holds with slack ≥ MARGIN and every bound in S
+rows as equalities and drops the other bounds: fewer rows and barrier terms (paper33,
+paper day, k = 0: 9.4 instead of 12.3 Clarabel iterations, each cheaper). Its solution
+(x, z) answers the full program when every dropped bound holds with slack ≥ MARGIN and every bound in S
 has multiplier z_r ≥ MARGIN: then x is feasible, and z with zeros on the dropped rows is
 dual feasible, for the full program, so x is its optimum and the screened dual objective
 (the same value at that z) is a lower bound of it (weak duality). A variable whose two
 bounds coincide (a Q limit of 0) is fixed: its upper row is in S with a multiplier of any
 sign. The guess for S is the last answer's S; if the check fails, one corrected guess
 (violated bounds added, wrong-signed ones removed), then the full program, whose active
-bounds give S (of a box narrower than MARGIN, the nearer end) for one more screened solve;
-a first snapshot, without a guess, thus costs two solves. So, except at degenerate snapshots (a bound
-within MARGIN of active with a multiplier below MARGIN, where the full program answers),
-the answer is the screened solution at the snapshot's own active set, whatever the
-guesses before it: the digits depend on the data alone, as sharing solves by data needs.
+bounds give S (of a box narrower than MARGIN, the nearer end) for one more screened
+solve; a first snapshot, without a guess, thus costs two solves. So, except at degenerate
+snapshots (a bound within MARGIN of active with a multiplier below MARGIN, where the full
+program answers), the answer is the screened solution at the snapshot's own active set,
+whatever the guesses before it: the digits depend on the data alone, as sharing solves by
+data needs.
 """
 
 from __future__ import annotations
@@ -91,8 +92,13 @@ class ConeSolve:
     screened: bool
 
     @property
+    def final_status(self) -> str:
+        """The last Clarabel status, e.g. "Solved"."""
+        return self.status.split(" → ")[-1]
+
+    @property
     def solved(self) -> bool:
-        return self.status.split(" → ")[-1] in SOLVED
+        return self.final_status in SOLVED
 
 
 class _Clarabel:

@@ -217,7 +217,7 @@ class SocpRelaxation:
         out, j = [], 0
         for (a, solve_ms), ok in zip(raw, solved, strict=True):
             if not ok:
-                outcome = "infeasible" if a.status.split(" → ")[-1] in CONIC_INFEASIBLE else "failed"
+                outcome = "infeasible" if a.final_status in CONIC_INFEASIBLE else "failed"
                 out.append(SocpSolve(outcome, a.status, np.nan, None, np.nan, solve_ms, a.iterations, a.solves))
                 continue
             out.append(SocpSolve("optimal", a.status, float(min(primal[j], dual[j])), q_pu[j],
