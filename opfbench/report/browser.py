@@ -25,9 +25,9 @@ from opfbench.errors import InputError
 
 CANDIDATES = ("chromium", "chromium-browser", "google-chrome")
 BROWSER_HOSTS = ("accounts.google.com", "update.googleapis.com", "clients2.google.com", "clients2.googleusercontent.com",
-                 "optimizationguide-pa.googleapis.com", "safebrowsing.googleapis.com", "content-autofill.googleapis.com")
-"""Hosts headless Chromium contacts on its own (accounts, component updater, network time),
-whatever page is open; their requests are not the page's (they still hit the refusing proxy)."""
+                 "optimizationguide-pa.googleapis.com", "safebrowsing.googleapis.com", "content-autofill.googleapis.com", "www.google.com")
+"""Hosts headless Chromium contacts on its own (accounts, component updater, network time;
+Debian's Chromium 150 also opens www.google.com five times with an empty page), whatever page is open; their requests are not the page's (they still hit the refusing proxy)."""
 VIRTUAL_TIME_MS = 20000
 _PROBE = """<script>
 window.__probe = {errors: []};
