@@ -82,7 +82,6 @@ def qmax(kinds: Sequence[str], p_mw: np.ndarray, rating_mw: np.ndarray, pv_night
     return np.where(kinds_arr == "PV", pv_limit(p, rating), dfig_qmax(p, rating))
 
 
-def usable_qmax(kinds: Sequence[str], p_mw: np.ndarray, rating_mw: np.ndarray, k: float,
-                pv_night_q: bool = False) -> np.ndarray:
+def usable_qmax(kinds: Sequence[str], p_mw: np.ndarray, rating_mw: np.ndarray, k: float, pv_night_q: bool = False) -> np.ndarray:
     """(1 − k)·Qmax: the part of the capability that loss minimization may use (MVAr)."""
     return (1.0 - check_reserve(k)) * qmax(kinds, p_mw, rating_mw, pv_night_q)

@@ -38,6 +38,9 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     except MemoryError:
         case = f" on case {args.case!r}" if getattr(args, "case", None) else ""
-        print(f"opfbench {args.command}: error: out of memory{case}: the problem is too large for this "
-              "machine's memory (a smaller case, or fewer snapshots)", file=sys.stderr)
+        print(
+            f"opfbench {args.command}: error: out of memory{case}: the problem is too large for this "
+            "machine's memory (a smaller case, or fewer snapshots)",
+            file=sys.stderr,
+        )
         return 2

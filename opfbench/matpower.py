@@ -148,8 +148,10 @@ def read_matpower(path: str | Path) -> MatpowerCase:
     neg_r = np.flatnonzero(branch[:, 2] < 0)
     if neg_r.size:  # checked on the file's values, before any unit conversion
         k = neg_r[0]
-        raise CaseFormatError(f"{name}: mpc.branch row {k + 1} ({branch[k, 0]:g}-{branch[k, 1]:g}): negative "
-                              f"resistance BR_R = {branch[k, 2]:g}; it would make negative losses, so it is refused")
+        raise CaseFormatError(
+            f"{name}: mpc.branch row {k + 1} ({branch[k, 0]:g}-{branch[k, 1]:g}): negative "
+            f"resistance BR_R = {branch[k, 2]:g}; it would make negative losses, so it is refused"
+        )
     case = MatpowerCase(name, base_mva, matrices["bus"], matrices["gen"], matrices["branch"], matrices.get("gencost"))
     _apply_conversions(case, _statements(trailing))
     return case
@@ -169,8 +171,7 @@ def _parse_matrix(name: str, key: str, body: list[tuple[int, str]]) -> np.ndarra
                     values.append(float(tok))
                 except ValueError:
                     raise CaseFormatError(
-                        f"{name}: mpc.{key} row {len(rows) + 1} (line {lineno}), column {col}: "
-                        f"non-numeric entry {tok!r}"
+                        f"{name}: mpc.{key} row {len(rows) + 1} (line {lineno}), column {col}: non-numeric entry {tok!r}"
                     ) from None
             rows.append(values)
             row_lines.append(lineno)
@@ -181,13 +182,14 @@ def _parse_matrix(name: str, key: str, body: list[tuple[int, str]]) -> np.ndarra
         first = len(rows[0])
         bad = next(k for k, r in enumerate(rows) if len(r) != first)
         raise CaseFormatError(
-            f"{name}: mpc.{key} row {bad + 1} (line {row_lines[bad]}) has {len(rows[bad])} columns, "
-            f"row 1 has {first}"
+            f"{name}: mpc.{key} row {bad + 1} (line {row_lines[bad]}) has {len(rows[bad])} columns, row 1 has {first}"
         )
     arr = np.array(rows)
     if not np.all(np.isfinite(arr)):
         r, c = np.argwhere(~np.isfinite(arr))[0]
-        raise CaseFormatError(f"{name}: mpc.{key} row {r + 1} (line {row_lines[r]}), column {c + 1}: value {arr[r, c]} is not finite")
+        raise CaseFormatError(
+            f"{name}: mpc.{key} row {r + 1} (line {row_lines[r]}), column {c + 1}: value {arr[r, c]} is not finite"
+        )
     return arr
 
 
@@ -207,8 +209,10 @@ def _apply_conversions(case: MatpowerCase, statements: list[tuple[int, str]]) ->
             continue
         if s == _VBASE:
             if not case.bus[0, 9] > 0:
-                raise CaseFormatError(f"{case.path}, line {lineno}: Vbase from mpc.bus row 1 BASE_KV = {case.bus[0, 9]:g} kV; "
-                                      "the ohm → p.u. conversion needs a positive base voltage")
+                raise CaseFormatError(
+                    f"{case.path}, line {lineno}: Vbase from mpc.bus row 1 BASE_KV = {case.bus[0, 9]:g} kV; "
+                    "the ohm → p.u. conversion needs a positive base voltage"
+                )
             env["Vbase"] = case.bus[0, 9] * 1e3
         elif s == _SBASE:
             env["Sbase"] = case.base_mva * 1e6
@@ -241,17 +245,24 @@ def to_network(case: MatpowerCase, name: str | None = None) -> Network:
     """Build the shared `Network` from a parsed case; validates bus references and slack."""
     label = name or Path(case.path).stem
     bus, gen, branch = case.bus, case.gen, case.branch
-    for matrix, arr, cols in (("bus", bus, ((0, "BUS_I"), (1, "BUS_TYPE"))),
-                              ("branch", branch, ((0, "F_BUS"), (1, "T_BUS"))), ("gen", gen, ((0, "GEN_BUS"),))):
+    for matrix, arr, cols in (
+        ("bus", bus, ((0, "BUS_I"), (1, "BUS_TYPE"))),
+        ("branch", branch, ((0, "F_BUS"), (1, "T_BUS"))),
+        ("gen", gen, ((0, "GEN_BUS"),)),
+    ):
         for col, col_name in cols:
             bad = np.flatnonzero(arr[:, col] != np.round(arr[:, col]))
             if bad.size:
-                raise CaseFormatError(f"{case.path}: mpc.{matrix} row {bad[0] + 1}, column {col + 1} ({col_name}): "
-                                      f"{arr[bad[0], col]:g} is not an integer")
+                raise CaseFormatError(
+                    f"{case.path}: mpc.{matrix} row {bad[0] + 1}, column {col + 1} ({col_name}): "
+                    f"{arr[bad[0], col]:g} is not an integer"
+                )
     crossed = np.flatnonzero(bus[:, 12] > bus[:, 11])
     if crossed.size:
         i = crossed[0]
-        raise CaseFormatError(f"{case.path}: mpc.bus row {i + 1} (bus {bus[i, 0]:.0f}): VMIN {bus[i, 12]:g} > VMAX {bus[i, 11]:g} p.u.")
+        raise CaseFormatError(
+            f"{case.path}: mpc.bus row {i + 1} (bus {bus[i, 0]:.0f}): VMIN {bus[i, 12]:g} > VMAX {bus[i, 11]:g} p.u."
+        )
     ids = bus[:, 0].astype(int)
     if len(set(ids)) != len(ids):
         dup = ids[np.flatnonzero(np.bincount(np.unique(ids, return_inverse=True)[1]) > 1)[0]]

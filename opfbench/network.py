@@ -94,7 +94,9 @@ class Network:
                 if arr.shape != (n,):
                     raise NetworkError(f"{self.name}: {name} has shape {arr.shape}, expected ({n},) like {group[0]}")
                 if arr.dtype.kind == "f" and not np.all(np.isfinite(arr)):
-                    raise NetworkError(f"{self.name}: {name} has a non-finite value at position {int(np.argmin(np.isfinite(arr)))}")
+                    raise NetworkError(
+                        f"{self.name}: {name} has a non-finite value at position {int(np.argmin(np.isfinite(arr)))}"
+                    )
         if not (np.isfinite(self.base_mva) and self.base_mva > 0):
             raise NetworkError(f"{self.name}: base_mva must be a finite positive number, got {self.base_mva}")
         for name in ("f", "t", "gen_bus"):
@@ -108,7 +110,8 @@ class Network:
             k = neg_r[0]
             raise NetworkError(
                 f"{self.name}: branch {k + 1} ({self.bus_ids[self.f[k]]}-{self.bus_ids[self.t[k]]}) has negative "
-                f"resistance r = {self.r[k]:.6g} p.u.; negative r makes negative losses and is refused")
+                f"resistance r = {self.r[k]:.6g} p.u.; negative r makes negative losses and is refused"
+            )
         crossed = np.flatnonzero(self.vmin > self.vmax)
         if crossed.size:
             i = crossed[0]

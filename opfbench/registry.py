@@ -56,25 +56,50 @@ class StrategySpec:
         return result if result.strategy == self.name else dataclasses.replace(result, strategy=self.name)
 
 
-STRATEGIES: dict[str, StrategySpec] = {s.name: s for s in (
-    StrategySpec("no-action", "local", "opfbench.strategies.local:no_action",
-                 "every DER at Q = 0"),
-    StrategySpec("llma", "local", "opfbench.strategies.local:llma",
-                 "Algorithm 1: Q = the load's Q at the DER's own bus, within (1 − k)·Qmax",
-                 options={"safe": False}, uses_forecast=True),
-    StrategySpec("lfma", "local", "opfbench.strategies.local:lfma",
-                 "Algorithm 2: LLMA plus the measured upstream Q inflow, sign-change rules",
-                 options={"safe": False}, uses_forecast=True),
-    StrategySpec("acopf", "formulation", "opfbench.formulations.acopf:run_acopf",
-                 "centralized AC OPF (IPOPT), fallback chain ending at an AC-feasible point",
-                 options={"fallback": "chain", "slack_export": True, "solver": "auto"}),
-    StrategySpec("acopf-paper", "formulation", "opfbench.formulations.acopf:run_acopf",
-                 "AC OPF under the paper's setup: slack may not export, failure → no action",
-                 options={"solver": "auto"}, fixed={"fallback": "paper", "slack_export": False}),
-    StrategySpec("socp", "formulation", "opfbench.formulations.socp:run_socp",
-                 "SOCP relaxation (Clarabel): certified lower bound; its Q evaluated by AC power flow",
-                 options={"slack_export": True}),
-)}
+STRATEGIES: dict[str, StrategySpec] = {
+    s.name: s
+    for s in (
+        StrategySpec("no-action", "local", "opfbench.strategies.local:no_action", "every DER at Q = 0"),
+        StrategySpec(
+            "llma",
+            "local",
+            "opfbench.strategies.local:llma",
+            "Algorithm 1: Q = the load's Q at the DER's own bus, within (1 − k)·Qmax",
+            options={"safe": False},
+            uses_forecast=True,
+        ),
+        StrategySpec(
+            "lfma",
+            "local",
+            "opfbench.strategies.local:lfma",
+            "Algorithm 2: LLMA plus the measured upstream Q inflow, sign-change rules",
+            options={"safe": False},
+            uses_forecast=True,
+        ),
+        StrategySpec(
+            "acopf",
+            "formulation",
+            "opfbench.formulations.acopf:run_acopf",
+            "centralized AC OPF (IPOPT), fallback chain ending at an AC-feasible point",
+            options={"fallback": "chain", "slack_export": True, "solver": "auto"},
+        ),
+        StrategySpec(
+            "acopf-paper",
+            "formulation",
+            "opfbench.formulations.acopf:run_acopf",
+            "AC OPF under the paper's setup: slack may not export, failure → no action",
+            options={"solver": "auto"},
+            fixed={"fallback": "paper", "slack_export": False},
+        ),
+        StrategySpec(
+            "socp",
+            "formulation",
+            "opfbench.formulations.socp:run_socp",
+            "SOCP relaxation (Clarabel): certified lower bound; its Q evaluated by AC power flow",
+            options={"slack_export": True},
+        ),
+    )
+}
 STRATEGY_NAMES = tuple(STRATEGIES)
 LOCAL_RULES = tuple(n for n, s in STRATEGIES.items() if s.kind == "local")
 FORMULATIONS = tuple(n for n, s in STRATEGIES.items() if s.kind == "formulation")

@@ -52,10 +52,18 @@ class StrategyResult:
     extra: dict = field(default_factory=dict)
 
     @classmethod
-    def from_setpoints(cls, strategy: str, k: float, scenario: "Scenario", q_mvar: np.ndarray,
-                       wall_ms: float, power_flows: np.ndarray | int = 0,
-                       pf: PowerFlowResult | None = None, status: np.ndarray | None = None,
-                       **kw) -> "StrategyResult":
+    def from_setpoints(
+        cls,
+        strategy: str,
+        k: float,
+        scenario: "Scenario",
+        q_mvar: np.ndarray,
+        wall_ms: float,
+        power_flows: np.ndarray | int = 0,
+        pf: PowerFlowResult | None = None,
+        status: np.ndarray | None = None,
+        **kw,
+    ) -> "StrategyResult":
         """Evaluate setpoints q_mvar (S, n_der) with the batched AC power flow (unless `pf`
         already holds that evaluation) and build the record. `power_flows` counts the
         flows the strategy itself used; the evaluation adds one per snapshot when run here.
@@ -71,8 +79,7 @@ class StrategyResult:
         losses = np.where(conv, np.atleast_1d(pf.losses_kw), np.nan)
         physical = scenario.qmax_mvar()
         excursion = np.maximum(np.abs(q) - physical, 0.0).max(axis=1, initial=0.0)
-        return cls(strategy, float(k), scenario.net, q, losses, np.atleast_2d(pf.vm), st, flows,
-                   float(wall_ms), excursion, **kw)
+        return cls(strategy, float(k), scenario.net, q, losses, np.atleast_2d(pf.vm), st, flows, float(wall_ms), excursion, **kw)
 
     @property
     def n_snapshots(self) -> int:

@@ -63,15 +63,20 @@ class Scenario:
         """The same network object and the same snapshots — loads, DER P, forecast and the
         "Q at night" mask (a mask set nowhere counts as none) — so that every strategy, a
         deterministic function of these, gives the same result on both."""
+
         def night_q(s: Scenario) -> np.ndarray | None:
             return s.pv_night_q if s.pv_night_q is not None and s.pv_night_q.any() else None
 
         def equal(a: np.ndarray | None, b: np.ndarray | None) -> bool:
             return (a is None and b is None) or (a is not None and b is not None and np.array_equal(a, b))
 
-        return (self.net is other.net and equal(self.load_scale, other.load_scale)
-                and equal(self.der_p_mw, other.der_p_mw) and equal(self.der_p_forecast_mw, other.der_p_forecast_mw)
-                and equal(night_q(self), night_q(other)))
+        return (
+            self.net is other.net
+            and equal(self.load_scale, other.load_scale)
+            and equal(self.der_p_mw, other.der_p_mw)
+            and equal(self.der_p_forecast_mw, other.der_p_forecast_mw)
+            and equal(night_q(self), night_q(other))
+        )
 
     def _check_range(self, label: str, p: np.ndarray) -> None:
         """0 ≤ P ≤ rating (MW) per DER, up to round-off."""
@@ -79,12 +84,15 @@ class Scenario:
         bad = (p < 0) | (p > rating * (1 + 1e-9))
         if np.any(bad):
             s, d = np.argwhere(bad)[0]
-            raise InputError(f"scenario: {label} must lie in [0, rating] MW; snapshot {s}, DER {d} "
-                             f"(bus {self.net.bus_ids[self.net.ders[d].bus]}): {p[s, d]:.6g} MW, rating {rating[d]:.6g} MW")
+            raise InputError(
+                f"scenario: {label} must lie in [0, rating] MW; snapshot {s}, DER {d} "
+                f"(bus {self.net.bus_ids[self.net.ders[d].bus]}): {p[s, d]:.6g} MW, rating {rating[d]:.6g} MW"
+            )
 
     @classmethod
-    def snapshot(cls, net: Network, load_scale: float = 1.0, der_scale: float = 0.8,
-                 forecast_der_scale: float | None = None) -> "Scenario":
+    def snapshot(
+        cls, net: Network, load_scale: float = 1.0, der_scale: float = 0.8, forecast_der_scale: float | None = None
+    ) -> "Scenario":
         """One snapshot: every DER at `der_scale` × rating (and optionally a forecast)."""
         for label, value in (("der_scale", der_scale), ("forecast_der_scale", forecast_der_scale)):
             if value is not None and not 0 <= value <= 1:
@@ -106,9 +114,15 @@ class Scenario:
         return self.load_scale[:, None] * self.net.load_q_mvar[self.net.der_bus][None, :]
 
     @classmethod
-    def from_profiles(cls, net: Network, load_pu: np.ndarray, pv_pu: np.ndarray, wind_pu: np.ndarray,
-                      forecast_pv_pu: np.ndarray | None = None,
-                      forecast_wind_pu: np.ndarray | None = None) -> "Scenario":
+    def from_profiles(
+        cls,
+        net: Network,
+        load_pu: np.ndarray,
+        pv_pu: np.ndarray,
+        wind_pu: np.ndarray,
+        forecast_pv_pu: np.ndarray | None = None,
+        forecast_wind_pu: np.ndarray | None = None,
+    ) -> "Scenario":
         """Snapshots from per-unit profiles (S,): loads follow `load_pu` × nominal load;
         PV units `pv_pu` × rating; DFIG units `wind_pu` × rating (the mapping rule of
         `opfbench.data.profiles`). Forecast profiles, when given, set P^F the same way."""
@@ -129,8 +143,11 @@ class Scenario:
 
         forecast = None
         if forecast_pv_pu is not None or forecast_wind_pu is not None:
-            forecast = der_mw(pv_pu if forecast_pv_pu is None else forecast_pv_pu,
-                              wind_pu if forecast_wind_pu is None else forecast_wind_pu, "forecast_")
+            forecast = der_mw(
+                pv_pu if forecast_pv_pu is None else forecast_pv_pu,
+                wind_pu if forecast_wind_pu is None else forecast_wind_pu,
+                "forecast_",
+            )
         return cls(net, load, der_mw(pv_pu, wind_pu), forecast)
 
     def take(self, rows: np.ndarray | slice) -> "Scenario":
@@ -176,8 +193,10 @@ def _der_array(label: str, value: object, n_snap: int, n_der: int) -> np.ndarray
     if arr.ndim == 1 and n_snap == 1 and arr.shape[0] == n_der:
         arr = arr[None, :]
     if arr.shape != (n_snap, n_der):
-        raise InputError(f"scenario: {label} must have shape (S, n_der) = ({n_snap}, {n_der}) "
-                         f"(S from load_scale, n_der from the network), got {arr.shape}")
+        raise InputError(
+            f"scenario: {label} must have shape (S, n_der) = ({n_snap}, {n_der}) "
+            f"(S from load_scale, n_der from the network), got {arr.shape}"
+        )
     return arr
 
 

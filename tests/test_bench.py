@@ -6,6 +6,7 @@ import builtins
 
 import numpy as np
 import pytest
+from test_powerflow import CASE4_PV
 
 import opfbench.bench.local as bench_local
 import opfbench.bench.opf as bench_opf
@@ -16,11 +17,23 @@ from opfbench.cases import load_case
 from opfbench.errors import NetworkError
 from opfbench.matpower import load_case_file
 from opfbench.powerflow import bus_injections, solve_pf
-from test_powerflow import CASE4_PV
 
-PF_KEYS = {"case", "snapshots", "single_ms", "batch_1440_ms", "batch_converged", "batch_max_iterations",
-           "batch_vs_single_max_dv_pu", "pandapower_loop_1440_ms", "ratio_vs_pandapower", "pandapower_max_dv_pu",
-           "pandapower_numba", "pgm_batch_1440_ms", "ratio_vs_pgm", "pgm_max_dv_pu"}
+PF_KEYS = {
+    "case",
+    "snapshots",
+    "single_ms",
+    "batch_1440_ms",
+    "batch_converged",
+    "batch_max_iterations",
+    "batch_vs_single_max_dv_pu",
+    "pandapower_loop_1440_ms",
+    "ratio_vs_pandapower",
+    "pandapower_max_dv_pu",
+    "pandapower_numba",
+    "pgm_batch_1440_ms",
+    "ratio_vs_pgm",
+    "pgm_max_dv_pu",
+}
 
 
 @pytest.fixture

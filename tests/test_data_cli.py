@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import json
 
-
 from opfbench import cli
 from opfbench.data import load_pv_minute, load_simbench_profiles, load_wind_hourly
 
@@ -13,8 +12,9 @@ def test_data_json_lists_every_dataset(capsys):
     assert cli.main(["data", "--json"]) == 0
     listing = json.loads(capsys.readouterr().out)
     assert [d["name"] for d in listing] == ["pv_minute", "wind_hourly", "simbench_profiles"]
-    for entry, loaded, step in zip(listing, (load_pv_minute(), load_wind_hourly(), load_simbench_profiles()),
-                                   ("1min", "1h", "15min"), strict=True):
+    for entry, loaded, step in zip(
+        listing, (load_pv_minute(), load_wind_hourly(), load_simbench_profiles()), ("1min", "1h", "15min"), strict=True
+    ):
         assert set(entry) == {"name", "rows", "start", "end", "step", "columns", "gaps_filled"}
         assert entry["rows"] == len(loaded) and entry["step"] == step
         assert entry["start"] == loaded.index[0].isoformat() and entry["end"] == loaded.index[-1].isoformat()

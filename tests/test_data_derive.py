@@ -42,8 +42,9 @@ def test_derivation_is_bit_for_bit(rederived, name):
 
 
 def test_manifest_gap_counts_are_the_raw_missing_values():
-    gaps = {name: entry["gaps_filled"] for name, entry in
-            json.loads((FILES_DIR / "manifest.json").read_text())["datasets"].items()}
+    gaps = {
+        name: entry["gaps_filled"] for name, entry in json.loads((FILES_DIR / "manifest.json").read_text())["datasets"].items()
+    }
     for name, raw in (("pv_minute", parse_bsrn_lr0100(RAW / BSRN_FILE)), ("wind_hourly", parse_try(RAW / TRY_FILE))):
         missing = raw.isna().sum().to_dict()
         assert {col: gaps[name][col] for col in raw.columns} == missing

@@ -31,18 +31,19 @@ def bsrn_text(rows: list[tuple]) -> str:
 
 
 def test_bsrn_parse_maps_fields_and_missing_values():
-    text = bsrn_text([
-        (1, 0, 10, 20, 5, 9.3, 95.0, 958),
-        (1, 1, -999, -999, 6, -99.9, -99.9, -999),
-        (1, 2, 30, 40, 7, 9.7, 97.0, 960),
-    ])
+    text = bsrn_text(
+        [
+            (1, 0, 10, 20, 5, 9.3, 95.0, 958),
+            (1, 1, -999, -999, 6, -99.9, -99.9, -999),
+            (1, 2, 30, 40, 7, 9.7, 97.0, 960),
+        ]
+    )
     df = parse_bsrn_lr0100(text)
     assert list(df.index) == list(pd.date_range("2016-06-01", periods=3, freq="1min", tz="UTC"))
     assert df.loc[df.index[0]].tolist() == [10, 20, 5, 9.3, 95.0, 958]
     assert df.iloc[1].isna().tolist() == [True, True, False, True, True, True]
     filled, counts = fill_gaps_linear(df)
-    assert counts == {"ghi_wm2": 1, "dni_wm2": 1, "dhi_wm2": 0, "temp_air_c": 1,
-                      "relative_humidity_pct": 1, "pressure_hpa": 1}
+    assert counts == {"ghi_wm2": 1, "dni_wm2": 1, "dhi_wm2": 0, "temp_air_c": 1, "relative_humidity_pct": 1, "pressure_hpa": 1}
     assert filled.iloc[1].tolist() == pytest.approx([20, 30, 6, 9.5, 96.0, 959])
 
 
@@ -55,9 +56,13 @@ def test_bsrn_parse_reads_gzipped_path_and_day_offset(tmp_path):
 
 def test_bsrn_dni_gap_rebuilt_from_closure_at_noon_and_linear_at_night():
     noon = (pd.Timestamp("2016-06-21 11:30", tz="UTC") - pd.Timestamp("2016-06-21", tz="UTC")).seconds // 60
-    text = bsrn_text([(21, noon - 1, 900, 800, 100, 20.0, 50.0, 960),
-                      (21, noon, 900, -999, 100, 20.0, 50.0, 960),
-                      (21, noon + 1, 900, 800, 100, 20.0, 50.0, 960)])
+    text = bsrn_text(
+        [
+            (21, noon - 1, 900, 800, 100, 20.0, 50.0, 960),
+            (21, noon, 900, -999, 100, 20.0, 50.0, 960),
+            (21, noon + 1, 900, 800, 100, 20.0, 50.0, 960),
+        ]
+    )
     filled, counts = fill_bsrn_gaps(parse_bsrn_lr0100(text), PAYERNE)
     from pvlib.solarposition import get_solarposition
 
@@ -65,15 +70,19 @@ def test_bsrn_dni_gap_rebuilt_from_closure_at_noon_and_linear_at_night():
     expected = 800 / np.cos(np.radians(zenith["apparent_zenith"].iloc[0]))
     assert filled["dni_wm2"].iloc[1] == pytest.approx(expected)
     assert counts["dni_wm2"] == 1
-    night = bsrn_text([(21, 0, 0, 2, 0, 10.0, 90.0, 960), (21, 1, 0, -999, 0, 10.0, 90.0, 960),
-                       (21, 2, 0, 4, 0, 10.0, 90.0, 960)])
+    night = bsrn_text(
+        [(21, 0, 0, 2, 0, 10.0, 90.0, 960), (21, 1, 0, -999, 0, 10.0, 90.0, 960), (21, 2, 0, 4, 0, 10.0, 90.0, 960)]
+    )
     assert fill_bsrn_gaps(parse_bsrn_lr0100(night), PAYERNE)[0]["dni_wm2"].iloc[1] == 3
 
 
-@pytest.mark.parametrize("rows, message", [
-    ([(1, 0, 0, 0, 0, 1.0, 1.0, 950), (1, 2, 0, 0, 0, 1.0, 1.0, 950)], "'time'"),
-    ([(1, 1, 0, 0, 0, 1.0, 1.0, 950), (1, 0, 0, 0, 0, 1.0, 1.0, 950)], "'time'"),
-])
+@pytest.mark.parametrize(
+    "rows, message",
+    [
+        ([(1, 0, 0, 0, 0, 1.0, 1.0, 950), (1, 2, 0, 0, 0, 1.0, 1.0, 950)], "'time'"),
+        ([(1, 1, 0, 0, 0, 1.0, 1.0, 950), (1, 0, 0, 0, 0, 1.0, 1.0, 950)], "'time'"),
+    ],
+)
 def test_bsrn_rejects_non_consecutive_time(rows, message):
     with pytest.raises(DataError, match=message):
         parse_bsrn_lr0100(bsrn_text(rows))
@@ -102,12 +111,14 @@ TRY_ROW = " 4     1  {mm:2d}  {dd:2d}  {hh:2d}  7  {wr:3d}     {wg:3.1f}    -2.6
 
 
 def test_try_parse_places_typical_year_on_cet_clock():
-    text = TRY_HEAD + "".join(TRY_ROW.format(mm=1, dd=1, hh=h, wr=wr, wg=wg)
-                              for h, wr, wg in [(1, 230, 5.7), (2, 999, 6.0), (24, 250, 3.0)])
+    text = TRY_HEAD + "".join(
+        TRY_ROW.format(mm=1, dd=1, hh=h, wr=wr, wg=wg) for h, wr, wg in [(1, 230, 5.7), (2, 999, 6.0), (24, 250, 3.0)]
+    )
     df = parse_try(text)
     assert str(df.index.tz) == "Etc/GMT-1"
-    assert list(df.index.tz_convert("UTC")) == [pd.Timestamp(t, tz="UTC") for t in
-                                              ("2010-01-01 00:00", "2010-01-01 01:00", "2010-01-01 23:00")]
+    assert list(df.index.tz_convert("UTC")) == [
+        pd.Timestamp(t, tz="UTC") for t in ("2010-01-01 00:00", "2010-01-01 01:00", "2010-01-01 23:00")
+    ]
     assert df.columns.tolist() == ["wind_speed_ms", "wind_dir_deg", "temp_air_c", "relative_humidity_pct", "pressure_hpa"]
     assert df["wind_speed_ms"].tolist() == [5.7, 6.0, 3.0]
     assert np.isnan(df["wind_dir_deg"].iloc[1])
@@ -138,8 +149,9 @@ def test_simbench_parse_localises_daylight_saving_jumps():
     df = parse_simbench_profiles(SIMBENCH_DST, {"pv_pu": "PV3", "wind_pu": "WP4"})
     assert list(df.index.tz_convert("UTC")) == list(pd.date_range("2016-03-27 00:30", periods=4, freq="15min", tz="UTC"))
     assert df["wind_pu"].tolist() == [0.5, 0.6, 0.7, 0.8]
-    repeated = "time;WP4\n" + "".join(f"30.10.2016 {t};{v}\n" for v, t in
-                                      enumerate(["02:30", "02:45", "02:00", "02:15", "02:30", "02:45", "03:00"]))
+    repeated = "time;WP4\n" + "".join(
+        f"30.10.2016 {t};{v}\n" for v, t in enumerate(["02:30", "02:45", "02:00", "02:15", "02:30", "02:45", "03:00"])
+    )
     fall = parse_simbench_profiles(repeated, {"wind_pu": "WP4"})
     assert list(fall.index.tz_convert("UTC")) == list(pd.date_range("2016-10-30 00:30", periods=7, freq="15min", tz="UTC"))
 

@@ -8,8 +8,15 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from opfbench.data import (PAPER_DAY, assemble_profiles, load_pv_minute, load_simbench_profiles,
-                           night_mask, night_mask_window, paper_day)
+from opfbench.data import (
+    PAPER_DAY,
+    assemble_profiles,
+    load_pv_minute,
+    load_simbench_profiles,
+    night_mask,
+    night_mask_window,
+    paper_day,
+)
 from opfbench.data.plot_paper_day import plot_paper_day
 from opfbench.data.profiles import PAPER_DAY_TZ
 from opfbench.errors import InputError
@@ -59,15 +66,18 @@ def test_assemble_profiles_downsamples_bsrn_pv_by_sampling():
     assert np.allclose(pv, minute["pv_ac_kw"].reindex(index) / minute.attrs["rating_kw"])
 
 
-@pytest.mark.parametrize("index, kwargs, message", [
-    (pd.date_range("2016-06-01", periods=3, freq="1min"), {}, "time-zone-aware"),
-    (pd.DatetimeIndex([], tz="UTC"), {}, "non-empty"),
-    (pd.DatetimeIndex(["2016-06-01 00:01", "2016-06-01 00:00"], tz="UTC"), {}, "strictly increasing"),
-    (pd.date_range("2016-12-31 23:50", periods=20, freq="1min", tz="Europe/Berlin"), {}, "leaves the span"),
-    (pd.date_range("2016-07-01 00:00", periods=3, freq="1min", tz="UTC"), {"pv_source": "bsrn"}, "leaves the span"),
-    (pd.date_range("2016-06-01", periods=3, freq="1min", tz="UTC"), {"load_profile": "L0-A"}, "unknown load"),
-    (pd.date_range("2016-06-01", periods=3, freq="1min", tz="UTC"), {"pv_source": "era5"}, "unknown pv_source"),
-])
+@pytest.mark.parametrize(
+    "index, kwargs, message",
+    [
+        (pd.date_range("2016-06-01", periods=3, freq="1min"), {}, "time-zone-aware"),
+        (pd.DatetimeIndex([], tz="UTC"), {}, "non-empty"),
+        (pd.DatetimeIndex(["2016-06-01 00:01", "2016-06-01 00:00"], tz="UTC"), {}, "strictly increasing"),
+        (pd.date_range("2016-12-31 23:50", periods=20, freq="1min", tz="Europe/Berlin"), {}, "leaves the span"),
+        (pd.date_range("2016-07-01 00:00", periods=3, freq="1min", tz="UTC"), {"pv_source": "bsrn"}, "leaves the span"),
+        (pd.date_range("2016-06-01", periods=3, freq="1min", tz="UTC"), {"load_profile": "L0-A"}, "unknown load"),
+        (pd.date_range("2016-06-01", periods=3, freq="1min", tz="UTC"), {"pv_source": "era5"}, "unknown pv_source"),
+    ],
+)
 def test_assemble_profiles_rejects_bad_windows(index, kwargs, message):
     with pytest.raises(InputError, match=message):
         assemble_profiles(index, **kwargs)
@@ -99,12 +109,15 @@ def test_night_mask_window_wraps_midnight():
     assert utc.sum() == 540 and not utc.equals(night)
 
 
-@pytest.mark.parametrize("call", [
-    lambda i: night_mask_window(i, "20:00", "20:00"),
-    lambda i: night_mask_window(i, "8pm", "05:00"),
-    lambda i: night_mask_window(i.tz_localize(None)),
-    lambda i: night_mask(i, 95.0, 0.0),
-])
+@pytest.mark.parametrize(
+    "call",
+    [
+        lambda i: night_mask_window(i, "20:00", "20:00"),
+        lambda i: night_mask_window(i, "8pm", "05:00"),
+        lambda i: night_mask_window(i.tz_localize(None)),
+        lambda i: night_mask(i, 95.0, 0.0),
+    ],
+)
 def test_night_masks_reject_bad_arguments(call):
     with pytest.raises(InputError):
         call(pd.date_range("2016-06-28", periods=10, freq="1min", tz="UTC"))

@@ -24,7 +24,7 @@ def test_andes_power_flow_is_our_start():
     v = ss.Bus.v.v[: net.n_bus] * np.exp(1j * ss.Bus.a.v[: net.n_bus])
     assert np.abs(v - model.v0).max() <= 1e-6
     nm = model.n_motors
-    assert np.abs(ss.Motor3.slip.v - model.x0[2 * nm:3 * nm]).max() <= 1e-8
+    assert np.abs(ss.Motor3.slip.v - model.x0[2 * nm : 3 * nm]).max() <= 1e-8
 
 
 @pytest.mark.slow

@@ -53,8 +53,17 @@ def test_lags_reach_the_references():
     dx = np.empty(4)
     h = 1e-4
     for _ in range(2000):
-        kernel.derivatives(x, v, np.zeros(0, np.int64), np.zeros((0, kernel.N_MOTOR_COLUMNS)), np.zeros(1, np.int64),
-                           inv, sc, np.zeros(1, dtype=np.bool_), dx)
+        kernel.derivatives(
+            x,
+            v,
+            np.zeros(0, np.int64),
+            np.zeros((0, kernel.N_MOTOR_COLUMNS)),
+            np.zeros(1, np.int64),
+            inv,
+            sc,
+            np.zeros(1, dtype=np.bool_),
+            dx,
+        )
         x = x + h * dx
     assert x[0] == pytest.approx(0.5, abs=1e-6)
     assert x[2] * 0.5 == pytest.approx(0.5 * 0.06, rel=0.01)  # Q = |V|·Iq, 100 % rated current

@@ -34,8 +34,9 @@ def _radau(model, fault: FaultParams, t_grid: np.ndarray) -> np.ndarray:
         z = model.impedance(fb, fault.impedance_pu) if on else model.impedance()
         t1 = t0 + length
         with threadpool_limits(1):  # Radau's small LUs: threaded BLAS only adds contention
-            sol = solve_ivp(lambda t, y, z=z: model.derivatives(y, z), (t0, t1), x, method="Radau", rtol=1e-8,
-                            atol=1e-10, dense_output=True)
+            sol = solve_ivp(
+                lambda t, y, z=z: model.derivatives(y, z), (t0, t1), x, method="Radau", rtol=1e-8, atol=1e-10, dense_output=True
+            )
         assert sol.success, sol.message
         first = t0 == 0.0
         sel = np.flatnonzero(((t_grid > t0 + 1e-12) | (first & (t_grid >= t0))) & (t_grid <= t1 + 1e-12))

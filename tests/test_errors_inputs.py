@@ -25,12 +25,17 @@ BAD_CASES = {
     "fractional bus id": (GOOD.replace("\t3\t1\t90", "\t2.9\t1\t90"), "mpc.bus row 3, column 1 (BUS_I): 2.9 is not an integer"),
     "fractional branch end": (GOOD.replace("\t2\t3\t0.4930", "\t2\t3.5\t0.4930"), "mpc.branch row 2, column 2 (T_BUS): 3.5"),
     "negative resistance": (GOOD.replace("0.4930", "-0.4930"), "mpc.branch row 2 (2-3): negative resistance BR_R = -0.493"),
-    "infinite baseMVA": (GOOD.replace("mpc.baseMVA = 10;", "mpc.baseMVA = Inf;"), "mpc.baseMVA must be a finite positive number, got inf"),
+    "infinite baseMVA": (
+        GOOD.replace("mpc.baseMVA = 10;", "mpc.baseMVA = Inf;"),
+        "mpc.baseMVA must be a finite positive number, got inf",
+    ),
     "baseKV 0 with ohm conversion": (GOOD.replace(_BUS1, _BUS1[:-5] + "0"), "line 24: Vbase from mpc.bus row 1 BASE_KV = 0 kV"),
     "power factor 2": (GOOD + _PF_LINES.format(2), "line 28: power factor pf = 2 must lie in (0, 1]"),
     "power factor 0": (GOOD + _PF_LINES.format(0), "line 28: power factor pf = 0 must lie in (0, 1]"),
-    "Vmin above Vmax": (GOOD.replace("12.66\t1\t1.1\t0.9;\n\t3", "12.66\t1\t0.9\t1.1;\n\t3"),
-                        "mpc.bus row 2 (bus 2): VMIN 1.1 > VMAX 0.9"),
+    "Vmin above Vmax": (
+        GOOD.replace("12.66\t1\t1.1\t0.9;\n\t3", "12.66\t1\t0.9\t1.1;\n\t3"),
+        "mpc.bus row 2 (bus 2): VMIN 1.1 > VMAX 0.9",
+    ),
 }
 
 
@@ -50,11 +55,14 @@ def test_malformed_case_file_exit_2_naming_file_and_row(capsys, tmp_path, label)
     assert err.startswith(f"opfbench pf: error: {path}") and message in err
 
 
-@pytest.mark.parametrize(("data", "message"), [
-    (GOOD.replace("%% in Volts", "%% in Volts \xe9").encode("latin-1"), "not a text MATPOWER file (byte 763 is not UTF-8)"),
-    (b"\x00\x01\x02mpc" * 10, "not a text MATPOWER file (contains NUL bytes)"),
-    (bytes(range(256)), "is not UTF-8"),
-])
+@pytest.mark.parametrize(
+    ("data", "message"),
+    [
+        (GOOD.replace("%% in Volts", "%% in Volts \xe9").encode("latin-1"), "not a text MATPOWER file (byte 763 is not UTF-8)"),
+        (b"\x00\x01\x02mpc" * 10, "not a text MATPOWER file (contains NUL bytes)"),
+        (bytes(range(256)), "is not UTF-8"),
+    ],
+)
 def test_binary_or_non_utf8_case_file_exit_2(capsys, tmp_path, data, message):
     path = tmp_path / "bad.m"
     path.write_bytes(data)
@@ -68,8 +76,10 @@ def test_out_of_memory_is_one_message_naming_the_case(capsys, monkeypatch):
 
     monkeypatch.setattr("opfbench.cases.load_case", too_big)  # the command imports it when it runs
     code, err = _cli(capsys, ["pf", "case10000"])
-    assert code == 2 and err == ("opfbench pf: error: out of memory on case 'case10000': the problem is too large "
-                                 "for this machine's memory (a smaller case, or fewer snapshots)\n")
+    assert code == 2 and err == (
+        "opfbench pf: error: out of memory on case 'case10000': the problem is too large "
+        "for this machine's memory (a smaller case, or fewer snapshots)\n"
+    )
 
 
 # ----- the shared network is immutable ----------------------------------------------------
@@ -174,17 +184,26 @@ def _forecast_dir(tmp_path, values, timestamps=None, raw: bytes | None = None):
     return tmp_path
 
 
-@pytest.mark.parametrize(("values", "timestamps", "message"), [
-    ([1.0, 1e12, 2.0], None, r"column 'lstm', line 3: '1000000000000.0' is outside the plant's range \[0, 10\] kW"),
-    ([1.0, 2.0, -0.5], None, r"column 'lstm', line 4: '-0.5' is outside the plant's range"),
-    ([1.0, float("inf"), 2.0], None, r"column 'lstm', line 3: 'inf' is not finite"),
-    ([1.0, "abc", 2.0], None, r"column 'lstm', line 3: 'abc' is not a number"),
-    ([1.0, "", 2.0], None, r"column 'lstm', line 3: '' is not a number"),
-    ([1.0, 2.0, 3.0], ["2016-06-01T10:00:00+0000", "yesterday", "2016-06-01T10:02:00+0000"],
-     r"column 'timestamp', line 3: 'yesterday' is not a timestamp"),
-    ([1.0, 2.0, 3.0], ["2016-06-01T10:00:00+0000", "2016-06-01T09:00:00+0000", "2016-06-01T10:02:00+0000"],
-     r"column 'timestamp' is not strictly increasing at row 1"),
-])
+@pytest.mark.parametrize(
+    ("values", "timestamps", "message"),
+    [
+        ([1.0, 1e12, 2.0], None, r"column 'lstm', line 3: '1000000000000.0' is outside the plant's range \[0, 10\] kW"),
+        ([1.0, 2.0, -0.5], None, r"column 'lstm', line 4: '-0.5' is outside the plant's range"),
+        ([1.0, float("inf"), 2.0], None, r"column 'lstm', line 3: 'inf' is not finite"),
+        ([1.0, "abc", 2.0], None, r"column 'lstm', line 3: 'abc' is not a number"),
+        ([1.0, "", 2.0], None, r"column 'lstm', line 3: '' is not a number"),
+        (
+            [1.0, 2.0, 3.0],
+            ["2016-06-01T10:00:00+0000", "yesterday", "2016-06-01T10:02:00+0000"],
+            r"column 'timestamp', line 3: 'yesterday' is not a timestamp",
+        ),
+        (
+            [1.0, 2.0, 3.0],
+            ["2016-06-01T10:00:00+0000", "2016-06-01T09:00:00+0000", "2016-06-01T10:02:00+0000"],
+            r"column 'timestamp' is not strictly increasing at row 1",
+        ),
+    ],
+)
 def test_bad_forecast_values_are_refused_not_clipped(tmp_path, values, timestamps, message):
     folder = _forecast_dir(tmp_path, values, timestamps)
     with pytest.raises(DataError, match=message) as info:
@@ -212,10 +231,13 @@ def no_computation(monkeypatch):
     monkeypatch.setattr("opfbench.forecasting.datasets.forecast_dataset", fail)
 
 
-@pytest.mark.parametrize(("seed", "message"), [
-    ("-1", "--seed must lie in [0, 4294967295], got -1"),
-    (str(2**64), f"--seed must lie in [0, 4294967295], got {2**64}"),
-])
+@pytest.mark.parametrize(
+    ("seed", "message"),
+    [
+        ("-1", "--seed must lie in [0, 4294967295], got -1"),
+        (str(2**64), f"--seed must lie in [0, 4294967295], got {2**64}"),
+    ],
+)
 def test_forecast_seed_out_of_range(capsys, no_computation, seed, message):
     code, err = _cli(capsys, ["forecast", "--dataset", "pv", "--quick", "--seed", seed])
     assert code == 2 and err == f"opfbench forecast: error: {message}\n"
@@ -237,8 +259,9 @@ def test_forecast_unknown_model_before_loading(capsys, no_computation):
 
 # ----- the loss-table module -------------------------------------------------------------------
 def test_strategies_table_unknown_case_exit_2():
-    proc = subprocess.run([sys.executable, "-m", "opfbench.strategies.table", "--case", "nope"],
-                          capture_output=True, text=True, timeout=120)
+    proc = subprocess.run(
+        [sys.executable, "-m", "opfbench.strategies.table", "--case", "nope"], capture_output=True, text=True, timeout=120
+    )
     assert proc.returncode == 2 and proc.stdout == ""
     assert proc.stderr.startswith("python -m opfbench.strategies.table: error: unknown case 'nope'")
     assert proc.stderr.count("\n") == 1
@@ -246,15 +269,17 @@ def test_strategies_table_unknown_case_exit_2():
 
 # ----- lazy imports -----------------------------------------------------------------------------
 def test_cli_pf_and_forecast_files_do_not_import_torch_statsmodels_matplotlib():
-    code = ("import sys, contextlib, io\n"
-            "import opfbench.cli as cli\n"
-            "heavy = ('torch', 'statsmodels', 'matplotlib')\n"
-            "cli.build_parser()  # what `opfbench --help` does: not even pandas, scipy or the solvers\n"
-            "after_parser = [m for m in heavy + ('pandas', 'scipy', 'cvxpy', 'casadi') if m in sys.modules]\n"
-            "with contextlib.redirect_stdout(io.StringIO()):\n"
-            "    rc = cli.main(['pf', 'paper33', '--json'])\n"
-            "after_pf = [m for m in heavy if m in sys.modules]\n"
-            "from opfbench.forecasting import load_forecast  # what `run --forecast MODEL` reads\n"
-            "print(after_parser, after_pf, [m for m in heavy if m in sys.modules], rc)\n")
+    code = (
+        "import sys, contextlib, io\n"
+        "import opfbench.cli as cli\n"
+        "heavy = ('torch', 'statsmodels', 'matplotlib')\n"
+        "cli.build_parser()  # what `opfbench --help` does: not even pandas, scipy or the solvers\n"
+        "after_parser = [m for m in heavy + ('pandas', 'scipy', 'cvxpy', 'casadi') if m in sys.modules]\n"
+        "with contextlib.redirect_stdout(io.StringIO()):\n"
+        "    rc = cli.main(['pf', 'paper33', '--json'])\n"
+        "after_pf = [m for m in heavy if m in sys.modules]\n"
+        "from opfbench.forecasting import load_forecast  # what `run --forecast MODEL` reads\n"
+        "print(after_parser, after_pf, [m for m in heavy if m in sys.modules], rc)\n"
+    )
     proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
     assert proc.stdout.strip() == "[] [] [] 0", proc.stderr

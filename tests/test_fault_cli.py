@@ -11,18 +11,21 @@ from opfbench.cli import main
 SHORT = ["paper33", "--strategies", "no-action", "llma", "--k", "0", "0.8", "--t-end", "0.6"]
 
 
-@pytest.mark.parametrize("argv, needle", [
-    (["paper33", "--fault-bus", "99"], "no bus 99"),
-    (["paper33", "--fault-bus", "x"], "--fault-bus"),
-    (["paper33", "--fault-bus", "17", "--fault-impedance", "-0.1"], "--fault-impedance"),
-    (["paper33", "--fault-bus", "17", "--duration-ms", "-5"], "--duration-ms"),
-    (["paper33", "--fault-bus", "17", "--step-ms", "10"], "too large for the fastest time constant"),
-    (["paper33", "--fault-bus", "17", "--motor-share", "1.5"], "motor share"),
-    (["paper33", "--fault-bus", "17", "--motor-share", "-0.1"], "motor share"),
-    (["paper33", "--fault-bus", "17", "--variants", "source=abc"], "not a number"),
-    (["paper33", "--fault-bus", "17", "--variants", "colour=red"], "unknown key"),
-    (["paper33", "--fault-bus", "17", "--time", "25:00"], "--time"),
-])
+@pytest.mark.parametrize(
+    "argv, needle",
+    [
+        (["paper33", "--fault-bus", "99"], "no bus 99"),
+        (["paper33", "--fault-bus", "x"], "--fault-bus"),
+        (["paper33", "--fault-bus", "17", "--fault-impedance", "-0.1"], "--fault-impedance"),
+        (["paper33", "--fault-bus", "17", "--duration-ms", "-5"], "--duration-ms"),
+        (["paper33", "--fault-bus", "17", "--step-ms", "10"], "too large for the fastest time constant"),
+        (["paper33", "--fault-bus", "17", "--motor-share", "1.5"], "motor share"),
+        (["paper33", "--fault-bus", "17", "--motor-share", "-0.1"], "motor share"),
+        (["paper33", "--fault-bus", "17", "--variants", "source=abc"], "not a number"),
+        (["paper33", "--fault-bus", "17", "--variants", "colour=red"], "unknown key"),
+        (["paper33", "--fault-bus", "17", "--time", "25:00"], "--time"),
+    ],
+)
 def test_bad_input_is_one_message_and_exit_2(argv, needle, capsys):
     assert main(["fault", *argv]) == 2
     err = capsys.readouterr().err.strip()
@@ -40,14 +43,30 @@ def test_json_and_out_files(tmp_path, capsys):
         assert r["status"] in ("recovered", "not-recovered", "diverged")
         assert r["vmin"]["18"] < 0.2  # a bolted-through-j0.02 fault
     table = pd.read_parquet(out / "fault.parquet")
-    assert list(table.columns) == ["case", "fault_bus", "strategy", "k", "forecast", "variant", "source_impedance_pu",
-                                   "emf", "motor_share", "bus", "recovery_ms", "status", "vmin_pu", "margin_pu",
-                                   "motors_stalled", "sim_ms", "der_bus", "faulted"]
+    assert list(table.columns) == [
+        "case",
+        "fault_bus",
+        "strategy",
+        "k",
+        "forecast",
+        "variant",
+        "source_impedance_pu",
+        "emf",
+        "motor_share",
+        "bus",
+        "recovery_ms",
+        "status",
+        "vmin_pu",
+        "margin_pu",
+        "motors_stalled",
+        "sim_ms",
+        "der_bus",
+        "faulted",
+    ]
     assert len(table) == 4 * 33 and table["faulted"].sum() == 4 and table["der_bus"].sum() == 4 * 5
     assert set(table["variant"]) == {"reference"} and set(table["emf"]) == {"reset"}
     traces = pd.read_parquet(out / "traces.parquet")
-    assert list(traces.columns) == ["case", "fault_bus", "strategy", "k", "forecast", "variant", "bus", "t_s", "v_pu",
-                                    "q_mvar"]
+    assert list(traces.columns) == ["case", "fault_bus", "strategy", "k", "forecast", "variant", "bus", "t_s", "v_pu", "q_mvar"]
     assert set(traces["bus"]) == {10, 16, 19, 27, 29, 18}
     assert traces.groupby(["strategy", "k", "bus"])["t_s"].diff().dropna().max() <= 0.005 + 1e-9
     assert traces.loc[traces["bus"] == 18, "q_mvar"].isna().all()
@@ -56,8 +75,26 @@ def test_json_and_out_files(tmp_path, capsys):
 
 
 def test_variants_are_labelled(capsys):
-    assert main(["fault", *SHORT, "--fault-bus", "27", "--strategies", "no-action", "--k", "0",
-                 "--variants", "reference", "motors=0.3", "emf=held", "--json"]) == 0
+    assert (
+        main(
+            [
+                "fault",
+                *SHORT,
+                "--fault-bus",
+                "27",
+                "--strategies",
+                "no-action",
+                "--k",
+                "0",
+                "--variants",
+                "reference",
+                "motors=0.3",
+                "emf=held",
+                "--json",
+            ]
+        )
+        == 0
+    )
     records = json.loads(capsys.readouterr().out)
     assert [r["variant"] for r in records] == ["reference", "motors=0.3", "emf=held"]
     # fewer motors: the voltage at the fault bus recovers sooner

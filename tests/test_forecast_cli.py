@@ -14,9 +14,9 @@ import pandas as pd
 import pytest
 
 import opfbench.cli as cli
+from opfbench.forecasting import models
 from opfbench.forecasting.datasets import pv_dataset, wind_dataset
 from opfbench.forecasting.experiment import run_comparison
-from opfbench.forecasting import models
 from opfbench.forecasting.models import MODEL_NAMES, settings_for
 from opfbench.forecasting.outputs import load_forecast
 from tests.forecast_synthetic import synthetic_pv_minute, synthetic_wind_hourly
@@ -26,14 +26,16 @@ TIMINGS = ("fit_s", "predict_s")
 
 def tiny_settings(dataset: str, quick: bool = True):
     """The quick settings, cut to one epoch of 64 windows and one ARIMA order fitted on 300 samples."""
-    return replace(settings_for(dataset, quick), epochs=1, windows_per_epoch=64,
-                   arima_orders=((1, 0, 0),), arima_fit_samples=300)
+    return replace(settings_for(dataset, quick), epochs=1, windows_per_epoch=64, arima_orders=((1, 0, 0),), arima_fit_samples=300)
 
 
 @pytest.fixture
 def run_cli(monkeypatch, capsys):
     """Run `opfbench forecast ...` on synthetic data; returns (exit code, stdout, stderr)."""
-    synthetic = {"pv": lambda: pv_dataset(synthetic_pv_minute(days=6)), "wind": lambda: wind_dataset(synthetic_wind_hourly(days=60))}
+    synthetic = {
+        "pv": lambda: pv_dataset(synthetic_pv_minute(days=6)),
+        "wind": lambda: wind_dataset(synthetic_wind_hourly(days=60)),
+    }
     monkeypatch.setattr("opfbench.forecasting.datasets.forecast_dataset", lambda name: synthetic[name]())
     monkeypatch.setattr(models, "settings_for", tiny_settings)
 
@@ -102,7 +104,9 @@ def test_load_forecast_errors(tmp_path):
 
     with pytest.raises(DataError, match="no forecast file"):
         load_forecast(tmp_path, "pv", "lstm")
-    pd.DataFrame({"actual": [1.0]}, index=pd.Index(["2016-06-01T00:00:00+0000"], name="timestamp")).to_csv(tmp_path / "forecast_pv.csv")
+    pd.DataFrame({"actual": [1.0]}, index=pd.Index(["2016-06-01T00:00:00+0000"], name="timestamp")).to_csv(
+        tmp_path / "forecast_pv.csv"
+    )
     with pytest.raises(InputError, match="available: actual"):
         load_forecast(tmp_path, "pv", "lstm")
 

@@ -17,8 +17,8 @@ import pytest
 from opfbench.errors import DataError, InputError
 from opfbench.forecasting.datasets import TARGET, pv_dataset, wind_dataset
 from opfbench.forecasting.models import MODEL_NAMES, build_model, settings_for
-from opfbench.forecasting.neural import NeuralForecaster, TrainConfig
 from opfbench.forecasting.networks import NetConfig
+from opfbench.forecasting.neural import NeuralForecaster, TrainConfig
 from opfbench.forecasting.persistence import Persistence
 from tests.forecast_synthetic import synthetic_pv_minute, synthetic_wind_hourly
 

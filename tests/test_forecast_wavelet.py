@@ -43,7 +43,9 @@ def _per_window_features(series: np.ndarray, width: int) -> np.ndarray:
 def _whole_series_features(series: np.ndarray, width: int) -> np.ndarray:
     """The leaky variant: decompose the whole series once, then slice."""
     coeffs = pywt.wavedec(series, "db2", level=3)
-    parts = [pywt.waverec([c if j == i else np.zeros_like(c) for j, c in enumerate(coeffs)], "db2")[: len(series)] for i in range(4)]
+    parts = [
+        pywt.waverec([c if j == i else np.zeros_like(c) for j, c in enumerate(coeffs)], "db2")[: len(series)] for i in range(4)
+    ]
     return np.stack([p[width - 1 : -1] for p in parts], axis=1)
 
 

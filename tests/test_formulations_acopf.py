@@ -195,8 +195,7 @@ def test_sequence_run_records_every_solve(paper33):
 def test_snapshot_cli_json_has_solver_fields(capsys):
     assert main(["snapshot", "paper33", "--strategy", "acopf", "--json"]) == 0
     out = json.loads(capsys.readouterr().out)
-    for key in ("status", "losses_kw", "solve_ms", "iterations", "lower_bound_kw", "relaxation_gap",
-                "fallback", "solver_status"):
+    for key in ("status", "losses_kw", "solve_ms", "iterations", "lower_bound_kw", "relaxation_gap", "fallback", "solver_status"):
         assert out[key] is not None, key
     assert out["status"] == "ok" and out["fallback"] == "none"
     assert out["lower_bound_kw"] <= out["losses_kw"] * (1 + 1e-6)
@@ -204,8 +203,22 @@ def test_snapshot_cli_json_has_solver_fields(capsys):
 
 
 def test_snapshot_cli_reports_infeasible_without_error(capsys):
-    code = main(["snapshot", "paper33", "--strategy", "acopf", "--json", "--load-scale", "0.2",
-                 "--der-scale", "1", "--no-slack-export", "--fallback", "paper"])
+    code = main(
+        [
+            "snapshot",
+            "paper33",
+            "--strategy",
+            "acopf",
+            "--json",
+            "--load-scale",
+            "0.2",
+            "--der-scale",
+            "1",
+            "--no-slack-export",
+            "--fallback",
+            "paper",
+        ]
+    )
     assert code == 0
     out = json.loads(capsys.readouterr().out)
     assert out["status"] == "infeasible" and out["fallback"] == "no-action"

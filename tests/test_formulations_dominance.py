@@ -54,8 +54,7 @@ def test_acopf_never_worse_than_the_local_rules(case, k):
     for rule in ("llma", "lfma"):
         other = run_strategy(rule, scenario, k)
         report = opf_dominance(opf, other, scenario)
-        exceptions = [(i, scenario.load_scale[i], scenario.der_p_mw[i].round(3).tolist(), a, b)
-                      for i, a, b in report.violations]
+        exceptions = [(i, scenario.load_scale[i], scenario.der_p_mw[i].round(3).tolist(), a, b) for i, a, b in report.violations]
         assert report.ok, f"{rule}: OPF lost at (snapshot, load scale, DER MW, OPF kW, rule kW) {exceptions}"
         assert report.compared >= 50 and report.opf_unsolved == 0
 

@@ -53,8 +53,7 @@ def test_fast_path_equals_ipopt_on_random_snapshots(case, n):
 def test_fast_path_equals_ipopt_on_100_random_snapshots_and_the_paper_day(case):
     from opfbench.bench.profiles import paper_day_scenario
 
-    shares = {"random": _compare(random_snapshots(case, 100, seed=11), 0.0),
-              "paper day": _compare(paper_day_scenario(case), 0.0)}
+    shares = {"random": _compare(random_snapshots(case, 100, seed=11), 0.0), "paper day": _compare(paper_day_scenario(case), 0.0)}
     print(case, "certified by the SOCP:", shares)
     assert shares["paper day"] >= 0.99, shares
 

@@ -38,12 +38,21 @@ def replicated_feeder(copies: int) -> Network:
 
     ders = tuple(DER(d.bus + c * m, d.kind, d.rating_mw) for c in range(copies) for d in base.ders)
     return base.with_changes(
-        name=f"paper33x{copies}", bus_ids=np.arange(1, 1 + 1 + copies * m), bus_type=buses(base.bus_type),
-        base_kv=buses(base.base_kv), load_p_mw=buses(base.load_p_mw), load_q_mvar=buses(base.load_q_mvar),
-        gs_mw=buses(base.gs_mw), bs_mvar=buses(base.bs_mvar), vmin=buses(base.vmin), vmax=buses(base.vmax),
-        f=ends(base.f), t=ends(base.t), **{k: np.tile(getattr(base, k), copies)
-                                           for k in ("r", "x", "b", "tap", "shift", "status")},
-        ders=ders)
+        name=f"paper33x{copies}",
+        bus_ids=np.arange(1, 1 + 1 + copies * m),
+        bus_type=buses(base.bus_type),
+        base_kv=buses(base.base_kv),
+        load_p_mw=buses(base.load_p_mw),
+        load_q_mvar=buses(base.load_q_mvar),
+        gs_mw=buses(base.gs_mw),
+        bs_mvar=buses(base.bs_mvar),
+        vmin=buses(base.vmin),
+        vmax=buses(base.vmax),
+        f=ends(base.f),
+        t=ends(base.t),
+        **{k: np.tile(getattr(base, k), copies) for k in ("r", "x", "b", "tap", "shift", "status")},
+        ders=ders,
+    )
 
 
 def test_replicated_feeder_ac_opf_is_paper33s_per_copy():

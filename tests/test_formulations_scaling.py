@@ -23,8 +23,7 @@ def test_branch_scale_is_the_power_below_each_branch():
     assert s[head].sum() == pytest.approx(total)
     leaves = np.flatnonzero(net.is_leaf & ~np.isin(np.arange(net.n_bus), net.der_bus))
     assert leaves.size
-    np.testing.assert_allclose(s[leaves], np.maximum(np.abs(net.load_p_mw + 1j * net.load_q_mvar)[leaves],
-                                                      1e-3 * s.max()))
+    np.testing.assert_allclose(s[leaves], np.maximum(np.abs(net.load_p_mw + 1j * net.load_q_mvar)[leaves], 1e-3 * s.max()))
 
 
 @pytest.mark.parametrize("case", ["paper33", "case141-der"])

@@ -54,9 +54,11 @@ def test_a_wrong_guess_is_refused_and_changes_no_digit():
     relax, fresh = build_socp(net), build_socp(net)
     b = _offsets(relax, Scenario.snapshot(net, 0.5, 0.7), 0.0)[0]
     program = relax.program
-    upper = tuple(int(i) for i in np.flatnonzero(program._bound_coef > 0)
-                  if program._bound_col[i] in range(program._var_col[relax.q.id],
-                                                    program._var_col[relax.q.id] + relax.q.size))
+    upper = tuple(
+        int(i)
+        for i in np.flatnonzero(program._bound_coef > 0)
+        if program._bound_col[i] in range(program._var_col[relax.q.id], program._var_col[relax.q.id] + relax.q.size)
+    )
     program._guess = upper
     wrong = program.solve(b)
     right = fresh.program.solve(b)
@@ -82,4 +84,3 @@ def test_a_q_limit_of_zero_fixes_the_der_at_zero():
     q = relax.program.reader(second.x)(relax.q)
     assert np.all(np.abs(q[:-1]) <= 1e-9) and abs(q[-1]) <= limit[-1] + 1e-9
     np.testing.assert_array_equal(first.x, second.x)
-

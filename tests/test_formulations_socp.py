@@ -21,8 +21,7 @@ def random_scenario(net, n: int, seed: int) -> Scenario:
     return Scenario(net, rng.uniform(0.3, 1.3, n), rng.uniform(0.0, 1.0, (n, len(net.ders))) * net.der_rating_mw)
 
 
-@pytest.mark.parametrize("case, n, exact", [("paper33", 20, True), ("case69-der", 8, True),
-                                            ("paper33-meshed", 20, False)])
+@pytest.mark.parametrize("case, n, exact", [("paper33", 20, True), ("case69-der", 8, True), ("paper33-meshed", 20, False)])
 def test_lower_bound_below_ac_opf(case, n, exact):
     net = load_case(case)
     scenario = random_scenario(net, n, seed=7)
@@ -83,8 +82,7 @@ def test_direct_clarabel_path_matches_cvxpy_solve(model):
     program = relax.program
     for scale in (0.5, 1.2):
         data = snapshot_data(Scenario.snapshot(net, scale, 0.7), 0.0)
-        pins = [relax.p_fixed == data.s_fixed[0].real, relax.q_fixed == data.s_fixed[0].imag,
-                relax.q_limit == data.q_limit[0]]
+        pins = [relax.p_fixed == data.s_fixed[0].real, relax.q_fixed == data.s_fixed[0].imag, relax.q_limit == data.q_limit[0]]
         pinned = cp.Problem(relax.cvxpy_problem.objective, relax.cvxpy_problem.constraints + pins)
         pinned.solve(solver=cp.CLARABEL)
         assert pinned.status == "optimal"

@@ -35,8 +35,7 @@ SLOW = {"acopf-paper"}
 @pytest.fixture(scope="module")
 def day_scenario() -> Scenario:
     day = paper_day()
-    return Scenario.from_profiles(load_case("paper33"), day["load"].to_numpy(), day["pv"].to_numpy(),
-                                  day["wind"].to_numpy())
+    return Scenario.from_profiles(load_case("paper33"), day["load"].to_numpy(), day["pv"].to_numpy(), day["wind"].to_numpy())
 
 
 def test_every_registered_strategy_has_a_pinned_energy():

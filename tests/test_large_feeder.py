@@ -80,8 +80,12 @@ def test_lfma_on_feeder1k_detects_every_upstream_line():
 def test_pf_command_on_feeder1k(capsys):
     assert main(["pf", "feeder1k", "--json"]) == 0
     out = json.loads(capsys.readouterr().out)
-    assert out["converged"] and out["losses_kw"] == pytest.approx(solve_pf(load_case("feeder1k"), bus_injections(
-        load_case("feeder1k"), 0.8 * load_case("feeder1k").der_rating_mw)).losses_kw, abs=1e-6)
+    assert out["converged"] and out["losses_kw"] == pytest.approx(
+        solve_pf(
+            load_case("feeder1k"), bus_injections(load_case("feeder1k"), 0.8 * load_case("feeder1k").der_rating_mw)
+        ).losses_kw,
+        abs=1e-6,
+    )
 
 
 @pytest.mark.slow

@@ -71,19 +71,41 @@ def test_case141_power_factor_conversion():
         (lambda s: s.replace("mpc.bus = [", "mpc.bux = ["), r"unsupported matrix mpc\.bux"),
         (lambda s: s.split("mpc.bus = [")[0] + "mpc.gen" + s.split("mpc.gen", 1)[1], r"missing mpc\.bus"),
         (lambda s: s.replace("mpc.baseMVA = 10;", ""), r"missing mpc\.baseMVA"),
-        (lambda s: s.replace("\t3\t1\t90\t40\t0\t0\t1\t1\t0\t12.66\t1\t1.1\t0.9;", "\t3\t1\t90\t40\t0\t0\t1\t1\t0\t12.66\t1\t1.1;"),
-         r"mpc\.bus row 3 \(line 7\) has 12 columns, row 1 has 13"),
+        (
+            lambda s: s.replace(
+                "\t3\t1\t90\t40\t0\t0\t1\t1\t0\t12.66\t1\t1.1\t0.9;", "\t3\t1\t90\t40\t0\t0\t1\t1\t0\t12.66\t1\t1.1;"
+            ),
+            r"mpc\.bus row 3 \(line 7\) has 12 columns, row 1 has 13",
+        ),
         (lambda s: s.replace("\t2\t3\t0.4930", "\t2\t7\t0.4930"), r"mpc\.branch row 2: to bus 7 is not a bus"),
-        (lambda s: s.replace("\t2\t1\t100\t60", "\t2\t1\tabc\t60"), r"mpc\.bus row 2 \(line 6\), column 3: non-numeric entry 'abc'"),
+        (
+            lambda s: s.replace("\t2\t1\t100\t60", "\t2\t1\tabc\t60"),
+            r"mpc\.bus row 2 \(line 6\), column 3: non-numeric entry 'abc'",
+        ),
         (lambda s: s + "mpc.bus(:, PD) = 2 * mpc.bus(:, PD);\n", r"line 28: unrecognized code line"),
         (lambda s: s.replace("\t0.2511\t0\t0\t0\t0\t0\t0\t1\t", "\t0.2511\t0\t0\t0\t0\t0\t0\t0\t"), r"islanded .*: 3"),
-        (lambda s: s.replace("mpc.branch = [", "mpc.branch = [\n\t1\t2\t0.1\t0.1\t0\t0\t0\t0\t0\t0;"), r"mpc\.branch row 2 \(line \d+\) has 13 columns, row 1 has 10"),
+        (
+            lambda s: s.replace("mpc.branch = [", "mpc.branch = [\n\t1\t2\t0.1\t0.1\t0\t0\t0\t0\t0\t0;"),
+            r"mpc\.branch row 2 \(line \d+\) has 13 columns, row 1 has 10",
+        ),
         (lambda s: s.replace("\t1\t3\t0\t0", "\t1\t1\t0\t0"), r"exactly one reference bus"),
         (lambda s: s.replace("mpc.version = '2';", "mpc.version = '1';"), r"version '2'"),
         (lambda s: s.replace("];\nmpc.gen", "\nmpc.gen", 1), r"non-numeric entry 'mpc.gen"),
     ],
-    ids=["unknown-matrix", "missing-bus", "missing-baseMVA", "wrong-column-count", "unknown-bus",
-         "non-numeric", "unrecognized-code", "islanded-bus", "ragged-branch", "no-slack", "version", "unclosed"],
+    ids=[
+        "unknown-matrix",
+        "missing-bus",
+        "missing-baseMVA",
+        "wrong-column-count",
+        "unknown-bus",
+        "non-numeric",
+        "unrecognized-code",
+        "islanded-bus",
+        "ragged-branch",
+        "no-slack",
+        "version",
+        "unclosed",
+    ],
 )
 def test_malformed_case_names_the_problem(tmp_path, mutate, message):
     path = _write(tmp_path, mutate(GOOD))

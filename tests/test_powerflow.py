@@ -4,8 +4,8 @@ import numpy as np
 import pytest
 
 from opfbench.cases import load_case
-from opfbench.powerflow import bus_injections, solve_pf, solve_pf_batch
 from opfbench.errors import InputError
+from opfbench.powerflow import bus_injections, solve_pf, solve_pf_batch
 
 
 def _pf(name, der_mw=0.0, load_scale=1.0):
@@ -13,10 +13,13 @@ def _pf(name, der_mw=0.0, load_scale=1.0):
     return solve_pf(net, bus_injections(net, der_mw, 0.0, load_scale))
 
 
-@pytest.mark.parametrize("name, losses_kw, vmin, vmin_bus", [
-    ("case33bw", 202.68, 0.9131, 18),  # Baran & Wu, as MATPOWER reports it
-    ("case69", 224.99, 0.9092, 65),
-])
+@pytest.mark.parametrize(
+    "name, losses_kw, vmin, vmin_bus",
+    [
+        ("case33bw", 202.68, 0.9131, 18),  # Baran & Wu, as MATPOWER reports it
+        ("case69", 224.99, 0.9092, 65),
+    ],
+)
 def test_published_figures(name, losses_kw, vmin, vmin_bus):
     r = _pf(name)
     assert r.converged
@@ -56,8 +59,12 @@ def _random_points(name, n, seed):
     net = load_case(name)
     rng = np.random.default_rng(seed)
     for _ in range(n):
-        yield net, rng.uniform(0.2, 1.6), rng.uniform(0, 1, len(net.ders)) * net.der_rating_mw, \
-            rng.uniform(-0.5, 0.5, len(net.ders)) * net.der_rating_mw
+        yield (
+            net,
+            rng.uniform(0.2, 1.6),
+            rng.uniform(0, 1, len(net.ders)) * net.der_rating_mw,
+            rng.uniform(-0.5, 0.5, len(net.ders)) * net.der_rating_mw,
+        )
 
 
 @pytest.mark.parametrize("name", ["paper33", "case69-der"])
@@ -103,6 +110,7 @@ def test_batched_warm_start_converges_to_the_same_point_in_fewer_iterations():
 def test_case_with_pv_bus_and_tap_matches_pandapower(tmp_path):
     """A meshed-free 4-bus case with a voltage-controlled bus and an off-nominal tap."""
     from pandapower_oracle import pandapower_pf
+
     from opfbench.matpower import load_case_file
 
     path = tmp_path / "case4pv.m"

@@ -3,18 +3,22 @@ the same batched solutions on every shipped small case, PV buses and taps includ
 
 import numpy as np
 import pytest
+from test_powerflow import CASE4_PV
 
 from opfbench.cases import load_case
 from opfbench.matpower import load_case_file
 from opfbench.powerflow import SPARSE_MIN_BUSES, bus_injections, solve_pf, solve_pf_batch, uses_sparse
-from test_powerflow import CASE4_PV
 
 
 def _injections(net, n, seed):
     rng = np.random.default_rng(seed)
     n_der = len(net.ders)
-    return bus_injections(net, rng.uniform(0, 1, (n, n_der)) * net.der_rating_mw,
-                          rng.uniform(-0.5, 0.5, (n, n_der)) * net.der_rating_mw, rng.uniform(0.2, 1.6, n))
+    return bus_injections(
+        net,
+        rng.uniform(0, 1, (n, n_der)) * net.der_rating_mw,
+        rng.uniform(-0.5, 0.5, (n, n_der)) * net.der_rating_mw,
+        rng.uniform(0.2, 1.6, n),
+    )
 
 
 @pytest.mark.parametrize("name", ["paper33", "case69-der", "case141-der", "paper33-meshed"])

@@ -34,8 +34,10 @@ def test_report_renders_offline_in_chromium(tmp_path):
 
 def test_the_check_sees_remote_requests(tmp_path):
     page = tmp_path / "leaky.html"
-    page.write_text('<!DOCTYPE html><html><head><script src="https://cdn.example.org/lib.js"></script></head>'
-                    '<body><img src="http://example.com/x.png"><section id="s"></section></body></html>')
+    page.write_text(
+        '<!DOCTYPE html><html><head><script src="https://cdn.example.org/lib.js"></script></head>'
+        '<body><img src="http://example.com/x.png"><section id="s"></section></body></html>'
+    )
     check = check_page(page)
     assert sorted(check.resources) == ["http://example.com/x.png", "https://cdn.example.org/lib.js"]
     assert len(check.page_requests) == 2 and check.images == 1

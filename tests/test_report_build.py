@@ -34,7 +34,7 @@ def test_full_report_has_every_section_and_no_missing_input(folders):
     for section in SECTIONS:
         assert f'<section id="{section}" class="report-section">' in html
     assert "Not available" not in html and "could not be built" not in html
-    year = html[html.index('id="year"'):html.index('id="night"')]
+    year = html[html.index('id="year"') : html.index('id="night"')]
     assert "321 MB (main process), 654 MB (largest worker process)" in year and "Energy losses over the year" in year
     assert html.count("<script>") == 2  # plotly.js once, the drawing loop once
     # one JSON element per figure, and the template they share once
@@ -64,8 +64,10 @@ def test_claim_verdicts_follow_the_tables(folders):
 
     summary = inputs.summary.copy()
     row = (summary.strategy == "lfma") & (summary.k == 0.4) & (summary.night_mode == "connected") & (summary.forecast == "off")
-    summary.loc[row, "energy_kwh"] = summary.loc[(summary.strategy == "llma") & (summary.k == 0.4)
-                                                 & (summary.night_mode == "connected"), "energy_kwh"].iloc[0] + 1.0
+    summary.loc[row, "energy_kwh"] = (
+        summary.loc[(summary.strategy == "llma") & (summary.k == 0.4) & (summary.night_mode == "connected"), "energy_kwh"].iloc[0]
+        + 1.0
+    )
     fault_table = inputs.fault.copy()
     fault_table.loc[fault_table.strategy == "llma", "recovery_ms"] += 25.0
     after = _verdicts(dataclasses.replace(inputs, summary=summary, fault=fault_table))
@@ -84,8 +86,9 @@ def test_report_command_rebuilds_the_page(folders, tmp_path, capsys):
     run, fault = folders
     out = tmp_path / "report.html"
     year = run.parent / "year"
-    assert main(["report", str(run), "--fault-dir", str(fault), "--year-dir", str(year), "--out", str(out),
-                 "--price", "0.5"]) == 0
+    assert (
+        main(["report", str(run), "--fault-dir", str(fault), "--year-dir", str(year), "--out", str(out), "--price", "0.5"]) == 0
+    )
     html = out.read_text()
     assert "0.5 EUR/kWh — given with --price" in html
     again = write_report(run, fault_dir=fault, out=tmp_path / "again.html", price=0.5, year_dir=year)

@@ -16,8 +16,14 @@ from opfbench.cli import main
 from opfbench.study import StudyConfig, run_study
 
 ROOT = Path(__file__).resolve().parents[1]
-CONFIG = StudyConfig(strategies=("no-action", "lfma", "acopf", "socp"), ks=(0.0, 0.4), night_modes=("connected",),
-                     forecast=("off", "oracle"), period="2016-06-28T19:50..2016-06-28T20:10", detail=False)
+CONFIG = StudyConfig(
+    strategies=("no-action", "lfma", "acopf", "socp"),
+    ks=(0.0, 0.4),
+    night_modes=("connected",),
+    forecast=("off", "oracle"),
+    period="2016-06-28T19:50..2016-06-28T20:10",
+    detail=False,
+)
 TIMING = ["wall_ms", "solver_ms"]
 DASK = [sys.executable, "-m", "distributed.cli"]
 
@@ -34,8 +40,24 @@ def cluster(tmp_path):
     address = f"tcp://127.0.0.1:{port}"
     env = os.environ | {"PYTHONPATH": str(ROOT), "OMP_NUM_THREADS": "1"}
     log = open(tmp_path / "dask.log", "w")
-    procs = [subprocess.Popen([sys.executable, "-m", "distributed.cli.dask_scheduler", "--host", "127.0.0.1",
-                               "--port", str(port), "--no-dashboard"], env=env, cwd=ROOT, stdout=log, stderr=log)]
+    procs = [
+        subprocess.Popen(
+            [
+                sys.executable,
+                "-m",
+                "distributed.cli.dask_scheduler",
+                "--host",
+                "127.0.0.1",
+                "--port",
+                str(port),
+                "--no-dashboard",
+            ],
+            env=env,
+            cwd=ROOT,
+            stdout=log,
+            stderr=log,
+        )
+    ]
     try:
         deadline = time.monotonic() + 60
         while True:
@@ -46,9 +68,25 @@ def cluster(tmp_path):
                 assert time.monotonic() < deadline and procs[0].poll() is None, (tmp_path / "dask.log").read_text()
                 time.sleep(0.2)
         for _ in range(2):
-            procs.append(subprocess.Popen([sys.executable, "-m", "distributed.cli.dask_worker", address, "--nthreads",
-                                           "1", "--nworkers", "1", "--no-dashboard"], env=env, cwd=ROOT,
-                                          stdout=log, stderr=log))
+            procs.append(
+                subprocess.Popen(
+                    [
+                        sys.executable,
+                        "-m",
+                        "distributed.cli.dask_worker",
+                        address,
+                        "--nthreads",
+                        "1",
+                        "--nworkers",
+                        "1",
+                        "--no-dashboard",
+                    ],
+                    env=env,
+                    cwd=ROOT,
+                    stdout=log,
+                    stderr=log,
+                )
+            )
         from dask.distributed import Client
 
         with Client(address, timeout="60s") as client:
@@ -68,8 +106,20 @@ def cluster(tmp_path):
 def test_cluster_equals_in_process(cluster, tmp_path):
     local = run_study(CONFIG, tmp_path / "local", quiet=True)
     assert len(local.tasks) == 4
-    args = ["run", "--period", CONFIG.period, "--strategies", *CONFIG.strategies, "--k", "0", "0.4",
-            "--night-modes", "connected", "--no-detail", "--quiet"]
+    args = [
+        "run",
+        "--period",
+        CONFIG.period,
+        "--strategies",
+        *CONFIG.strategies,
+        "--k",
+        "0",
+        "0.4",
+        "--night-modes",
+        "connected",
+        "--no-detail",
+        "--quiet",
+    ]
     assert main([*args, "--scheduler", cluster, "--out", str(tmp_path / "cluster")]) == 0
     a = pd.read_parquet(local.out / "steps.parquet").drop(columns=TIMING)
     b = pd.read_parquet(tmp_path / "cluster" / "steps.parquet").drop(columns=TIMING)

@@ -17,17 +17,41 @@ ROOT = Path(__file__).resolve().parents[1]
 PERIOD = "2016-06-28T10:00..2016-06-28T11:00"
 KS = ("0", "0.2", "0.4", "0.6", "0.8")
 # only the `run` subcommand (the full CLI also imports the forecasting models)
-CODE = ("import argparse, sys; from opfbench.commands import run; p = argparse.ArgumentParser(); "
-        "run.register(p.add_subparsers()); a = p.parse_args(sys.argv[1:]); sys.exit(a.func(a))")
+CODE = (
+    "import argparse, sys; from opfbench.commands import run; p = argparse.ArgumentParser(); "
+    "run.register(p.add_subparsers()); a = p.parse_args(sys.argv[1:]); sys.exit(a.func(a))"
+)
 
 
 @pytest.mark.slow  # a fresh process (start-up of several seconds) and two AC OPF runs
 def test_ctrl_c_stops_keeps_and_resumes(tmp_path):
     out = tmp_path / "run"
-    args = ["run", "--period", PERIOD, "--strategies", "no-action", "acopf", "--k", *KS, "--night-modes", "connected",
-            "--forecast", "off", "--workers", "1", "--no-detail", "--out", str(out)]
-    proc = subprocess.Popen([sys.executable, "-c", CODE, *args], cwd=ROOT, stderr=subprocess.PIPE, text=True,
-                            preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
+    args = [
+        "run",
+        "--period",
+        PERIOD,
+        "--strategies",
+        "no-action",
+        "acopf",
+        "--k",
+        *KS,
+        "--night-modes",
+        "connected",
+        "--forecast",
+        "off",
+        "--workers",
+        "1",
+        "--no-detail",
+        "--out",
+        str(out),
+    ]
+    proc = subprocess.Popen(
+        [sys.executable, "-c", CODE, *args],
+        cwd=ROOT,
+        stderr=subprocess.PIPE,
+        text=True,
+        preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL),
+    )
     try:
         deadline = time.monotonic() + 240
         while not finished_tasks(out):
@@ -42,7 +66,13 @@ def test_ctrl_c_stops_keeps_and_resumes(tmp_path):
     kept = finished_tasks(out)
     assert 1 <= kept < len(KS) and f"stopped; {kept} tasks kept" in err
     assert not (out / ".lock").exists()
-    config = StudyConfig(strategies=("no-action", "acopf"), ks=tuple(float(k) for k in KS), night_modes=("connected",),
-                         forecast=("off",), period=PERIOD, detail=False)
+    config = StudyConfig(
+        strategies=("no-action", "acopf"),
+        ks=tuple(float(k) for k in KS),
+        night_modes=("connected",),
+        forecast=("off",),
+        period=PERIOD,
+        detail=False,
+    )
     resumed = run_study(config, out, quiet=True)
     assert resumed.ran == len(KS) - kept and len(resumed.summary) == 2 * len(KS)

@@ -13,8 +13,15 @@ from opfbench.study import StudyConfig, run_study
 from opfbench.study.store import finished_tasks
 
 # 4 k × 2 chunks (one per local day) = 8 tasks (each with 2 night modes) with the AC OPF
-CONFIG = StudyConfig(strategies=("no-action", "lfma", "acopf"), ks=(0.0, 0.25, 0.5, 0.75), night_modes=("connected", "disconnected"),
-                     forecast=("off",), period="2016-06-28T23:30..2016-06-29T00:30", chunk="day", detail=False)
+CONFIG = StudyConfig(
+    strategies=("no-action", "lfma", "acopf"),
+    ks=(0.0, 0.25, 0.5, 0.75),
+    night_modes=("connected", "disconnected"),
+    forecast=("off",),
+    period="2016-06-28T23:30..2016-06-29T00:30",
+    chunk="day",
+    detail=False,
+)
 TIMING = ["wall_ms", "solver_ms"]
 KEYS = ["case", "strategy", "k", "night_mode", "forecast", "time"]
 

@@ -63,15 +63,18 @@ def test_text_output_shows_lfma_diagnostics(capsys: pytest.CaptureFixture) -> No
     assert f"upstream disagreements: {buses}" in capsys.readouterr().out
 
 
-@pytest.mark.parametrize("args,message", [
-    (["--strategy", "llma", "--k", "1.5"], "reserve coefficient k must lie in [0, 1]"),
-    (["--strategy", "no-action", "--k", "2"], "reserve coefficient k must lie in [0, 1]"),
-    (["--strategy", "lfma", "--k", "-0.1"], "--k"),
-    (["--strategy", "lfma", "--k", "nan"], "--k"),
-    (["--strategy", "lfma", "--der-scale", "1.5"], "der_scale"),
-    (["--strategy", "llma", "--fallback", "chain"], "--fallback"),
-    (["--strategy", "teleport"], "invalid choice"),
-])
+@pytest.mark.parametrize(
+    "args,message",
+    [
+        (["--strategy", "llma", "--k", "1.5"], "reserve coefficient k must lie in [0, 1]"),
+        (["--strategy", "no-action", "--k", "2"], "reserve coefficient k must lie in [0, 1]"),
+        (["--strategy", "lfma", "--k", "-0.1"], "--k"),
+        (["--strategy", "lfma", "--k", "nan"], "--k"),
+        (["--strategy", "lfma", "--der-scale", "1.5"], "der_scale"),
+        (["--strategy", "llma", "--fallback", "chain"], "--fallback"),
+        (["--strategy", "teleport"], "invalid choice"),
+    ],
+)
 def test_bad_arguments_exit_2(capsys: pytest.CaptureFixture, args: list[str], message: str) -> None:
     assert main(["snapshot", "paper33", *args]) == 2
     captured = capsys.readouterr()

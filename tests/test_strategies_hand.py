@@ -14,8 +14,7 @@ import numpy as np
 import pytest
 
 from opfbench.scenario import Scenario
-from opfbench.strategies.local import (BACK_TO_LLMA, KEPT, LEAF, STOPPED, SUBTRACTED, lfma, lfma_step4, lfma_trace,
-                                       llma, no_action)
+from opfbench.strategies.local import BACK_TO_LLMA, KEPT, LEAF, STOPPED, SUBTRACTED, lfma, lfma_step4, lfma_trace, llma, no_action
 from opfbench.strategies.meters import LocalMeters
 from tests.strategies_feeders import radial_feeder
 
@@ -30,8 +29,13 @@ LOAD_Q = [0.0, 0.1, 0.1, 0.1, 0.35]
 
 
 def chain_scenario() -> Scenario:
-    net = radial_feeder(parent=[0, 1, 2, 3], load_p_mw=[0.0, *P_NOW], load_q_mvar=LOAD_Q,
-                        ders=[(b, "PV", s) for b, s in zip((1, 2, 3, 4), RATING, strict=True)], reversed_lines=[1, 3])
+    net = radial_feeder(
+        parent=[0, 1, 2, 3],
+        load_p_mw=[0.0, *P_NOW],
+        load_q_mvar=LOAD_Q,
+        ders=[(b, "PV", s) for b, s in zip((1, 2, 3, 4), RATING, strict=True)],
+        reversed_lines=[1, 3],
+    )
     return Scenario(net, [1.0], [P_NOW])
 
 
@@ -46,12 +50,26 @@ def chain_scenario() -> Scenario:
 #   0.3, 0.1, 0.075]: bus 3 imports 0.275, bus 2 imports 0.075 (both KEPT); bus 1 feeds
 #   0.075 down and exports 0.125 up → Q^F = 0.3 − 0.125 = 0.175.
 HAND = {
-    0.0: dict(q_llma=[0.1, 0.1, 0.1, 0.15], q_up_h=[0.2, 0.2, 0.2], q_do_h=[0.2, 0.2, 0.2],
-              q_step3=[0.3, 0.3, 0.2, 0.15], q_up_i=[-0.3, -0.1, 0.1], q_do_i=[-0.1, 0.1, 0.2],
-              rule=[BACK_TO_LLMA, SUBTRACTED, KEPT, LEAF], q_final=[0.1, 0.2, 0.2, 0.15]),
-    0.5: dict(q_llma=[0.1, 0.1, 0.1, 0.075], q_up_h=[0.275] * 3, q_do_h=[0.275] * 3,
-              q_step3=[0.3, 0.3, 0.1, 0.075], q_up_i=[-0.125, 0.075, 0.275], q_do_i=[0.075, 0.275, 0.275],
-              rule=[SUBTRACTED, KEPT, KEPT, LEAF], q_final=[0.175, 0.3, 0.1, 0.075]),
+    0.0: dict(
+        q_llma=[0.1, 0.1, 0.1, 0.15],
+        q_up_h=[0.2, 0.2, 0.2],
+        q_do_h=[0.2, 0.2, 0.2],
+        q_step3=[0.3, 0.3, 0.2, 0.15],
+        q_up_i=[-0.3, -0.1, 0.1],
+        q_do_i=[-0.1, 0.1, 0.2],
+        rule=[BACK_TO_LLMA, SUBTRACTED, KEPT, LEAF],
+        q_final=[0.1, 0.2, 0.2, 0.15],
+    ),
+    0.5: dict(
+        q_llma=[0.1, 0.1, 0.1, 0.075],
+        q_up_h=[0.275] * 3,
+        q_do_h=[0.275] * 3,
+        q_step3=[0.3, 0.3, 0.1, 0.075],
+        q_up_i=[-0.125, 0.075, 0.275],
+        q_do_i=[0.075, 0.275, 0.275],
+        rule=[SUBTRACTED, KEPT, KEPT, LEAF],
+        q_final=[0.175, 0.3, 0.1, 0.075],
+    ),
 }
 
 
@@ -104,8 +122,13 @@ def test_step4_decision_table() -> None:
 
 def test_meters_read_both_line_ends_with_the_documented_signs() -> None:
     # Tree: 0 – 1, 1 – 2 (leaf), 1 – 3, 3 – 4 (leaf); line 2 (1–3) stored 3 → 1.
-    net = radial_feeder(parent=[0, 1, 1, 3], load_p_mw=[0, 0, 0, 0, 0], load_q_mvar=[0, 0.05, 0.2, 0.1, 0.15],
-                        ders=[(1, "PV", 1.0), (3, "PV", 1.0)], reversed_lines=[2])
+    net = radial_feeder(
+        parent=[0, 1, 1, 3],
+        load_p_mw=[0, 0, 0, 0, 0],
+        load_q_mvar=[0, 0.05, 0.2, 0.1, 0.15],
+        ders=[(1, "PV", 1.0), (3, "PV", 1.0)],
+        reversed_lines=[2],
+    )
     scenario = Scenario(net, [1.0], [[0.0, 0.0]])
     meters = LocalMeters.of(net)
     trace = lfma_trace(scenario, 1.0)  # k = 1: no reactive output at any step

@@ -30,9 +30,15 @@ def random_scenarios(draw) -> Scenario:
     rng = np.random.default_rng(seed)
     der_buses = draw(st.lists(st.integers(1, n - 1), min_size=1, max_size=min(4, n - 1), unique=True))
     ders = [(b, draw(st.sampled_from(["PV", "DFIG"])), float(rng.uniform(0.05, 0.5))) for b in der_buses]
-    net = radial_feeder(parent, np.r_[0.0, rng.uniform(0, 0.2, n - 1)], np.r_[0.0, rng.uniform(0, 0.2, n - 1)],
-                        ders, r=rng.uniform(1e-3, 0.02, n - 1), x=rng.uniform(1e-3, 0.02, n - 1),
-                        reversed_lines=reversed_lines)
+    net = radial_feeder(
+        parent,
+        np.r_[0.0, rng.uniform(0, 0.2, n - 1)],
+        np.r_[0.0, rng.uniform(0, 0.2, n - 1)],
+        ders,
+        r=rng.uniform(1e-3, 0.02, n - 1),
+        x=rng.uniform(1e-3, 0.02, n - 1),
+        reversed_lines=reversed_lines,
+    )
     rating = net.der_rating_mw
     p_now = rng.uniform(0, 1, (SNAPSHOTS, len(ders))) * rating
     p_fc = rng.uniform(0, 1, (SNAPSHOTS, len(ders))) * rating if draw(st.booleans()) else None

@@ -47,10 +47,15 @@ def test_detection_on_random_radial_feeders(n: int, data: st.DataObject) -> None
     parent = [data.draw(st.integers(0, j - 1)) for j in range(1, n)]
     rng = np.random.default_rng(data.draw(st.integers(0, 2**32 - 1)))
     der_buses = data.draw(st.lists(st.integers(1, n - 1), min_size=1, max_size=n - 1, unique=True))
-    net = radial_feeder(parent, np.r_[0.0, rng.uniform(0, 0.2, n - 1)], np.r_[0.0, rng.uniform(0.01, 0.2, n - 1)],
-                        [(b, "PV", 0.3) for b in der_buses], r=rng.uniform(1e-3, 0.02, n - 1),
-                        x=rng.uniform(1e-3, 0.02, n - 1),
-                        reversed_lines=data.draw(st.lists(st.integers(0, n - 2), unique=True)))
+    net = radial_feeder(
+        parent,
+        np.r_[0.0, rng.uniform(0, 0.2, n - 1)],
+        np.r_[0.0, rng.uniform(0.01, 0.2, n - 1)],
+        [(b, "PV", 0.3) for b in der_buses],
+        r=rng.uniform(1e-3, 0.02, n - 1),
+        x=rng.uniform(1e-3, 0.02, n - 1),
+        reversed_lines=data.draw(st.lists(st.integers(0, n - 2), unique=True)),
+    )
     scenario = Scenario(net, rng.uniform(0.1, 1.5, 5), rng.uniform(0, 0.3, (5, len(der_buses))))
     trace = lfma_trace(scenario, 0.0)
     np.testing.assert_array_equal(trace.upstream_branch, np.broadcast_to(true_upstream(net), trace.rule.shape))

@@ -66,8 +66,7 @@ def test_detail_tables_match_the_steps(day_run):
 
 def _scenario(mode, forecast="off", period=HOURS, forecast_dir="."):
     p = resolve_period(period, "20:00-05:00")
-    return p, chunk_scenario("paper33", mode, forecast, p.profiles, p.night, len(p.index), p.index[1] - p.index[0],
-                             forecast_dir)
+    return p, chunk_scenario("paper33", mode, forecast, p.profiles, p.night, len(p.index), p.index[1] - p.index[0], forecast_dir)
 
 
 def test_night_modes():
@@ -87,8 +86,9 @@ def test_night_modes():
 
 
 def test_night_q_lowers_night_losses(tmp_path):
-    config = StudyConfig(strategies=("lfma",), ks=(0.0,), night_modes=("connected", "connected-q"),
-                         forecast=("off",), period=HOURS)
+    config = StudyConfig(
+        strategies=("lfma",), ks=(0.0,), night_modes=("connected", "connected-q"), forecast=("off",), period=HOURS
+    )
     steps = pd.read_parquet(run_study(config, tmp_path, quiet=True).out / "steps.parquet")
     wide = steps.pivot_table(index="time", columns="night_mode", values="losses_kw")
     night = steps.groupby("time").night.first()
@@ -123,17 +123,20 @@ def test_chunking_does_not_change_local_rules(tmp_path):
     pd.testing.assert_frame_equal(ta.reset_index(drop=True), tb.reset_index(drop=True), check_exact=False, rtol=1e-12)
 
 
-@pytest.mark.parametrize("kwargs, message", [
-    ({"strategies": ("magic",)}, "unknown strategy"),
-    ({"night_modes": ("sometimes",)}, "unknown night mode"),
-    ({"ks": ()}, "nothing to run"),
-    ({"ks": (1.5,)}, "k must lie"),
-    ({"strategies": ("acopf", "socp"), "forecast": ("oracle",)}, "nothing to run"),
-    ({"night": "20:00-05:00+09:00"}, "night must be"),
-    ({"night": "dusk"}, "night must be"),
-    ({"night": "20:00-20:00"}, "night must be"),
-    ({"chunk": "year"}, "unknown chunk"),
-])
+@pytest.mark.parametrize(
+    "kwargs, message",
+    [
+        ({"strategies": ("magic",)}, "unknown strategy"),
+        ({"night_modes": ("sometimes",)}, "unknown night mode"),
+        ({"ks": ()}, "nothing to run"),
+        ({"ks": (1.5,)}, "k must lie"),
+        ({"strategies": ("acopf", "socp"), "forecast": ("oracle",)}, "nothing to run"),
+        ({"night": "20:00-05:00+09:00"}, "night must be"),
+        ({"night": "dusk"}, "night must be"),
+        ({"night": "20:00-20:00"}, "night must be"),
+        ({"chunk": "year"}, "unknown chunk"),
+    ],
+)
 def test_bad_configuration(kwargs, message):
     with pytest.raises(InputError, match=message):
         StudyConfig(**kwargs)
@@ -184,8 +187,21 @@ def test_model_forecast_not_covering_the_day_is_refused(tmp_path):
 
 
 # ----- the run folder ------------------------------------------------------------------------
-SMALL = ["run", "--period", "2016-06-28T10:00..2016-06-28T10:20", "--strategies", "no-action", "lfma",
-         "--k", "0", "--night-modes", "connected", "--workers", "1", "--quiet"]
+SMALL = [
+    "run",
+    "--period",
+    "2016-06-28T10:00..2016-06-28T10:20",
+    "--strategies",
+    "no-action",
+    "lfma",
+    "--k",
+    "0",
+    "--night-modes",
+    "connected",
+    "--workers",
+    "1",
+    "--quiet",
+]
 
 
 def test_resume_refuse_fresh(tmp_path, capsys):
@@ -213,7 +229,7 @@ def test_out_and_lock_checks(tmp_path, capsys):
     (tmp_path / "busy" / ".lock").write_text(f"{os.getppid()} {os.uname().nodename}\n")  # a live process
     assert main([*SMALL, "--out", str(tmp_path / "busy")]) == 2
     assert "in use by another run" in capsys.readouterr().err
-    (tmp_path / "busy" / ".lock").write_text(f"{2 ** 22 + 12345} {os.uname().nodename}\n")  # no such process
+    (tmp_path / "busy" / ".lock").write_text(f"{2**22 + 12345} {os.uname().nodename}\n")  # no such process
     assert main([*SMALL, "--out", str(tmp_path / "busy")]) == 0
     assert not (tmp_path / "busy" / ".lock").exists()
 
@@ -243,8 +259,7 @@ def _check_day(table):
 
 
 def test_whole_day_every_strategy_at_k0(tmp_path):
-    run = run_study(StudyConfig(ks=(0.0,), night_modes=("connected",), forecast=("off",), detail=False),
-                    tmp_path, quiet=True)
+    run = run_study(StudyConfig(ks=(0.0,), night_modes=("connected",), forecast=("off",), detail=False), tmp_path, quiet=True)
     table = pd.read_parquet(run.out / "steps.parquet")
     assert (table.status == "ok").all() and (table.voltage_violation_pu < 1e-6).all()
     _check_day(table)
@@ -266,8 +281,14 @@ def test_acopf_solver_ipopt_runs_ipopt_on_every_step(tmp_path):
     """--acopf-solver ipopt: no step certified by the SOCP; auto: the same losses, most steps certified."""
     tables = {}
     for solver in ("auto", "ipopt"):
-        config = StudyConfig.build(strategies=["acopf"], ks=[0.0], night_modes=["connected"], forecast=["off"],
-                                   period="2016-06-28T11:00..2016-06-28T11:20", acopf_solver=solver)
+        config = StudyConfig.build(
+            strategies=["acopf"],
+            ks=[0.0],
+            night_modes=["connected"],
+            forecast=["off"],
+            period="2016-06-28T11:00..2016-06-28T11:20",
+            acopf_solver=solver,
+        )
         run_study(config, tmp_path / solver, workers=1, quiet=True)
         tables[solver] = pd.read_parquet(tmp_path / solver / "steps.parquet")
     assert set(tables["ipopt"]["certified_by"]) == {"ipopt"}
@@ -276,8 +297,13 @@ def test_acopf_solver_ipopt_runs_ipopt_on_every_step(tmp_path):
 
 
 def test_default_detail_is_the_der_q_table_on_short_periods(tmp_path):
-    config = StudyConfig(strategies=("no-action", "llma"), ks=(0.0,), night_modes=("connected",), forecast=("off",),
-                         period="2016-06-28T10:00..2016-06-28T11:00")
+    config = StudyConfig(
+        strategies=("no-action", "llma"),
+        ks=(0.0,),
+        night_modes=("connected",),
+        forecast=("off",),
+        period="2016-06-28T10:00..2016-06-28T11:00",
+    )
     run = run_study(config, tmp_path / "run", quiet=True)
     assert run.config.detail_tables == ("der_q",)
     assert len(pd.read_parquet(run.out / "der_q.parquet")) == 2 * 60 * 5 and not (run.out / "bus_v.parquet").exists()
@@ -287,8 +313,9 @@ def test_default_detail_is_the_der_q_table_on_short_periods(tmp_path):
 def test_a_night_mode_with_the_same_scenario_takes_the_results_of_the_first(tmp_path):
     """A winter night with no PV output: connected and disconnected are the same scenario,
     so the second mode's rows are the first's (wall time 0); connected-q differs."""
-    config = StudyConfig(strategies=("no-action", "lfma", "acopf"), ks=(0.2,), forecast=("off",),
-                         period="2016-01-10T22:00..2016-01-10T23:00")
+    config = StudyConfig(
+        strategies=("no-action", "lfma", "acopf"), ks=(0.2,), forecast=("off",), period="2016-01-10T22:00..2016-01-10T23:00"
+    )
     steps = pd.read_parquet(run_study(config, tmp_path / "run", quiet=True).out / "steps.parquet")
     by_mode = {m: g.drop(columns=["night_mode"]).reset_index(drop=True) for m, g in steps.groupby("night_mode")}
     on, off, night_q = by_mode["connected"], by_mode["disconnected"], by_mode["connected-q"]
@@ -298,9 +325,9 @@ def test_a_night_mode_with_the_same_scenario_takes_the_results_of_the_first(tmp_
 
 
 def test_auto_chunk_is_six_hours_on_short_periods_and_a_month_otherwise():
-    day, _, tasks = prepare(StudyConfig(strategies=("no-action",), ks=(0.0,), night_modes=("connected",),
-                                        forecast=("off",)))
+    day, _, tasks = prepare(StudyConfig(strategies=("no-action",), ks=(0.0,), night_modes=("connected",), forecast=("off",)))
     assert day.chunk == "6h" and [t.start[11:16] for t in tasks] == ["00:00", "06:00", "12:00", "18:00"]
-    year, _, tasks = prepare(StudyConfig(strategies=("no-action",), ks=(0.0,), night_modes=("connected",),
-                                         forecast=("off",), period="year"))
+    year, _, tasks = prepare(
+        StudyConfig(strategies=("no-action",), ks=(0.0,), night_modes=("connected",), forecast=("off",), period="year")
+    )
     assert year.chunk == "month" and len(tasks) == 12

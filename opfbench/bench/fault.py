@@ -35,18 +35,29 @@ def run() -> dict:
     from opfbench.dynamics.andes_ref import MILD_FAULT, andes_available, mild_fault_comparison
 
     andes_ms = mild_fault_comparison()["andes_sim_ms"] if andes_available() else None
-    return {"case": "paper33", "sim_ms": sim_ms, "steps": int(len(sim.t) - 1), "study_s": timings["study_s"],
-            "study_simulations": timings["simulations"], "study_workers": workers, "andes_sim_ms": andes_ms,
-            "andes_t_end_s": MILD_FAULT.t_end_s,
-            "ratio_vs_andes": None if andes_ms is None else andes_ms / sim_ms}
+    return {
+        "case": "paper33",
+        "sim_ms": sim_ms,
+        "steps": int(len(sim.t) - 1),
+        "study_s": timings["study_s"],
+        "study_simulations": timings["simulations"],
+        "study_workers": workers,
+        "andes_sim_ms": andes_ms,
+        "andes_t_end_s": MILD_FAULT.t_end_s,
+        "ratio_vs_andes": None if andes_ms is None else andes_ms / sim_ms,
+    }
 
 
 def print_table(f: dict) -> None:
     print(f"fault simulation on {f['case']}: one 3-s run, {f['steps']} steps: {f['sim_ms']:.1f} ms (best of 5)")
-    print(f"study, a fault at every bus: {f['study_simulations']} simulations in {f['study_s']:.1f} s "
-          f"on {f['study_workers']} worker(s)")
+    print(
+        f"study, a fault at every bus: {f['study_simulations']} simulations in {f['study_s']:.1f} s "
+        f"on {f['study_workers']} worker(s)"
+    )
     if f["andes_sim_ms"] is None:
         print("ANDES: not installed")
     else:
-        print(f"ANDES on the mild fault ({f['andes_t_end_s']:g} s simulated, fixed 1-ms step): {f['andes_sim_ms']:.0f} ms "
-              f"→ ours (3 s simulated) is {f['ratio_vs_andes']:.0f}× faster")
+        print(
+            f"ANDES on the mild fault ({f['andes_t_end_s']:g} s simulated, fixed 1-ms step): {f['andes_sim_ms']:.0f} ms "
+            f"→ ours (3 s simulated) is {f['ratio_vs_andes']:.0f}× faster"
+        )

@@ -24,8 +24,10 @@ def bench_local(scenario: Scenario, k: float = 0.4, repeats: int = 3, loop_sampl
     for name in LOCAL_RULES:
         ms, res = best_ms(lambda name=name: run_strategy(name, scenario, k), repeats)
         out["rules"][name] = {
-            "wall_ms": ms, "ms_per_snapshot": ms / n,
-            "power_flows_per_snapshot": int(res.power_flows.max()), "ok": int((res.status == "ok").sum()),
+            "wall_ms": ms,
+            "ms_per_snapshot": ms / n,
+            "power_flows_per_snapshot": int(res.power_flows.max()),
+            "ok": int((res.status == "ok").sum()),
             "energy_losses_kwh": float(np.nansum(res.losses_kw) * 24.0 / n),
         }
     m = min(loop_sample, n)
@@ -44,7 +46,11 @@ def run() -> dict:
 def print_table(f: dict) -> None:
     print(f"local rules on {f['case']}, {f['snapshots']} snapshots of the paper day, k = {f['k']}")
     for name, r in f["rules"].items():
-        print(f"  {name:<10} {r['wall_ms']:8.1f} ms  ({r['ms_per_snapshot']:.3f} ms/snapshot, "
-              f"{r['power_flows_per_snapshot']} flows/snapshot, {r['ok']} ok, {r['energy_losses_kwh']:.2f} kWh)")
-    print(f"  LFMA one snapshot at a time (extrapolated): {f['lfma_one_by_one_ms_extrapolated']:.0f} ms "
-          f"→ batching is {f['ratio_batch_vs_one_by_one']:.1f}× faster (same setpoints to {f['lfma_one_by_one_max_dq_mvar']:.1e} MVAr)")
+        print(
+            f"  {name:<10} {r['wall_ms']:8.1f} ms  ({r['ms_per_snapshot']:.3f} ms/snapshot, "
+            f"{r['power_flows_per_snapshot']} flows/snapshot, {r['ok']} ok, {r['energy_losses_kwh']:.2f} kWh)"
+        )
+    print(
+        f"  LFMA one snapshot at a time (extrapolated): {f['lfma_one_by_one_ms_extrapolated']:.0f} ms "
+        f"→ batching is {f['ratio_batch_vs_one_by_one']:.1f}× faster (same setpoints to {f['lfma_one_by_one_max_dq_mvar']:.1e} MVAr)"
+    )

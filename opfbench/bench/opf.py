@@ -96,8 +96,7 @@ def bench_opf(n: int = 200, case: str = "paper33", k: float = 0.0) -> dict:
         socp_wall[i] = elapsed_ms(t0)
 
     q_mvar_limit = data.q_limit * net.base_mva
-    peers = [] if peer is None else [peer.solve(scenario.load_scale[i], scenario.der_p_mw[i], q_mvar_limit[i])
-                                     for i in range(n)]
+    peers = [] if peer is None else [peer.solve(scenario.load_scale[i], scenario.der_p_mw[i], q_mvar_limit[i]) for i in range(n)]
 
     ipopt_ok = np.array([s.success for s in warm])
     q_opf = np.array([s.q_pu for s in warm]) * net.base_mva
@@ -115,8 +114,11 @@ def bench_opf(n: int = 200, case: str = "paper33", k: float = 0.0) -> dict:
         "k": k,
         "total": n,
         "solved": int((ipopt_ok & socp_ok).sum()),
-        "solved_by_solver": {"ipopt": int(ipopt_ok.sum()), "socp": int(socp_ok.sum()),
-                             "pandapower": int(pp_ok.sum()) if peers else None},
+        "solved_by_solver": {
+            "ipopt": int(ipopt_ok.sum()),
+            "socp": int(socp_ok.sum()),
+            "pandapower": int(pp_ok.sum()) if peers else None,
+        },
         "pandapower_failures": int((~pp_ok).sum()) if peers else None,
         "ipopt_ms": ipopt_ms,
         "socp_ms": socp_ms,
@@ -196,20 +198,30 @@ def print_table(f: dict) -> None:
         return "pandapower not installed" if ratio is None else f"{ratio:.0f}× pandapower"
 
     print(f"centralized formulations on {f['case']}, {f['total']} snapshots of a smooth day, k = {f['k']}")
-    print(f"  IPOPT warm-started    {f['ipopt_ms']:.2f} ms median  ({f['ipopt_iterations_warm_mean']:.1f} iterations; "
-          f"cold {f['ipopt_iterations_cold_mean']:.1f})  → {versus(f['ratio_ipopt_vs_pandapower'])}")
-    print(f"  SOCP (Clarabel)       {f['socp_ms']:.2f} ms median  → {versus(f['ratio_socp_vs_pandapower'])}"
-          f"  (largest relative gap {f['max_relative_gap']:.1e})")
+    print(
+        f"  IPOPT warm-started    {f['ipopt_ms']:.2f} ms median  ({f['ipopt_iterations_warm_mean']:.1f} iterations; "
+        f"cold {f['ipopt_iterations_cold_mean']:.1f})  → {versus(f['ratio_ipopt_vs_pandapower'])}"
+    )
+    print(
+        f"  SOCP (Clarabel)       {f['socp_ms']:.2f} ms median  → {versus(f['ratio_socp_vs_pandapower'])}"
+        f"  (largest relative gap {f['max_relative_gap']:.1e})"
+    )
     if f["pandapower_runopp_ms"] is not None:
-        print(f"  pandapower runopp     {f['pandapower_runopp_ms']:.1f} ms median, {f['pandapower_failures']} failures, "
-              f"agrees on {f['pandapower_agrees']} (max |Δ| {f['pandapower_max_loss_diff_kw']:.1e} kW)")
+        print(
+            f"  pandapower runopp     {f['pandapower_runopp_ms']:.1f} ms median, {f['pandapower_failures']} failures, "
+            f"agrees on {f['pandapower_agrees']} (max |Δ| {f['pandapower_max_loss_diff_kw']:.1e} kW)"
+        )
     print(f"  solved by both ours   {f['solved']}/{f['total']}   load average {f['loadavg_before']} → {f['loadavg_after']}")
     if "acopf_step_ms" not in f:  # `bench_opf` alone (without `bench_paper_day`)
         return
     print(f"paper day on {f['paper_day_case']}, {f['paper_day_steps']} steps, per step, everything included:")
-    print(f"  acopf (fast path)     {f['acopf_step_ms']:.2f} ms  → {versus(f['ratio_acopf_step_vs_pandapower'])};"
-          f" certified by the SOCP {f['certified_share']:.1%}, largest relative difference from IPOPT"
-          f" {f['fast_path_max_rel_diff']:.1e}")
+    print(
+        f"  acopf (fast path)     {f['acopf_step_ms']:.2f} ms  → {versus(f['ratio_acopf_step_vs_pandapower'])};"
+        f" certified by the SOCP {f['certified_share']:.1%}, largest relative difference from IPOPT"
+        f" {f['fast_path_max_rel_diff']:.1e}"
+    )
     print(f"  acopf (IPOPT always)  {f['acopf_ipopt_step_ms']:.2f} ms")
-    print(f"  socp                  {f['socp_step_ms']:.2f} ms  (after acopf on the same scenario:"
-          f" {f['socp_shared_step_ms']:.3f} ms) → {versus(f['ratio_socp_step_vs_pandapower'])}")
+    print(
+        f"  socp                  {f['socp_step_ms']:.2f} ms  (after acopf on the same scenario:"
+        f" {f['socp_shared_step_ms']:.3f} ms) → {versus(f['ratio_socp_step_vs_pandapower'])}"
+    )

@@ -78,9 +78,20 @@ class PandapowerOpf:
         self._load_q = self.pnet.load.q_mvar.to_numpy().copy()
         if not slack_export:
             self.pnet.ext_grid["min_p_mw"] = 0.0
-        self._sgens = [pp.create_sgen(self.pnet, self.pnet.bus.index[b], p_mw=0.0, q_mvar=0.0, min_p_mw=0.0,
-                                      max_p_mw=0.0, min_q_mvar=0.0, max_q_mvar=0.0, controllable=True)
-                       for b in net.der_bus]
+        self._sgens = [
+            pp.create_sgen(
+                self.pnet,
+                self.pnet.bus.index[b],
+                p_mw=0.0,
+                q_mvar=0.0,
+                min_p_mw=0.0,
+                max_p_mw=0.0,
+                min_q_mvar=0.0,
+                max_q_mvar=0.0,
+                controllable=True,
+            )
+            for b in net.der_bus
+        ]
         pp.create_poly_cost(self.pnet, self.pnet.ext_grid.index[0], "ext_grid", cp1_eur_per_mw=1.0)
 
     def solve(self, load_scale: float, der_p_mw: np.ndarray, q_limit_mvar: np.ndarray) -> RunoppOutcome:

@@ -11,7 +11,6 @@ With `--large` the large-feeder figures of `opfbench.bench.pf_large` are added.
 from __future__ import annotations
 
 import argparse
-
 import importlib.util
 import warnings
 
@@ -74,8 +73,9 @@ def _pgm_batch_ms(net: Network, s_mw: np.ndarray) -> tuple[float | None, float |
     """(wall ms of power-grid-model's batch power flow, max |V| difference p.u.), or
     (None, None) when power-grid-model is not installed. The model is built from series
     r/x only, so a case with line charging, taps, shunts or fixed generators is refused."""
-    plain = not (net.b.any() or (net.tap != 1).any() or net.shift.any() or net.gs_mw.any() or net.bs_mvar.any()
-                 or net.gen_bus.size)
+    plain = not (
+        net.b.any() or (net.tap != 1).any() or net.shift.any() or net.gs_mw.any() or net.bs_mvar.any() or net.gen_bus.size
+    )
     if not plain:
         raise NetworkError(f"{net.name}: the power-grid-model peer models plain series lines only")
     try:
@@ -99,17 +99,23 @@ def _pgm_batch_ms(net: Network, s_mw: np.ndarray) -> tuple[float | None, float |
     load = initialize_array(DatasetType.input, ComponentType.sym_load, n)
     load["id"] = n + len(on) + 1 + np.arange(n)
     load["node"], load["status"], load["type"] = np.arange(n), 1, LoadGenType.const_power
-    model = PowerGridModel({ComponentType.node: node, ComponentType.line: line,
-                            ComponentType.source: source, ComponentType.sym_load: load}, system_frequency=50.0)
+    model = PowerGridModel(
+        {ComponentType.node: node, ComponentType.line: line, ComponentType.source: source, ComponentType.sym_load: load},
+        system_frequency=50.0,
+    )
     update = initialize_array(DatasetType.update, ComponentType.sym_load, (len(s_mw), n))
     update["id"] = load["id"][None, :]
     update["p_specified"] = -s_mw.real * 1e6
     update["q_specified"] = -s_mw.imag * 1e6
 
     def run():
-        return model.calculate_power_flow(update_data={ComponentType.sym_load: update}, symmetric=True,
-                                          error_tolerance=1e-10, max_iterations=30,
-                                          calculation_method=CalculationMethod.newton_raphson)
+        return model.calculate_power_flow(
+            update_data={ComponentType.sym_load: update},
+            symmetric=True,
+            error_tolerance=1e-10,
+            max_iterations=30,
+            calculation_method=CalculationMethod.newton_raphson,
+        )
 
     ms, out = best_ms(run, 5)
     vm = out[ComponentType.node]["u_pu"]
@@ -160,17 +166,23 @@ def run(args: argparse.Namespace | None = None) -> dict:
 def print_table(f: dict) -> None:
     print(f"power flow on {f['case']}, {f['snapshots']} snapshots of the paper day")
     print(f"  single NR solve              {f['single_ms']:.3f} ms")
-    print(f"  batched solver, 1440 steps   {f['batch_1440_ms']:.2f} ms  ({f['batch_converged']} converged, ≤ {f['batch_max_iterations']} iterations, "
-          f"max |ΔV| vs NR {f['batch_vs_single_max_dv_pu']:.1e} p.u.)")
+    print(
+        f"  batched solver, 1440 steps   {f['batch_1440_ms']:.2f} ms  ({f['batch_converged']} converged, ≤ {f['batch_max_iterations']} iterations, "
+        f"max |ΔV| vs NR {f['batch_vs_single_max_dv_pu']:.1e} p.u.)"
+    )
     numba = "with numba" if f["pandapower_numba"] else "without numba"
     if f["pandapower_loop_1440_ms"] is None:
         print("  pandapower                   not installed")
     else:
-        print(f"  pandapower runpp loop ({numba}) {f['pandapower_loop_1440_ms']:.0f} ms  → ours is {f['ratio_vs_pandapower']:.0f}× faster (max |ΔV| {f['pandapower_max_dv_pu']:.1e} p.u.)")
+        print(
+            f"  pandapower runpp loop ({numba}) {f['pandapower_loop_1440_ms']:.0f} ms  → ours is {f['ratio_vs_pandapower']:.0f}× faster (max |ΔV| {f['pandapower_max_dv_pu']:.1e} p.u.)"
+        )
     if f["pgm_batch_1440_ms"] is None:
         print("  power-grid-model            not installed")
     else:
-        print(f"  power-grid-model batch       {f['pgm_batch_1440_ms']:.2f} ms  → ratio {f['ratio_vs_pgm']:.2f} (max |ΔV| {f['pgm_max_dv_pu']:.1e} p.u.)")
+        print(
+            f"  power-grid-model batch       {f['pgm_batch_1440_ms']:.2f} ms  → ratio {f['ratio_vs_pgm']:.2f} (max |ΔV| {f['pgm_max_dv_pu']:.1e} p.u.)"
+        )
     if "large_case" in f:
         from opfbench.bench.pf_large import print_large
 

@@ -110,8 +110,9 @@ def _worker(task: str, case: str, cap_gib: float, conn) -> None:
         best = min(first, best_ms(fn, repeats - 1)[0] / 1e3) if repeats > 1 else first
         cpu = (time.process_time() - cpu) / repeats
         peak = _status_kb("VmHWM") / 1024 if reset else resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
-        conn.send({"first_s": first, "s": best, "cpu_s": cpu, "baseline_mb": baseline, "mb": peak,
-                   "ok": _succeeded(out), "error": None})
+        conn.send(
+            {"first_s": first, "s": best, "cpu_s": cpu, "baseline_mb": baseline, "mb": peak, "ok": _succeeded(out), "error": None}
+        )
     except BaseException as exc:  # noqa: BLE001 — reported to the parent, never swallowed
         conn.send({"error": f"{type(exc).__name__}: {exc}"[:300], "trace": traceback.format_exc()[-2000:]})
     finally:
@@ -172,8 +173,9 @@ def scaling(cases=SCALING_CASES) -> tuple[dict, dict]:
     t ∝ n_bus^e, least squares on logs)."""
     rows = {case: _scaling_row(case) for case in cases}
     n = np.log([r["buses"] for r in rows.values()])
-    exponents = {key: float(np.polyfit(n, np.log([r[key] for r in rows.values()]), 1)[0])
-                 for key in ("pf_s", "batch96_s", "lfma96_s")}
+    exponents = {
+        key: float(np.polyfit(n, np.log([r[key] for r in rows.values()]), 1)[0]) for key in ("pf_s", "batch96_s", "lfma96_s")
+    }
     return rows, exponents
 
 
@@ -199,17 +201,25 @@ def run_large() -> dict:
 
 def print_large(f: dict) -> None:
     print(f"large feeder {f['large_case']} (each figure in a fresh process; peak RSS includes interpreter and case)")
-    labels = {"pf": "one power flow (NR)", "batch96": "batched, 96 snapshots", "acopf": "AC OPF, one snapshot",
-              "lfma96": "LFMA, 96 snapshots"}
+    labels = {
+        "pf": "one power flow (NR)",
+        "batch96": "batched, 96 snapshots",
+        "acopf": "AC OPF, one snapshot",
+        "lfma96": "LFMA, 96 snapshots",
+    }
     for task, label in labels.items():
         if f[f"large_{task}_error"]:
             print(f"  {label:<24} FAILED: {f[f'large_{task}_error']}")
         else:
-            print(f"  {label:<24} {f[f'large_{task}_s']:8.3f} s (CPU {f[f'large_{task}_cpu_s']:.3f} s)  peak {f[f'large_{task}_mb']:7.0f} MB "
-                  f"(before the call {f[f'large_{task}_baseline_mb']:.0f} MB){'' if f[f'large_{task}_ok'] else '  NOT OK'}")
+            print(
+                f"  {label:<24} {f[f'large_{task}_s']:8.3f} s (CPU {f[f'large_{task}_cpu_s']:.3f} s)  peak {f[f'large_{task}_mb']:7.0f} MB "
+                f"(before the call {f[f'large_{task}_baseline_mb']:.0f} MB){'' if f[f'large_{task}_ok'] else '  NOT OK'}"
+            )
     print("  time vs buses (s):")
     for case, r in f["large_scaling"].items():
-        print(f"    {case:<12} {r['buses']:>6} buses  PF {r['pf_s']:.4f}  batch96 {r['batch96_s']:.4f}  LFMA96 {r['lfma96_s']:.4f}")
+        print(
+            f"    {case:<12} {r['buses']:>6} buses  PF {r['pf_s']:.4f}  batch96 {r['batch96_s']:.4f}  LFMA96 {r['lfma96_s']:.4f}"
+        )
     e = f["large_exponents"]
     print(f"  fitted exponents (t ∝ n^e): PF {e['pf_s']:.2f}, batch96 {e['batch96_s']:.2f}, LFMA96 {e['lfma96_s']:.2f}")
     print(f"  load average before/after: {f['load_average_before']:.1f} / {f['load_average_after']:.1f}")

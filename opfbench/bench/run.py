@@ -35,8 +35,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def _timed(out: Path, *args: str) -> float:
     start = now()
-    subprocess.run([sys.executable, "-m", "opfbench", "run", "--quiet", "--out", str(out), *args], check=True,
-                   stdout=subprocess.DEVNULL)
+    subprocess.run(
+        [sys.executable, "-m", "opfbench", "run", "--quiet", "--out", str(out), *args], check=True, stdout=subprocess.DEVNULL
+    )
     return elapsed_ms(start) / 1e3
 
 
@@ -56,9 +57,18 @@ def run(args: argparse.Namespace | None = None) -> dict:
         year = _timed(root / "year", "--period", "year", "--workers", "2") if args is not None and args.year else None
         identical = all(_same(root / "day1-0", root / f"day{w}-{i}") for w in (1, 2) for i in range(repeats))
     day_1, day_2 = statistics.median(runs[1]), statistics.median(runs[2])
-    return {"day_s_1worker": day_1, "day_s": day_2, "speedup": day_1 / day_2, "year_s": year,
-            "day_s_1worker_runs": runs[1], "day_s_runs": runs[2], "repeats": repeats,
-            "identical_1_vs_2_workers": identical, "target_day_s": TARGET_DAY_S, "target_year_s": TARGET_YEAR_S}
+    return {
+        "day_s_1worker": day_1,
+        "day_s": day_2,
+        "speedup": day_1 / day_2,
+        "year_s": year,
+        "day_s_1worker_runs": runs[1],
+        "day_s_runs": runs[2],
+        "repeats": repeats,
+        "identical_1_vs_2_workers": identical,
+        "target_day_s": TARGET_DAY_S,
+        "target_year_s": TARGET_YEAR_S,
+    }
 
 
 def _runs(times: list[float]) -> str:
@@ -68,7 +78,9 @@ def _runs(times: list[float]) -> str:
 def print_table(f: dict) -> None:
     print("opfbench run, default grid, wall time including start-up")
     print(f"  paper day, 1 worker : {f['day_s_1worker']:8.1f} s median of {f['repeats']} ({_runs(f['day_s_1worker_runs'])})")
-    print(f"  paper day, 2 workers: {f['day_s']:8.1f} s median of {f['repeats']} ({_runs(f['day_s_runs'])}); speed-up "
-          f"{f['speedup']:.2f}×, target ≤ {f['target_day_s']:.0f} s; tables identical: {f['identical_1_vs_2_workers']}")
+    print(
+        f"  paper day, 2 workers: {f['day_s']:8.1f} s median of {f['repeats']} ({_runs(f['day_s_runs'])}); speed-up "
+        f"{f['speedup']:.2f}×, target ≤ {f['target_day_s']:.0f} s; tables identical: {f['identical_1_vs_2_workers']}"
+    )
     if f["year_s"] is not None:
         print(f"  year 15 min, 2 workers: {f['year_s']:8.1f} s  (target ≤ {f['target_year_s']:.0f} s)")

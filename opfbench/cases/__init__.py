@@ -106,6 +106,4 @@ def load_case(name_or_path: str) -> Network:
     path = Path(name_or_path)
     if path.suffix == ".m" and path.exists():
         return load_case_file(path)
-    raise InputError(
-        f"unknown case {name_or_path!r}: give one of {', '.join(CASE_NAMES)} or the path of a MATPOWER .m file"
-    )
+    raise InputError(f"unknown case {name_or_path!r}: give one of {', '.join(CASE_NAMES)} or the path of a MATPOWER .m file")

@@ -22,6 +22,8 @@ def run(args: argparse.Namespace) -> int:
         return 0
     print(f"{'case':<16}{'buses':>6}{'branches':>9}{'open':>6}{'DER':>5}  meshed  load MW / MVAr")
     for r in rows:
-        print(f"{r['case']:<16}{r['buses']:>6}{r['branches']:>9}{r['branches_open']:>6}{r['ders']:>5}  "
-              f"{'yes' if r['meshed'] else 'no':<6}  {r['load_mw']:.3f} / {r['load_mvar']:.3f}")
+        print(
+            f"{r['case']:<16}{r['buses']:>6}{r['branches']:>9}{r['branches_open']:>6}{r['ders']:>5}  "
+            f"{'yes' if r['meshed'] else 'no':<6}  {r['load_mw']:.3f} / {r['load_mvar']:.3f}"
+        )
     return 0

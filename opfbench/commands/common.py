@@ -23,8 +23,8 @@ def fraction(text: str) -> float:
 
 def add_operating_point(parser: argparse.ArgumentParser) -> None:
     """--load-scale and --der-scale, as every snapshot-type command takes them."""
-    parser.add_argument("--load-scale", type=fraction, default=1.0,
-                        help="multiplier on every nominal load (default 1.0)")
-    parser.add_argument("--der-scale", type=fraction, default=0.8,
-                        help="DER active power as a fraction of rating, 0..1 (default 0.8)")
+    parser.add_argument("--load-scale", type=fraction, default=1.0, help="multiplier on every nominal load (default 1.0)")
+    parser.add_argument(
+        "--der-scale", type=fraction, default=0.8, help="DER active power as a fraction of rating, 0..1 (default 0.8)"
+    )
     parser.add_argument("--json", action="store_true", help="print one JSON object")

@@ -9,8 +9,9 @@ from opfbench.jsonio import print_json
 
 def register(sub: argparse._SubParsersAction) -> None:
     parser = sub.add_parser("data", help="list the embedded time series (rows, span, step, units, gaps filled)")
-    parser.add_argument("--json", action="store_true",
-                        help="print a JSON list of {name, rows, start, end, step, columns, gaps_filled}")
+    parser.add_argument(
+        "--json", action="store_true", help="print a JSON list of {name, rows, start, end, step, columns, gaps_filled}"
+    )
     parser.set_defaults(func=run)
 
 

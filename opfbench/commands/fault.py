@@ -38,8 +38,13 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--duration-ms", type=_number, default=150.0, help="fault duration, ms (default 150)")
     p.add_argument("--strategies", nargs="+", choices=STRATEGY_NAMES, default=["no-action", "llma", "lfma", "acopf"])
     p.add_argument("--k", nargs="+", type=fraction, default=[0.0, 0.2, 0.4, 0.6, 0.8], help="reserve coefficients")
-    p.add_argument("--forecast", nargs="+", choices=FORECASTS, default=["off"],
-                   help="setpoints without (off) and with the oracle forecast (Algorithm 3)")
+    p.add_argument(
+        "--forecast",
+        nargs="+",
+        choices=FORECASTS,
+        default=["off"],
+        help="setpoints without (off) and with the oracle forecast (Algorithm 3)",
+    )
     p.add_argument("--load-scale", type=fraction, default=1.0, help="multiplier on the nominal loads (default 1)")
     p.add_argument("--der-scale", type=fraction, default=0.8, help="DER output as a fraction of rating (default 0.8)")
     p.add_argument("--time", default=None, help="HH:MM: the paper day's minute as operating point instead")
@@ -47,16 +52,27 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--motor-inertia", type=_number, default=0.2, help="motor H, s (default 0.2)")
     p.add_argument("--torque", choices=("quadratic", "constant"), default="quadratic", help="motor load torque law")
     p.add_argument("--source-impedance", type=_number, default=0.2, help="upstream source reactance, p.u.")
-    p.add_argument("--emf", type=_number, default=None,
-                   help="source EMF |E| in p.u. (default: re-set so the slack sits at its scheduled voltage)")
-    p.add_argument("--active", choices=("constant-power", "ramp"), default="constant-power",
-                   help="inverter active power after the dip (default constant-power)")
+    p.add_argument(
+        "--emf",
+        type=_number,
+        default=None,
+        help="source EMF |E| in p.u. (default: re-set so the slack sits at its scheduled voltage)",
+    )
+    p.add_argument(
+        "--active",
+        choices=("constant-power", "ramp"),
+        default="constant-power",
+        help="inverter active power after the dip (default constant-power)",
+    )
     p.add_argument("--area-c-trip", action="store_true", help="inverters disconnect below 0.2 p.u. (area C)")
-    p.add_argument("--variants", nargs="+", default=["reference"],
-                   help="model variants key=value[,key=value] (emf=held, source=0.1, motors=0.3, inertia=H, "
-                        "torque=constant, active=ramp, emf-pu=E) or 'reference'")
-    p.add_argument("--sensitivity", action="store_true",
-                   help="run the sensitivity variants: " + " ".join(SENSITIVITY_VARIANTS))
+    p.add_argument(
+        "--variants",
+        nargs="+",
+        default=["reference"],
+        help="model variants key=value[,key=value] (emf=held, source=0.1, motors=0.3, inertia=H, "
+        "torque=constant, active=ramp, emf-pu=E) or 'reference'",
+    )
+    p.add_argument("--sensitivity", action="store_true", help="run the sensitivity variants: " + " ".join(SENSITIVITY_VARIANTS))
     p.add_argument("--t-end", type=_number, default=3.0, help="simulated time, s (default 3)")
     p.add_argument("--step-ms", type=_number, default=1.0, help="fixed step, ms (default 1)")
     p.add_argument("--workers", type=int, default=1, help="processes (default 1)")
@@ -67,8 +83,7 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 def _params(args: argparse.Namespace) -> ModelParams:
     base = ModelParams()
-    src = replace(base.source, impedance_pu=args.source_impedance,
-                  emf="reset" if args.emf is None else "given", emf_pu=args.emf)
+    src = replace(base.source, impedance_pu=args.source_impedance, emf="reset" if args.emf is None else "given", emf_pu=args.emf)
     mot = replace(base.motors, share=args.motor_share, h_s=args.motor_inertia, torque=args.torque)
     inv = replace(base.inverters, active=args.active, area_c_trip=args.area_c_trip)
     params = ModelParams(src, mot, inv)
@@ -97,10 +112,20 @@ def run(args: argparse.Namespace) -> int:
         except ValueError:
             raise InputError(f"--fault-bus takes bus numbers or 'all', got {' '.join(args.fault_bus)}") from None
     variants = tuple(dict.fromkeys((SENSITIVITY_VARIANTS if args.sensitivity else ()) + tuple(args.variants)))
-    fault = FaultParams(bus=0, impedance_pu=args.fault_impedance, duration_s=args.duration_ms / 1e3,
-                        t_end_s=args.t_end, step_s=args.step_ms / 1e3)
-    config = StudyConfig(args.case, buses, tuple(args.strategies), tuple(args.k), tuple(args.forecast), variants,
-                         _params(args), fault, args.workers)
+    fault = FaultParams(
+        bus=0, impedance_pu=args.fault_impedance, duration_s=args.duration_ms / 1e3, t_end_s=args.t_end, step_s=args.step_ms / 1e3
+    )
+    config = StudyConfig(
+        args.case,
+        buses,
+        tuple(args.strategies),
+        tuple(args.k),
+        tuple(args.forecast),
+        variants,
+        _params(args),
+        fault,
+        args.workers,
+    )
     config.check(net)
     point = operating_point(net, args.load_scale, args.der_scale, args.time)
     records, timings = run_study(config, point, progress=None if args.json else print)
@@ -117,14 +142,20 @@ def run(args: argparse.Namespace) -> int:
 
 def _print_table(records, net, label: str, timings: dict) -> None:
     print(f"{net.name} · {label} · {timings['simulations']} simulations in {timings['study_s']:.1f} s")
-    print(f"{'variant':<12} {'fault':>5} {'strategy':<10} {'k':>4} {'fc':<6} {'status':<13} "
-          f"{'rec@fault ms':>12} {'slowest ms':>10} {'at bus':>6} {'margin':>8} {'stalled':>7}")
-    print("(recovery: ms from inception until |V| ≥ 0.9 p.u. for good, nan = not recovered; margin: min |V| − 0.9 "
-          "p.u. over the last 100 ms at the slowest bus)")
+    print(
+        f"{'variant':<12} {'fault':>5} {'strategy':<10} {'k':>4} {'fc':<6} {'status':<13} "
+        f"{'rec@fault ms':>12} {'slowest ms':>10} {'at bus':>6} {'margin':>8} {'stalled':>7}"
+    )
+    print(
+        "(recovery: ms from inception until |V| ≥ 0.9 p.u. for good, nan = not recovered; margin: min |V| − 0.9 "
+        "p.u. over the last 100 ms at the slowest bus)"
+    )
     for r in records:
         i = net.index_of(r.fault_bus)
         rec = np.where(np.isnan(r.recovery_ms), np.inf, r.recovery_ms)  # not recovered = slowest
         worst = int(np.argmax(rec))
-        print(f"{r.variant:<12} {r.fault_bus:>5} {r.strategy:<10} {r.k:>4.1f} {r.forecast:<6} {r.status:<13} "
-              f"{r.recovery_ms[i]:>12.1f} {r.recovery_ms[worst]:>10.1f} {int(net.bus_ids[worst]):>6} "
-              f"{r.margin_pu[worst]:>8.4f} {r.motors_stalled:>7}")
+        print(
+            f"{r.variant:<12} {r.fault_bus:>5} {r.strategy:<10} {r.k:>4.1f} {r.forecast:<6} {r.status:<13} "
+            f"{r.recovery_ms[i]:>12.1f} {r.recovery_ms[worst]:>10.1f} {int(net.bus_ids[worst]):>6} "
+            f"{r.margin_pu[worst]:>8.4f} {r.motors_stalled:>7}"
+        )

@@ -88,7 +88,11 @@ def format_table(result: "ComparisonResult") -> str:
     """Plain-text metrics table with the paper's Table I values."""
     from opfbench.forecasting.report import PAPER_TABLE
 
-    header = f"{'model':<18}" + "".join(f"{name:>12}" for name, _ in METRIC_COLUMNS) + f"{'fit_s':>9}{'paper_mse':>11}{'paper_mape':>11}"
+    header = (
+        f"{'model':<18}"
+        + "".join(f"{name:>12}" for name, _ in METRIC_COLUMNS)
+        + f"{'fit_s':>9}{'paper_mse':>11}{'paper_mape':>11}"
+    )
     lines = [
         f"{result.dataset}: {len(result.forecasts)} test steps from {result.forecasts.index[0]}, "
         f"MAPE on actual > {result.settings.mape_threshold:.0%} of {result.rating_kw:g} kW, "

@@ -23,14 +23,25 @@ def run(args: argparse.Namespace) -> int:
         raise InputError(f"--der-scale is a fraction of rating and must be ≤ 1, got {args.der_scale}")
     net = load_case(args.case)
     res = solve_pf(net, bus_injections(net, args.der_scale * net.der_rating_mw, 0.0, args.load_scale))
-    out = {"case": net.name, "converged": bool(res.converged), "iterations": int(res.iterations),
-           "load_scale": args.load_scale, "der_scale": args.der_scale}
+    out = {
+        "case": net.name,
+        "converged": bool(res.converged),
+        "iterations": int(res.iterations),
+        "load_scale": args.load_scale,
+        "der_scale": args.der_scale,
+    }
     if res.converged:  # a non-converged state has no meaningful losses or voltages
         vmin, vmin_bus = res.extreme_voltage("min")
         vmax, vmax_bus = res.extreme_voltage("max")
-        out |= {"losses_kw": float(res.losses_kw), "vmin": float(vmin), "vmin_bus": int(vmin_bus),
-                "vmax": float(vmax), "vmax_bus": int(vmax_bus),
-                "slack_p_mw": float(res.slack_s_mva.real), "slack_q_mvar": float(res.slack_s_mva.imag)}
+        out |= {
+            "losses_kw": float(res.losses_kw),
+            "vmin": float(vmin),
+            "vmin_bus": int(vmin_bus),
+            "vmax": float(vmax),
+            "vmax_bus": int(vmax_bus),
+            "slack_p_mw": float(res.slack_s_mva.real),
+            "slack_q_mvar": float(res.slack_s_mva.imag),
+        }
     else:
         out |= dict.fromkeys(("losses_kw", "vmin", "vmin_bus", "vmax", "vmax_bus", "slack_p_mw", "slack_q_mvar"))
     if args.json:

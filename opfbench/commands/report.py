@@ -14,17 +14,31 @@ from opfbench.errors import InputError
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("report", help="write the HTML report of a run folder (report.html)", description=__doc__)
     p.add_argument("run_dir", type=Path, metavar="RUN_DIR", help="folder written by `opfbench run --out RUN_DIR`")
-    p.add_argument("--forecast-dir", type=Path, help="folder written by `opfbench forecast --out DIR` "
-                                                     "(default reports/forecast when it holds one, else the "
-                                                     "committed docs/forecast metrics)")
-    p.add_argument("--fault-dir", type=Path, help="folder written by `opfbench fault ... --out DIR` "
-                                                  "(default reports/fault when it holds one)")
-    p.add_argument("--year-dir", type=Path, help="folder written by `opfbench run --period year --out DIR` "
-                                                 "(default reports/year when it holds one, else the committed "
-                                                 "docs/year summary)")
+    p.add_argument(
+        "--forecast-dir",
+        type=Path,
+        help="folder written by `opfbench forecast --out DIR` "
+        "(default reports/forecast when it holds one, else the "
+        "committed docs/forecast metrics)",
+    )
+    p.add_argument(
+        "--fault-dir",
+        type=Path,
+        help="folder written by `opfbench fault ... --out DIR` (default reports/fault when it holds one)",
+    )
+    p.add_argument(
+        "--year-dir",
+        type=Path,
+        help="folder written by `opfbench run --period year --out DIR` "
+        "(default reports/year when it holds one, else the committed "
+        "docs/year summary)",
+    )
     p.add_argument("--out", type=Path, help="report file (default RUN_DIR/report.html)")
-    p.add_argument("--price", type=float, help="energy price per kWh for the money rows "
-                                               "(default: the run's manifest, else 0.20 EUR/kWh, Eurostat 2023-H2)")
+    p.add_argument(
+        "--price",
+        type=float,
+        help="energy price per kWh for the money rows (default: the run's manifest, else 0.20 EUR/kWh, Eurostat 2023-H2)",
+    )
     p.set_defaults(func=run)
 
 

@@ -21,7 +21,6 @@ if TYPE_CHECKING:
     from opfbench.study.runner import StudyRun
 
 
-
 def _workers(text: str) -> int:
     try:
         n = int(text)
@@ -41,42 +40,84 @@ def _minutes(text: str) -> float:
 
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("run", help="run the study (default: the paper day on paper33, every strategy)")
-    p.add_argument("--case", nargs="+", default=["paper33"],
-                   help="shipped case names or MATPOWER .m paths, e.g. paper33 case69-der case141-der paper33-meshed")
-    p.add_argument("--strategies", nargs="+", default=list(STRATEGY_NAMES), choices=STRATEGY_NAMES,
-                   help="default: every registered strategy")
+    p.add_argument(
+        "--case",
+        nargs="+",
+        default=["paper33"],
+        help="shipped case names or MATPOWER .m paths, e.g. paper33 case69-der case141-der paper33-meshed",
+    )
+    p.add_argument(
+        "--strategies", nargs="+", default=list(STRATEGY_NAMES), choices=STRATEGY_NAMES, help="default: every registered strategy"
+    )
     p.add_argument("--k", nargs="+", type=fraction, default=list(DEFAULT_KS), help="reserve coefficients in [0, 1]")
     p.add_argument("--night-modes", nargs="+", default=list(NIGHT_MODES), choices=NIGHT_MODES)
-    p.add_argument("--night", default=DEFAULT_NIGHT,
-                   help="night hours: a clock window HH:MM-HH:MM (default the paper's 20:00-05:00) or 'sun'")
-    p.add_argument("--forecast", nargs="+", default=["off", "oracle"],
-                   help="forecast sources: off, oracle (next step's actual) and/or a model name whose PV "
-                        "forecasts `opfbench forecast --dataset pv --out DIR` wrote (default: off oracle)")
+    p.add_argument(
+        "--night",
+        default=DEFAULT_NIGHT,
+        help="night hours: a clock window HH:MM-HH:MM (default the paper's 20:00-05:00) or 'sun'",
+    )
+    p.add_argument(
+        "--forecast",
+        nargs="+",
+        default=["off", "oracle"],
+        help="forecast sources: off, oracle (next step's actual) and/or a model name whose PV "
+        "forecasts `opfbench forecast --dataset pv --out DIR` wrote (default: off oracle)",
+    )
     p.add_argument("--forecast-dir", default="reports/forecast", help="where model forecasts are (default reports/forecast)")
-    p.add_argument("--acopf-solver", choices=ACOPF_SOLVERS, default="auto",
-                   help="auto (default): the SOCP certifies the AC optimum where it can, IPOPT solves the rest; "
-                        "ipopt: IPOPT on every step (its own convergence record)")
-    p.add_argument("--fault-dir", type=Path, default=None,
-                   help="a fault study's folder (`opfbench fault ... --out DIR`) for the report's fault section "
-                        "(default reports/fault, when it holds one)")
-    p.add_argument("--year-dir", type=Path, default=None,
-                   help="a year run's folder (`opfbench run --period year --out DIR`) for the report's year section "
-                        "(default reports/year when it holds one, else the committed docs/year summary)")
-    p.add_argument("--period", default="paper-day",
-                   help="paper-day (default; 1 min, BSRN PV), year (2016 at 15 min, SimBench PV3) or START..END "
-                        "(local times, END excluded)")
+    p.add_argument(
+        "--acopf-solver",
+        choices=ACOPF_SOLVERS,
+        default="auto",
+        help="auto (default): the SOCP certifies the AC optimum where it can, IPOPT solves the rest; "
+        "ipopt: IPOPT on every step (its own convergence record)",
+    )
+    p.add_argument(
+        "--fault-dir",
+        type=Path,
+        default=None,
+        help="a fault study's folder (`opfbench fault ... --out DIR`) for the report's fault section "
+        "(default reports/fault, when it holds one)",
+    )
+    p.add_argument(
+        "--year-dir",
+        type=Path,
+        default=None,
+        help="a year run's folder (`opfbench run --period year --out DIR`) for the report's year section "
+        "(default reports/year when it holds one, else the committed docs/year summary)",
+    )
+    p.add_argument(
+        "--period",
+        default="paper-day",
+        help="paper-day (default; 1 min, BSRN PV), year (2016 at 15 min, SimBench PV3) or START..END (local times, END excluded)",
+    )
     p.add_argument("--step-minutes", type=_minutes, default=None, help="override the period's step (minutes)")
-    p.add_argument("--chunk", choices=CHUNKS, default="auto",
-                   help="steps per task: a local quarter day (6h), day, week or month; auto (default): 6h for "
-                        "periods of up to two days, else month (fixed by the config, independent of workers)")
-    p.add_argument("--detail", action=argparse.BooleanOptionalAction, default=None,
-                   help="also write the long tables of per-DER Q and per-bus V (default: per-DER Q only, and only "
-                        "for periods of ≤ 2 days: the report plots it)")
-    p.add_argument("--workers", type=_workers, default=os.cpu_count() or 1,
-                   help="local worker processes (default: every core; 1 runs in this process)")
+    p.add_argument(
+        "--chunk",
+        choices=CHUNKS,
+        default="auto",
+        help="steps per task: a local quarter day (6h), day, week or month; auto (default): 6h for "
+        "periods of up to two days, else month (fixed by the config, independent of workers)",
+    )
+    p.add_argument(
+        "--detail",
+        action=argparse.BooleanOptionalAction,
+        default=None,
+        help="also write the long tables of per-DER Q and per-bus V (default: per-DER Q only, and only "
+        "for periods of ≤ 2 days: the report plots it)",
+    )
+    p.add_argument(
+        "--workers",
+        type=_workers,
+        default=os.cpu_count() or 1,
+        help="local worker processes (default: every core; 1 runs in this process)",
+    )
     p.add_argument("--scheduler", default=None, help="run on an existing Dask cluster, e.g. tcp://HOST:8786")
-    p.add_argument("--price", type=fraction, default=DEFAULT_PRICE_PER_KWH,
-                   help=f"price of lost energy per kWh for the report (default {DEFAULT_PRICE_PER_KWH} {DEFAULT_CURRENCY}, Eurostat 2023-H2 non-household)")
+    p.add_argument(
+        "--price",
+        type=fraction,
+        default=DEFAULT_PRICE_PER_KWH,
+        help=f"price of lost energy per kWh for the report (default {DEFAULT_PRICE_PER_KWH} {DEFAULT_CURRENCY}, Eurostat 2023-H2 non-household)",
+    )
     p.add_argument("--currency", default=DEFAULT_CURRENCY)
     p.add_argument("--out", type=Path, default=Path("reports/run"), help="run folder (default reports/run)")
     p.add_argument("--fresh", action="store_true", help="discard a previous run of another configuration in --out")
@@ -92,21 +133,43 @@ def run(args: argparse.Namespace) -> int:
     from opfbench.study.store import finished_tasks
 
     if args.fault_dir is not None and not holds_fault_study(args.fault_dir):
-        raise InputError(f"--fault-dir {args.fault_dir} holds no fault study (fault.parquet); "
-                         f"write one with `opfbench fault CASE --out {args.fault_dir}`")
+        raise InputError(
+            f"--fault-dir {args.fault_dir} holds no fault study (fault.parquet); "
+            f"write one with `opfbench fault CASE --out {args.fault_dir}`"
+        )
     check_year_dir(args.year_dir)
     config = StudyConfig.build(
-        cases=args.case, strategies=args.strategies, ks=args.k, night_modes=args.night_modes, night=args.night,
-        forecast=args.forecast, period=args.period, step_minutes=args.step_minutes, chunk=args.chunk,
-        detail=args.detail, acopf_solver=args.acopf_solver,
-        forecast_dir=args.forecast_dir, price_per_kwh=args.price, currency=args.currency,
-        price_source=source)
+        cases=args.case,
+        strategies=args.strategies,
+        ks=args.k,
+        night_modes=args.night_modes,
+        night=args.night,
+        forecast=args.forecast,
+        period=args.period,
+        step_minutes=args.step_minutes,
+        chunk=args.chunk,
+        detail=args.detail,
+        acopf_solver=args.acopf_solver,
+        forecast_dir=args.forecast_dir,
+        price_per_kwh=args.price,
+        currency=args.currency,
+        price_source=source,
+    )
     try:
-        result = run_study(config, args.out, workers=args.workers, scheduler=args.scheduler, fresh=args.fresh,
-                           quiet=args.quiet, command=["opfbench", *sys.argv[1:]])
+        result = run_study(
+            config,
+            args.out,
+            workers=args.workers,
+            scheduler=args.scheduler,
+            fresh=args.fresh,
+            quiet=args.quiet,
+            command=["opfbench", *sys.argv[1:]],
+        )
     except KeyboardInterrupt:
-        print(f"\nopfbench run: stopped; {finished_tasks(args.out)} tasks kept in {args.out}; rerun the same command to resume",
-              file=sys.stderr)
+        print(
+            f"\nopfbench run: stopped; {finished_tasks(args.out)} tasks kept in {args.out}; rerun the same command to resume",
+            file=sys.stderr,
+        )
         return 130
     return finish_run(result, args)
 
@@ -117,17 +180,29 @@ def finish_run(result: StudyRun, args: argparse.Namespace) -> int:
     from opfbench.report.sources import holds_forecasts, report_sources
 
     forecast_dir = Path(args.forecast_dir)
-    forecast, fault, year = report_sources(forecast_dir if holds_forecasts(forecast_dir) else None, args.fault_dir,
-                                           args.year_dir)
+    forecast, fault, year = report_sources(forecast_dir if holds_forecasts(forecast_dir) else None, args.fault_dir, args.year_dir)
     report = write_report(result.out, forecast, fault, year_dir=year)
     summary = result.summary
     if args.json:
         print_json(summary.to_dict(orient="records"))
         return 0
-    cols = ["case", "strategy", "k", "night_mode", "forecast", "avg_loss_kw", "energy_kwh", "savings_pct",
-            "not_ok_steps", "voltage_violation_steps", "gap_pct"]
+    cols = [
+        "case",
+        "strategy",
+        "k",
+        "night_mode",
+        "forecast",
+        "avg_loss_kw",
+        "energy_kwh",
+        "savings_pct",
+        "not_ok_steps",
+        "voltage_violation_steps",
+        "gap_pct",
+    ]
     print(summary[cols].to_string(index=False, float_format=lambda v: f"{v:.3f}"))
-    print(f"\n{len(result.tasks)} tasks ({result.ran} run now, {len(result.tasks) - result.ran} kept), "
-          f"{result.wall_s:.1f} s; per-step table: {result.out / 'steps.parquet'}   summary: {result.out / 'summary.csv'}")
+    print(
+        f"\n{len(result.tasks)} tasks ({result.ran} run now, {len(result.tasks) - result.ran} kept), "
+        f"{result.wall_s:.1f} s; per-step table: {result.out / 'steps.parquet'}   summary: {result.out / 'summary.csv'}"
+    )
     print(f"report: {report}")
     return 0

@@ -15,16 +15,32 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--strategy", required=True, choices=STRATEGY_NAMES)
     p.add_argument("--k", type=fraction, default=0.0, help="reactive reserve coefficient in [0, 1] (default 0)")
     add_operating_point(p)
-    p.add_argument("--forecast-der-scale", type=fraction, default=None,
-                   help="forecast DER output as a fraction of rating: turns on Algorithm 3 (local rules)")
-    p.add_argument("--safe", action="store_true",
-                   help="Algorithm 3: clip setpoints to the physical capability at the current P (local rules)")
-    p.add_argument("--fallback", choices=("chain", "paper"), default=None,
-                   help="AC OPF failure policy: chain (default) or paper (fall back to no action)")
-    p.add_argument("--acopf-solver", choices=("auto", "ipopt"), default=None,
-                   help="AC OPF: auto (default: SOCP-certified fast path, IPOPT for the rest) or ipopt (always)")
-    p.add_argument("--no-slack-export", action="store_true",
-                   help="formulations: forbid reverse power flow at the slack (slack P ≥ 0)")
+    p.add_argument(
+        "--forecast-der-scale",
+        type=fraction,
+        default=None,
+        help="forecast DER output as a fraction of rating: turns on Algorithm 3 (local rules)",
+    )
+    p.add_argument(
+        "--safe",
+        action="store_true",
+        help="Algorithm 3: clip setpoints to the physical capability at the current P (local rules)",
+    )
+    p.add_argument(
+        "--fallback",
+        choices=("chain", "paper"),
+        default=None,
+        help="AC OPF failure policy: chain (default) or paper (fall back to no action)",
+    )
+    p.add_argument(
+        "--acopf-solver",
+        choices=("auto", "ipopt"),
+        default=None,
+        help="AC OPF: auto (default: SOCP-certified fast path, IPOPT for the rest) or ipopt (always)",
+    )
+    p.add_argument(
+        "--no-slack-export", action="store_true", help="formulations: forbid reverse power flow at the slack (slack P ≥ 0)"
+    )
     p.set_defaults(func=run)
 
 
@@ -32,10 +48,12 @@ def _options(args: argparse.Namespace) -> dict:
     """The strategy options the flags set; a flag the strategy does not take is an error
     (which strategies take it is the registry's word)."""
     spec = get_strategy(args.strategy)
-    given = {"--safe": ("safe", True) if args.safe else None,
-             "--fallback": ("fallback", args.fallback) if args.fallback is not None else None,
-             "--no-slack-export": ("slack_export", False) if args.no_slack_export else None,
-             "--acopf-solver": ("solver", args.acopf_solver) if args.acopf_solver is not None else None}
+    given = {
+        "--safe": ("safe", True) if args.safe else None,
+        "--fallback": ("fallback", args.fallback) if args.fallback is not None else None,
+        "--no-slack-export": ("slack_export", False) if args.no_slack_export else None,
+        "--acopf-solver": ("solver", args.acopf_solver) if args.acopf_solver is not None else None,
+    }
     options = {}
     for flag, option in given.items():
         if option is None:
@@ -70,8 +88,10 @@ def run(args: argparse.Namespace) -> int:
     if out.get("lower_bound_kw") is not None:
         print(f"  lower bound   {out['lower_bound_kw']:.3f} kW")
     if "fallback" in out:  # the formulations: how the point was obtained
-        print(f"  solver        {out['solver_status']} · {out['iterations']} iterations · {out['solve_ms']:.2f} ms"
-              f" · fallback {out['fallback']}")
+        print(
+            f"  solver        {out['solver_status']} · {out['iterations']} iterations · {out['solve_ms']:.2f} ms"
+            f" · fallback {out['fallback']}"
+        )
     print("  Q setpoints   " + ", ".join(f"bus {b}: {q:+.4f}" for b, q in out["q_mvar"].items()) + " MVAr")
     print(f"  power flows   {out['power_flows']}   excursion {out['excursion_mvar']:.4f} MVAr   wall {out['wall_ms']:.2f} ms")
     for key in result.extra:  # strategy diagnostics, e.g. LFMA's upstream disagreements

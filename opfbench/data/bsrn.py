@@ -77,9 +77,7 @@ def parse_bsrn_lr0100(source: Source) -> pd.DataFrame:
         pair = (body[2 * k].split(), body[2 * k + 1].split())
         for line, (tokens, want) in enumerate(zip(pair, _TOKENS_PER_LINE, strict=True)):
             if len(tokens) != want:
-                raise DataError(
-                    f"{name}: line {first + 2 * k + line + 1}: expected {want} fields, got {len(tokens)}"
-                )
+                raise DataError(f"{name}: line {first + 2 * k + line + 1}: expected {want} fields, got {len(tokens)}")
         try:
             day, minute = int(pair[0][0]), int(pair[0][1])
             values[k] = [float(pair[ln][pos]) for ln, pos, _ in _LAYOUT.values()]

@@ -38,20 +38,36 @@ LIBRARIES = ("numpy", "pandas", "pvlib", "windpowerlib")
 _LINEAR = "linear interpolation in time; nearest value at the ends of the series"
 
 
-def _entry(df: pd.DataFrame, file: str, source: Path, step: str, units: dict[str, str],
-           gaps: dict[str, int], gap_method: str, bounds: dict[str, tuple[float, float]],
-           **extra: object) -> dict:
+def _entry(
+    df: pd.DataFrame,
+    file: str,
+    source: Path,
+    step: str,
+    units: dict[str, str],
+    gaps: dict[str, int],
+    gap_method: str,
+    bounds: dict[str, tuple[float, float]],
+    **extra: object,
+) -> dict:
     """Validated manifest entry of one dataset (the file's hash is added when written).
     ``bounds`` gives the physical range of the power columns."""
     check_time_index(df.index, file, pd.Timedelta(step))
     check_finite(df, file)
     check_bounds(df, file, bounds)
     return {
-        "file": file, "source": f"{source.parent.name}/{source.name}", "source_sha256": sha256(source),
-        "tz": str(df.index.tz), "step": step, "rows": len(df),
-        "start": df.index[0].isoformat(), "end": df.index[-1].isoformat(),
-        "columns": units, "gaps_filled": gaps, "gap_method": gap_method,
-        "bounds": {col: list(b) for col, b in bounds.items()}, **extra,
+        "file": file,
+        "source": f"{source.parent.name}/{source.name}",
+        "source_sha256": sha256(source),
+        "tz": str(df.index.tz),
+        "step": step,
+        "rows": len(df),
+        "start": df.index[0].isoformat(),
+        "end": df.index[-1].isoformat(),
+        "columns": units,
+        "gaps_filled": gaps,
+        "gap_method": gap_method,
+        "bounds": {col: list(b) for col, b in bounds.items()},
+        **extra,
     }
 
 
@@ -62,13 +78,21 @@ def derive_pv_minute(source_dir: Path) -> tuple[pd.DataFrame, dict]:
     df = weather.assign(pv_ac_kw=pv_ac_power_kw(weather, PAYERNE, PV_PLANT))
     units = {**WEATHER_UNITS, "pv_ac_kw": "kW"}
     entry = _entry(
-        df, "pv_minute_payerne_2016-06.csv.gz", src, "1min", units, {**gaps, "pv_ac_kw": 0},
+        df,
+        "pv_minute_payerne_2016-06.csv.gz",
+        src,
+        "1min",
+        units,
+        {**gaps, "pv_ac_kw": 0},
         f"{_LINEAR}; DNI gaps first rebuilt as (GHI - DHI)/cos(zenith) where the apparent zenith is "
         f"below {CLOSURE_MAX_ZENITH_DEG:g} deg",
-        {"pv_ac_kw": (0.0, PV_PLANT.ac_rating_kw)}, rating_kw=PV_PLANT.ac_rating_kw,
-        model=(f"pvlib PVWatts: {PV_PLANT.dc_rating_kw} kW DC, {PV_PLANT.ac_rating_kw} kW AC, tilt "
-               f"{PV_PLANT.tilt_deg} deg, azimuth {PV_PLANT.azimuth_deg} deg, Perez transposition, SAPM "
-               f"open-rack cell temperature, {PV_PLANT.system_losses_pct} % losses, at {PAYERNE}"),
+        {"pv_ac_kw": (0.0, PV_PLANT.ac_rating_kw)},
+        rating_kw=PV_PLANT.ac_rating_kw,
+        model=(
+            f"pvlib PVWatts: {PV_PLANT.dc_rating_kw} kW DC, {PV_PLANT.ac_rating_kw} kW AC, tilt "
+            f"{PV_PLANT.tilt_deg} deg, azimuth {PV_PLANT.azimuth_deg} deg, Perez transposition, SAPM "
+            f"open-rack cell temperature, {PV_PLANT.system_losses_pct} % losses, at {PAYERNE}"
+        ),
     )
     return df, entry
 
@@ -81,11 +105,21 @@ def derive_wind_hourly(source_dir: Path) -> tuple[pd.DataFrame, dict]:
     units = {col: unit for col, (_, unit) in TRY_COLUMNS.items()} | {"wind_power_kw": "kW"}
     rating = turbine_rating_kw(TURBINE)
     entry = _entry(
-        df, "wind_hourly_potsdam_try2010.csv.gz", src, "1h", units, {**gaps, "wind_power_kw": 0}, _LINEAR,
-        {"wind_power_kw": (0.0, rating)}, rating_kw=rating, year=TRY_YEAR,
-        model=(f"windpowerlib: {TURBINE.turbine_type}, hub height {TURBINE.hub_height_m} m, logarithmic "
-               f"profile from {TURBINE.wind_measurement_height_m} m with roughness length "
-               f"{TURBINE.roughness_length_m} m, barometric density, density-corrected power curve, at {POTSDAM}"),
+        df,
+        "wind_hourly_potsdam_try2010.csv.gz",
+        src,
+        "1h",
+        units,
+        {**gaps, "wind_power_kw": 0},
+        _LINEAR,
+        {"wind_power_kw": (0.0, rating)},
+        rating_kw=rating,
+        year=TRY_YEAR,
+        model=(
+            f"windpowerlib: {TURBINE.turbine_type}, hub height {TURBINE.hub_height_m} m, logarithmic "
+            f"profile from {TURBINE.wind_measurement_height_m} m with roughness length "
+            f"{TURBINE.roughness_length_m} m, barometric density, density-corrected power curve, at {POTSDAM}"
+        ),
     )
     return df, entry
 
@@ -100,19 +134,38 @@ def derive_simbench(source_dir: Path) -> tuple[pd.DataFrame, dict]:
     profiles = {col: f"{SIMBENCH_RES_FILE}:{name}" for col, name in GENERATION_PROFILES.items()}
     profiles |= {col: f"{SIMBENCH_LOAD_FILE}:{name}" for col, name in LOAD_PROFILES.items()}
     entry = _entry(
-        df, "simbench_profiles_2016.csv.gz", res, "15min", dict.fromkeys(df.columns, "p.u."), gaps, _LINEAR,
+        df,
+        "simbench_profiles_2016.csv.gz",
+        res,
+        "15min",
+        dict.fromkeys(df.columns, "p.u."),
+        gaps,
+        _LINEAR,
         dict.fromkeys(GENERATION_PROFILES, (0.0, 1.0)),
-        profiles=profiles, load_source_sha256=sha256(load), negatives_clipped=clipped,
+        profiles=profiles,
+        load_source_sha256=sha256(load),
+        negatives_clipped=clipped,
     )
     return df, entry
 
 
 #: dataset name -> (derivation, decimals per column)
 DERIVED = {
-    "pv_minute": (derive_pv_minute, {"ghi_wm2": 1, "dni_wm2": 1, "dhi_wm2": 1, "temp_air_c": 2,
-                                     "relative_humidity_pct": 2, "pressure_hpa": 2, "pv_ac_kw": 4}),
-    "wind_hourly": (derive_wind_hourly, {"wind_speed_ms": 2, "wind_dir_deg": 1, "temp_air_c": 2,
-                                         "relative_humidity_pct": 2, "pressure_hpa": 2, "wind_power_kw": 3}),
+    "pv_minute": (
+        derive_pv_minute,
+        {"ghi_wm2": 1, "dni_wm2": 1, "dhi_wm2": 1, "temp_air_c": 2, "relative_humidity_pct": 2, "pressure_hpa": 2, "pv_ac_kw": 4},
+    ),
+    "wind_hourly": (
+        derive_wind_hourly,
+        {
+            "wind_speed_ms": 2,
+            "wind_dir_deg": 1,
+            "temp_air_c": 2,
+            "relative_humidity_pct": 2,
+            "pressure_hpa": 2,
+            "wind_power_kw": 3,
+        },
+    ),
     "simbench_profiles": (derive_simbench, dict.fromkeys((*GENERATION_PROFILES, *LOAD_PROFILES), 4)),
 }
 
@@ -127,8 +180,11 @@ def derive_all(source_dir: Path, out_dir: Path = FILES_DIR) -> dict:
         write_series_csv_gz(df, out_dir / entry["file"], decimals)
         datasets[name] = {**entry, "sha256": sha256(out_dir / entry["file"])}
     shutil.copyfile(source_dir / SIMBENCH_LICENSE, out_dir / "SIMBENCH_LICENSE.txt")
-    manifest = {"generated_by": "python -m opfbench.data.derive",
-                "libraries": {lib: version(lib) for lib in LIBRARIES}, "datasets": datasets}
+    manifest = {
+        "generated_by": "python -m opfbench.data.derive",
+        "libraries": {lib: version(lib) for lib in LIBRARIES},
+        "datasets": datasets,
+    }
     write_manifest(manifest, out_dir)
     return manifest
 

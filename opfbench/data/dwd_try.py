@@ -61,9 +61,7 @@ def parse_try(source: Source, year: int = TRY_YEAR) -> pd.DataFrame:
             raise DataError(f"{name}: line {n}: {exc}") from exc
     table = pd.DataFrame(rows, columns=names)
     try:
-        days = pd.to_datetime(
-            {"year": year, "month": table["MM"].astype(int), "day": table["DD"].astype(int)}
-        )
+        days = pd.to_datetime({"year": year, "month": table["MM"].astype(int), "day": table["DD"].astype(int)})
     except ValueError as exc:
         raise DataError(f"{name}: column 'time': invalid month/day ({exc})") from exc
     index = pd.DatetimeIndex(days + pd.to_timedelta(table["HH"].astype(int), unit="h")).tz_localize(TRY_TZ)

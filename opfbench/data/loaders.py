@@ -28,15 +28,21 @@ def _load(name: str, folder: Path) -> pd.DataFrame:
         raise DataError(f"{folder / 'manifest.json'}: no dataset {name!r}")
     path = folder / entry["file"]
     if not path.exists() or sha256(path) != entry["sha256"]:
-        raise DataError(f"{path}: missing or changed since derivation (hash differs from the manifest); "
-                        "rerun python -m opfbench.data.derive")
+        raise DataError(
+            f"{path}: missing or changed since derivation (hash differs from the manifest); rerun python -m opfbench.data.derive"
+        )
     df = read_series_csv_gz(path, entry["tz"])
     if list(df.columns) != list(entry["columns"]):
         raise DataError(f"{path}: columns {list(df.columns)} differ from the manifest's {list(entry['columns'])}")
     check_time_index(df.index, str(path), pd.Timedelta(entry["step"]))
     check_finite(df, str(path))
-    df.attrs = {"name": name, "source": entry["source"], "units": dict(entry["columns"]),
-                "gaps_filled": dict(entry["gaps_filled"]), "gap_method": entry["gap_method"]}
+    df.attrs = {
+        "name": name,
+        "source": entry["source"],
+        "units": dict(entry["columns"]),
+        "gaps_filled": dict(entry["gaps_filled"]),
+        "gap_method": entry["gap_method"],
+    }
     if "rating_kw" in entry:
         df.attrs["rating_kw"] = check_rating(entry["rating_kw"], str(path), "rating_kw")
         df.attrs["model"] = entry["model"]
@@ -94,9 +100,15 @@ def describe_datasets(files_dir: Path | None = None) -> list[dict]:
     summaries = []
     for name in read_manifest(folder)["datasets"]:
         df = load_dataset(name, folder)
-        summaries.append({
-            "name": name, "rows": len(df), "start": df.index[0].isoformat(), "end": df.index[-1].isoformat(),
-            "step": _step_label(df.index[1] - df.index[0]), "columns": df.attrs["units"],
-            "gaps_filled": df.attrs["gaps_filled"],
-        })
+        summaries.append(
+            {
+                "name": name,
+                "rows": len(df),
+                "start": df.index[0].isoformat(),
+                "end": df.index[-1].isoformat(),
+                "step": _step_label(df.index[1] - df.index[0]),
+                "columns": df.attrs["units"],
+                "gaps_filled": df.attrs["gaps_filled"],
+            }
+        )
     return summaries

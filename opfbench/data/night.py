@@ -15,8 +15,12 @@ def _require_aware(index: pd.DatetimeIndex) -> None:
         raise InputError("night mask needs a time-zone-aware DatetimeIndex")
 
 
-def night_mask(index: pd.DatetimeIndex, latitude: float = PAYERNE.latitude,
-               longitude: float = PAYERNE.longitude, altitude_m: float = PAYERNE.altitude_m) -> pd.Series:
+def night_mask(
+    index: pd.DatetimeIndex,
+    latitude: float = PAYERNE.latitude,
+    longitude: float = PAYERNE.longitude,
+    altitude_m: float = PAYERNE.altitude_m,
+) -> pd.Series:
     """True where the sun is below the horizon (sunset → sunrise) at the site
     (degrees north/east, m): apparent, refraction-corrected elevation of the sun's
     centre < 0° (pvlib NREL SPA). Returns a boolean Series on ``index``."""

@@ -1,6 +1,6 @@
 """Plot the paper day's load, PV and wind profiles to a PNG.
 
-    python -m opfbench.data.plot_paper_day docs/paper_day.png
+python -m opfbench.data.plot_paper_day docs/paper_day.png
 """
 
 from __future__ import annotations

@@ -59,8 +59,9 @@ def _check_window(index: pd.DatetimeIndex) -> None:
         raise InputError("the window's times must be strictly increasing")
 
 
-def assemble_profiles(index: pd.DatetimeIndex, load_profile: str = "mv_semiurb",
-                      pv_source: Literal["simbench", "bsrn"] = "simbench") -> pd.DataFrame:
+def assemble_profiles(
+    index: pd.DatetimeIndex, load_profile: str = "mv_semiurb", pv_source: Literal["simbench", "bsrn"] = "simbench"
+) -> pd.DataFrame:
     """Per-unit multipliers ``load``, ``pv``, ``wind`` on ``index`` (see the module
     docstring for the mapping rule). ``load_profile`` is a key of
     `LOAD_PROFILE_COLUMNS`; ``pv_source`` picks SimBench PV3 or the BSRN plant."""

@@ -44,14 +44,25 @@ def pv_ac_power_kw(weather: pd.DataFrame, site: Site, plant: PVPlant = PV_PLANT)
 
     ghi, dni, dhi = (weather[c].clip(lower=0.0) for c in ("ghi_wm2", "dni_wm2", "dhi_wm2"))
     sun = pvlib.solarposition.get_solarposition(
-        weather.index, site.latitude, site.longitude, site.altitude_m,
-        pressure=weather["pressure_hpa"] * 100.0, temperature=weather["temp_air_c"],
+        weather.index,
+        site.latitude,
+        site.longitude,
+        site.altitude_m,
+        pressure=weather["pressure_hpa"] * 100.0,
+        temperature=weather["temp_air_c"],
     )
     poa = pvlib.irradiance.get_total_irradiance(
-        plant.tilt_deg, plant.azimuth_deg, sun["apparent_zenith"], sun["azimuth"], dni, ghi, dhi,
+        plant.tilt_deg,
+        plant.azimuth_deg,
+        sun["apparent_zenith"],
+        sun["azimuth"],
+        dni,
+        ghi,
+        dhi,
         dni_extra=pvlib.irradiance.get_extra_radiation(weather.index),
         airmass=pvlib.atmosphere.get_relative_airmass(sun["apparent_zenith"]),
-        albedo=plant.albedo, model="perez",
+        albedo=plant.albedo,
+        model="perez",
     ).fillna(0.0)  # Perez is 0/0 (NaN) where the sun is down or DHI is zero: no sky light
     aoi = pvlib.irradiance.aoi(plant.tilt_deg, plant.azimuth_deg, sun["apparent_zenith"], sun["azimuth"])
     effective = poa["poa_direct"] * pvlib.iam.physical(aoi) + poa["poa_diffuse"]

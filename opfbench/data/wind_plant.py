@@ -53,7 +53,11 @@ def wind_power_kw(weather: pd.DataFrame, spec: TurbineSpec = TURBINE) -> pd.Seri
         index=weather.index,
     )
     chain = ModelChain(
-        turbine, wind_speed_model="logarithmic", density_model="barometric",
-        temperature_model="linear_gradient", power_output_model="power_curve", density_correction=True,
+        turbine,
+        wind_speed_model="logarithmic",
+        density_model="barometric",
+        temperature_model="linear_gradient",
+        power_output_model="power_curve",
+        density_correction=True,
     ).run_model(mc_weather)
     return (chain.power_output / 1e3).rename("wind_power_kw")

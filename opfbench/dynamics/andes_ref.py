@@ -53,17 +53,62 @@ def andes_system(model: DynamicModel, fault: FaultParams):
     ids = [int(b) for b in net.bus_ids]
     src_bus = max(ids) + 1
     for i, b in enumerate(ids):
-        ss.add("Bus", {"idx": b, "name": f"B{b}", "Vn": float(net.base_kv[i]), "v0": float(abs(model.v0[i])),
-                       "a0": float(np.angle(model.v0[i]))})
+        ss.add(
+            "Bus",
+            {
+                "idx": b,
+                "name": f"B{b}",
+                "Vn": float(net.base_kv[i]),
+                "v0": float(abs(model.v0[i])),
+                "a0": float(np.angle(model.v0[i])),
+            },
+        )
     ss.add("Bus", {"idx": src_bus, "name": "EMF", "Vn": vn, "v0": abs(model.emf), "a0": float(np.angle(model.emf))})
-    ss.add("Slack", {"idx": "source", "bus": src_bus, "Vn": vn, "Sn": sb, "v0": abs(model.emf),
-                     "a0": float(np.angle(model.emf)), "p0": 0.0, "q0": 0.0, "vmax": 2.0, "vmin": 0.0})
+    ss.add(
+        "Slack",
+        {
+            "idx": "source",
+            "bus": src_bus,
+            "Vn": vn,
+            "Sn": sb,
+            "v0": abs(model.emf),
+            "a0": float(np.angle(model.emf)),
+            "p0": 0.0,
+            "q0": 0.0,
+            "vmax": 2.0,
+            "vmin": 0.0,
+        },
+    )
     for k in np.flatnonzero(net.status):
-        ss.add("Line", {"idx": f"L{k}", "bus1": ids[net.f[k]], "bus2": ids[net.t[k]], "Sn": base, "Vn1": vn, "Vn2": vn,
-                        "r": float(net.r[k]), "x": float(net.x[k]), "b": float(net.b[k]),
-                        "tap": float(net.tap[k]), "phi": float(np.deg2rad(net.shift[k]))})
-    ss.add("Line", {"idx": "Lsource", "bus1": src_bus, "bus2": ids[net.slack], "Sn": base, "Vn1": vn, "Vn2": vn,
-                    "r": 0.0, "x": model.params.source.impedance_pu})
+        ss.add(
+            "Line",
+            {
+                "idx": f"L{k}",
+                "bus1": ids[net.f[k]],
+                "bus2": ids[net.t[k]],
+                "Sn": base,
+                "Vn1": vn,
+                "Vn2": vn,
+                "r": float(net.r[k]),
+                "x": float(net.x[k]),
+                "b": float(net.b[k]),
+                "tap": float(net.tap[k]),
+                "phi": float(np.deg2rad(net.shift[k])),
+            },
+        )
+    ss.add(
+        "Line",
+        {
+            "idx": "Lsource",
+            "bus1": src_bus,
+            "bus2": ids[net.slack],
+            "Sn": base,
+            "Vn1": vn,
+            "Vn2": vn,
+            "r": 0.0,
+            "x": model.params.source.impedance_pu,
+        },
+    )
 
     # static loads: what is left of the model's diagonal after the network and motors
     y_static = np.diag(model.y - net.ybus).copy()
@@ -71,28 +116,92 @@ def andes_system(model: DynamicModel, fault: FaultParams):
     y_static[model.mot_bus] -= model.mot_y
     s_static = np.conj(y_static) * np.abs(model.v0) ** 2 * base  # MVA consumed
     for i in np.flatnonzero(np.abs(s_static) > 1e-12):
-        ss.add("PQ", {"idx": f"P{ids[i]}", "bus": ids[i], "Vn": vn, "p0": float(s_static[i].real / sb),
-                      "q0": float(s_static[i].imag / sb), "vmin": 0.05, "vmax": 2.0})
+        ss.add(
+            "PQ",
+            {
+                "idx": f"P{ids[i]}",
+                "bus": ids[i],
+                "Vn": vn,
+                "p0": float(s_static[i].real / sb),
+                "q0": float(s_static[i].imag / sb),
+                "vmin": 0.05,
+                "vmax": 2.0,
+            },
+        )
 
     mp = model.params.motors
     for m, i in enumerate(model.mot_bus):
         par = model.mot_par[m]
         s_mva = float(np.real(model.mot_y[m] * (mp.rs + 1j * mp.xp)) * base)  # motor MVA base
         a_coef = par[5] / (1.0 - par[6]) ** 2 * s_mva / sb
-        ss.add("Motor3", {"idx": f"M{ids[i]}", "bus": ids[i], "Sn": s_mva, "Vn": vn, "fn": 50.0,
-                          "rs": mp.rs, "xs": mp.xs, "rr1": mp.rr, "xr1": mp.xr, "xm": mp.xm, "Hm": mp.h_s,
-                          "c1": -a_coef / 2, "c2": a_coef, "c3": a_coef / 2})
+        ss.add(
+            "Motor3",
+            {
+                "idx": f"M{ids[i]}",
+                "bus": ids[i],
+                "Sn": s_mva,
+                "Vn": vn,
+                "fn": 50.0,
+                "rs": mp.rs,
+                "xs": mp.xs,
+                "rr1": mp.rr,
+                "xr1": mp.xr,
+                "xm": mp.xm,
+                "Hm": mp.h_s,
+                "c1": -a_coef / 2,
+                "c2": a_coef,
+                "c3": a_coef / 2,
+            },
+        )
 
     nm = model.n_motors
     for d, i in enumerate(model.inv_bus):
         p0, q0 = model.inv_par[d, 1] * base, model.inv_par[d, 2] * base
-        ss.add("PV", {"idx": f"G{ids[i]}", "bus": ids[i], "Vn": vn, "Sn": base, "p0": p0 / sb, "q0": q0 / sb,
-                      "v0": float(abs(model.v0[i])), "qmax": 99.0, "qmin": -99.0, "pmax": 99.0, "pmin": -99.0})
-        ss.add("REGCA1", {"idx": f"R{ids[i]}", "bus": ids[i], "gen": f"G{ids[i]}", "Sn": base,
-                          "Tg": model.params.inverters.t_lag_s, "Lvplsw": 0, "Lvpnt0": 0.001, "Lvpnt1": 0.002,
-                          "Rrpwr": 999.0, "Iqrmax": 999.0, "Iqrmin": -999.0, "Volim": 9.0, "Iolim": -9.0})
-    ss.add("Fault", {"idx": "F1", "bus": fault.bus, "tf": fault.t_on_s, "tc": fault.t_on_s + fault.duration_s,
-                     "xf": fault.impedance_pu * sb / base, "rf": 0.0})
+        ss.add(
+            "PV",
+            {
+                "idx": f"G{ids[i]}",
+                "bus": ids[i],
+                "Vn": vn,
+                "Sn": base,
+                "p0": p0 / sb,
+                "q0": q0 / sb,
+                "v0": float(abs(model.v0[i])),
+                "qmax": 99.0,
+                "qmin": -99.0,
+                "pmax": 99.0,
+                "pmin": -99.0,
+            },
+        )
+        ss.add(
+            "REGCA1",
+            {
+                "idx": f"R{ids[i]}",
+                "bus": ids[i],
+                "gen": f"G{ids[i]}",
+                "Sn": base,
+                "Tg": model.params.inverters.t_lag_s,
+                "Lvplsw": 0,
+                "Lvpnt0": 0.001,
+                "Lvpnt1": 0.002,
+                "Rrpwr": 999.0,
+                "Iqrmax": 999.0,
+                "Iqrmin": -999.0,
+                "Volim": 9.0,
+                "Iolim": -9.0,
+            },
+        )
+    ss.add(
+        "Fault",
+        {
+            "idx": "F1",
+            "bus": fault.bus,
+            "tf": fault.t_on_s,
+            "tc": fault.t_on_s + fault.duration_s,
+            "xf": fault.impedance_pu * sb / base,
+            "rf": 0.0,
+        },
+    )
     ss.setup()
     ss.PQ.config.pq2z = 0
     _seed_motors(ss, model, nm)
@@ -104,7 +213,7 @@ def _seed_motors(ss, model: DynamicModel, nm: int) -> None:
     pf = ss.PFlow
     original = pf.init
     base, sb = model.net.base_mva, ss.config.mva
-    e = model.x0[:nm] + 1j * model.x0[nm:2 * nm]
+    e = model.x0[:nm] + 1j * model.x0[nm : 2 * nm]
     v = model.v0[model.mot_bus]
     i_sys = (v - e) * model.mot_y * base / sb  # motor current on the ANDES base
     te = np.real(e * np.conj(i_sys))
@@ -112,7 +221,7 @@ def _seed_motors(ss, model: DynamicModel, nm: int) -> None:
     def init():
         out = original()
         mot = ss.Motor3
-        mot.slip.v[:] = model.x0[2 * nm:3 * nm]
+        mot.slip.v[:] = model.x0[2 * nm : 3 * nm]
         mot.e1d.v[:], mot.e1q.v[:] = _dq(e)
         mot.vd.v[:], mot.vq.v[:] = _dq(v)
         mot.Id.v[:], mot.Iq.v[:] = _dq(i_sys)
@@ -160,7 +269,16 @@ def mild_fault_comparison(fault: FaultParams = MILD_FAULT) -> dict:
     rec_ours = ours.recovery_ms()
     rec_andes = recovery_ms(t, vm, fault.t_on_s, ok) if ok else np.full(net.n_bus, np.nan)
     v_interp = np.column_stack([np.interp(ours.t, t, vm[:, b]) for b in range(net.n_bus)]) if ok else None
-    return {"andes_ok": ok, "andes_sim_ms": ms, "sim_ms": ours.sim_ms, "recovery_ms": rec_ours,
-            "andes_recovery_ms": rec_andes, "fault_bus_vmin": float(ours.vmin()[model.net.index_of(fault.bus)]),
-            "max_dv_pu": None if v_interp is None else float(np.abs(v_interp - ours.vm).max()),
-            "t": ours.t, "vm": ours.vm, "andes_t": t, "andes_vm": vm}
+    return {
+        "andes_ok": ok,
+        "andes_sim_ms": ms,
+        "sim_ms": ours.sim_ms,
+        "recovery_ms": rec_ours,
+        "andes_recovery_ms": rec_andes,
+        "fault_bus_vmin": float(ours.vmin()[model.net.index_of(fault.bus)]),
+        "max_dv_pu": None if v_interp is None else float(np.abs(v_interp - ours.vm).max()),
+        "t": ours.t,
+        "vm": ours.vm,
+        "andes_t": t,
+        "andes_vm": vm,
+    }

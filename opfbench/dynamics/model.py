@@ -68,8 +68,17 @@ class DynamicModel:
     def voltages(self, x: np.ndarray, z: np.ndarray) -> np.ndarray:
         """Bus voltages (complex p.u.) at state x on the network with impedance matrix z."""
         v_der = self.v0[self.inv_bus].copy()
-        v, ok = kernel.network_voltages(x, np.ascontiguousarray(z.real), np.ascontiguousarray(z.imag), self.i_const, self.mot_bus, self.mot_y, self.inv_bus,
-                                        np.zeros(self.n_ders, dtype=np.bool_), v_der)
+        v, ok = kernel.network_voltages(
+            x,
+            np.ascontiguousarray(z.real),
+            np.ascontiguousarray(z.imag),
+            self.i_const,
+            self.mot_bus,
+            self.mot_y,
+            self.inv_bus,
+            np.zeros(self.n_ders, dtype=np.bool_),
+            v_der,
+        )
         if not ok:
             raise NetworkError("network solve did not converge")
         return v
@@ -77,14 +86,26 @@ class DynamicModel:
     def derivatives(self, x: np.ndarray, z: np.ndarray) -> np.ndarray:
         """dx/dt at state x on the network with impedance matrix z."""
         v_der = self.v0[self.inv_bus].copy()
-        dx, _, _ = kernel.rhs(x, np.ascontiguousarray(z.real), np.ascontiguousarray(z.imag), self.i_const, self.mot_bus, self.mot_y, self.mot_par, self.inv_bus,
-                              self.inv_par, self.scalars, np.zeros(self.n_ders, dtype=np.bool_), v_der)
+        dx, _, _ = kernel.rhs(
+            x,
+            np.ascontiguousarray(z.real),
+            np.ascontiguousarray(z.imag),
+            self.i_const,
+            self.mot_bus,
+            self.mot_y,
+            self.mot_par,
+            self.inv_bus,
+            self.inv_par,
+            self.scalars,
+            np.zeros(self.n_ders, dtype=np.bool_),
+            v_der,
+        )
         return dx
 
     def der_q_mvar(self, x: np.ndarray, v: np.ndarray) -> np.ndarray:
         """Reactive output of each DER (MVAr) at state x, voltages v."""
         nm, nd = self.n_motors, self.n_ders
-        return np.abs(v[self.inv_bus]) * x[3 * nm + 2 * nd: 3 * nm + 3 * nd] * self.net.base_mva
+        return np.abs(v[self.inv_bus]) * x[3 * nm + 2 * nd : 3 * nm + 3 * nd] * self.net.base_mva
 
 
 def source_emf(net: Network, v: np.ndarray, s_slack_mva: complex, z_source: complex) -> complex:
@@ -104,16 +125,32 @@ def with_source_bus(net: Network, z_source: complex, emf_pu: float) -> Network:
         return np.append(arr, value)
 
     return net.with_changes(
-        name=f"{net.name}+source", bus_ids=add(net.bus_ids, int(net.bus_ids.max()) + 1), bus_type=bus_type,
-        base_kv=add(net.base_kv, net.base_kv[net.slack]), load_p_mw=add(net.load_p_mw, 0.0),
-        load_q_mvar=add(net.load_q_mvar, 0.0), gs_mw=add(net.gs_mw, 0.0), bs_mvar=add(net.bs_mvar, 0.0),
-        vmin=add(net.vmin, 0.0), vmax=add(net.vmax, 2.0), f=add(net.f, n), t=add(net.t, net.slack),
-        r=add(net.r, z_source.real), x=add(net.x, z_source.imag), b=add(net.b, 0.0), tap=add(net.tap, 1.0),
-        shift=add(net.shift, 0.0), status=np.append(net.status, True), slack=n, v_slack=float(emf_pu))
+        name=f"{net.name}+source",
+        bus_ids=add(net.bus_ids, int(net.bus_ids.max()) + 1),
+        bus_type=bus_type,
+        base_kv=add(net.base_kv, net.base_kv[net.slack]),
+        load_p_mw=add(net.load_p_mw, 0.0),
+        load_q_mvar=add(net.load_q_mvar, 0.0),
+        gs_mw=add(net.gs_mw, 0.0),
+        bs_mvar=add(net.bs_mvar, 0.0),
+        vmin=add(net.vmin, 0.0),
+        vmax=add(net.vmax, 2.0),
+        f=add(net.f, n),
+        t=add(net.t, net.slack),
+        r=add(net.r, z_source.real),
+        x=add(net.x, z_source.imag),
+        b=add(net.b, 0.0),
+        tap=add(net.tap, 1.0),
+        shift=add(net.shift, 0.0),
+        status=np.append(net.status, True),
+        slack=n,
+        v_slack=float(emf_pu),
+    )
 
 
-def prefault_flow(scenario: Scenario, q_mvar: np.ndarray, params: ModelParams,
-                  emf_pu: float | None = None) -> tuple[np.ndarray, complex]:
+def prefault_flow(
+    scenario: Scenario, q_mvar: np.ndarray, params: ModelParams, emf_pu: float | None = None
+) -> tuple[np.ndarray, complex]:
     """(V (n,) complex, E) of the pre-fault AC power flow at DER setpoints q_mvar (n_der,).
     emf_pu None: the slack at its scheduled voltage and E re-set to match ("reset");
     otherwise the source EMF |E| = emf_pu is the slack of the power flow."""
@@ -132,8 +169,9 @@ def prefault_flow(scenario: Scenario, q_mvar: np.ndarray, params: ModelParams,
     return pf.v[:-1], complex(pf.v[-1])
 
 
-def build_model(scenario: Scenario, q_mvar: np.ndarray, params: ModelParams, emf_pu: float | None = None,
-                row: int = 0) -> DynamicModel:
+def build_model(
+    scenario: Scenario, q_mvar: np.ndarray, params: ModelParams, emf_pu: float | None = None, row: int = 0
+) -> DynamicModel:
     """The dynamic model at snapshot `row` of `scenario` with DER reactive setpoints
     q_mvar (n_der,) MVAr; `emf_pu` as `prefault_flow`."""
     scenario = scenario.take(slice(row, row + 1))
@@ -166,8 +204,20 @@ def build_model(scenario: Scenario, q_mvar: np.ndarray, params: ModelParams, emf
         e0.append(st.emf)
         slips.append(st.slip)
         g = 1.0 / (mp.rs + 1j * mp.xp)
-        mot_rows.append([mp.rs, mp.xp, mp.x0 - mp.xp, mp.t0p_s, mp.h_s, st.torque, st.slip,
-                         2.0 if mp.torque == "quadratic" else 0.0, g.real, g.imag])
+        mot_rows.append(
+            [
+                mp.rs,
+                mp.xp,
+                mp.x0 - mp.xp,
+                mp.t0p_s,
+                mp.h_s,
+                st.torque,
+                st.slip,
+                2.0 if mp.torque == "quadratic" else 0.0,
+                g.real,
+                g.imag,
+            ]
+        )
     y[np.diag_indices(net.n_bus)] += np.conj(static / base) / np.abs(v0) ** 2
 
     der_p = scenario.der_p_mw[0]
@@ -176,27 +226,68 @@ def build_model(scenario: Scenario, q_mvar: np.ndarray, params: ModelParams, emf
     s_rated = np.where(is_pv, rating, np.hypot(der_p, qmax(net.der_kinds, der_p, rating)))
     vd = np.abs(v0[net.der_bus])
     p0, q0 = der_p / base, np.asarray(q_mvar, float) / base
-    inv_par = np.column_stack([s_rated / base, p0, q0, q0 / vd, p0 / vd]) if len(net.ders) else \
-        np.zeros((0, kernel.N_INVERTER_COLUMNS))
+    inv_par = (
+        np.column_stack([s_rated / base, p0, q0, q0 / vd, p0 / vd]) if len(net.ders) else np.zeros((0, kernel.N_INVERTER_COLUMNS))
+    )
     sc = np.zeros(kernel.N_SCALARS)
-    sc[[kernel.S_WB, kernel.S_IMAX, kernel.S_SLOPE, kernel.S_VDIP, kernel.S_GCMAX, kernel.S_TF, kernel.S_TLAG,
-        kernel.S_RAMP, kernel.S_RAMP_RATE, kernel.S_TRIP, kernel.S_VTRIP, kernel.S_CC]] = [
-        2 * np.pi * NOMINAL_HZ, ip.i_max, ip.slope, ip.v_dip, ip.gc_max, ip.t_filter_s, ip.t_lag_s,
-        1.0 if ip.active == "ramp" else 0.0, ip.ramp_pu_s, 1.0 if ip.area_c_trip else 0.0, ip.v_trip,
-        1.0 if ip.control == "constant-current" else 0.0]
+    sc[
+        [
+            kernel.S_WB,
+            kernel.S_IMAX,
+            kernel.S_SLOPE,
+            kernel.S_VDIP,
+            kernel.S_GCMAX,
+            kernel.S_TF,
+            kernel.S_TLAG,
+            kernel.S_RAMP,
+            kernel.S_RAMP_RATE,
+            kernel.S_TRIP,
+            kernel.S_VTRIP,
+            kernel.S_CC,
+        ]
+    ] = [
+        2 * np.pi * NOMINAL_HZ,
+        ip.i_max,
+        ip.slope,
+        ip.v_dip,
+        ip.gc_max,
+        ip.t_filter_s,
+        ip.t_lag_s,
+        1.0 if ip.active == "ramp" else 0.0,
+        ip.ramp_pu_s,
+        1.0 if ip.area_c_trip else 0.0,
+        ip.v_trip,
+        1.0 if ip.control == "constant-current" else 0.0,
+    ]
     low = np.flatnonzero(vd < ip.v_dip)
     if low.size:
         b = net.bus_ids[net.der_bus[low[0]]]
-        raise InputError(f"{net.name}: DER bus {b} is at {vd[low[0]]:.4f} p.u. before the fault, below the grid "
-                         f"code's {ip.v_dip} p.u.: no steady pre-fault state")
+        raise InputError(
+            f"{net.name}: DER bus {b} is at {vd[low[0]]:.4f} p.u. before the fault, below the grid "
+            f"code's {ip.v_dip} p.u.: no steady pre-fault state"
+        )
     over = np.hypot(p0, q0) / vd > ip.i_max * s_rated / base * (1 + 1e-9)
     if over.any():
         b = net.bus_ids[net.der_bus[np.flatnonzero(over)[0]]]
-        raise InputError(f"{net.name}: the setpoint of the DER at bus {b} needs more than {ip.i_max} × its rated "
-                         "current before the fault: no steady pre-fault state")
+        raise InputError(
+            f"{net.name}: the setpoint of the DER at bus {b} needs more than {ip.i_max} × its rated "
+            "current before the fault: no steady pre-fault state"
+        )
     e0 = np.array(e0, dtype=complex)
     x0 = np.concatenate([e0.real, e0.imag, np.array(slips, float), vd, p0 / vd, q0 / vd, np.ones(len(vd))])
-    return DynamicModel(net, params, v0, emf, y, i_const, np.array(mot_bus, dtype=np.int64),
-                        np.array(mot_y, dtype=complex), np.array(mot_rows, float).reshape(-1, kernel.N_MOTOR_COLUMNS),
-                        net.der_bus.astype(np.int64), np.ascontiguousarray(inv_par, dtype=float), sc, x0,
-                        peak_slips(mp)[1])
+    return DynamicModel(
+        net,
+        params,
+        v0,
+        emf,
+        y,
+        i_const,
+        np.array(mot_bus, dtype=np.int64),
+        np.array(mot_y, dtype=complex),
+        np.array(mot_rows, float).reshape(-1, kernel.N_MOTOR_COLUMNS),
+        net.der_bus.astype(np.int64),
+        np.ascontiguousarray(inv_par, dtype=float),
+        sc,
+        x0,
+        peak_slips(mp)[1],
+    )

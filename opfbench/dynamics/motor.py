@@ -34,10 +34,12 @@ def _airgap_torque_at_unit_voltage(p: MotorParams, s: float) -> float:
 def peak_slips(p: MotorParams) -> tuple[float, float]:
     """(slip of maximum electrical P, breakdown slip of maximum air-gap torque) — both
     independent of the voltage, since P and torque scale with |V|²."""
-    s_p = minimize_scalar(lambda s: -_power_at_unit_voltage(p, s), bounds=(1e-5, 1.0), method="bounded",
-                          options={"xatol": 1e-12}).x
-    s_t = minimize_scalar(lambda s: -_airgap_torque_at_unit_voltage(p, s), bounds=(1e-5, 1.0), method="bounded",
-                          options={"xatol": 1e-12}).x
+    s_p = minimize_scalar(
+        lambda s: -_power_at_unit_voltage(p, s), bounds=(1e-5, 1.0), method="bounded", options={"xatol": 1e-12}
+    ).x
+    s_t = minimize_scalar(
+        lambda s: -_airgap_torque_at_unit_voltage(p, s), bounds=(1e-5, 1.0), method="bounded", options={"xatol": 1e-12}
+    ).x
     return float(s_p), float(s_t)
 
 
@@ -59,8 +61,10 @@ def steady_state(p: MotorParams, v: complex, p_mw: float, bus_label: object) -> 
     target = p.loading / abs(v) ** 2  # P at unit voltage that gives `loading` at |v|
     s_peak, _ = peak_slips(p)
     if _power_at_unit_voltage(p, s_peak) < target:
-        raise InputError(f"bus {bus_label}: the motor cannot carry {p.loading:g} p.u. at the pre-fault "
-                         f"voltage {abs(v):.4f} p.u. (beyond its pull-out power)")
+        raise InputError(
+            f"bus {bus_label}: the motor cannot carry {p.loading:g} p.u. at the pre-fault "
+            f"voltage {abs(v):.4f} p.u. (beyond its pull-out power)"
+        )
     s0 = brentq(lambda s: _power_at_unit_voltage(p, s) - target, 1e-12, s_peak, xtol=1e-15, rtol=1e-15)
     i0 = v / impedance(p, s0)
     e0 = v - (p.rs + 1j * p.xp) * i0

@@ -59,7 +59,7 @@ class Simulation:
     def motors_stalled(self) -> int:
         """Motors whose final slip is beyond the breakdown slip."""
         nm = self.model.n_motors
-        return int(np.sum(self.x_end[2 * nm: 3 * nm] > self.model.breakdown_slip))
+        return int(np.sum(self.x_end[2 * nm : 3 * nm] > self.model.breakdown_slip))
 
 
 def recovery_ms(t: np.ndarray, vm: np.ndarray, t_on: float, ok: bool = True) -> np.ndarray:
@@ -87,26 +87,31 @@ def check_fault(net: Network, params: ModelParams, fault: FaultParams) -> int:
     """Validate the fault and the step against the model; return the internal fault bus."""
     if fault.bus not in set(int(b) for b in net.bus_ids):
         raise InputError(f"{net.name}: no bus {fault.bus} to fault (buses {net.bus_ids.min()}..{net.bus_ids.max()})")
-    for label, value in (("fault impedance", fault.impedance_pu), ("fault duration", fault.duration_s),
-                         ("fault inception", fault.t_on_s)):
+    for label, value in (
+        ("fault impedance", fault.impedance_pu),
+        ("fault duration", fault.duration_s),
+        ("fault inception", fault.t_on_s),
+    ):
         if not math.isfinite(value) or value < 0:
             raise InputError(f"{label} must be ≥ 0, got {value}")
     if not fault.step_s > 0:
         raise InputError(f"time step must be > 0, got {fault.step_s * 1e3:g} ms")
     fastest = min(params.inverters.t_filter_s, params.inverters.t_lag_s)
     if fault.step_s > fastest / 2:
-        raise InputError(f"time step {fault.step_s * 1e3:g} ms is too large for the fastest time constant "
-                         f"{fastest * 1e3:g} ms (at most {fastest / 2 * 1e3:g} ms)")
+        raise InputError(
+            f"time step {fault.step_s * 1e3:g} ms is too large for the fastest time constant "
+            f"{fastest * 1e3:g} ms (at most {fastest / 2 * 1e3:g} ms)"
+        )
     if not fault.t_end_s > fault.t_on_s + fault.duration_s:
-        raise InputError(f"simulation end {fault.t_end_s} s must lie after the fault clears "
-                         f"({fault.t_on_s + fault.duration_s} s)")
+        raise InputError(
+            f"simulation end {fault.t_end_s} s must lie after the fault clears ({fault.t_on_s + fault.duration_s} s)"
+        )
     return net.index_of(fault.bus)
 
 
 def segments(fault: FaultParams) -> list[tuple[float, bool]]:
     """(length s, faulted) of the pre-fault, fault and post-fault intervals (empty ones dropped)."""
-    parts = [(fault.t_on_s, False), (fault.duration_s, True),
-             (fault.t_end_s - fault.t_on_s - fault.duration_s, False)]
+    parts = [(fault.t_on_s, False), (fault.duration_s, True), (fault.t_end_s - fault.t_on_s - fault.duration_s, False)]
     return [(length, on) for length, on in parts if length > 1e-12]
 
 
@@ -122,7 +127,19 @@ def simulate(model: DynamicModel, fault: FaultParams) -> Simulation:
     hs = np.array([length for length, _ in segs]) / steps
     every = max(1, int(round(TRACE_EVERY_S / fault.step_s)))
     t, vm, t_tr, vm_tr, q_tr, x_end, ok = kernel.integrate(
-        model.x0, np.ascontiguousarray(zs.real), np.ascontiguousarray(zs.imag), steps, hs, model.i_const, model.mot_bus, model.mot_y, model.mot_par, model.inv_bus,
-        model.inv_par, model.scalars, model.v0[model.inv_bus].copy(), every)
-    return Simulation(model, fault, fb, t, vm, t_tr, vm_tr, q_tr * model.net.base_mva, x_end, bool(ok),
-                      elapsed_ms(start))
+        model.x0,
+        np.ascontiguousarray(zs.real),
+        np.ascontiguousarray(zs.imag),
+        steps,
+        hs,
+        model.i_const,
+        model.mot_bus,
+        model.mot_y,
+        model.mot_par,
+        model.inv_bus,
+        model.inv_par,
+        model.scalars,
+        model.v0[model.inv_bus].copy(),
+        every,
+    )
+    return Simulation(model, fault, fb, t, vm, t_tr, vm_tr, q_tr * model.net.base_mva, x_end, bool(ok), elapsed_ms(start))

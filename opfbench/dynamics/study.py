@@ -31,7 +31,6 @@ from opfbench.scenario import Scenario
 from opfbench.timing import elapsed_ms, now
 
 
-
 @dataclass(frozen=True)
 class OperatingPoint:
     """The pre-fault snapshot: `scenario` (forecast P^F = the oracle's, used only by
@@ -41,8 +40,7 @@ class OperatingPoint:
     label: str
 
 
-def operating_point(net: Network, load_scale: float = 1.0, der_scale: float = 0.8,
-                    time: str | None = None) -> OperatingPoint:
+def operating_point(net: Network, load_scale: float = 1.0, der_scale: float = 0.8, time: str | None = None) -> OperatingPoint:
     """Nominal loads × load_scale with every DER at der_scale × rating (the oracle
     forecast of a snapshot is the snapshot itself), or the paper day's minute `time`
     ("HH:MM", local time) with the next minute as the oracle forecast."""
@@ -57,9 +55,14 @@ def operating_point(net: Network, load_scale: float = 1.0, der_scale: float = 0.
         raise InputError(f"--time must be HH:MM within the paper day (00:00..23:59), got {time!r}")
     i = int(hits[0])
     j = min(i + 1, len(day) - 1)
-    sc = Scenario.from_profiles(net, day["load"].to_numpy()[i:i + 1], day["pv"].to_numpy()[i:i + 1],
-                                day["wind"].to_numpy()[i:i + 1], day["pv"].to_numpy()[j:j + 1],
-                                day["wind"].to_numpy()[j:j + 1])
+    sc = Scenario.from_profiles(
+        net,
+        day["load"].to_numpy()[i : i + 1],
+        day["pv"].to_numpy()[i : i + 1],
+        day["wind"].to_numpy()[i : i + 1],
+        day["pv"].to_numpy()[j : j + 1],
+        day["wind"].to_numpy()[j : j + 1],
+    )
     return OperatingPoint(sc, f"paper day {day.index[i].isoformat()}")
 
 
@@ -136,11 +139,19 @@ class SimRecord:
         vmin per bus, motors_stalled, sim_ms (plus variant and the voltage margin)."""
         ids = [str(int(b)) for b in bus_ids]
         rec = [None if np.isnan(r) else round(float(r), 3) for r in self.recovery_ms]
-        return {"fault_bus": self.fault_bus, "strategy": self.strategy, "k": self.k, "forecast": self.forecast,
-                "variant": self.variant, "status": self.status, "recovery_ms": dict(zip(ids, rec, strict=True)),
-                "vmin": dict(zip(ids, np.round(self.vmin_pu, 6).tolist(), strict=True)),
-                "margin_pu": dict(zip(ids, np.round(self.margin_pu, 6).tolist(), strict=True)),
-                "motors_stalled": self.motors_stalled, "sim_ms": round(self.sim_ms, 3)}
+        return {
+            "fault_bus": self.fault_bus,
+            "strategy": self.strategy,
+            "k": self.k,
+            "forecast": self.forecast,
+            "variant": self.variant,
+            "status": self.status,
+            "recovery_ms": dict(zip(ids, rec, strict=True)),
+            "vmin": dict(zip(ids, np.round(self.vmin_pu, 6).tolist(), strict=True)),
+            "margin_pu": dict(zip(ids, np.round(self.margin_pu, 6).tolist(), strict=True)),
+            "motors_stalled": self.motors_stalled,
+            "sim_ms": round(self.sim_ms, 3),
+        }
 
 
 def _trace(sim: Simulation) -> pd.DataFrame:
@@ -151,8 +162,7 @@ def _trace(sim: Simulation) -> pd.DataFrame:
     parts = []
     for b in buses:
         q = sim.q_trace_mvar[:, der.index(b)] if b in der else np.full(len(sim.t_trace), np.nan)
-        parts.append(pd.DataFrame({"bus": int(net.bus_ids[b]), "t_s": sim.t_trace, "v_pu": sim.vm_trace[:, b],
-                                   "q_mvar": q}))
+        parts.append(pd.DataFrame({"bus": int(net.bus_ids[b]), "t_s": sim.t_trace, "v_pu": sim.vm_trace[:, b], "q_mvar": q}))
     return pd.concat(parts, ignore_index=True)
 
 
@@ -162,8 +172,9 @@ def _simulate_model(job: tuple) -> list[tuple[int, bool, np.ndarray, np.ndarray,
     out = []
     for fault in faults:
         sim = simulate(model, fault)
-        out.append((fault.bus, sim.ok, sim.recovery_ms(), sim.vmin(), sim.margin_pu(), sim.motors_stalled(),
-                    sim.sim_ms, _trace(sim)))
+        out.append(
+            (fault.bus, sim.ok, sim.recovery_ms(), sim.vmin(), sim.margin_pu(), sim.motors_stalled(), sim.sim_ms, _trace(sim))
+        )
     return out
 
 
@@ -217,23 +228,43 @@ def fault_table(records: list[SimRecord], net: Network, case: str) -> pd.DataFra
     rows = []
     for r in records:
         src = r.params.source
-        base = {"case": case, "fault_bus": r.fault_bus, "strategy": r.strategy, "k": r.k, "forecast": r.forecast,
-                "variant": r.variant, "source_impedance_pu": src.impedance_pu, "emf": src.emf,
-                "motor_share": r.params.motors.share}
+        base = {
+            "case": case,
+            "fault_bus": r.fault_bus,
+            "strategy": r.strategy,
+            "k": r.k,
+            "forecast": r.forecast,
+            "variant": r.variant,
+            "source_impedance_pu": src.impedance_pu,
+            "emf": src.emf,
+            "motor_share": r.params.motors.share,
+        }
         status = r.bus_status()
         for i, b in enumerate(net.bus_ids):
-            rows.append(base | {"bus": int(b), "recovery_ms": r.recovery_ms[i], "status": status[i],
-                                "vmin_pu": r.vmin_pu[i], "margin_pu": r.margin_pu[i],
-                                "motors_stalled": r.motors_stalled, "sim_ms": r.sim_ms, "der_bus": int(b) in der,
-                                "faulted": int(b) == r.fault_bus})
+            rows.append(
+                base
+                | {
+                    "bus": int(b),
+                    "recovery_ms": r.recovery_ms[i],
+                    "status": status[i],
+                    "vmin_pu": r.vmin_pu[i],
+                    "margin_pu": r.margin_pu[i],
+                    "motors_stalled": r.motors_stalled,
+                    "sim_ms": r.sim_ms,
+                    "der_bus": int(b) in der,
+                    "faulted": int(b) == r.fault_bus,
+                }
+            )
     return pd.DataFrame(rows)
 
 
 def trace_table(records: list[SimRecord], case: str) -> pd.DataFrame:
     """The `traces.parquet` table (long): case, fault_bus, strategy, k, forecast, variant,
     bus, t_s, v_pu, q_mvar."""
-    parts = [r.trace.assign(case=case, fault_bus=r.fault_bus, strategy=r.strategy, k=r.k, forecast=r.forecast,
-                            variant=r.variant) for r in records]
+    parts = [
+        r.trace.assign(case=case, fault_bus=r.fault_bus, strategy=r.strategy, k=r.k, forecast=r.forecast, variant=r.variant)
+        for r in records
+    ]
     cols = ["case", "fault_bus", "strategy", "k", "forecast", "variant", "bus", "t_s", "v_pu", "q_mvar"]
     return pd.concat(parts, ignore_index=True)[cols] if parts else pd.DataFrame(columns=cols)
 
@@ -244,8 +275,9 @@ def _write_parquet(path: Path, df: pd.DataFrame) -> None:
     write_atomic(path, buf.getvalue())
 
 
-def write_study(out: Path, records: list[SimRecord], config: StudyConfig, point: OperatingPoint,
-                timings: dict, command: list[str]) -> list[Path]:
+def write_study(
+    out: Path, records: list[SimRecord], config: StudyConfig, point: OperatingPoint, timings: dict, command: list[str]
+) -> list[Path]:
     """Write fault.parquet, traces.parquet and manifest.json into `out`."""
     import numba
     import scipy
@@ -259,23 +291,41 @@ def write_study(out: Path, records: list[SimRecord], config: StudyConfig, point:
     fault = asdict(config.fault)
     fault.pop("bus")
     manifest = {
-        "schema": 1, "opfbench_version": __version__, "command": command,
+        "schema": 1,
+        "opfbench_version": __version__,
+        "command": command,
         "created_utc": pd.Timestamp.now(tz="UTC").isoformat(),
-        "case": config.case, "operating_point": point.label,
-        "config": {"fault_buses": list(config.fault_buses), "strategies": list(config.strategies),
-                   "ks": list(config.ks), "forecasts": list(config.forecasts), "variants": list(config.variants)},
+        "case": config.case,
+        "operating_point": point.label,
+        "config": {
+            "fault_buses": list(config.fault_buses),
+            "strategies": list(config.strategies),
+            "ks": list(config.ks),
+            "forecasts": list(config.forecasts),
+            "variants": list(config.variants),
+        },
         "model": config.params.as_dict(),
         "variants": {label: config.params.with_variant(label).as_dict() for label in config.variants},
         "fault": fault,
-        "integrator": {"method": "classical Runge–Kutta (RK4), fixed step", "step_s": config.fault.step_s,
-                       "network": "current injection, fixed point over the DER buses to 1e-12 p.u."},
+        "integrator": {
+            "method": "classical Runge–Kutta (RK4), fixed step",
+            "step_s": config.fault.step_s,
+            "network": "current injection, fixed point over the DER buses to 1e-12 p.u.",
+        },
         "recovery": {"threshold_pu": 0.9, "margin_window_s": 0.1, "trace_step_s": 0.005},
         "timings": timings,
-        "versions": {"python": platform.python_version(), "numpy": np.__version__, "scipy": scipy.__version__,
-                     "pandas": pd.__version__, "numba": numba.__version__},
+        "versions": {
+            "python": platform.python_version(),
+            "numpy": np.__version__,
+            "scipy": scipy.__version__,
+            "pandas": pd.__version__,
+            "numba": numba.__version__,
+        },
         "machine": {"cores": os.cpu_count(), "platform": platform.platform()},
-        "files": {"fault.parquet": "one row per (simulation, bus)",
-                  "traces.parquet": "|V| and Q at the DER buses and the fault bus, 5-ms samples"},
+        "files": {
+            "fault.parquet": "one row per (simulation, bus)",
+            "traces.parquet": "|V| and Q at the DER buses and the fault bus, 5-ms samples",
+        },
     }
     write_json(out / "manifest.json", manifest)
     return [out / "fault.parquet", out / "traces.parquet", out / "manifest.json"]
@@ -289,13 +339,15 @@ def recovery_summary(table: pd.DataFrame) -> pd.DataFrame:
     keys = ["variant", "fault_bus", "strategy", "k", "forecast"]
     t = table.assign(rec=table["recovery_ms"].fillna(np.inf))
     worst = t.loc[t.groupby(keys, sort=False)["rec"].idxmax(), keys + ["bus", "recovery_ms", "margin_pu"]]
-    worst = worst.rename(columns={"bus": "slowest_bus", "recovery_ms": "feeder_recovery_ms",
-                                  "margin_pu": "slowest_margin_pu"})
+    worst = worst.rename(columns={"bus": "slowest_bus", "recovery_ms": "feeder_recovery_ms", "margin_pu": "slowest_margin_pu"})
     at_fault = table.loc[table["faulted"], keys + ["recovery_ms", "vmin_pu", "motors_stalled"]]
     out = at_fault.rename(columns={"recovery_ms": "fault_bus_recovery_ms", "vmin_pu": "fault_bus_vmin_pu"})
     out = out.merge(worst, on=keys)
-    base = out[out["strategy"] == "no-action"].groupby(["variant", "fault_bus"])[
-        ["fault_bus_recovery_ms", "feeder_recovery_ms"]].first()
+    base = (
+        out[out["strategy"] == "no-action"]
+        .groupby(["variant", "fault_bus"])[["fault_bus_recovery_ms", "feeder_recovery_ms"]]
+        .first()
+    )
     base.columns = ["na_fault", "na_feeder"]
     out = out.join(base, on=["variant", "fault_bus"])
     out["delta_fault_bus_ms"] = out["fault_bus_recovery_ms"] - out.pop("na_fault")

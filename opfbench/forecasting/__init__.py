@@ -17,13 +17,26 @@ import importlib
 
 _EXPORTS = {
     "Forecaster": "base",
-    "TARGET": "datasets", "ForecastDataset": "datasets", "forecast_dataset": "datasets",
-    "pv_dataset": "datasets", "wind_dataset": "datasets",
-    "ComparisonResult": "experiment", "run_comparison": "experiment",
-    "ForecastMetrics": "metrics", "evaluate": "metrics",
-    "MODEL_NAMES": "models", "RunSettings": "models", "build_model": "models", "settings_for": "models",
-    "forecast_path": "outputs", "load_forecast": "outputs", "write_outputs": "outputs",
-    "PAPER_TABLE": "report", "forecast_page": "report", "forecast_section": "report", "html_page": "report",
+    "TARGET": "datasets",
+    "ForecastDataset": "datasets",
+    "forecast_dataset": "datasets",
+    "pv_dataset": "datasets",
+    "wind_dataset": "datasets",
+    "ComparisonResult": "experiment",
+    "run_comparison": "experiment",
+    "ForecastMetrics": "metrics",
+    "evaluate": "metrics",
+    "MODEL_NAMES": "models",
+    "RunSettings": "models",
+    "build_model": "models",
+    "settings_for": "models",
+    "forecast_path": "outputs",
+    "load_forecast": "outputs",
+    "write_outputs": "outputs",
+    "PAPER_TABLE": "report",
+    "forecast_page": "report",
+    "forecast_section": "report",
+    "html_page": "report",
 }
 
 __all__ = sorted(_EXPORTS)

@@ -19,12 +19,12 @@ import numpy as np
 import pandas as pd
 
 from opfbench.errors import InputError
-from opfbench.timing import elapsed_ms, now
 from opfbench.forecasting.arima import Arima
 from opfbench.forecasting.base import Forecaster
 from opfbench.forecasting.datasets import TARGET, ForecastDataset
 from opfbench.forecasting.metrics import ForecastMetrics, evaluate
 from opfbench.forecasting.models import MODEL_NAMES, RunSettings, build_model
+from opfbench.timing import elapsed_ms, now
 
 REFERENCE = "persistence"
 

@@ -24,7 +24,6 @@ if TYPE_CHECKING:  # torch is imported only when a network model is built
     from opfbench.forecasting.neural import TrainConfig
 
 
-
 @dataclass(frozen=True)
 class RunSettings:
     """Settings of one comparison run.
@@ -74,10 +73,18 @@ class RunSettings:
 _QUICK_ORDERS: tuple[Order, ...] = ((1, 0, 0), (1, 1, 0), (2, 0, 1))
 
 SETTINGS: dict[tuple[str, bool], RunSettings] = {
-    ("pv", False): RunSettings(rows=None, window=30, epochs=20, windows_per_epoch=16384, arima_orders=order_grid(), arima_fit_samples=5000),
-    ("pv", True): RunSettings(rows=4 * 1440, window=24, epochs=2, windows_per_epoch=512, arima_orders=_QUICK_ORDERS, arima_fit_samples=1000),
-    ("wind", False): RunSettings(rows=None, window=24, epochs=40, windows_per_epoch=None, arima_orders=order_grid(), arima_fit_samples=5000),
-    ("wind", True): RunSettings(rows=42 * 24, window=24, epochs=2, windows_per_epoch=512, arima_orders=_QUICK_ORDERS, arima_fit_samples=500),
+    ("pv", False): RunSettings(
+        rows=None, window=30, epochs=20, windows_per_epoch=16384, arima_orders=order_grid(), arima_fit_samples=5000
+    ),
+    ("pv", True): RunSettings(
+        rows=4 * 1440, window=24, epochs=2, windows_per_epoch=512, arima_orders=_QUICK_ORDERS, arima_fit_samples=1000
+    ),
+    ("wind", False): RunSettings(
+        rows=None, window=24, epochs=40, windows_per_epoch=None, arima_orders=order_grid(), arima_fit_samples=5000
+    ),
+    ("wind", True): RunSettings(
+        rows=42 * 24, window=24, epochs=2, windows_per_epoch=512, arima_orders=_QUICK_ORDERS, arima_fit_samples=500
+    ),
 }
 
 

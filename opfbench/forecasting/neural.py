@@ -140,7 +140,11 @@ class NeuralForecaster(Forecaster):
                 optimizer.step()
                 losses.append(loss.item())
             train_loss = float(np.mean(losses))
-            val_mse = float(np.mean((_evaluate(self._model, sequences[n_fit:]) - labels[n_fit:].numpy()) ** 2)) if n_val else float("nan")
+            val_mse = (
+                float(np.mean((_evaluate(self._model, sequences[n_fit:]) - labels[n_fit:].numpy()) ** 2))
+                if n_val
+                else float("nan")
+            )
             self.log.append(EpochLog(epoch + 1, train_loss, val_mse))
             score = val_mse if n_val else -epoch
             if score < best_score:

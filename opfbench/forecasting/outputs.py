@@ -63,10 +63,12 @@ def write_outputs(result: ComparisonResult, directory: str | Path) -> list[Path]
     from opfbench.forecasting.report import forecast_page  # matplotlib only when a page is drawn
 
     out = check_out_dir(directory)
-    csv = write_atomic(forecast_path(out, result.dataset, "csv"),
-                       result.forecasts.to_csv(index_label="timestamp", date_format=_TIME_FORMAT))
-    meta = write_json(forecast_path(out, result.dataset, "json"),
-                      {"run": run_metadata(result), "metrics": result.metrics_table()})
+    csv = write_atomic(
+        forecast_path(out, result.dataset, "csv"), result.forecasts.to_csv(index_label="timestamp", date_format=_TIME_FORMAT)
+    )
+    meta = write_json(
+        forecast_path(out, result.dataset, "json"), {"run": run_metadata(result), "metrics": result.metrics_table()}
+    )
     html = write_atomic(forecast_path(out, result.dataset, "html"), forecast_page(result))
     return [csv, meta, html]
 
@@ -103,8 +105,7 @@ def load_forecast(directory: str | Path, dataset: str, model: str) -> pd.Series:
     values = pd.to_numeric(frame[model], errors="coerce").to_numpy(dtype=float)
     _first_bad(path, model, frame[model], np.isnan(values), "is not a number")
     _first_bad(path, model, frame[model], ~np.isfinite(values), "is not finite")
-    _first_bad(path, model, frame[model], (values < 0) | (values > rating),
-               f"is outside the plant's range [0, {rating:g}] kW")
+    _first_bad(path, model, frame[model], (values < 0) | (values > rating), f"is outside the plant's range [0, {rating:g}] kW")
     return pd.Series(values, index=pd.DatetimeIndex(index, name="timestamp"), name=model)
 
 
@@ -125,5 +126,4 @@ def _rating_kw(meta: Path, dataset: str) -> float:
 def _first_bad(path: Path, column: str, raw: pd.Series, bad: np.ndarray, problem: str) -> None:
     if bad.any():
         i = int(np.flatnonzero(bad)[0])
-        raise DataError(f"{path}, column {column!r}, line {i + 2}: {raw.iloc[i]!r} {problem}"
-                        f" ({int(bad.sum())} such row(s))")
+        raise DataError(f"{path}, column {column!r}, line {i + 2}: {raw.iloc[i]!r} {problem} ({int(bad.sum())} such row(s))")

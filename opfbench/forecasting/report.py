@@ -33,14 +33,19 @@ def forecast_section(result: ComparisonResult) -> str:
         f"{s.epochs} epochs of {s.windows_per_epoch or 'all'} windows (batch {s.batch_size}, Adam {s.learning_rate:g}, best "
         f"epoch on the last {s.train_config(result.seed).val_fraction:.0%} of the training windows); ARIMA order by AIC on "
         f"the last {s.arima_fit_samples} training steps; wavelet {s.wavelet}, {s.wavelet_level} levels, applied per input "
-        f"window. Seed {result.seed}.")
-    note = (f"MSE on the series min-max scaled with the training range of the power; MAPE over test samples whose actual "
-            f"power exceeds {s.mape_threshold:.0%} of the rating; skill = 1 − RMSE/RMSE(persistence). "
-            f"{_weather_text(result.weather_lag)} Paper values: SYSLAB (DTU) 2019 data at 5-min resolution, with a softmax "
-            "output layer; our data and resolution differ, so only the ranking is comparable.")
-    return environment().get_template("forecast_section.html.j2").render(
-        dataset=result.dataset, description=description, note=note, table=_metrics_table(result),
-        png=_day_plot(result))
+        f"window. Seed {result.seed}."
+    )
+    note = (
+        f"MSE on the series min-max scaled with the training range of the power; MAPE over test samples whose actual "
+        f"power exceeds {s.mape_threshold:.0%} of the rating; skill = 1 − RMSE/RMSE(persistence). "
+        f"{_weather_text(result.weather_lag)} Paper values: SYSLAB (DTU) 2019 data at 5-min resolution, with a softmax "
+        "output layer; our data and resolution differ, so only the ranking is comparable."
+    )
+    return (
+        environment()
+        .get_template("forecast_section.html.j2")
+        .render(dataset=result.dataset, description=description, note=note, table=_metrics_table(result), png=_day_plot(result))
+    )
 
 
 def forecast_page(result: ComparisonResult) -> str:
@@ -67,9 +72,19 @@ def _metrics_table(result: ComparisonResult) -> str:
     for name, run in result.runs.items():
         v = run.as_dict()
         paper = PAPER_TABLE.get(result.dataset, {}).get(name, (float("nan"), float("nan")))
-        rows.append({"model": name, "MSE (scaled)": v["mse_scaled"], "MAPE %": v["mape_pct"], "MAE kW": v["mae_kw"],
-                     "RMSE kW": v["rmse_kw"], "skill vs persistence": v["skill"], "fit s": v["fit_s"],
-                     "paper MSE": paper[0], "paper MAPE %": paper[1]})
+        rows.append(
+            {
+                "model": name,
+                "MSE (scaled)": v["mse_scaled"],
+                "MAPE %": v["mape_pct"],
+                "MAE kW": v["mae_kw"],
+                "RMSE kW": v["rmse_kw"],
+                "skill vs persistence": v["skill"],
+                "fit s": v["fit_s"],
+                "paper MSE": paper[0],
+                "paper MAPE %": paper[1],
+            }
+        )
     return table(pd.DataFrame(rows)).html
 
 
@@ -93,7 +108,9 @@ def _day_plot(result: ComparisonResult) -> str:
         ax.plot(day.index, day[name], linewidth=1.0, label=name)
     ax.set_ylabel("power (kW)")
     ax.set_xlabel(f"time ({day.index.tz})")
-    ax.set_title(f"{result.dataset.upper()}: one-step-ahead forecasts, {day.index[0]:%Y-%m-%d %H:%M} to {day.index[-1]:%Y-%m-%d %H:%M}")
+    ax.set_title(
+        f"{result.dataset.upper()}: one-step-ahead forecasts, {day.index[0]:%Y-%m-%d %H:%M} to {day.index[-1]:%Y-%m-%d %H:%M}"
+    )
     ax.legend(loc="upper left", fontsize=8)
     ax.grid(alpha=0.3)
     fig.autofmt_xdate()

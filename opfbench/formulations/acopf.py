@@ -183,12 +183,21 @@ class AcOpf:
         p_f, q_f, p_t, q_t = br.flows(vm_f**2, vm_t**2, c, s, lambda a, e: ca.DM(a) * e)
         at_from, at_to = _sparse_dm(br.at_from), _sparse_dm(br.at_to)
         mismatch_p = ca.mtimes(at_from, p_f) + ca.mtimes(at_to, p_t) + ca.DM(problem.gsh) * v2 - p_fixed
-        mismatch_q = (ca.mtimes(at_from, q_f) + ca.mtimes(at_to, q_t) - ca.DM(problem.bsh) * v2 - q_fixed
-                      - ca.mtimes(_sparse_dm(problem.der_at_bus), q))
+        mismatch_q = (
+            ca.mtimes(at_from, q_f)
+            + ca.mtimes(at_to, q_t)
+            - ca.DM(problem.bsh) * v2
+            - q_fixed
+            - ca.mtimes(_sparse_dm(problem.der_at_bus), q)
+        )
         rows = problem.balance(mismatch_p, mismatch_q, lambda e, i: e[i.tolist()])
         losses = mismatch_p[problem.slack] + ca.sum1(p_fixed) - ca.dot(ca.DM(problem.gsh), v2)
-        nlp = {"x": ca.vertcat(theta_o, vm_o, q), "p": ca.vertcat(p_fixed, q_fixed),
-               "f": problem.kw_per_pu * losses, "g": ca.vertcat(*(r.expr for r in rows))}
+        nlp = {
+            "x": ca.vertcat(theta_o, vm_o, q),
+            "p": ca.vertcat(p_fixed, q_fixed),
+            "f": problem.kw_per_pu * losses,
+            "g": ca.vertcat(*(r.expr for r in rows)),
+        }
         self._nlp = nlp
         self._solvers: dict[bool, ca.Function] = {}
         self._lbg = np.concatenate([r.lo for r in rows])
@@ -231,7 +240,7 @@ class AcOpf:
             iterations=int(stats["iter_count"]),
             solve_ms=float(stats["t_wall_total"]) * 1e3,
             objective_kw=float(out["f"]),
-            q_pu=np.clip(x[2 * self.others.size:], -q_limit, q_limit),  # a no-op with bound_relax_factor 0
+            q_pu=np.clip(x[2 * self.others.size :], -q_limit, q_limit),  # a no-op with bound_relax_factor 0
             x=x,
             lam_x=np.asarray(out["lam_x"]).ravel(),
             lam_g=np.asarray(out["lam_g"]).ravel(),
@@ -267,11 +276,15 @@ class _Snapshot:
 
     def diagnostics(self) -> dict:
         acc = self.accepted
-        socp = socp_diagnostics(self.socp) if self.socp else {"solve_ms": np.nan, "iterations": 0,
-                                                                "solver_status": "not-run", "relaxation_gap": np.nan}
+        socp = (
+            socp_diagnostics(self.socp)
+            if self.socp
+            else {"solve_ms": np.nan, "iterations": 0, "solver_status": "not-run", "relaxation_gap": np.nan}
+        )
         by_socp = self.certified_by == CERTIFIED_BY_SOCP
         return {
-            "solver_status": socp["solver_status"] if by_socp or not self.attempts
+            "solver_status": socp["solver_status"]
+            if by_socp or not self.attempts
             else " → ".join(a.status for a in self.attempts),
             "iterations": sum(a.iterations for a in self.attempts),
             "solve_ms": socp["solve_ms"] if by_socp else sum(a.solve_ms for a in self.attempts),
@@ -288,8 +301,7 @@ class _Snapshot:
 class _Policy:
     """Settles snapshots with IPOPT one by one under a failure policy, carrying the warm start."""
 
-    def __init__(self, data: SnapshotData, problem: OpfProblem, fallback: Fallback,
-                 socp: tuple[SocpSolve, ...] | None):
+    def __init__(self, data: SnapshotData, problem: OpfProblem, fallback: Fallback, socp: tuple[SocpSolve, ...] | None):
         self.data, self.problem = data, problem
         self.fallback, self.socp = fallback, socp
         self.net = problem.net
@@ -318,8 +330,15 @@ class _Policy:
         if attempts[-1].success:
             self.start = attempts[-1]
             retried = len(attempts) > 1
-            return _Snapshot(attempts[-1].q_pu, FALLBACK_COLD if retried else OK,
-                             FROM_COLD if retried else FROM_SOLVER, attempts, socp, 0, CERTIFIED_BY_IPOPT)
+            return _Snapshot(
+                attempts[-1].q_pu,
+                FALLBACK_COLD if retried else OK,
+                FROM_COLD if retried else FROM_SOLVER,
+                attempts,
+                socp,
+                0,
+                CERTIFIED_BY_IPOPT,
+            )
         flows = 0
         if self.fallback == "chain":
             socp = self._relaxed(i)
@@ -344,8 +363,7 @@ class _FastPath:
     certified: np.ndarray  # (S,) bool
 
 
-def _fast_path(scenario: Scenario, problem: OpfProblem, data: SnapshotData,
-               solves: tuple[SocpSolve, ...]) -> _FastPath:
+def _fast_path(scenario: Scenario, problem: OpfProblem, data: SnapshotData, solves: tuple[SocpSolve, ...]) -> _FastPath:
     net = scenario.net
     n_der = len(net.ders)
     optimal = np.array([s.optimal for s in solves], dtype=bool)
@@ -364,8 +382,15 @@ def _merge(fast: PowerFlowResult, rest: PowerFlowResult, rows: np.ndarray) -> Po
     return PowerFlowResult(fast.net, v, conv, it)
 
 
-def run_acopf(scenario: Scenario, k: float, *, slack_export: bool = True, fallback: Fallback = "chain",
-              lower_bound: bool = True, solver: Solver = "auto") -> StrategyResult:
+def run_acopf(
+    scenario: Scenario,
+    k: float,
+    *,
+    slack_export: bool = True,
+    fallback: Fallback = "chain",
+    lower_bound: bool = True,
+    solver: Solver = "auto",
+) -> StrategyResult:
     """AC OPF on every snapshot of `scenario` with reserve k (see the module docstring).
 
     Returns the setpoints evaluated by the AC power flow, with status per snapshot and
@@ -393,8 +418,9 @@ def run_acopf(scenario: Scenario, k: float, *, slack_export: bool = True, fallba
     settled = []
     for i in range(n):
         if certified[i]:
-            settled.append(_Snapshot(fast.q_pu[i], OK, FROM_SOLVER, [], solves[i], 0, CERTIFIED_BY_SOCP,
-                                     float(fast.pf.losses_kw[i])))
+            settled.append(
+                _Snapshot(fast.q_pu[i], OK, FROM_SOLVER, [], solves[i], 0, CERTIFIED_BY_SOCP, float(fast.pf.losses_kw[i]))
+            )
         elif fast_path and solves[i].outcome == "infeasible":  # the relaxation proves it: no IPOPT
             settled.append(_Snapshot(np.zeros(len(net.ders)), INFEASIBLE, FROM_NO_ACTION, [], solves[i], 1, ""))
         else:
@@ -405,11 +431,22 @@ def run_acopf(scenario: Scenario, k: float, *, slack_export: bool = True, fallba
     pf = None
     if fast is not None:  # the certified snapshots' evaluation is done; evaluate the rest
         rows = np.flatnonzero(~certified)
-        pf = fast.pf if rows.size == 0 else _merge(
-            fast.pf, solve_pf_batch(net, scenario.take(rows).injections(q_pu[rows] * net.base_mva)), rows)
+        pf = (
+            fast.pf
+            if rows.size == 0
+            else _merge(fast.pf, solve_pf_batch(net, scenario.take(rows).injections(q_pu[rows] * net.base_mva)), rows)
+        )
     return evaluated_result(
-        "acopf", k, scenario, problem, data, q_pu, elapsed_ms(start),
+        "acopf",
+        k,
+        scenario,
+        problem,
+        data,
+        q_pu,
+        elapsed_ms(start),
         status=np.array([s.status for s in settled], dtype=object),
         lower_bound_kw=np.array([s.socp.lower_bound_kw if s.socp else np.nan for s in settled]),
         extra=diagnostics(s.diagnostics() for s in settled),
-        power_flows=np.array([s.power_flows for s in settled]), pf=pf)
+        power_flows=np.array([s.power_flows for s in settled]),
+        pf=pf,
+    )

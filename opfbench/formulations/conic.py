@@ -107,9 +107,17 @@ class _Clarabel:
     dropped bounds its answers must check (all but those whose opposite is kept: their
     slack is the box's width)."""
 
-    def __init__(self, a: sp.csc_matrix, c: np.ndarray, rows: np.ndarray, cones: list, b: np.ndarray,
-                 settings: clarabel.DefaultSettings, kept: np.ndarray | None = None,
-                 checked: np.ndarray | None = None):
+    def __init__(
+        self,
+        a: sp.csc_matrix,
+        c: np.ndarray,
+        rows: np.ndarray,
+        cones: list,
+        b: np.ndarray,
+        settings: clarabel.DefaultSettings,
+        kept: np.ndarray | None = None,
+        checked: np.ndarray | None = None,
+    ):
         self.rows, self._a, self._c, self._cones, self._settings = rows, a[rows], c, cones, settings
         self.kept, self.checked = kept, checked
         self.solver = self._fresh(b[rows])
@@ -171,7 +179,7 @@ class _BoundState:
         kept = program.kept
         n_zero, n_kept = self.p._n_zero, len(z) - self.p._n_rest - self.p._n_zero
         slack = self.slack(x)
-        mult = np.asarray(z[n_zero:n_zero + n_kept])
+        mult = np.asarray(z[n_zero : n_zero + n_kept])
         signs_ok = (mult[~self.fixed[kept]] if self.any_fixed else mult) >= MARGIN
         if (slack[program.checked] >= MARGIN).all() and signs_ok.all():
             return True, ()
@@ -205,8 +213,9 @@ class ParametricConeProgram:
             raise ValueError("variable bounds attributes are not supported; write them as constraints")
         var_col = data["param_prob"].var_id_to_col
         a, c = data["A"].tocsc(), np.asarray(data["c"], dtype=float)
-        data_cols = [np.arange(var_col[v.id], var_col[v.id] + v.size) if v.id in var_col
-                     else np.full(v.size, -1) for v in data_vars]
+        data_cols = [
+            np.arange(var_col[v.id], var_col[v.id] + v.size) if v.id in var_col else np.full(v.size, -1) for v in data_vars
+        ]
         self._sizes = [v.size for v in data_vars]
         is_data = np.zeros(c.size, dtype=bool)
         theta_cols = np.concatenate(data_cols) if data_cols else np.zeros(0, dtype=int)
@@ -270,15 +279,15 @@ class ParametricConeProgram:
         its `kept` marks the bounds in `active`."""
         program = self._screens.get(active)
         if program is None:
-            rows = np.concatenate([np.arange(self._n_zero), self._bounds[list(active)], self._other_nonneg,
-                                   self._soc_rows])
+            rows = np.concatenate([np.arange(self._n_zero), self._bounds[list(active)], self._other_nonneg, self._soc_rows])
             cones = [clarabel.ZeroConeT(self._n_zero + len(active))]
             cones += [clarabel.NonnegativeConeT(self._other_nonneg.size)] if self._other_nonneg.size else []
             kept = np.zeros(self._bounds.size, dtype=bool)
             kept[list(active)] = True
             checked = ~kept & ~((self._opposite >= 0) & kept[self._opposite])
-            program = self._screens[active] = _Clarabel(self._a, self._c, rows, cones + self._soc_cones,
-                                                        self._b0, self._settings, kept, checked)
+            program = self._screens[active] = _Clarabel(
+                self._a, self._c, rows, cones + self._soc_cones, self._b0, self._settings, kept, checked
+            )
             while len(self._screens) > MAX_SCREENS:
                 self._screens.popitem(last=False)
         self._screens.move_to_end(active)
@@ -334,6 +343,6 @@ class ParametricConeProgram:
             if var.size == 0:  # e.g. the DER setpoints of a case without DER
                 return x[..., :0]
             start = self._var_col[var.id]
-            return x[..., start:start + var.size]
+            return x[..., start : start + var.size]
 
         return value

@@ -40,8 +40,9 @@ class DominanceReport:
         return not self.violations
 
 
-def opf_dominance(opf: StrategyResult, other: StrategyResult, scenario: Scenario,
-                  tol_kw: float = TOLERANCE_KW) -> DominanceReport:
+def opf_dominance(
+    opf: StrategyResult, other: StrategyResult, scenario: Scenario, tol_kw: float = TOLERANCE_KW
+) -> DominanceReport:
     """Check AC OPF losses ≤ `other`'s losses wherever `other` is feasible (see module doc).
 
     `opf` is a `run_acopf` result and `other` any strategy's result, both on `scenario`
@@ -52,8 +53,10 @@ def opf_dominance(opf: StrategyResult, other: StrategyResult, scenario: Scenario
     if other.net is not scenario.net or opf.net is not scenario.net:
         raise InputError("both results must be computed on the scenario's network")
     if not opf.n_snapshots == other.n_snapshots == scenario.n_snapshots:
-        raise InputError(f"snapshot counts differ: acopf {opf.n_snapshots}, {other.strategy} "
-                         f"{other.n_snapshots}, scenario {scenario.n_snapshots}")
+        raise InputError(
+            f"snapshot counts differ: acopf {opf.n_snapshots}, {other.strategy} "
+            f"{other.n_snapshots}, scenario {scenario.n_snapshots}"
+        )
     data = snapshot_data(scenario, opf.k)
     pf = solve_pf_batch(scenario.net, scenario.injections(other.q_mvar))
     feasible = ac_feasible(scenario.net, pf, data.s_fixed, bool(opf.extra["slack_export"]))

@@ -158,8 +158,17 @@ class OpfProblem:
         check_supported(net)
         others = np.flatnonzero(np.arange(net.n_bus) != net.slack)
         gsh, bsh = bus_shunts(net)
-        return cls(net, bool(slack_export), others, net.vmin[others], net.vmax[others], gsh, bsh,
-                   incidence(net.der_bus, net.n_bus), PiBranches.of(net))
+        return cls(
+            net,
+            bool(slack_export),
+            others,
+            net.vmin[others],
+            net.vmax[others],
+            gsh,
+            bsh,
+            incidence(net.der_bus, net.n_bus),
+            PiBranches.of(net),
+        )
 
     @property
     def slack(self) -> int:
@@ -178,8 +187,10 @@ class OpfProblem:
         when the slack may not export, slack P = mismatch_p[slack] ≥ 0. `index(expr, idx)`
         selects entries of an expression of the formulation's tool."""
         m = self.others.size
-        rows = [Row("P balance", index(mismatch_p, self.others), np.zeros(m), np.zeros(m)),
-                Row("Q balance", index(mismatch_q, self.others), np.zeros(m), np.zeros(m))]
+        rows = [
+            Row("P balance", index(mismatch_p, self.others), np.zeros(m), np.zeros(m)),
+            Row("Q balance", index(mismatch_q, self.others), np.zeros(m), np.zeros(m)),
+        ]
         if not self.slack_export:
             rows.append(Row("slack P ≥ 0", index(mismatch_p, np.array([self.slack])), np.zeros(1), np.full(1, np.inf)))
         return rows
@@ -203,9 +214,11 @@ def check_supported(net: Network) -> None:
     bad = bad[bad != net.slack]  # the slack's |V| is fixed at v_slack
     if bad.size:
         i = bad[0]
-        raise NetworkError(f"{net.name}: bus {net.bus_ids[i]} has voltage limits vmin {net.vmin[i]:g} p.u., "
-                           f"vmax {net.vmax[i]:g} p.u.; the OPF needs 0 ≤ vmin ≤ vmax, both finite"
-                           + (f" ({bad.size} such buses)" if bad.size > 1 else ""))
+        raise NetworkError(
+            f"{net.name}: bus {net.bus_ids[i]} has voltage limits vmin {net.vmin[i]:g} p.u., "
+            f"vmax {net.vmax[i]:g} p.u.; the OPF needs 0 ≤ vmin ≤ vmax, both finite"
+            + (f" ({bad.size} such buses)" if bad.size > 1 else "")
+        )
 
 
 @dataclass(frozen=True)
@@ -265,8 +278,9 @@ def slack_p_mw(net: Network, pf: PowerFlowResult) -> np.ndarray:
     in-service branches plus its shunt's — from branch flows, without the n×n Y-bus."""
     at_slack_f, at_slack_t = net.f == net.slack, net.t == net.slack
     vm2 = np.abs(pf.v[..., net.slack]) ** 2
-    return (pf.sf_mva.real[..., at_slack_f].sum(axis=-1) + pf.st_mva.real[..., at_slack_t].sum(axis=-1)
-            + net.gs_mw[net.slack] * vm2)
+    return (
+        pf.sf_mva.real[..., at_slack_f].sum(axis=-1) + pf.st_mva.real[..., at_slack_t].sum(axis=-1) + net.gs_mw[net.slack] * vm2
+    )
 
 
 def diagnostics(rows: Iterable[dict]) -> dict[str, np.ndarray]:
@@ -287,10 +301,20 @@ def diagnostics(rows: Iterable[dict]) -> dict[str, np.ndarray]:
     return out
 
 
-def evaluated_result(strategy: str, k: float, scenario: Scenario, problem: OpfProblem, data: SnapshotData,
-                     q_pu: np.ndarray, wall_ms: float, status: np.ndarray, lower_bound_kw: np.ndarray,
-                     extra: dict[str, np.ndarray], power_flows: np.ndarray | int = 0,
-                     pf: PowerFlowResult | None = None) -> StrategyResult:
+def evaluated_result(
+    strategy: str,
+    k: float,
+    scenario: Scenario,
+    problem: OpfProblem,
+    data: SnapshotData,
+    q_pu: np.ndarray,
+    wall_ms: float,
+    status: np.ndarray,
+    lower_bound_kw: np.ndarray,
+    extra: dict[str, np.ndarray],
+    power_flows: np.ndarray | int = 0,
+    pf: PowerFlowResult | None = None,
+) -> StrategyResult:
     """A formulation's result: setpoints `q_pu` (S, n_der) evaluated by the batched AC power
     flow (or `pf`, that evaluation already done), with extra["ac_feasible"] (the point
     meets every limit, `OpfProblem.feasible`) and the scalar extra["slack_export"]."""
@@ -300,5 +324,15 @@ def evaluated_result(strategy: str, k: float, scenario: Scenario, problem: OpfPr
         pf = solve_pf_batch(net, scenario.injections(q_mvar))
     extra = extra | {"ac_feasible": problem.feasible(pf, data.s_fixed), "slack_export": problem.slack_export}
     flows = np.asarray(power_flows, dtype=np.int64) + 1
-    return StrategyResult.from_setpoints(strategy, k, scenario, q_mvar, wall_ms, power_flows=flows, pf=pf,
-                                         status=status, lower_bound_kw=lower_bound_kw, extra=extra)
+    return StrategyResult.from_setpoints(
+        strategy,
+        k,
+        scenario,
+        q_mvar,
+        wall_ms,
+        power_flows=flows,
+        pf=pf,
+        status=status,
+        lower_bound_kw=lower_bound_kw,
+        extra=extra,
+    )

@@ -54,12 +54,11 @@ Clarabel instance) is built once per network and options *per thread*
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-from typing import Literal
-
 import hashlib
 import threading
 from collections import OrderedDict
+from dataclasses import dataclass
+from typing import Literal
 
 import clarabel
 import cvxpy as cp
@@ -122,8 +121,9 @@ def _rows(row: Row) -> list[cp.Constraint]:
     """A problem row lo ≤ expr ≤ hi as cvxpy constraints."""
     if np.array_equal(row.lo, row.hi):
         return [row.expr == row.lo]
-    return ([row.expr >= row.lo] if np.all(np.isfinite(row.lo)) else []) + \
-        ([row.expr <= row.hi] if np.all(np.isfinite(row.hi)) else [])
+    return ([row.expr >= row.lo] if np.all(np.isfinite(row.lo)) else []) + (
+        [row.expr <= row.hi] if np.all(np.isfinite(row.hi)) else []
+    )
 
 
 class SocpRelaxation:
@@ -172,8 +172,7 @@ class SocpRelaxation:
         # 8.9, case69-der 9.9 → 9.5 / 10.1 → 9.7, case141-der 9.5 → 9.9 / 9.4 → 9.5, feeder1k
         # (every 20th step) 11.1 → 9.9 / 10.7 → 10.1; 0.97: more again.
         settings.max_step_fraction = 0.98
-        self.program = ParametricConeProgram(self.cvxpy_problem, (self.p_fixed, self.q_fixed, self.q_limit),
-                                             settings)
+        self.program = ParametricConeProgram(self.cvxpy_problem, (self.p_fixed, self.q_fixed, self.q_limit), settings)
 
     def _network_model(self) -> tuple[cp.Expression, cp.Expression, cp.Expression, list[cp.Constraint]]:
         """(mismatch_p, mismatch_q, branch losses, model constraints), p.u., per `problem`."""
@@ -208,7 +207,7 @@ class SocpRelaxation:
         primal = np.array([a.primal for a in final])
         dual = np.array([a.dual for a in final])
         value = self.program.reader(x)
-        n, q_limit = self.net.n_bus, thetas[solved, 2 * self.net.n_bus:]
+        n, q_limit = self.net.n_bus, thetas[solved, 2 * self.net.n_bus :]
         q_pu = np.clip(value(self.q), -q_limit, q_limit)  # within solver tolerance of the limits anyway
         # Summed over all buses the mismatches are the branch losses plus the shunts' P minus
         # the fixed injections; every non-slack mismatch is 0, so this is the slack's P.
@@ -220,8 +219,19 @@ class SocpRelaxation:
                 outcome = "infeasible" if a.final_status in CONIC_INFEASIBLE else "failed"
                 out.append(SocpSolve(outcome, a.status, np.nan, None, np.nan, solve_ms, a.iterations, a.solves))
                 continue
-            out.append(SocpSolve("optimal", a.status, float(min(primal[j], dual[j])), q_pu[j],
-                                 float(gap[j]), solve_ms, a.iterations, a.solves, float(slack_p[j])))
+            out.append(
+                SocpSolve(
+                    "optimal",
+                    a.status,
+                    float(min(primal[j], dual[j])),
+                    q_pu[j],
+                    float(gap[j]),
+                    solve_ms,
+                    a.iterations,
+                    a.solves,
+                    float(slack_p[j]),
+                )
+            )
             j += 1
         return out
 
@@ -258,14 +268,21 @@ class DistFlowSocp(SocpRelaxation):
         v_parent, v_child = v[parent], v[child]
         inv_s = 1 / branch_scale(net)[child]  # the cone's per-branch scale: α = 1 / inv_s²
         l_scaled = cp.multiply(inv_s**2, l_br)  # ℓ/α
-        mismatch_p = (at_parent @ p_br - at_child @ (p_br - cp.multiply(r, l_br))
-                      + cp.multiply(self.problem.gsh, v) - self.p_fixed)
-        mismatch_q = (at_parent @ q_br - at_child @ (q_br - cp.multiply(x, l_br))
-                      - cp.multiply(self.problem.bsh + charging, v) - self.q_fixed - self._der_q_at_buses())
+        mismatch_p = at_parent @ p_br - at_child @ (p_br - cp.multiply(r, l_br)) + cp.multiply(self.problem.gsh, v) - self.p_fixed
+        mismatch_q = (
+            at_parent @ q_br
+            - at_child @ (q_br - cp.multiply(x, l_br))
+            - cp.multiply(self.problem.bsh + charging, v)
+            - self.q_fixed
+            - self._der_q_at_buses()
+        )
         constraints = [
             v_child == v_parent - 2 * (cp.multiply(r, p_br) + cp.multiply(x, q_br)) + cp.multiply(r**2 + x**2, l_br),
-            cp.SOC(v_parent + l_scaled,
-                   cp.vstack([2 * cp.multiply(inv_s, p_br), 2 * cp.multiply(inv_s, q_br), v_parent - l_scaled]), axis=0),
+            cp.SOC(
+                v_parent + l_scaled,
+                cp.vstack([2 * cp.multiply(inv_s, p_br), 2 * cp.multiply(inv_s, q_br), v_parent - l_scaled]),
+                axis=0,
+            ),
         ]
         self._parent = parent
         return mismatch_p, mismatch_q, r @ l_br, constraints
@@ -307,8 +324,9 @@ class JabrSocp(SocpRelaxation):
         vf, vt = self.v[br.f], self.v[br.t]
         p_f, q_f, p_t, q_t = br.flows(vf, vt, self.c_br, self.s_br, cp.multiply)
         mismatch_p = br.at_from @ p_f + br.at_to @ p_t + cp.multiply(self.problem.gsh, self.v) - self.p_fixed
-        mismatch_q = (br.at_from @ q_f + br.at_to @ q_t - cp.multiply(self.problem.bsh, self.v) - self.q_fixed
-                      - self._der_q_at_buses())
+        mismatch_q = (
+            br.at_from @ q_f + br.at_to @ q_t - cp.multiply(self.problem.bsh, self.v) - self.q_fixed - self._der_q_at_buses()
+        )
         cone = cp.SOC(vf + vt, cp.vstack([2 * self.c_br, 2 * self.s_br, vf - vt]), axis=0)
         return mismatch_p, mismatch_q, cp.sum(p_f + p_t), [cone]
 
@@ -320,7 +338,7 @@ class JabrSocp(SocpRelaxation):
 
 
 def resolve_model(net: Network, model: Model) -> str:
-    """"auto" → DistFlow on radial feeders, Jabr on meshed ones."""
+    """ "auto" → DistFlow on radial feeders, Jabr on meshed ones."""
     check_option("SOCP model", model, MODELS)
     return ("jabr" if net.meshed else "distflow") if model == "auto" else model
 
@@ -400,8 +418,9 @@ def _restricted(unrestricted: SocpSolve) -> SocpSolve | None:
     return None
 
 
-def socp_solves(scenario: Scenario, k: float, slack_export: bool = True, model: Model = "auto",
-                data: SnapshotData | None = None) -> tuple[SocpSolve, ...]:
+def socp_solves(
+    scenario: Scenario, k: float, slack_export: bool = True, model: Model = "auto", data: SnapshotData | None = None
+) -> tuple[SocpSolve, ...]:
     """The relaxation solved on every snapshot of `scenario` with reserve k — once per
     (scenario object, k, options); every later caller gets the same solves; identical data
     and the paper's slack rule share solves as the module docstring says. `data`: the
@@ -450,15 +469,33 @@ def run_socp(scenario: Scenario, k: float, *, slack_export: bool = True, model: 
     solves = socp_solves(scenario, k, slack_export, model, data)
     n_der = len(scenario.net.ders)
     q_pu = np.array([s.q_pu if s.optimal else np.zeros(n_der) for s in solves]).reshape(len(solves), n_der)
-    status = np.array([OK if s.optimal else INFEASIBLE if s.outcome == "infeasible" else SOLVER_FAILED
-                       for s in solves], dtype=object)
-    extra = diagnostics(socp_diagnostics(s) | {"fallback": FROM_SOLVER if s.optimal else FROM_NO_ACTION,
-                                               "certified_by": "", "model": model} for s in solves)
-    return evaluated_result("socp", k, scenario, OpfProblem.of(scenario.net, slack_export), data, q_pu,
-                            elapsed_ms(start), status, np.array([s.lower_bound_kw for s in solves]), extra)
+    status = np.array(
+        [OK if s.optimal else INFEASIBLE if s.outcome == "infeasible" else SOLVER_FAILED for s in solves], dtype=object
+    )
+    extra = diagnostics(
+        socp_diagnostics(s) | {"fallback": FROM_SOLVER if s.optimal else FROM_NO_ACTION, "certified_by": "", "model": model}
+        for s in solves
+    )
+    return evaluated_result(
+        "socp",
+        k,
+        scenario,
+        OpfProblem.of(scenario.net, slack_export),
+        data,
+        q_pu,
+        elapsed_ms(start),
+        status,
+        np.array([s.lower_bound_kw for s in solves]),
+        extra,
+    )
 
 
 def socp_diagnostics(s: SocpSolve) -> dict:
     """The per-snapshot diagnostics a relaxation solve contributes to a result's `extra`."""
-    return {"solve_ms": s.solve_ms, "iterations": int(s.iterations), "solves": int(s.solves),
-            "solver_status": s.solver_status, "relaxation_gap": s.relaxation_gap}
+    return {
+        "solve_ms": s.solve_ms,
+        "iterations": int(s.iterations),
+        "solves": int(s.solves),
+        "solver_status": s.solver_status,
+        "relaxation_gap": s.relaxation_gap,
+    }

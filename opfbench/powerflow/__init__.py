@@ -45,8 +45,17 @@ from opfbench.powerflow.dense import DenseNewton, DenseZbus
 from opfbench.powerflow.sparse import SparseNewton, SparseZbus
 
 __all__ = [
-    "MAX_NR_ITER", "MAX_SWEEP_ITER", "MISMATCH_CHECK", "NR_TOLERANCE", "SPARSE_MIN_BUSES", "SWEEP_TOLERANCE",
-    "PowerFlowResult", "bus_injections", "solve_pf", "solve_pf_batch", "uses_sparse",
+    "MAX_NR_ITER",
+    "MAX_SWEEP_ITER",
+    "MISMATCH_CHECK",
+    "NR_TOLERANCE",
+    "SPARSE_MIN_BUSES",
+    "SWEEP_TOLERANCE",
+    "PowerFlowResult",
+    "bus_injections",
+    "solve_pf",
+    "solve_pf_batch",
+    "uses_sparse",
 ]
 
 # The batched mat-muls are small (n_bus² × S); multi-threaded BLAS only adds
@@ -59,9 +68,14 @@ def _newton(net: Network, sparse: bool) -> DenseNewton | SparseNewton:
     return SparseNewton(net) if sparse else DenseNewton(net)
 
 
-def solve_pf(net: Network, s_mw: np.ndarray, v0: np.ndarray | None = None,
-             tol: float = NR_TOLERANCE, max_iter: int = MAX_NR_ITER,
-             sparse: bool | None = None) -> PowerFlowResult:
+def solve_pf(
+    net: Network,
+    s_mw: np.ndarray,
+    v0: np.ndarray | None = None,
+    tol: float = NR_TOLERANCE,
+    max_iter: int = MAX_NR_ITER,
+    sparse: bool | None = None,
+) -> PowerFlowResult:
     """Newton–Raphson, polar coordinates; dense Jacobian below SPARSE_MIN_BUSES buses,
     sparse (SuperLU) from there on, or as `sparse` forces.
 
@@ -124,8 +138,7 @@ class _Sweep:
     settled: np.ndarray  # (S,) bool: update fell below tol
 
 
-def _fixed_point(fac: _ZbusFactor, s_conj: np.ndarray, tol: float, max_iter: int,
-                 v_start: np.ndarray | None) -> _Sweep:
+def _fixed_point(fac: _ZbusFactor, s_conj: np.ndarray, tol: float, max_iter: int, v_start: np.ndarray | None) -> _Sweep:
     """Iterate V ← Z·conj(S/V) + V₀ on all columns of `s_conj` (conj(S), shape (m, S)),
     starting from `v_start` (m, S) or, without it, from the no-load voltages.
 
@@ -135,8 +148,7 @@ def _fixed_point(fac: _ZbusFactor, s_conj: np.ndarray, tol: float, max_iter: int
     m, n_snap = s_conj.shape
     order = fac.z.order  # memory layout the Z kernel works in without copies
     start = np.repeat(fac.v_noload[:, None], n_snap, axis=1) if v_start is None else v_start
-    out = _Sweep(np.array(start, dtype=complex, order=order),
-                 np.zeros(n_snap, dtype=np.int64), np.zeros(n_snap, dtype=bool))
+    out = _Sweep(np.array(start, dtype=complex, order=order), np.zeros(n_snap, dtype=np.int64), np.zeros(n_snap, dtype=bool))
     active = np.arange(n_snap)
     v, s_act = out.v.copy(order=order), np.asarray(s_conj, order=order)
     v_new, cur = np.empty_like(v), np.empty_like(v)
@@ -175,9 +187,14 @@ def _fixed_point(fac: _ZbusFactor, s_conj: np.ndarray, tol: float, max_iter: int
     return out
 
 
-def solve_pf_batch(net: Network, s_mw: np.ndarray, v0: np.ndarray | None = None,
-                   tol: float = SWEEP_TOLERANCE, max_iter: int = MAX_SWEEP_ITER,
-                   sparse: bool | None = None) -> PowerFlowResult:
+def solve_pf_batch(
+    net: Network,
+    s_mw: np.ndarray,
+    v0: np.ndarray | None = None,
+    tol: float = SWEEP_TOLERANCE,
+    max_iter: int = MAX_SWEEP_ITER,
+    sparse: bool | None = None,
+) -> PowerFlowResult:
     """Power flow for many snapshots at once; `s_mw` shaped (S, n_bus) complex MW; `v0`
     (S, n_bus) complex p.u. an optional warm start (e.g. the previous solution of a
     nearby operating point; non-finite rows fall back to the no-load start). Dense
@@ -194,15 +211,20 @@ def solve_pf_batch(net: Network, s_mw: np.ndarray, v0: np.ndarray | None = None,
     n_snap = s.shape[0]
     if net.pv_buses.size:
         results = [solve_pf(net, row * net.base_mva, sparse=sparse) for row in s]
-        return PowerFlowResult(net, np.array([r.v for r in results]),
-                               np.array([r.converged for r in results]), np.array([r.iterations for r in results]))
+        return PowerFlowResult(
+            net,
+            np.array([r.v for r in results]),
+            np.array([r.converged for r in results]),
+            np.array([r.iterations for r in results]),
+        )
     fac = _zbus(net, sparse)
     with _BLAS.limit(limits=1, user_api="blas"):
         start = None
         if v0 is not None:
             v0 = np.asarray(v0, dtype=complex).reshape(n_snap, net.n_bus)
-            start = np.where(np.isfinite(v0).all(axis=1, keepdims=True) & (np.abs(v0) > 0).all(axis=1, keepdims=True),
-                             v0, fac.v_noload_full)[:, fac.keep].T.copy()
+            start = np.where(
+                np.isfinite(v0).all(axis=1, keepdims=True) & (np.abs(v0) > 0).all(axis=1, keepdims=True), v0, fac.v_noload_full
+            )[:, fac.keep].T.copy()
         sweep = _fixed_point(fac, np.conj(s[:, fac.keep]).T, tol, max_iter, start)
         v = np.empty((n_snap, net.n_bus), dtype=complex)
         v[:, fac.keep] = sweep.v.T

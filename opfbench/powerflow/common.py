@@ -82,7 +82,7 @@ class PowerFlowResult:
         s = self.net.slack
         row = self.net.ybus_sparse[s]  # (1, n_bus) sparse
         current = (row @ np.atleast_2d(self.v).T)[0]
-        return (self.v[..., s] * np.conj(current.reshape(self.v.shape[:-1])) * self.net.base_mva)
+        return self.v[..., s] * np.conj(current.reshape(self.v.shape[:-1])) * self.net.base_mva
 
     def extreme_voltage(self, which: str) -> tuple[np.ndarray, np.ndarray]:
         """(|V| p.u., external bus number) of the lowest ('min') or highest ('max') voltage."""

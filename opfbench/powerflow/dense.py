@@ -24,7 +24,7 @@ class DenseNewton:
     def mismatch(self, v: np.ndarray, s_sub: np.ndarray) -> np.ndarray:
         """[ΔP at pvpq, ΔQ at pq] p.u. for voltages v (n_bus,) and injections s_sub at pvpq."""
         mis = v[self.pvpq] * np.conj(self.y_rows @ v) - s_sub
-        return np.concatenate([mis.real, mis.imag[len(self.pv):]])
+        return np.concatenate([mis.real, mis.imag[len(self.pv) :]])
 
     def step(self, v: np.ndarray, f: np.ndarray) -> np.ndarray | None:
         """Newton step [ΔVa at pvpq, ΔVm at pq] solving J·dx = −f; None if J is singular."""

@@ -63,14 +63,15 @@ class SparseNewton:
     def mismatch(self, v: np.ndarray, s_sub: np.ndarray) -> np.ndarray:
         """[ΔP at pvpq, ΔQ at pq] p.u. for voltages v (n_bus,) and injections s_sub at pvpq."""
         mis = v[self.pvpq] * np.conj(self.y_rows @ v) - s_sub
-        return np.concatenate([mis.real, mis.imag[len(self.pv):]])
+        return np.concatenate([mis.real, mis.imag[len(self.pv) :]])
 
     def jacobian(self, v: np.ndarray) -> sp.csc_matrix:
         """The polar power-flow Jacobian at v (CSC)."""
         vi, vj = v[self.i], v[self.j]
         yv = self.y * vj
-        ibus = np.bincount(self.i, weights=yv.real, minlength=len(v)) \
-            + 1j * np.bincount(self.i, weights=yv.imag, minlength=len(v))
+        ibus = np.bincount(self.i, weights=yv.real, minlength=len(v)) + 1j * np.bincount(
+            self.i, weights=yv.imag, minlength=len(v)
+        )
         vnorm_j = vj / np.abs(vj)
         # MATPOWER dSbus_dV: dS/dVa = j·diag(V)·conj(diag(I) − Y·diag(V)),
         # dS/dVm = diag(V)·conj(Y·diag(V/|V|)) + conj(diag(I))·diag(V/|V|).

@@ -24,8 +24,16 @@ from urllib.parse import urlsplit
 from opfbench.errors import InputError
 
 CANDIDATES = ("chromium", "chromium-browser", "google-chrome")
-BROWSER_HOSTS = ("accounts.google.com", "update.googleapis.com", "clients2.google.com", "clients2.googleusercontent.com",
-                 "optimizationguide-pa.googleapis.com", "safebrowsing.googleapis.com", "content-autofill.googleapis.com", "www.google.com")
+BROWSER_HOSTS = (
+    "accounts.google.com",
+    "update.googleapis.com",
+    "clients2.google.com",
+    "clients2.googleusercontent.com",
+    "optimizationguide-pa.googleapis.com",
+    "safebrowsing.googleapis.com",
+    "content-autofill.googleapis.com",
+    "www.google.com",
+)
 """Hosts headless Chromium contacts on its own (accounts, component updater, network time;
 Debian's Chromium 150 also opens www.google.com five times with an empty page), whatever page is open; their requests are not the page's (they still hit the refusing proxy)."""
 VIRTUAL_TIME_MS = 20000
@@ -103,19 +111,37 @@ class _Refuse(BaseHTTPRequestHandler):
 
 def _run(binary: str, args: list[str], proxy: _Proxy, profile: str, timeout_s: float) -> str:
     flags = [
-        "--headless=new", "--no-sandbox", "--disable-gpu", "--hide-scrollbars", "--no-first-run", "--no-default-browser-check",
-        "--disable-background-networking", "--disable-component-update", "--disable-sync", "--disable-extensions",
-        "--disable-default-apps", "--disable-domain-reliability", "--no-pings", "--metrics-recording-only",
-        "--disable-dev-shm-usage", "--disable-client-side-phishing-detection", "--safebrowsing-disable-auto-update",
-        "--disable-breakpad", "--disable-component-extensions-with-background-pages", "--password-store=basic",
+        "--headless=new",
+        "--no-sandbox",
+        "--disable-gpu",
+        "--hide-scrollbars",
+        "--no-first-run",
+        "--no-default-browser-check",
+        "--disable-background-networking",
+        "--disable-component-update",
+        "--disable-sync",
+        "--disable-extensions",
+        "--disable-default-apps",
+        "--disable-domain-reliability",
+        "--no-pings",
+        "--metrics-recording-only",
+        "--disable-dev-shm-usage",
+        "--disable-client-side-phishing-detection",
+        "--safebrowsing-disable-auto-update",
+        "--disable-breakpad",
+        "--disable-component-extensions-with-background-pages",
+        "--password-store=basic",
         "--disable-features=OptimizationHints,OptimizationGuideModelDownloading,OptimizationHintsFetching,"
         "OptimizationTargetPrediction,MediaRouter,DialMediaRouteProvider,Translate,AutofillServerCommunication,"
         "CertificateTransparencyComponentUpdater,NetworkTimeServiceQuerying,InterestFeedContentSuggestions,"
         "PrivacySandboxSettings4,AccountConsistency,SignInProfileCreation",
-        "--allow-pre-commit-input", f"--user-data-dir={profile}",
-        f"--proxy-server=http://127.0.0.1:{proxy.server_address[1]}", "--proxy-bypass-list=<-loopback>",
+        "--allow-pre-commit-input",
+        f"--user-data-dir={profile}",
+        f"--proxy-server=http://127.0.0.1:{proxy.server_address[1]}",
+        "--proxy-bypass-list=<-loopback>",
         "--host-resolver-rules=MAP * ~NOTFOUND , EXCLUDE 127.0.0.1",
-        f"--virtual-time-budget={VIRTUAL_TIME_MS}", "--run-all-compositor-stages-before-draw",
+        f"--virtual-time-budget={VIRTUAL_TIME_MS}",
+        "--run-all-compositor-stages-before-draw",
     ]
     done = subprocess.run([binary, *flags, *args], capture_output=True, text=True, timeout=timeout_s, check=False)
     if done.returncode != 0:
@@ -134,6 +160,7 @@ def _with_proxy(fn):
         finally:
             proxy.shutdown()
             proxy.server_close()
+
     return wrapper
 
 
@@ -159,8 +186,16 @@ def check_page(html: str | Path, width: int = 1400, *, proxy: _Proxy, profile: s
     if found is None:
         raise RuntimeError("the probe did not run: the page never finished loading")
     data = json.loads(found.group(1).replace("&quot;", '"').replace("&lt;", "<").replace("&gt;", ">").replace("&amp;", "&"))
-    return PageCheck(data["errors"], data["plots"], data["drawn"], data["sections"], data["resources"], list(proxy.seen),
-                     int(data["height"]), int(data["images"]))
+    return PageCheck(
+        data["errors"],
+        data["plots"],
+        data["drawn"],
+        data["sections"],
+        data["resources"],
+        list(proxy.seen),
+        int(data["height"]),
+        int(data["images"]),
+    )
 
 
 @_with_proxy

@@ -17,12 +17,17 @@ def build_html(inputs: Inputs, price: float | None = None) -> str:
     cost = price_of(inputs, price)
     cases = ", ".join(sorted(str(c) for c in (inputs.manifest or {}).get("config", {}).get("cases", [])))
     subtitle = f"Run folder {inputs.run_dir}" + (f" — case {cases}" if cases else "")
-    return render("report.html.j2", "opfbench benchmark report", subtitle, plots=True,
-                  sections=all_sections(inputs, cost))
+    return render("report.html.j2", "opfbench benchmark report", subtitle, plots=True, sections=all_sections(inputs, cost))
 
 
-def write_report(run_dir: str | Path, forecast_dir: str | Path | None = None, fault_dir: str | Path | None = None,
-                 out: str | Path | None = None, price: float | None = None, year_dir: str | Path | None = None) -> Path:
+def write_report(
+    run_dir: str | Path,
+    forecast_dir: str | Path | None = None,
+    fault_dir: str | Path | None = None,
+    out: str | Path | None = None,
+    price: float | None = None,
+    year_dir: str | Path | None = None,
+) -> Path:
     """Write the report of `run_dir` to `out` (default `run_dir/report.html`), atomically.
 
     `forecast_dir`: a forecast run's folder (default: the committed docs/forecast JSONs);

@@ -53,8 +53,11 @@ def _where(index: tuple) -> str:
 
 def ranking(inputs: Inputs) -> Claim:
     claim = "LFMA < LLMA < no action at every k"
-    na, ll, lf = paper.NIGHT_TABLE["connected"]["no-action"][1], paper.NIGHT_TABLE["connected"]["llma"][1], \
-        paper.NIGHT_TABLE["connected"]["lfma"][1]
+    na, ll, lf = (
+        paper.NIGHT_TABLE["connected"]["no-action"][1],
+        paper.NIGHT_TABLE["connected"]["llma"][1],
+        paper.NIGHT_TABLE["connected"]["lfma"][1],
+    )
     figure = f"LFMA {lf} < LLMA {ll} < no action {na} kWh (night connected)"
     if inputs.summary is None:
         return _missing(claim, figure, inputs, "summary.csv")
@@ -67,8 +70,13 @@ def ranking(inputs: Inputs) -> Claim:
         return Claim(claim, figure, ours, HOLDS, "strict order in every configuration of the run")
     first = e.index[~ok][0]
     w = e.loc[first]
-    return Claim(claim, figure, ours, FAILS, f"not ordered at {_where(first)}: LFMA {w['lfma']:.2f}, "
-                 f"LLMA {w['llma']:.2f}, no action {w['no-action']:.2f} kWh")
+    return Claim(
+        claim,
+        figure,
+        ours,
+        FAILS,
+        f"not ordered at {_where(first)}: LFMA {w['lfma']:.2f}, LLMA {w['llma']:.2f}, no action {w['no-action']:.2f} kWh",
+    )
 
 
 def forecast_savings(inputs: Inputs) -> Claim:
@@ -81,11 +89,18 @@ def forecast_savings(inputs: Inputs) -> Claim:
     if aware.empty:
         return Claim(claim, figure, "—", NA, "the run has no forecast-aware (forecast ≠ off) LLMA/LFMA configuration")
     best = aware.loc[aware["savings_pct"].idxmax()]
-    base = s[(s["forecast"] == "off") & (s["case"] == best["case"]) & (s["strategy"] == best["strategy"])
-             & (s["night_mode"] == best["night_mode"]) & np.isclose(s["k"], best["k"])]
+    base = s[
+        (s["forecast"] == "off")
+        & (s["case"] == best["case"])
+        & (s["strategy"] == best["strategy"])
+        & (s["night_mode"] == best["night_mode"])
+        & np.isclose(s["k"], best["k"])
+    ]
     added = best["savings_pct"] - float(base["savings_pct"].iloc[0]) if len(base) else np.nan
-    ours = (f"best {best['savings_pct']:.1f} % ({best['strategy']}, forecast {best['forecast']}, k={best['k']:g}, "
-            f"night {best['night_mode']}); the forecast itself adds {added:.1f} points")
+    ours = (
+        f"best {best['savings_pct']:.1f} % ({best['strategy']}, forecast {best['forecast']}, k={best['k']:g}, "
+        f"night {best['night_mode']}); the forecast itself adds {added:.1f} points"
+    )
     floor = paper.FORECAST_SAVINGS_PCT - 5.0
     if best["savings_pct"] >= floor:
         return Claim(claim, figure, ours, HOLDS, f"best saving ≥ {floor:g} % (within 5 points of the claimed 30 %)")
@@ -95,14 +110,17 @@ def forecast_savings(inputs: Inputs) -> Claim:
 def night_connected(inputs: Inputs) -> Claim:
     claim = "Keeping PV connected at night cuts losses 4–15 %"
     lo, hi = paper.NIGHT_SAVINGS_PCT
-    own = [100 * (1 - paper.NIGHT_TABLE["connected"][s][1] / paper.NIGHT_TABLE["disconnected"][s][1])
-           for s in ("llma", "lfma", "acopf")]
+    own = [
+        100 * (1 - paper.NIGHT_TABLE["connected"][s][1] / paper.NIGHT_TABLE["disconnected"][s][1])
+        for s in ("llma", "lfma", "acopf")
+    ]
     figure = f"{lo:g}–{hi:g} % (its own table: {min(own):.1f}–{max(own):.1f} %)"
     if inputs.summary is None:
         return _missing(claim, figure, inputs, "summary.csv")
     e = _off(inputs.summary)
     e = e[e["strategy"].isin(["llma", "lfma", "acopf"])].pivot_table(
-        index=["case", "strategy", "k"], columns="night_mode", values="energy_kwh", aggfunc="first")
+        index=["case", "strategy", "k"], columns="night_mode", values="energy_kwh", aggfunc="first"
+    )
     if not {"connected", "disconnected"} <= set(e.columns):
         return Claim(claim, figure, "—", NA, "the run lacks the connected or the disconnected night mode")
     cut = (100 * (1 - e["connected"] / e["disconnected"])).dropna()
@@ -117,9 +135,11 @@ def night_connected(inputs: Inputs) -> Claim:
 
 
 def _beats(inputs: Inputs, opf: str, claim: str) -> Claim:
-    figure = (f"LFMA {paper.NIGHT_TABLE['connected']['lfma'][1]} < OPF {paper.NIGHT_TABLE['connected']['acopf'][1]} kWh "
-              f"(connected), {paper.NIGHT_TABLE['disconnected']['lfma'][1]} < {paper.NIGHT_TABLE['disconnected']['acopf'][1]}"
-              " (disconnected)")
+    figure = (
+        f"LFMA {paper.NIGHT_TABLE['connected']['lfma'][1]} < OPF {paper.NIGHT_TABLE['connected']['acopf'][1]} kWh "
+        f"(connected), {paper.NIGHT_TABLE['disconnected']['lfma'][1]} < {paper.NIGHT_TABLE['disconnected']['acopf'][1]}"
+        " (disconnected)"
+    )
     if inputs.summary is None:
         return _missing(claim, figure, inputs, "summary.csv")
     e = _energy(inputs.summary, ["lfma", opf])
@@ -128,11 +148,19 @@ def _beats(inputs: Inputs, opf: str, claim: str) -> Claim:
     e = e.dropna()
     wins = e["lfma"] < e[opf] - TOL_KWH
     diff = 100 * (e["lfma"] / e[opf] - 1)
-    ours = f"LFMA lower in {int(wins.sum())} of {len(wins)} configurations (LFMA vs {opf}: {diff.min():+.1f} … {diff.max():+.1f} %)"
+    ours = (
+        f"LFMA lower in {int(wins.sum())} of {len(wins)} configurations (LFMA vs {opf}: {diff.min():+.1f} … {diff.max():+.1f} %)"
+    )
     if wins.all():
         return Claim(claim, figure, ours, HOLDS, f"LFMA uses less energy than {opf} in every configuration")
-    return Claim(claim, figure, ours, FAILS, f"{opf} uses less or equal energy in {int((~wins).sum())} configuration(s)"
-                 + ("; a converged OPF under the same limits cannot lose to a feasible local rule" if opf == "acopf" else ""))
+    return Claim(
+        claim,
+        figure,
+        ours,
+        FAILS,
+        f"{opf} uses less or equal energy in {int((~wins).sum())} configuration(s)"
+        + ("; a converged OPF under the same limits cannot lose to a feasible local rule" if opf == "acopf" else ""),
+    )
 
 
 def lfma_vs_opf(inputs: Inputs) -> Claim:
@@ -140,8 +168,11 @@ def lfma_vs_opf(inputs: Inputs) -> Claim:
 
 
 def lfma_vs_paper_opf(inputs: Inputs) -> Claim:
-    return _beats(inputs, "acopf-paper", "LFMA beats the centralized OPF under the paper's setup (acopf-paper: "
-                  "slack may not export, failure → no action)")
+    return _beats(
+        inputs,
+        "acopf-paper",
+        "LFMA beats the centralized OPF under the paper's setup (acopf-paper: slack may not export, failure → no action)",
+    )
 
 
 def best_forecaster(inputs: Inputs) -> Claim:
@@ -196,8 +227,10 @@ def larger_k_faster(inputs: Inputs) -> Claim:
     if rec is None:
         return _missing(claim, figure, inputs, "fault.parquet")
     rec = rec[rec["strategy"] != "no-action"].dropna(subset=["recovery_ms"])
-    groups = [g.sort_values("k")["recovery_ms"].to_numpy() for _, g in rec.groupby(["case", "fault_bus", "strategy",
-                                                                                    "forecast", "variant"])]
+    groups = [
+        g.sort_values("k")["recovery_ms"].to_numpy()
+        for _, g in rec.groupby(["case", "fault_bus", "strategy", "forecast", "variant"])
+    ]
     groups = [g for g in groups if len(g) > 1]
     if not groups:
         return Claim(claim, figure, "—", NA, "the fault study has fewer than two k per (fault bus, strategy)")
@@ -225,8 +258,16 @@ def voltage_band(inputs: Inputs) -> Claim:
 
 
 CLAIMS: tuple[Callable[[Inputs], Claim], ...] = (
-    ranking, forecast_savings, night_connected, lfma_vs_opf, lfma_vs_paper_opf, best_forecaster,
-    lambda inp: recovery_added(inp, "llma"), lambda inp: recovery_added(inp, "lfma"), larger_k_faster, voltage_band,
+    ranking,
+    forecast_savings,
+    night_connected,
+    lfma_vs_opf,
+    lfma_vs_paper_opf,
+    best_forecaster,
+    lambda inp: recovery_added(inp, "llma"),
+    lambda inp: recovery_added(inp, "lfma"),
+    larger_k_faster,
+    voltage_band,
 )
 
 

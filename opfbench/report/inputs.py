@@ -53,8 +53,23 @@ def _json(path: Path) -> dict | None:
 
 
 TRACE_BUS = 27  # the fault traces plotted: at the paper's DFIG
-STEP_COLUMNS = ("case", "strategy", "k", "night_mode", "forecast", "time", "status", "losses_kw", "vmin_pu", "vmax_pu",
-                "solver_ms", "iterations", "certified_by", "fallback", "solver_status")
+STEP_COLUMNS = (
+    "case",
+    "strategy",
+    "k",
+    "night_mode",
+    "forecast",
+    "time",
+    "status",
+    "losses_kw",
+    "vmin_pu",
+    "vmax_pu",
+    "solver_ms",
+    "iterations",
+    "certified_by",
+    "fallback",
+    "solver_status",
+)
 """The columns of steps.parquet the report uses."""
 
 
@@ -79,8 +94,9 @@ def _filtered(path: Path, columns: tuple[str, ...] | None, filters: list | None)
     # instead of 0.2-0.4 s), decoded once filtered
     text = [f.name for f in schema if f.name in wanted and pa.types.is_string(f.type)]
     table = pq.read_table(path, columns=wanted, filters=filters, read_dictionary=text)
-    table = table.cast(pa.schema([pa.field(f.name, pa.string()) if f.name in text else f for f in table.schema],
-                                 metadata=table.schema.metadata))
+    table = table.cast(
+        pa.schema([pa.field(f.name, pa.string()) if f.name in text else f for f in table.schema], metadata=table.schema.metadata)
+    )
     frame = table.to_pandas(types_mapper={pa.string(): pd.StringDtype("pyarrow")}.get)
     return frame if len(frame) else None
 
@@ -108,8 +124,12 @@ def _summary(path: Path) -> pd.DataFrame | None:
     return summary if len(summary) else None
 
 
-def load_inputs(run_dir: str | Path, forecast_dir: str | Path | None = None,
-                fault_dir: str | Path | None = None, year_dir: str | Path | None = None) -> Inputs:
+def load_inputs(
+    run_dir: str | Path,
+    forecast_dir: str | Path | None = None,
+    fault_dir: str | Path | None = None,
+    year_dir: str | Path | None = None,
+) -> Inputs:
     """Read what exists; record how to produce what does not."""
     run = Path(run_dir)
     inp = Inputs(run_dir=run)
@@ -134,8 +154,11 @@ def load_inputs(run_dir: str | Path, forecast_dir: str | Path | None = None,
     if fault_dir is not None:
         inp.fault_dir = Path(fault_dir)
         inp.fault = _filtered(inp.fault_dir / "fault.parquet", None, None)
-        inp.traces = _filtered(inp.fault_dir / "traces.parquet", None,  # plotted: one bus, forecast off
-                               [("bus", "==", TRACE_BUS), ("forecast", "==", "off")])
+        inp.traces = _filtered(
+            inp.fault_dir / "traces.parquet",
+            None,  # plotted: one bus, forecast off
+            [("bus", "==", TRACE_BUS), ("forecast", "==", "off")],
+        )
         inp.fault_manifest = _json(inp.fault_dir / "manifest.json")
     if inp.fault is None:
         inp.missing["fault.parquet"] = FAULT_COMMAND

@@ -45,8 +45,13 @@ class Section:
 
 @lru_cache(maxsize=1)
 def environment() -> jinja2.Environment:
-    return jinja2.Environment(loader=jinja2.PackageLoader("opfbench.report", "templates"), autoescape=True,
-                              undefined=jinja2.StrictUndefined, trim_blocks=True, lstrip_blocks=True)
+    return jinja2.Environment(
+        loader=jinja2.PackageLoader("opfbench.report", "templates"),
+        autoescape=True,
+        undefined=jinja2.StrictUndefined,
+        trim_blocks=True,
+        lstrip_blocks=True,
+    )
 
 
 @lru_cache(maxsize=1)
@@ -59,9 +64,18 @@ def plotly_js() -> str:
 
 def render(template: str, title: str, subtitle: str = "", plots: bool = False, **context: object) -> str:
     """Render `template` (extends page.html.j2) into a complete, self-contained page."""
-    return environment().get_template(template).render(
-        title=title, subtitle=subtitle, version=__version__, plotly_js=plotly_js() if plots else "",
-        plot_template=plot_template() if plots else "", **context)
+    return (
+        environment()
+        .get_template(template)
+        .render(
+            title=title,
+            subtitle=subtitle,
+            version=__version__,
+            plotly_js=plotly_js() if plots else "",
+            plot_template=plot_template() if plots else "",
+            **context,
+        )
+    )
 
 
 def _digits(column: str) -> int:
@@ -84,10 +98,12 @@ def table_html(frame: pd.DataFrame) -> str:
     right-aligned and formatted per column (p.u. 4 decimals, MSE 5, else 2), NaN as "—"."""
     numeric = [pd.api.types.is_numeric_dtype(frame[c]) and not pd.api.types.is_bool_dtype(frame[c]) for c in frame.columns]
     digits = [_digits(str(c)) for c in frame.columns]
-    rows = [[_cell(v, d) for v, d in zip(row, digits, strict=True)]
-            for row in frame.itertuples(index=False, name=None)]
-    return environment().get_template("table.html.j2").render(
-        columns=list(zip([str(c) for c in frame.columns], numeric, strict=True)), rows=rows)
+    rows = [[_cell(v, d) for v, d in zip(row, digits, strict=True)] for row in frame.itertuples(index=False, name=None)]
+    return (
+        environment()
+        .get_template("table.html.j2")
+        .render(columns=list(zip([str(c) for c in frame.columns], numeric, strict=True)), rows=rows)
+    )
 
 
 def table(frame: pd.DataFrame, text: str = "", collapse_over: int = 40) -> Block:

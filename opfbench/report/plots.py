@@ -56,8 +56,7 @@ def _subplots(**options: object) -> go.Figure:
 
 
 def plot_json(pid: str, title: str, fig: go.Figure, xtitle: str, ytitle: str, height: int = HEIGHT) -> Plot:
-    fig.update_layout(height=height, title=escape(title), margin=dict(l=60, r=20, t=50, b=50),
-                      legend=dict(orientation="v"))
+    fig.update_layout(height=height, title=escape(title), margin=dict(l=60, r=20, t=50, b=50), legend=dict(orientation="v"))
     if xtitle:
         fig.update_xaxes(title_text=xtitle)
     if ytitle:
@@ -98,8 +97,15 @@ def losses_day(steps: pd.DataFrame) -> list[Plot]:
         for strategy in order(sub[["strategy"]].drop_duplicates())["strategy"]:
             d = _decimate(sub[sub["strategy"] == strategy].sort_values("time"), "losses_kw")
             fig.add_scatter(x=d["time"], y=d["losses_kw"], mode="lines", name=escape(strategy))
-        out.append(plot_json(f"losses-day-{i}", f"{case}: losses through the day (k={k:g}, night connected, forecast off)",
-                         fig, "time", "losses (kW)"))
+        out.append(
+            plot_json(
+                f"losses-day-{i}",
+                f"{case}: losses through the day (k={k:g}, night connected, forecast off)",
+                fig,
+                "time",
+                "losses (kW)",
+            )
+        )
     return out
 
 
@@ -111,10 +117,22 @@ def energy_vs_k(summary: pd.DataFrame, pid: str = "energy-k", period: str = "") 
         for (strategy, forecast), grp in order(sub).groupby(["strategy", "forecast"], sort=False):
             grp = grp.sort_values("k")
             name = strategy if forecast == "off" else f"{strategy} (forecast {forecast})"
-            fig.add_scatter(x=grp["k"], y=grp["energy_kwh"], mode="lines+markers", name=escape(name),
-                            line=dict(dash="solid" if forecast == "off" else "dot"))
-        out.append(plot_json(f"{pid}-{i}", f"{case}: energy losses vs reserve k{period} (night connected)", fig,
-                         "reserve coefficient k", "energy losses (kWh)"))
+            fig.add_scatter(
+                x=grp["k"],
+                y=grp["energy_kwh"],
+                mode="lines+markers",
+                name=escape(name),
+                line=dict(dash="solid" if forecast == "off" else "dot"),
+            )
+        out.append(
+            plot_json(
+                f"{pid}-{i}",
+                f"{case}: energy losses vs reserve k{period} (night connected)",
+                fig,
+                "reserve coefficient k",
+                "energy losses (kWh)",
+            )
+        )
     return out
 
 
@@ -126,18 +144,36 @@ def der_q_day(der_q: pd.DataFrame) -> list[Plot]:
         if not strategies:
             continue
         buses = sorted(sub["bus"].unique())
-        fig = _subplots(rows=len(strategies), cols=1, shared_xaxes=True, subplot_titles=[escape(s) for s in strategies],
-                        vertical_spacing=0.06)
+        fig = _subplots(
+            rows=len(strategies), cols=1, shared_xaxes=True, subplot_titles=[escape(s) for s in strategies], vertical_spacing=0.06
+        )
         for row, strategy in enumerate(strategies, start=1):
             for bus, grp in sub[sub["strategy"] == strategy].groupby("bus"):
                 d = _decimate(grp.sort_values("time"), "q_mvar")
                 kind = escape(str(grp["kind"].iloc[0]))
                 color = _COLORS[buses.index(bus) % len(_COLORS)]  # a DER keeps its colour in every panel
-                fig.add_scatter(x=d["time"], y=d["q_mvar"], mode="lines", name=f"bus {bus} ({kind})",
-                                line=dict(color=color), legendgroup=str(bus), showlegend=row == 1, row=row, col=1)
+                fig.add_scatter(
+                    x=d["time"],
+                    y=d["q_mvar"],
+                    mode="lines",
+                    name=f"bus {bus} ({kind})",
+                    line=dict(color=color),
+                    legendgroup=str(bus),
+                    showlegend=row == 1,
+                    row=row,
+                    col=1,
+                )
             fig.update_yaxes(title_text="Q (MVAr)", row=row, col=1)
-        out.append(plot_json(f"der-q-{i}", f"{case}: DER Q setpoints through the day (k={k:g}, night connected, "
-                         "forecast off)", fig, "", "", height=max(HEIGHT, 220 * len(strategies))))
+        out.append(
+            plot_json(
+                f"der-q-{i}",
+                f"{case}: DER Q setpoints through the day (k={k:g}, night connected, forecast off)",
+                fig,
+                "",
+                "",
+                height=max(HEIGHT, 220 * len(strategies)),
+            )
+        )
     return out
 
 
@@ -150,15 +186,35 @@ def voltage_envelope(steps: pd.DataFrame, limits: dict[str, tuple[float, float]]
             grp = sub[sub["strategy"] == strategy].sort_values("time")
             lo, hi = _decimate(grp, "vmin_pu"), _decimate(grp, "vmax_pu")
             color = _COLORS[j % len(_COLORS)]
-            fig.add_scatter(x=lo["time"], y=lo["vmin_pu"], mode="lines", name=f"{escape(strategy)} min",
-                            line=dict(color=color), legendgroup=escape(strategy))
-            fig.add_scatter(x=hi["time"], y=hi["vmax_pu"], mode="lines", name=f"{escape(strategy)} max",
-                            line=dict(color=color, dash="dot"), legendgroup=escape(strategy))
+            fig.add_scatter(
+                x=lo["time"],
+                y=lo["vmin_pu"],
+                mode="lines",
+                name=f"{escape(strategy)} min",
+                line=dict(color=color),
+                legendgroup=escape(strategy),
+            )
+            fig.add_scatter(
+                x=hi["time"],
+                y=hi["vmax_pu"],
+                mode="lines",
+                name=f"{escape(strategy)} max",
+                line=dict(color=color, dash="dot"),
+                legendgroup=escape(strategy),
+            )
         if case in limits:
             for v in limits[case]:
                 fig.add_hline(y=v, line=dict(color="#b00", dash="dash", width=1))
-        out.append(plot_json(f"voltage-{i}", f"{case}: voltage envelope through the day (k={k:g}, night connected, "
-                         "forecast off; dashed red: the case's limits)", fig, "time", "|V| (p.u.)"))
+        out.append(
+            plot_json(
+                f"voltage-{i}",
+                f"{case}: voltage envelope through the day (k={k:g}, night connected, "
+                "forecast off; dashed red: the case's limits)",
+                fig,
+                "time",
+                "|V| (p.u.)",
+            )
+        )
     return out
 
 
@@ -172,10 +228,23 @@ def gap_vs_k(summary: pd.DataFrame) -> list[Plot]:
         fig = _figure()
         for strategy, grp in order(sub).groupby("strategy", sort=False):
             grp = grp.sort_values("k")
-            fig.add_scatter(x=grp["k"], y=grp["gap_pct"], mode="lines+markers", name=escape(strategy),
-                            customdata=grp["gap_kwh"], hovertemplate="k=%{x}<br>gap %{y:.2f} %<br>%{customdata:.2f} kWh")
-        out.append(plot_json(f"gap-{i}", f"{case}: gap to the SOCP lower bound (night connected, forecast off)", fig,
-                         "reserve coefficient k", "gap to the bound (%)"))
+            fig.add_scatter(
+                x=grp["k"],
+                y=grp["gap_pct"],
+                mode="lines+markers",
+                name=escape(strategy),
+                customdata=grp["gap_kwh"],
+                hovertemplate="k=%{x}<br>gap %{y:.2f} %<br>%{customdata:.2f} kWh",
+            )
+        out.append(
+            plot_json(
+                f"gap-{i}",
+                f"{case}: gap to the SOCP lower bound (night connected, forecast off)",
+                fig,
+                "reserve coefficient k",
+                "gap to the bound (%)",
+            )
+        )
     return out
 
 
@@ -189,8 +258,15 @@ def night_bars(summary: pd.DataFrame) -> list[Plot]:
         for mode, grp in sub.groupby("night_mode", sort=True):
             fig.add_bar(x=[escape(s) for s in grp["strategy"]], y=grp["energy_kwh"], name=f"PV {escape(mode)} at night")
         fig.update_layout(barmode="group")
-        out.append(plot_json(f"night-{i}", f"{case}: energy losses per night mode (k={k:g}, forecast off)", fig,
-                         "strategy", "energy losses (kWh)"))
+        out.append(
+            plot_json(
+                f"night-{i}",
+                f"{case}: energy losses per night mode (k={k:g}, forecast off)",
+                fig,
+                "strategy",
+                "energy losses (kWh)",
+            )
+        )
     return out
 
 
@@ -204,9 +280,15 @@ def solve_times(steps: pd.DataFrame) -> list[Plot]:
         ms = grp["solver_ms"].to_numpy(dtype=float)
         q1, median, q3 = np.percentile(ms, [25, 50, 75])
         whisker = 1.5 * (q3 - q1)
-        fig.add_box(name=escape(f"{strategy} ({case})"), q1=[q1], median=[median], q3=[q3],
-                    lowerfence=[ms[ms >= q1 - whisker].min()], upperfence=[ms[ms <= q3 + whisker].max()],
-                    x=[escape(f"{strategy} ({case})")])
+        fig.add_box(
+            name=escape(f"{strategy} ({case})"),
+            q1=[q1],
+            median=[median],
+            q3=[q3],
+            lowerfence=[ms[ms >= q1 - whisker].min()],
+            upperfence=[ms[ms <= q3 + whisker].max()],
+            x=[escape(f"{strategy} ({case})")],
+        )
     return [plot_json("solve-times", "Solve time per step and formulation", fig, "", "solve time (ms)")]
 
 
@@ -218,11 +300,21 @@ def recovery_per_bus(rec: pd.DataFrame) -> list[Plot]:
     sub = order(sub[np.isclose(sub["k"], k) & (sub["forecast"] == "off")])
     fig = _figure()
     for strategy, grp in sub.groupby("strategy", sort=False):
-        fig.add_bar(x=[escape(f"{c} bus {b}") for c, b in zip(grp["case"], grp["fault_bus"], strict=True)],
-                    y=grp["recovery_ms"], name=escape(strategy))
+        fig.add_bar(
+            x=[escape(f"{c} bus {b}") for c, b in zip(grp["case"], grp["fault_bus"], strict=True)],
+            y=grp["recovery_ms"],
+            name=escape(strategy),
+        )
     fig.update_layout(barmode="group")
-    return [plot_json("recovery-bus", f"Recovery time per fault bus (k={k:g}, forecast off, reference model)", fig,
-                  "fault bus", "recovery time (ms)")]
+    return [
+        plot_json(
+            "recovery-bus",
+            f"Recovery time per fault bus (k={k:g}, forecast off, reference model)",
+            fig,
+            "fault bus",
+            "recovery time (ms)",
+        )
+    ]
 
 
 def recovery_vs_k(rec: pd.DataFrame) -> list[Plot]:
@@ -233,10 +325,22 @@ def recovery_vs_k(rec: pd.DataFrame) -> list[Plot]:
     fig = _figure()
     for (case, bus, strategy), grp in order(sub).groupby(["case", "fault_bus", "strategy"], sort=False):
         grp = grp.sort_values("k")
-        fig.add_scatter(x=grp["k"], y=grp["recovery_ms"], mode="lines+markers", name=escape(f"{strategy}, {case} fault at {bus}"),
-                        legendgroup=escape(strategy))
-    return [plot_json("recovery-k", "Recovery time vs reserve k (forecast off, reference model)", fig,
-                  "reserve coefficient k", "recovery time (ms)")]
+        fig.add_scatter(
+            x=grp["k"],
+            y=grp["recovery_ms"],
+            mode="lines+markers",
+            name=escape(f"{strategy}, {case} fault at {bus}"),
+            legendgroup=escape(strategy),
+        )
+    return [
+        plot_json(
+            "recovery-k",
+            "Recovery time vs reserve k (forecast off, reference model)",
+            fig,
+            "reserve coefficient k",
+            "recovery time (ms)",
+        )
+    ]
 
 
 def fault_traces(traces: pd.DataFrame, bus: int = TRACE_BUS) -> list[Plot]:
@@ -257,13 +361,38 @@ def fault_traces(traces: pd.DataFrame, bus: int = TRACE_BUS) -> list[Plot]:
     for j, (strategy, grp) in enumerate(order(sub).groupby("strategy", sort=False)):
         grp = grp.sort_values("t_s")
         color = _COLORS[j % len(_COLORS)]
-        fig.add_scatter(x=grp["t_s"], y=grp["v_pu"], mode="lines", name=escape(strategy), line=dict(color=color),
-                        legendgroup=escape(strategy), row=1, col=1)
-        fig.add_scatter(x=grp["t_s"], y=grp["q_mvar"], mode="lines", name=escape(strategy), line=dict(color=color),
-                        legendgroup=escape(strategy), showlegend=False, row=2, col=1)
+        fig.add_scatter(
+            x=grp["t_s"],
+            y=grp["v_pu"],
+            mode="lines",
+            name=escape(strategy),
+            line=dict(color=color),
+            legendgroup=escape(strategy),
+            row=1,
+            col=1,
+        )
+        fig.add_scatter(
+            x=grp["t_s"],
+            y=grp["q_mvar"],
+            mode="lines",
+            name=escape(strategy),
+            line=dict(color=color),
+            legendgroup=escape(strategy),
+            showlegend=False,
+            row=2,
+            col=1,
+        )
     fig.update_xaxes(title_text="time (s)", row=2, col=1)
-    return [plot_json("fault-traces", f"{case}: voltage and Q at bus {bus}, fault at bus {fault_bus} (k={k:g}, forecast off)",
-                  fig, "", "", height=2 * HEIGHT)]
+    return [
+        plot_json(
+            "fault-traces",
+            f"{case}: voltage and Q at bus {bus}, fault at bus {fault_bus} (k={k:g}, forecast off)",
+            fig,
+            "",
+            "",
+            height=2 * HEIGHT,
+        )
+    ]
 
 
 _COLORS = ("#1f77b4", "#ff7f0e", "#2ca02c", "#d62728", "#9467bd", "#8c564b", "#e377c2", "#7f7f7f")

@@ -1,6 +1,6 @@
 """Full-page screenshot of a report in headless Chromium (the README's docs/report.png):
 
-    python -m opfbench.report.screenshot reports/run/report.html docs/report.png [--width 1400]
+python -m opfbench.report.screenshot reports/run/report.html docs/report.png [--width 1400]
 """
 
 from __future__ import annotations

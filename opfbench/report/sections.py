@@ -15,7 +15,6 @@ if TYPE_CHECKING:
     import pandas as pd
 
 
-
 def _seconds(value: object) -> str:
     return f"{float(value):.1f} s" if isinstance(value, (int, float)) else "not recorded"
 
@@ -37,27 +36,37 @@ def metadata(inputs: Inputs, price: tuple[float, str, str]) -> Section:
     versions = ", ".join(f"{k} {v}" for k, v in (m.get("versions") or {}).items())
     timings, machine = m.get("timings") or {}, m.get("machine") or {}
     cases = "; ".join(
-        f"{name}: {c.get('buses')} buses, DER " + ", ".join(f"{d.get('kind')} at bus {d.get('bus')} ({d.get('rating_mw')} MW)"
-                                                            for d in c.get("ders", []))
+        f"{name}: {c.get('buses')} buses, DER "
+        + ", ".join(f"{d.get('kind')} at bus {d.get('bus')} ({d.get('rating_mw')} MW)" for d in c.get("ders", []))
         + f", limits [{c.get('vmin_pu')}, {c.get('vmax_pu')}] p.u."
-        for name, c in (m.get("cases") or {}).items())
+        for name, c in (m.get("cases") or {}).items()
+    )
     items = [
         ("command", " ".join(str(a) for a in m.get("command") or [])),
         ("run folder", str(inputs.run_dir)),
         ("created (UTC)", str(m.get("created_utc"))),
         ("cases", cases or ", ".join(cfg.get("cases", []))),
-        ("period", f"{cfg.get('period')}: {period.get('start')} → {period.get('end')}, {period.get('steps')} steps "
-                   f"of {cfg.get('step_minutes')} min"),
-        ("grid", f"strategies {', '.join(cfg.get('strategies', []))}; k {', '.join(f'{k:g}' for k in cfg.get('ks', []))}; "
-                 f"night modes {', '.join(cfg.get('night_modes', []))} (night {cfg.get('night')}); "
-                 f"forecast {', '.join(cfg.get('forecast', []))}"),
+        (
+            "period",
+            f"{cfg.get('period')}: {period.get('start')} → {period.get('end')}, {period.get('steps')} steps "
+            f"of {cfg.get('step_minutes')} min",
+        ),
+        (
+            "grid",
+            f"strategies {', '.join(cfg.get('strategies', []))}; k {', '.join(f'{k:g}' for k in cfg.get('ks', []))}; "
+            f"night modes {', '.join(cfg.get('night_modes', []))} (night {cfg.get('night')}); "
+            f"forecast {', '.join(cfg.get('forecast', []))}",
+        ),
         ("data sources", "; ".join(m.get("data_sources") or [])),
         ("energy price", f"{price[0]:g} {price[1]}/kWh — {price[2]}"),
         ("opfbench", f"{m.get('opfbench_version')} (git commit {m.get('git_commit') or 'not available'})"),
         ("versions", versions),
         ("machine", f"{machine.get('cores')} cores, {machine.get('platform')}"),
-        ("wall time", f"{_seconds(timings.get('wall_s'))} total, {timings.get('workers')} workers, "
-                      f"scheduler {timings.get('scheduler') or 'local'}"),
+        (
+            "wall time",
+            f"{_seconds(timings.get('wall_s'))} total, {timings.get('workers')} workers, "
+            f"scheduler {timings.get('scheduler') or 'local'}",
+        ),
     ]
     sec.add(Block("meta", items=items))
     if inputs.summary is not None:
@@ -68,23 +77,37 @@ def metadata(inputs: Inputs, price: tuple[float, str, str]) -> Section:
 def _energy_tables(s: pd.DataFrame, price: tuple[float, str, str], over: str = "") -> list[Block]:
     """Energy per strategy × k for each night mode, then savings % and money saved per year
     vs no action with PV connected at night; `over` qualifies the period (e.g. " over the year")."""
-    out = [table(tables.energy_pivot(s, mode), f"Energy losses{over} (kWh) per strategy and k, PV {mode} at night",
-                 collapse_over=60)
-           for mode in ("connected", "disconnected", "connected-q") if mode in set(s["night_mode"])]
-    out.append(table(tables.energy_pivot(s, tables.REFERENCE_NIGHT, "savings_pct"),
-                     f"Savings vs no action{over} (%), PV connected at night", collapse_over=60))
+    out = [
+        table(tables.energy_pivot(s, mode), f"Energy losses{over} (kWh) per strategy and k, PV {mode} at night", collapse_over=60)
+        for mode in ("connected", "disconnected", "connected-q")
+        if mode in set(s["night_mode"])
+    ]
+    out.append(
+        table(
+            tables.energy_pivot(s, tables.REFERENCE_NIGHT, "savings_pct"),
+            f"Savings vs no action{over} (%), PV connected at night",
+            collapse_over=60,
+        )
+    )
     money = tables.losses(s, price[0])
-    out.append(table(tables.energy_pivot(money, tables.REFERENCE_NIGHT, "money_per_year"),
-                     f"Money saved per year vs no action ({price[1]} at {price[0]:g}/kWh), PV connected at night",
-                     collapse_over=60))
+    out.append(
+        table(
+            tables.energy_pivot(money, tables.REFERENCE_NIGHT, "money_per_year"),
+            f"Money saved per year vs no action ({price[1]} at {price[0]:g}/kWh), PV connected at night",
+            collapse_over=60,
+        )
+    )
     return out
 
 
 def losses(inputs: Inputs, price: tuple[float, str, str]) -> Section:
-    sec = Section("losses", "Losses and savings",
-                  f"Average losses (kW), energy (kWh), savings vs no action (same case, k and night mode, forecast off) and "
-                  f"the money they save at {price[0]:g} {price[1]}/kWh ({price[2]}); per year = the run's daily "
-                  f"savings × 365.")
+    sec = Section(
+        "losses",
+        "Losses and savings",
+        f"Average losses (kW), energy (kWh), savings vs no action (same case, k and night mode, forecast off) and "
+        f"the money they save at {price[0]:g} {price[1]}/kWh ({price[2]}); per year = the run's daily "
+        f"savings × 365.",
+    )
     if inputs.summary is None:
         return sec.add(*_missing(inputs, "summary.csv"))
     s = inputs.summary
@@ -103,60 +126,101 @@ def losses(inputs: Inputs, price: tuple[float, str, str]) -> Section:
 
 
 def convergence(inputs: Inputs) -> Section:
-    sec = Section("convergence", "Convergence of the formulations",
-                  "Per formulation and k: steps of each status (ok; fallback-cold / fallback-socp / fallback-no-action: "
-                  "IPOPT failed, a fallback point was used; infeasible / solver-failed: no feasible point found, no "
-                  "action applied; pf-diverged: the setpoints' power flow did not converge).")
+    sec = Section(
+        "convergence",
+        "Convergence of the formulations",
+        "Per formulation and k: steps of each status (ok; fallback-cold / fallback-socp / fallback-no-action: "
+        "IPOPT failed, a fallback point was used; infeasible / solver-failed: no feasible point found, no "
+        "action applied; pf-diverged: the setpoints' power flow did not converge).",
+    )
     if inputs.steps is None:
         return sec.add(*_missing(inputs, "steps.parquet"))
     conv = tables.convergence(inputs.steps)
     if conv.empty:
         return sec.add(Block("note", text="The run has no formulation (acopf, acopf-paper, socp)."))
     solver = (inputs.manifest or {}).get("config", {}).get("acopf_solver", "auto")
-    sec.add(Block("note", text=(
-        "AC OPF solver 'auto': where the SOCP relaxation's point is AC-feasible and its losses lie within 1e-6 of "
-        "the relaxation's lower bound it is the certified AC optimum and IPOPT is not run; IPOPT solves the other "
-        "steps. IPOPT's own failure rate on every step (the paper's question): opfbench run --acopf-solver ipopt."
-        if solver == "auto" else
-        "AC OPF solver 'ipopt': IPOPT solved every step of acopf and acopf-paper (the paper's question: how often "
-        "does a nonlinear OPF solver fail?).")))
+    sec.add(
+        Block(
+            "note",
+            text=(
+                "AC OPF solver 'auto': where the SOCP relaxation's point is AC-feasible and its losses lie within 1e-6 of "
+                "the relaxation's lower bound it is the certified AC optimum and IPOPT is not run; IPOPT solves the other "
+                "steps. IPOPT's own failure rate on every step (the paper's question): opfbench run --acopf-solver ipopt."
+                if solver == "auto"
+                else "AC OPF solver 'ipopt': IPOPT solved every step of acopf and acopf-paper (the paper's question: how often "
+                "does a nonlinear OPF solver fail?)."
+            ),
+        )
+    )
     sec.add(table(conv, "Steps per status"))
     sec.add(table(tables.failure_reasons(inputs.steps), "Steps not ok: status, solver return status and fallback used"))
-    sec.add(table(tables.solver_stats(inputs.steps), "Solver iterations and solve times (ms): IPOPT for acopf/acopf-paper (0 iterations where the SOCP certified the step), Clarabel for socp"))
+    sec.add(
+        table(
+            tables.solver_stats(inputs.steps),
+            "Solver iterations and solve times (ms): IPOPT for acopf/acopf-paper (0 iterations where the SOCP certified the step), Clarabel for socp",
+        )
+    )
     sec.blocks += _plots(plots.solve_times(inputs.steps))
     if inputs.summary is not None:
         setup = tables.paper_setup(inputs.summary, inputs.steps)
         sec.add(Block("heading", text="The paper's OPF setup (acopf-paper)"))
         if setup.empty:
-            sec.add(Block("note", text="The run has no acopf-paper configuration: run opfbench run with the default "
-                                       "strategies (or --strategies ... acopf-paper)."))
+            sec.add(
+                Block(
+                    "note",
+                    text="The run has no acopf-paper configuration: run opfbench run with the default "
+                    "strategies (or --strategies ... acopf-paper).",
+                )
+            )
         else:
-            sec.add(Block("note", text="acopf-paper: the slack may not export and a failed solve falls back to no action, "
-                                       "as in the paper; its energy beside our AC OPF (fallback chain) and LFMA."))
+            sec.add(
+                Block(
+                    "note",
+                    text="acopf-paper: the slack may not export and a failed solve falls back to no action, "
+                    "as in the paper; its energy beside our AC OPF (fallback chain) and LFMA.",
+                )
+            )
             sec.add(table(setup))
     return sec
 
 
 def year(inputs: Inputs, price: tuple[float, str, str]) -> Section:
-    sec = Section("year", "A year (2016 at 15 min)",
-                  "The whole grid over the year 2016 at SimBench's native 15 min: energy per strategy and k, savings vs "
-                  "no action, and what the run cost (wall time, peak memory).")
+    sec = Section(
+        "year",
+        "A year (2016 at 15 min)",
+        "The whole grid over the year 2016 at SimBench's native 15 min: energy per strategy and k, savings vs "
+        "no action, and what the run cost (wall time, peak memory).",
+    )
     if (inputs.manifest or {}).get("config", {}).get("period") == "year":
         return sec.add(Block("note", text="This run is the year run: the sections above show it."))
     if inputs.year_summary is None or inputs.year_manifest is None:
         return sec.add(*_missing(inputs, "year run"))
     m, s = inputs.year_manifest, inputs.year_summary
     period, timings = m.get("period", {}), m.get("timings") or {}
-    sec.add(Block("meta", items=[
-        ("run folder", f"{inputs.year_dir} (created {m.get('created_utc')}, opfbench {m.get('opfbench_version')})"),
-        ("command", " ".join(str(a) for a in m.get("command") or [])),
-        ("period", f"{period.get('start')} → {period.get('end')}, {period.get('steps')} steps of "
-                   f"{m.get('config', {}).get('step_minutes')} min; {len(m.get('tasks', []))} tasks"),
-        ("wall time", f"{_seconds(timings.get('wall_s'))} on {timings.get('workers')} worker process(es) "
-                      f"({(m.get('machine') or {}).get('cores')} cores)"),
-        ("peak memory", f"{timings.get('peak_rss_mb', float('nan')):.0f} MB (main process), "
-                        f"{timings.get('worker_peak_rss_mb', float('nan')):.0f} MB (largest worker process)"),
-    ]))
+    sec.add(
+        Block(
+            "meta",
+            items=[
+                ("run folder", f"{inputs.year_dir} (created {m.get('created_utc')}, opfbench {m.get('opfbench_version')})"),
+                ("command", " ".join(str(a) for a in m.get("command") or [])),
+                (
+                    "period",
+                    f"{period.get('start')} → {period.get('end')}, {period.get('steps')} steps of "
+                    f"{m.get('config', {}).get('step_minutes')} min; {len(m.get('tasks', []))} tasks",
+                ),
+                (
+                    "wall time",
+                    f"{_seconds(timings.get('wall_s'))} on {timings.get('workers')} worker process(es) "
+                    f"({(m.get('machine') or {}).get('cores')} cores)",
+                ),
+                (
+                    "peak memory",
+                    f"{timings.get('peak_rss_mb', float('nan')):.0f} MB (main process), "
+                    f"{timings.get('worker_peak_rss_mb', float('nan')):.0f} MB (largest worker process)",
+                ),
+            ],
+        )
+    )
     sec.blocks += _energy_tables(s, price, " over the year")
     sec.add(table(tables.convergence_summary(s), "Steps not ok over the year per formulation and k (all night modes)"))
     sec.blocks += _plots(plots.energy_vs_k(s, "year-energy-k", " over the year"))
@@ -164,20 +228,32 @@ def year(inputs: Inputs, price: tuple[float, str, str]) -> Section:
 
 
 def night(inputs: Inputs) -> Section:
-    sec = Section("night", "Night hours",
-                  "PV inverters connected vs disconnected at night, and connected-q: connected with the S-limited "
-                  "capability at night (Q without the power-factor limit, 'Q at night'). Reduction % = "
-                  "1 − E(mode)/E(disconnected).")
+    sec = Section(
+        "night",
+        "Night hours",
+        "PV inverters connected vs disconnected at night, and connected-q: connected with the S-limited "
+        "capability at night (Q without the power-factor limit, 'Q at night'). Reduction % = "
+        "1 − E(mode)/E(disconnected).",
+    )
     if inputs.summary is None:
         return sec.add(*_missing(inputs, "summary.csv"))
     s = inputs.summary
     if "connected-q" not in set(s["night_mode"]):
-        sec.add(Block("note", text="The run has no connected-q night mode: run opfbench run --night-modes connected "
-                                   "disconnected connected-q."))
+        sec.add(
+            Block(
+                "note",
+                text="The run has no connected-q night mode: run opfbench run --night-modes connected disconnected connected-q.",
+            )
+        )
     k = float(s["k"].min())
     sec.add(Block("heading", text=f"The paper's night-hour table beside ours (k = {k:g}, forecast off)"))
-    sec.add(Block("note", text="Paper Table III (SYSLAB data, 20 August 2019); the paper does not state k. "
-                               "acopf = our AC OPF (fallback chain)."))
+    sec.add(
+        Block(
+            "note",
+            text="Paper Table III (SYSLAB data, 20 August 2019); the paper does not state k. "
+            "acopf = our AC OPF (fallback chain).",
+        )
+    )
     sec.add(table(tables.night_vs_paper(s, k)))
     sec.add(table(tables.night(s), "Energy (kWh) per night mode, every strategy and k"))
     sec.blocks += _plots(plots.night_bars(s))
@@ -185,24 +261,34 @@ def night(inputs: Inputs) -> Section:
 
 
 def gap(inputs: Inputs) -> Section:
-    sec = Section("gap", "Optimality gap",
-                  "Each strategy's energy against the SOCP relaxation's lower bound (slack may export; certified: "
-                  "no AC-feasible setpoints can lose less), summed over the same steps: gap kWh and % of the bound.")
+    sec = Section(
+        "gap",
+        "Optimality gap",
+        "Each strategy's energy against the SOCP relaxation's lower bound (slack may export; certified: "
+        "no AC-feasible setpoints can lose less), summed over the same steps: gap kWh and % of the bound.",
+    )
     if inputs.summary is None:
         return sec.add(*_missing(inputs, "summary.csv"))
     s = inputs.summary
-    sec.add(table(tables.energy_pivot(s[s["forecast"] == "off"], tables.REFERENCE_NIGHT, "gap_pct"),
-                  "Gap to the bound (%), PV connected at night, forecast off"))
+    sec.add(
+        table(
+            tables.energy_pivot(s[s["forecast"] == "off"], tables.REFERENCE_NIGHT, "gap_pct"),
+            "Gap to the bound (%), PV connected at night, forecast off",
+        )
+    )
     sec.add(table(tables.gap(s), "Gap per configuration", collapse_over=0))
     sec.blocks += _plots(plots.gap_vs_k(s))
     return sec
 
 
 def voltage(inputs: Inputs) -> Section:
-    sec = Section("voltage", "Voltage compliance",
-                  "Steps outside the case's voltage limits and the extreme voltages per strategy (over every k, night "
-                  "mode and forecast); Algorithm 3's capability excursions (setpoints above the inverter's capability at "
-                  "the current P, when the forecast P gives a larger limit).")
+    sec = Section(
+        "voltage",
+        "Voltage compliance",
+        "Steps outside the case's voltage limits and the extreme voltages per strategy (over every k, night "
+        "mode and forecast); Algorithm 3's capability excursions (setpoints above the inverter's capability at "
+        "the current P, when the forecast P gives a larger limit).",
+    )
     if inputs.summary is None:
         return sec.add(*_missing(inputs, "summary.csv"))
     limits = {name: (c.get("vmin_pu"), c.get("vmax_pu")) for name, c in ((inputs.manifest or {}).get("cases") or {}).items()}
@@ -221,10 +307,13 @@ def voltage(inputs: Inputs) -> Section:
 
 def forecasting(inputs: Inputs) -> Section:
     source = inputs.forecast_dir
-    sec = Section("forecasting", "Forecasting",
-                  "One-step-ahead forecast metrics beside the paper's Table I (SYSLAB 2019, 5-min data; our data and "
-                  "resolution differ, so only the ranking is comparable). MSE on min-max scaled data, MAPE on samples "
-                  "above a fraction of the rating (see the forecast run).")
+    sec = Section(
+        "forecasting",
+        "Forecasting",
+        "One-step-ahead forecast metrics beside the paper's Table I (SYSLAB 2019, 5-min data; our data and "
+        "resolution differ, so only the ranking is comparable). MSE on min-max scaled data, MAPE on samples "
+        "above a fraction of the rating (see the forecast run).",
+    )
     if not inputs.forecast:
         return sec.add(*_missing(inputs, "forecast"))
     sec.add(Block("note", text=f"From {source}: " + ", ".join(f"forecast_{d}.json" for d in inputs.forecast)))
@@ -233,9 +322,12 @@ def forecasting(inputs: Inputs) -> Section:
 
 
 def fault(inputs: Inputs) -> Section:
-    sec = Section("fault", "Fault ride-through",
-                  "Voltage recovery time at the faulted bus (fault inception until |V| stays ≥ 0.9 p.u.) per fault bus, "
-                  "strategy, k and forecast, and the time each strategy adds over no action.")
+    sec = Section(
+        "fault",
+        "Fault ride-through",
+        "Voltage recovery time at the faulted bus (fault inception until |V| stays ≥ 0.9 p.u.) per fault bus, "
+        "strategy, k and forecast, and the time each strategy adds over no action.",
+    )
     if inputs.fault is None:
         return sec.add(*_missing(inputs, "fault.parquet"))
     rec = tables.recovery(inputs.fault)
@@ -255,18 +347,27 @@ def fault(inputs: Inputs) -> Section:
 
 
 def paper_claims(inputs: Inputs) -> Section:
-    sec = Section("claims", "The paper's claims",
-                  "Each claim with the paper's figure, ours, and a verdict computed from the run's tables (the sections below show them).")
+    sec = Section(
+        "claims",
+        "The paper's claims",
+        "Each claim with the paper's figure, ours, and a verdict computed from the run's tables (the sections below show them).",
+    )
     return sec.add(Block("claims", claims=claims(inputs)))
 
 
 PRICED = {metadata, losses, year}
 """Builders that also take the energy price (currency per kWh, currency, source)."""
 SECTIONS = (
-    ("claims", "The paper's claims", paper_claims), ("metadata", "Run metadata", metadata),
-    ("losses", "Losses and savings", losses), ("convergence", "Convergence of the formulations", convergence),
-    ("year", "A year (2016 at 15 min)", year), ("night", "Night hours", night), ("gap", "Optimality gap", gap), ("voltage", "Voltage compliance", voltage),
-    ("forecasting", "Forecasting", forecasting), ("fault", "Fault ride-through", fault),
+    ("claims", "The paper's claims", paper_claims),
+    ("metadata", "Run metadata", metadata),
+    ("losses", "Losses and savings", losses),
+    ("convergence", "Convergence of the formulations", convergence),
+    ("year", "A year (2016 at 15 min)", year),
+    ("night", "Night hours", night),
+    ("gap", "Optimality gap", gap),
+    ("voltage", "Voltage compliance", voltage),
+    ("forecasting", "Forecasting", forecasting),
+    ("fault", "Fault ride-through", fault),
 )
 """(id, title, builder) in page order."""
 FAILED = "This section could not be built from its input files"
@@ -293,4 +394,3 @@ def price_of(inputs: Inputs, price: float | None) -> tuple[float, str, str]:
     if cfg.get("price_per_kwh") is not None:
         return float(cfg["price_per_kwh"]), currency, str(cfg.get("price_source") or "the run's manifest")
     return DEFAULT_PRICE_PER_KWH, DEFAULT_CURRENCY, DEFAULT_PRICE_SOURCE
-

@@ -38,12 +38,15 @@ def holds_year_run(folder: Path) -> bool:
 def check_year_dir(folder: Path | None) -> None:
     """A `--year-dir` given on the command line must hold a finished year run."""
     if folder is not None and not holds_year_run(folder):
-        raise InputError(f"--year-dir {folder} holds no finished year run (manifest.json with period 'year' and "
-                         f"summary.csv); write one with `opfbench run --period year --out {folder}`")
+        raise InputError(
+            f"--year-dir {folder} holds no finished year run (manifest.json with period 'year' and "
+            f"summary.csv); write one with `opfbench run --period year --out {folder}`"
+        )
 
 
-def report_sources(forecast_dir: Path | None, fault_dir: Path | None,
-                   year_dir: Path | None = None) -> tuple[Path | None, Path | None, Path | None]:
+def report_sources(
+    forecast_dir: Path | None, fault_dir: Path | None, year_dir: Path | None = None
+) -> tuple[Path | None, Path | None, Path | None]:
     """(forecast, fault, year-run folder) the report reads: as given, else the defaults when they hold data."""
     if forecast_dir is None and holds_forecasts(DEFAULT_FORECAST_DIR):
         forecast_dir = DEFAULT_FORECAST_DIR

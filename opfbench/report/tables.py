@@ -36,8 +36,10 @@ def losses(summary: pd.DataFrame, price_per_kwh: float) -> pd.DataFrame:
     days = summary["hours"] / 24.0
     saved_per_day = (summary["no_action_kwh"] - summary["energy_kwh"]) / days
     out = summary[CONFIG + ["avg_loss_kw", "energy_kwh", "savings_pct"]].assign(
-        saved_kwh_per_day=saved_per_day, money_per_day=saved_per_day * price_per_kwh,
-        money_per_year=saved_per_day * price_per_kwh * 365.0)
+        saved_kwh_per_day=saved_per_day,
+        money_per_day=saved_per_day * price_per_kwh,
+        money_per_year=saved_per_day * price_per_kwh * 365.0,
+    )
     return order(out)
 
 
@@ -74,8 +76,13 @@ def convergence(steps: pd.DataFrame) -> pd.DataFrame:
     ac = sub["strategy"] != "socp"  # who certified the AC OPF's ok steps
     for solver in ("socp", "ipopt"):
         picked = sub[ac & (sub["status"] == "ok") & (sub["certified_by"] == solver)]
-        out[f"ok, certified by {solver}"] = picked.groupby(["case", "strategy", "k"]).size().reindex(
-            out.index, fill_value=0).where(out.index.get_level_values("strategy") != "socp").astype("Int64")
+        out[f"ok, certified by {solver}"] = (
+            picked.groupby(["case", "strategy", "k"])
+            .size()
+            .reindex(out.index, fill_value=0)
+            .where(out.index.get_level_values("strategy") != "socp")
+            .astype("Int64")
+        )
     return order(out.reset_index())
 
 
@@ -95,13 +102,18 @@ def solver_stats(steps: pd.DataFrame) -> pd.DataFrame:
     if sub.empty:
         return pd.DataFrame()
     g = sub.groupby(["case", "strategy"])
-    out = pd.DataFrame({
-        "steps": g.size(),
-        "iterations median": g["iterations"].median(), "iterations p90": g["iterations"].quantile(0.9),
-        "iterations max": g["iterations"].max(),
-        "solve ms median": g["solver_ms"].median(), "solve ms p90": g["solver_ms"].quantile(0.9),
-        "solve ms max": g["solver_ms"].max(), "solve s total": g["solver_ms"].sum() / 1e3,
-    })
+    out = pd.DataFrame(
+        {
+            "steps": g.size(),
+            "iterations median": g["iterations"].median(),
+            "iterations p90": g["iterations"].quantile(0.9),
+            "iterations max": g["iterations"].max(),
+            "solve ms median": g["solver_ms"].median(),
+            "solve ms p90": g["solver_ms"].quantile(0.9),
+            "solve ms max": g["solver_ms"].max(),
+            "solve s total": g["solver_ms"].sum() / 1e3,
+        }
+    )
     return order(out.reset_index())
 
 
@@ -163,16 +175,24 @@ def voltage(summary: pd.DataFrame) -> pd.DataFrame:
     """Per case × strategy (over every k, night mode and forecast): steps outside the case's
     limits, lowest and highest voltage."""
     g = summary.groupby(["case", "strategy"])
-    out = pd.DataFrame({"configurations": g.size(), "steps": g["steps"].sum(),
-                        "steps outside limits": g["voltage_violation_steps"].sum(),
-                        "vmin_pu": g["vmin_pu"].min(), "vmax_pu": g["vmax_pu"].max()})
+    out = pd.DataFrame(
+        {
+            "configurations": g.size(),
+            "steps": g["steps"].sum(),
+            "steps outside limits": g["voltage_violation_steps"].sum(),
+            "vmin_pu": g["vmin_pu"].min(),
+            "vmax_pu": g["vmax_pu"].max(),
+        }
+    )
     return order(out.reset_index())
 
 
 def excursions(summary: pd.DataFrame) -> pd.DataFrame:
     """Algorithm 3 (forecast on): steps whose setpoint exceeds the capability at P^C, and the largest excess."""
-    sub = summary[(summary["forecast"] != "off") & summary["strategy"].map(
-        lambda s: STRATEGIES[s].uses_forecast if s in STRATEGIES else True)]
+    sub = summary[
+        (summary["forecast"] != "off")
+        & summary["strategy"].map(lambda s: STRATEGIES[s].uses_forecast if s in STRATEGIES else True)
+    ]
     return order(sub[CONFIG + ["steps", "excursion_steps", "max_excursion_mvar"]])
 
 
@@ -182,10 +202,20 @@ def forecast_metrics(forecast: dict[str, dict]) -> pd.DataFrame:
     for dataset, data in forecast.items():
         for model, m in data.get("metrics", {}).items():
             ref = paper.FORECAST_TABLE.get(dataset, {}).get(model, (np.nan, np.nan))
-            rows.append({"dataset": dataset, "model": model, "MSE (scaled)": m.get("mse_scaled"),
-                         "MAPE %": m.get("mape_pct"), "MAE kW": m.get("mae_kw"), "RMSE kW": m.get("rmse_kw"),
-                         "skill": m.get("skill"), "fit s": m.get("fit_s"),
-                         "paper MSE": ref[0], "paper MAPE %": ref[1]})
+            rows.append(
+                {
+                    "dataset": dataset,
+                    "model": model,
+                    "MSE (scaled)": m.get("mse_scaled"),
+                    "MAPE %": m.get("mape_pct"),
+                    "MAE kW": m.get("mae_kw"),
+                    "RMSE kW": m.get("rmse_kw"),
+                    "skill": m.get("skill"),
+                    "fit s": m.get("fit_s"),
+                    "paper MSE": ref[0],
+                    "paper MAPE %": ref[1],
+                }
+            )
     return pd.DataFrame(rows)
 
 
@@ -203,8 +233,9 @@ def recovery(fault: pd.DataFrame) -> pd.DataFrame:
 def recovery_pivot(rec: pd.DataFrame, variant: str = "reference") -> pd.DataFrame:
     """Recovery ms per (case, fault bus, strategy, forecast) × k for one model variant."""
     sub = rec[rec["variant"] == variant]
-    table = sub.pivot_table(index=["case", "fault_bus", "strategy", "forecast"], columns="k", values="recovery_ms",
-                            aggfunc="first")
+    table = sub.pivot_table(
+        index=["case", "fault_bus", "strategy", "forecast"], columns="k", values="recovery_ms", aggfunc="first"
+    )
     table.columns = [f"k={k:g}" for k in table.columns]
     return order(table.reset_index())
 
@@ -212,9 +243,16 @@ def recovery_pivot(rec: pd.DataFrame, variant: str = "reference") -> pd.DataFram
 def sensitivity(rec: pd.DataFrame) -> pd.DataFrame:
     """Mean recovery and added time per model variant × strategy (over fault buses, k, forecast)."""
     g = rec.groupby(["case", "variant", "strategy"])
-    out = pd.DataFrame({"simulations": g.size(), "recovered": g["recovery_ms"].count(),
-                        "recovery ms mean": g["recovery_ms"].mean(), "added ms mean": g["added_ms"].mean(),
-                        "added ms min": g["added_ms"].min(), "added ms max": g["added_ms"].max()})
+    out = pd.DataFrame(
+        {
+            "simulations": g.size(),
+            "recovered": g["recovery_ms"].count(),
+            "recovery ms mean": g["recovery_ms"].mean(),
+            "added ms mean": g["added_ms"].mean(),
+            "added ms min": g["added_ms"].min(),
+            "added ms max": g["added_ms"].max(),
+        }
+    )
     return order(out.reset_index())
 
 

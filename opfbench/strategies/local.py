@@ -23,9 +23,9 @@ import numpy as np
 from opfbench.powerflow import PowerFlowResult, solve_pf_batch
 from opfbench.result import StrategyResult
 from opfbench.scenario import Scenario
-from opfbench.timing import elapsed_ms, now
 from opfbench.strategies.limits import clip, reactive_limit, reserve
 from opfbench.strategies.meters import LocalMeters
+from opfbench.timing import elapsed_ms, now
 
 # What LFMA step 4 did at each DER (LfmaTrace.rule).
 LEAF = 0  # leaf node: keeps its LLMA setpoint throughout
@@ -33,7 +33,6 @@ KEPT = 1  # Q_up did not change sign between steps 2 and 3: keep the step-3 setp
 SUBTRACTED = 2  # Q_up changed sign, Q_do did not: Q^F = Q^I − |Q_up^I|
 BACK_TO_LLMA = 3  # Q_up and Q_do both changed sign (or Q_do hit zero): Q^F = Q^H
 STOPPED = 4  # a power flow of this snapshot diverged earlier: setpoint frozen
-
 
 
 def _evaluate(name: str, k: float, scenario: Scenario, q_mvar: np.ndarray, t0: float) -> StrategyResult:
@@ -91,9 +90,17 @@ class LfmaTrace:
     diverged_step: np.ndarray
 
 
-def lfma_step4(q_h: np.ndarray, q_i: np.ndarray, q_up_h: np.ndarray, q_up_i: np.ndarray, q_do_h: np.ndarray,
-               q_do_i: np.ndarray, limit: np.ndarray, running: np.ndarray,
-               branch_node: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def lfma_step4(
+    q_h: np.ndarray,
+    q_i: np.ndarray,
+    q_up_h: np.ndarray,
+    q_up_i: np.ndarray,
+    q_do_h: np.ndarray,
+    q_do_i: np.ndarray,
+    limit: np.ndarray,
+    running: np.ndarray,
+    branch_node: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray]:
     """LFMA step 4: (Q^F, rule), both (S, n_der), from the setpoints and measurements of
     steps 2 (H) and 3 (I). `running` (S,) marks the snapshots whose flows all converged so
     far (the others are STOPPED); `branch_node` (n_der,) the non-leaf DER buses (LEAF).
@@ -172,5 +179,6 @@ def lfma(scenario: Scenario, k: float = 0.0, safe: bool = False) -> StrategyResu
     final = trace.flows[-1]
     completed = PowerFlowResult(final.net, final.v, trace.diverged_step == 0, final.iterations)
     extra = {"diverged_step": trace.diverged_step, "upstream_disagreements": upstream_disagreements(scenario, trace)}
-    return StrategyResult.from_setpoints("lfma", k, scenario, trace.q_final, elapsed_ms(t0),
-                                         power_flows=len(trace.flows), pf=completed, extra=extra)
+    return StrategyResult.from_setpoints(
+        "lfma", k, scenario, trace.q_final, elapsed_ms(t0), power_flows=len(trace.flows), pf=completed, extra=extra
+    )

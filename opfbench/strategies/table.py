@@ -31,9 +31,14 @@ def forecast_p_mw(p_mw: np.ndarray, rating_mw: np.ndarray, factor: float = FOREC
     return np.minimum(factor * np.asarray(p_mw, float), rating_mw)
 
 
-def loss_table(case: str = "paper33", ks: Sequence[float] = PAPER_KS, load_scale: float = 1.0,
-               der_scale: float = 0.8, forecast_factor: float = FORECAST_FACTOR,
-               safe: bool = False) -> pd.DataFrame:
+def loss_table(
+    case: str = "paper33",
+    ks: Sequence[float] = PAPER_KS,
+    load_scale: float = 1.0,
+    der_scale: float = 0.8,
+    forecast_factor: float = FORECAST_FACTOR,
+    safe: bool = False,
+) -> pd.DataFrame:
     """One row per (forecast, k, strategy): losses_kw, excursion_mvar, status, vmin.
     `forecast` is False (plain rules) or True (Algorithm 3 with the forecast rule above)."""
     net = load_case(case)
@@ -47,9 +52,17 @@ def loss_table(case: str = "paper33", ks: Sequence[float] = PAPER_KS, load_scale
             for name in LOCAL_RULES:
                 options = {"safe": safe} if "safe" in STRATEGIES[name].options else {}
                 res = run_strategy(name, scenario, k, **options)
-                rows.append({"forecast": forecast, "k": float(k), "strategy": name,
-                             "losses_kw": float(res.losses_kw[0]), "excursion_mvar": float(res.excursion_mvar[0]),
-                             "status": str(res.status[0]), "vmin": float(res.vmin[0])})
+                rows.append(
+                    {
+                        "forecast": forecast,
+                        "k": float(k),
+                        "strategy": name,
+                        "losses_kw": float(res.losses_kw[0]),
+                        "excursion_mvar": float(res.excursion_mvar[0]),
+                        "status": str(res.status[0]),
+                        "vmin": float(res.vmin[0]),
+                    }
+                )
     return pd.DataFrame(rows)
 
 
@@ -73,8 +86,9 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--case", default="paper33", help="shipped case name or MATPOWER .m path")
     parser.add_argument("--load-scale", type=fraction, default=1.0)
     parser.add_argument("--der-scale", type=fraction, default=0.8, help="P^C as a fraction of rating, 0..1")
-    parser.add_argument("--forecast-factor", type=fraction, default=FORECAST_FACTOR,
-                        help="P^F = min(factor · P^C, rating) (default 1.2)")
+    parser.add_argument(
+        "--forecast-factor", type=fraction, default=FORECAST_FACTOR, help="P^F = min(factor · P^C, rating) (default 1.2)"
+    )
     parser.add_argument("--safe", action="store_true", help="clip to the physical capability at P^C")
     args = parser.parse_args(argv)
     try:
@@ -82,8 +96,10 @@ def main(argv: list[str] | None = None) -> int:
     except OpfbenchError as exc:
         print(f"{parser.prog}: error: {exc}", file=sys.stderr)
         return 2
-    print(f"{args.case}: load ×{args.load_scale:g}, P^C = {args.der_scale:g}·P̄, "
-          f"P^F = min({args.forecast_factor:g}·P^C, P̄){', safe' if args.safe else ''}\n")
+    print(
+        f"{args.case}: load ×{args.load_scale:g}, P^C = {args.der_scale:g}·P̄, "
+        f"P^F = min({args.forecast_factor:g}·P^C, P̄){', safe' if args.safe else ''}\n"
+    )
     print(format_table(table))
     return 0
 

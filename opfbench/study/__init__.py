@@ -6,8 +6,13 @@ Not to be confused with `opfbench.bench`, the speed benchmarks."""
 from opfbench.study.config import NIGHT_MODES, StudyConfig
 
 __all__ = ["NIGHT_MODES", "Period", "StudyConfig", "StudyRun", "prepare", "resolve_period", "run_study"]
-_LAZY = {"Period": "periods", "resolve_period": "periods", "StudyRun": "runner", "prepare": "runner",
-         "run_study": "runner"}  # pandas and the solvers load on first use, not with the CLI
+_LAZY = {
+    "Period": "periods",
+    "resolve_period": "periods",
+    "StudyRun": "runner",
+    "prepare": "runner",
+    "run_study": "runner",
+}  # pandas and the solvers load on first use, not with the CLI
 
 
 def __getattr__(name: str):

@@ -16,8 +16,8 @@ import re
 from dataclasses import asdict, dataclass, field, replace
 
 from opfbench.errors import InputError
-from opfbench.report.price import DEFAULT_CURRENCY, DEFAULT_PRICE_PER_KWH, DEFAULT_PRICE_SOURCE
 from opfbench.registry import FORMULATIONS, STRATEGY_NAMES
+from opfbench.report.price import DEFAULT_CURRENCY, DEFAULT_PRICE_PER_KWH, DEFAULT_PRICE_SOURCE
 
 NIGHT_MODES = ("connected", "disconnected", "connected-q")
 DEFAULT_KS = (0.0, 0.2, 0.4, 0.6, 0.8)
@@ -46,6 +46,7 @@ def _unique(label: str, values: tuple, notes: list[str]) -> tuple:
         dropped = [v for i, v in enumerate(values) if v in values[:i]]
         notes.append(f"note: duplicated {label} dropped: {', '.join(str(v) for v in dropped)}")
     return out
+
 
 ACOPF_SOLVERS = ("auto", "ipopt")  # formulations.acopf.SOLVERS, kept light for the CLI
 
@@ -101,15 +102,22 @@ class StudyConfig:
         if not (self.cases and self.strategies and self.ks and self.night_modes and self.forecast):
             raise InputError("nothing to run: give at least one case, strategy, k, night mode and forecast")
         if not any(self.strategies_for(source) for source in self.forecast):
-            raise InputError(f"nothing to run: the formulations ({', '.join(FORMULATIONS)}) run only with forecast "
-                             f"'off', and the grid has no local rule for forecast {', '.join(self.forecast)}")
+            raise InputError(
+                f"nothing to run: the formulations ({', '.join(FORMULATIONS)}) run only with forecast "
+                f"'off', and the grid has no local rule for forecast {', '.join(self.forecast)}"
+            )
 
     @classmethod
     def build(cls, **fields) -> "StudyConfig":
         """A config with duplicated grid values dropped; `notes` say what was dropped."""
         notes: list[str] = []
-        for key, label in (("cases", "cases"), ("strategies", "strategies"), ("ks", "k values"),
-                           ("night_modes", "night modes"), ("forecast", "forecast sources")):
+        for key, label in (
+            ("cases", "cases"),
+            ("strategies", "strategies"),
+            ("ks", "k values"),
+            ("night_modes", "night modes"),
+            ("forecast", "forecast sources"),
+        ):
             if key in fields:
                 values = tuple(float(v) for v in fields[key]) if key == "ks" else tuple(fields[key])
                 fields[key] = _unique(label, values, notes)

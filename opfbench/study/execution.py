@@ -35,8 +35,10 @@ STOPPED = 130  # exit code after Ctrl-C (128 + SIGINT)
 #:   tasks' summed wall time on the paper day, 2 workers, fell from ~32 s to ~28.5 s.
 LOCAL_CLUSTER_CONFIG = {
     "distributed.nanny.pre-spawn-environ": {"OMP_NUM_THREADS": 1, "MKL_NUM_THREADS": 1, "OPENBLAS_NUM_THREADS": 1},
-    "distributed.worker.profile.enabled": False, "distributed.admin.tick.interval": "1s",
-    "distributed.admin.system-monitor.interval": "5s"}
+    "distributed.worker.profile.enabled": False,
+    "distributed.admin.tick.interval": "1s",
+    "distributed.admin.system-monitor.interval": "5s",
+}
 
 
 class _SigintWatcher:
@@ -99,12 +101,14 @@ def run_dask(inputs: list[TaskInput], save: Save, workers: int, scheduler: str |
         with warnings.catch_warnings(), dask.config.set(LOCAL_CLUSTER_CONFIG):
             # its small HTTP server (health checks) moves off a busy port
             warnings.filterwarnings("ignore", message="Port .* is already in use")
-            cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, dashboard_address=None,
-                                   silence_logs=40)
+            cluster = LocalCluster(
+                n_workers=workers, threads_per_worker=1, processes=True, dashboard_address=None, silence_logs=40
+            )
         client = Client(cluster)
     try:
-        futures = [client.submit(run_task, inp, pure=False, priority=-i, key=f"task-{inp.task.id}-{i}")
-                   for i, inp in enumerate(inputs)]
+        futures = [
+            client.submit(run_task, inp, pure=False, priority=-i, key=f"task-{inp.task.id}-{i}") for i, inp in enumerate(inputs)
+        ]
         for future in as_completed(futures):
             save(future.result())
             future.release()
@@ -121,8 +125,9 @@ def run_dask(inputs: list[TaskInput], save: Save, workers: int, scheduler: str |
     return closing.join
 
 
-def execute(inputs: list[TaskInput], save: Save, workers: int, scheduler: str | None,
-            on_stop: Callable[[], None]) -> Callable[[], None]:
+def execute(
+    inputs: list[TaskInput], save: Save, workers: int, scheduler: str | None, on_stop: Callable[[], None]
+) -> Callable[[], None]:
     """Run `inputs`, calling `save` with each finished task (in completion order);
     `on_stop` ends the process on Ctrl-C in the in-process path. Returns a function that
     waits until every local worker process has exited (`run_dask`)."""

@@ -59,8 +59,12 @@ class Period:
         return [slice(a, b) for a, b in zip(bounds[:-1], bounds[1:], strict=True)]
 
     def as_dict(self) -> dict:
-        return {"start": self.index[0].isoformat(), "end": self.index[-1].isoformat(),
-                "steps": len(self.index), "step_h": self.step_h}
+        return {
+            "start": self.index[0].isoformat(),
+            "end": self.index[-1].isoformat(),
+            "steps": len(self.index),
+            "step_h": self.step_h,
+        }
 
 
 def _parse_time(text: str) -> pd.Timestamp:

@@ -15,8 +15,7 @@ class Progress:
         if not quiet and sys.stderr.isatty():
             from tqdm import tqdm
 
-            self.bar = tqdm(total=total, initial=done, unit="task", file=sys.stderr, dynamic_ncols=True,
-                            smoothing=0.1)
+            self.bar = tqdm(total=total, initial=done, unit="task", file=sys.stderr, dynamic_ncols=True, smoothing=0.1)
         elif not quiet and done:
             print(f"resuming: {done}/{total} tasks already done", file=sys.stderr, flush=True)
 

@@ -21,7 +21,6 @@ from opfbench.study.tasks import Task, TaskOutput, plan_tasks, task_input
 from opfbench.timing import elapsed_ms, now
 
 
-
 @dataclass
 class StudyRun:
     """A finished (or interrupted) run: its folder, summary (None if interrupted), tasks
@@ -58,8 +57,16 @@ def prepare(config: StudyConfig) -> tuple[StudyConfig, Period, list[Task]]:
     return config, period, plan_tasks(config, period)
 
 
-def run_study(config: StudyConfig, out: Path, *, workers: int = 1, scheduler: str | None = None,
-              fresh: bool = False, quiet: bool = False, command: list[str] | None = None) -> StudyRun:
+def run_study(
+    config: StudyConfig,
+    out: Path,
+    *,
+    workers: int = 1,
+    scheduler: str | None = None,
+    fresh: bool = False,
+    quiet: bool = False,
+    command: list[str] | None = None,
+) -> StudyRun:
     """Run `config` into the folder `out` (resuming finished tasks). KeyboardInterrupt
     propagates after the finished tasks are saved; `StudyRun.kept` counts them then."""
     say = (lambda msg: None) if quiet else (lambda msg: print(msg, file=sys.stderr, flush=True))
@@ -88,8 +95,9 @@ def run_study(config: StudyConfig, out: Path, *, workers: int = 1, scheduler: st
             progress.close()
             assembly.abort()
             store.lock.unlink(missing_ok=True)
-            print(f"\nstopped; {run.kept} tasks kept in {store.out}; rerun the same command to resume",
-                  file=sys.stderr, flush=True)
+            print(
+                f"\nstopped; {run.kept} tasks kept in {store.out}; rerun the same command to resume", file=sys.stderr, flush=True
+            )
             os._exit(STOPPED)
 
         try:

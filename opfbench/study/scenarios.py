@@ -15,8 +15,9 @@ from opfbench.errors import DataError
 from opfbench.scenario import Scenario
 
 
-def model_pv_forecast_pu(forecast_dir: str, model: str, index: pd.DatetimeIndex, pv_now: np.ndarray,
-                         step: pd.Timedelta) -> np.ndarray:
+def model_pv_forecast_pu(
+    forecast_dir: str, model: str, index: pd.DatetimeIndex, pv_now: np.ndarray, step: pd.Timedelta
+) -> np.ndarray:
     """P^F per unit for each step t of `index`: the model's forecast for t + 1 step, made
     from data up to t (the forecast file is indexed by target time). Steps the forecast
     file does not cover keep P^F = P^C, but only where P^C and the next step's output are
@@ -31,18 +32,28 @@ def model_pv_forecast_pu(forecast_dir: str, model: str, index: pd.DatetimeIndex,
     targets = (index + step).tz_convert("UTC")
     ahead = series.reindex(targets).to_numpy()
     missing = np.isnan(ahead)
-    nxt = pv_now[1:n + 1] if len(pv_now) > n else np.append(pv_now[1:n], pv_now[n - 1])
+    nxt = pv_now[1 : n + 1] if len(pv_now) > n else np.append(pv_now[1:n], pv_now[n - 1])
     dark = (pv_now[:n] == 0) & (nxt == 0)
     if (missing & ~dark).any():
         first = targets[np.flatnonzero(missing & ~dark)[0]]
-        raise DataError(f"forecast {model!r} in {forecast_dir} has no value for {int((missing & ~dark).sum())} "
-                        f"daylight step(s) of the period, first {first}; the forecasts cover "
-                        f"{series.index[0]} .. {series.index[-1]}")
+        raise DataError(
+            f"forecast {model!r} in {forecast_dir} has no value for {int((missing & ~dark).sum())} "
+            f"daylight step(s) of the period, first {first}; the forecasts cover "
+            f"{series.index[0]} .. {series.index[-1]}"
+        )
     return np.clip(np.where(missing, pv_now[:n], ahead), 0.0, 1.0)
 
 
-def chunk_scenario(case: str, night_mode: str, forecast: str, profiles: pd.DataFrame, night: np.ndarray,
-                   n_steps: int, step: pd.Timedelta, forecast_dir: str) -> Scenario:
+def chunk_scenario(
+    case: str,
+    night_mode: str,
+    forecast: str,
+    profiles: pd.DataFrame,
+    night: np.ndarray,
+    n_steps: int,
+    step: pd.Timedelta,
+    forecast_dir: str,
+) -> Scenario:
     """The scenario of the first `n_steps` rows of `profiles` (load, pv, wind p.u.; a
     further row, if present, is the next step). Night mode "disconnected" zeroes PV
     output (and its forecast) in the night hours; "connected-q" gives PV units the
@@ -53,7 +64,7 @@ def chunk_scenario(case: str, night_mode: str, forecast: str, profiles: pd.DataF
     pv, wind = pv_all[:n_steps], wind_all[:n_steps]
     ahead_pv = ahead_wind = None
     if forecast == "oracle":
-        ahead_pv, ahead_wind = (np.append(x[1:n_steps + 1], x[len(x) - 1])[:n_steps] for x in (pv_all, wind_all))
+        ahead_pv, ahead_wind = (np.append(x[1 : n_steps + 1], x[len(x) - 1])[:n_steps] for x in (pv_all, wind_all))
     elif forecast != "off":
         raw = profiles["pv"].to_numpy()
         ahead_pv = model_pv_forecast_pu(forecast_dir, forecast, profiles.index[:n_steps], raw, step)

@@ -85,8 +85,7 @@ def _versions() -> dict:
 
 def _git_commit() -> str | None:
     try:
-        res = subprocess.run(["git", "rev-parse", "HEAD"], cwd=Path(__file__).parent, capture_output=True, text=True,
-                             timeout=5)
+        res = subprocess.run(["git", "rev-parse", "HEAD"], cwd=Path(__file__).parent, capture_output=True, text=True, timeout=5)
     except (OSError, subprocess.SubprocessError):
         return None
     return res.stdout.strip() or None if res.returncode == 0 else None
@@ -96,9 +95,12 @@ def _case_info(case: str) -> dict:
     from opfbench.cases import load_case
 
     net = load_case(case)
-    return {"buses": int(net.n_bus),
-            "ders": [{"bus": int(net.bus_ids[d.bus]), "kind": d.kind, "rating_mw": float(d.rating_mw)} for d in net.ders],
-            "vmin_pu": float(net.vmin.min()), "vmax_pu": float(net.vmax.max())}
+    return {
+        "buses": int(net.n_bus),
+        "ders": [{"bus": int(net.bus_ids[d.bus]), "kind": d.kind, "rating_mw": float(d.rating_mw)} for d in net.ders],
+        "vmin_pu": float(net.vmin.min()),
+        "vmax_pu": float(net.vmax.max()),
+    }
 
 
 class RunStore:
@@ -123,8 +125,10 @@ class RunStore:
                 pid = int(text[0]) if text and text[0].isdigit() else -1
                 host = text[1] if len(text) > 1 else socket.gethostname()
                 if pid > 0 and (host != socket.gethostname() or _alive(pid)):
-                    raise InputError(f"{self.out} is in use by another run (PID {pid} on {host}); wait for it, or "
-                                     f"delete {self.lock} if that run is gone") from None
+                    raise InputError(
+                        f"{self.out} is in use by another run (PID {pid} on {host}); wait for it, or "
+                        f"delete {self.lock} if that run is gone"
+                    ) from None
                 self.say(f"note: taking over the lock of a run that is gone (PID {pid})")
                 self.lock.unlink(missing_ok=True)
                 continue
@@ -154,8 +158,10 @@ class RunStore:
                 prev = old.get("config", {})
                 now = config.as_dict()
                 diff = sorted(k for k in now if k not in LABEL_FIELDS and prev.get(k) != now[k])
-                raise InputError(f"{self.out} holds a run of another configuration (differs in: {', '.join(diff) or '?'}); "
-                                 "use --fresh to discard it, or another --out")
+                raise InputError(
+                    f"{self.out} holds a run of another configuration (differs in: {', '.join(diff) or '?'}); "
+                    "use --fresh to discard it, or another --out"
+                )
         if fresh:
             self._discard()
         self.tasks_dir.mkdir(exist_ok=True)
@@ -163,10 +169,16 @@ class RunStore:
             stale.unlink()
         done = {t.id for t in tasks if (self.out / t.file).exists()}
         self.manifest = {
-            "schema": SCHEMA, "opfbench_version": _version(), "git_commit": _git_commit(), "command": command,
+            "schema": SCHEMA,
+            "opfbench_version": _version(),
+            "git_commit": _git_commit(),
+            "command": command,
             "created_utc": datetime.now(timezone.utc).isoformat(timespec="seconds"),
-            "config": config.as_dict(), "config_digest": digest, "period": period.as_dict(),
-            "data_sources": list(period.sources), "versions": _versions(),
+            "config": config.as_dict(),
+            "config_digest": digest,
+            "period": period.as_dict(),
+            "data_sources": list(period.sources),
+            "versions": _versions(),
             "machine": {"cores": os.cpu_count(), "platform": platform.platform()},
             "cases": {case: _case_info(case) for case in config.cases},
             "tasks": [t.as_dict() | {"done": t.id in done, "wall_s": None} for t in tasks],

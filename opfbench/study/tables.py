@@ -12,9 +12,27 @@ from opfbench.result import OK, StrategyResult
 from opfbench.study.config import DETAIL_TABLES
 
 KEYS = ["case", "strategy", "k", "night_mode", "forecast"]
-STEP_COLUMNS = [*KEYS, "time", "step_h", "night", "status", "losses_kw", "vmin_pu", "vmax_pu", "voltage_violation_pu",
-                "q_total_mvar", "excursion_mvar", "lower_bound_kw", "power_flows", "wall_ms", "solver_ms",
-                "iterations", "certified_by", "fallback", "solver_status"]
+STEP_COLUMNS = [
+    *KEYS,
+    "time",
+    "step_h",
+    "night",
+    "status",
+    "losses_kw",
+    "vmin_pu",
+    "vmax_pu",
+    "voltage_violation_pu",
+    "q_total_mvar",
+    "excursion_mvar",
+    "lower_bound_kw",
+    "power_flows",
+    "wall_ms",
+    "solver_ms",
+    "iterations",
+    "certified_by",
+    "fallback",
+    "solver_status",
+]
 DETAIL_COLUMNS = {"der_q": [*KEYS, "time", "bus", "kind", "q_mvar"], "bus_v": [*KEYS, "time", "bus", "v_pu"]}
 VIOLATION_PU = 1e-6  # a step violates the voltage limits beyond this
 EXCURSION_MVAR = 1e-9  # a step's setpoint exceeds the physical capability beyond this
@@ -33,8 +51,9 @@ def _certified_by(res: StrategyResult) -> np.ndarray:
 Columns = dict[str, object]  # column name → array of the part's rows, or one value for all of them
 
 
-def step_rows(case: str, night_mode: str, forecast: str, time: pd.DatetimeIndex, step_h: float,
-              night: np.ndarray, res: StrategyResult) -> Columns:
+def step_rows(
+    case: str, night_mode: str, forecast: str, time: pd.DatetimeIndex, step_h: float, night: np.ndarray, res: StrategyResult
+) -> Columns:
     """The columns of one row per step of `res` (see the contract), for `stack`."""
     n = res.n_snapshots
     nan = np.full(n, np.nan)
@@ -42,13 +61,25 @@ def step_rows(case: str, night_mode: str, forecast: str, time: pd.DatetimeIndex,
     local = "fallback" not in extra
     lb = res.lower_bound_kw if res.lower_bound_kw is not None else nan
     return {
-        "case": case, "strategy": res.strategy, "k": float(res.k), "night_mode": night_mode, "forecast": forecast,
-        "time": time.asi8, "step_h": float(step_h), "night": np.asarray(night, dtype=bool),
-        "status": res.status.astype(str), "losses_kw": res.losses_kw, "vmin_pu": res.vmin, "vmax_pu": res.vmax,
-        "voltage_violation_pu": res.voltage_violation(), "q_total_mvar": res.q_mvar.sum(axis=1),
-        "excursion_mvar": res.excursion_mvar, "lower_bound_kw": np.asarray(lb, dtype=float),
+        "case": case,
+        "strategy": res.strategy,
+        "k": float(res.k),
+        "night_mode": night_mode,
+        "forecast": forecast,
+        "time": time.asi8,
+        "step_h": float(step_h),
+        "night": np.asarray(night, dtype=bool),
+        "status": res.status.astype(str),
+        "losses_kw": res.losses_kw,
+        "vmin_pu": res.vmin,
+        "vmax_pu": res.vmax,
+        "voltage_violation_pu": res.voltage_violation(),
+        "q_total_mvar": res.q_mvar.sum(axis=1),
+        "excursion_mvar": res.excursion_mvar,
+        "lower_bound_kw": np.asarray(lb, dtype=float),
         "power_flows": np.asarray(res.power_flows, dtype=np.int64),
-        "wall_ms": res.wall_ms / n, "solver_ms": np.asarray(extra.get("solve_ms", nan), dtype=float),
+        "wall_ms": res.wall_ms / n,
+        "solver_ms": np.asarray(extra.get("solve_ms", nan), dtype=float),
         "iterations": np.asarray(extra.get("iterations", nan), dtype=float),
         "certified_by": _certified_by(res).astype(str),
         "fallback": "" if local else np.asarray(extra["fallback"], dtype=str),
@@ -56,23 +87,35 @@ def step_rows(case: str, night_mode: str, forecast: str, time: pd.DatetimeIndex,
     }
 
 
-def detail_rows(case: str, night_mode: str, forecast: str, time: pd.DatetimeIndex,
-                res: StrategyResult, tables: tuple[str, ...] = DETAIL_TABLES) -> dict[str, Columns]:
+def detail_rows(
+    case: str,
+    night_mode: str,
+    forecast: str,
+    time: pd.DatetimeIndex,
+    res: StrategyResult,
+    tables: tuple[str, ...] = DETAIL_TABLES,
+) -> dict[str, Columns]:
     """The columns of the long tables named in `tables`, for `stack`: "der_q" per-DER
     setpoints (bus id, kind, q_mvar), "bus_v" per-bus |V| (p.u.)."""
     net = res.net
     n = res.n_snapshots
-    label = {"case": case, "strategy": res.strategy, "k": float(res.k), "night_mode": night_mode,
-             "forecast": forecast}
+    label = {"case": case, "strategy": res.strategy, "k": float(res.k), "night_mode": night_mode, "forecast": forecast}
 
     def der_q() -> Columns:
         n_der = len(net.ders)
-        return label | {"time": np.repeat(time.asi8, n_der), "bus": np.tile(net.bus_ids[net.der_bus], n).astype(np.int64),
-                        "kind": np.tile(np.asarray(net.der_kinds, dtype=str), n), "q_mvar": res.q_mvar.reshape(-1)}
+        return label | {
+            "time": np.repeat(time.asi8, n_der),
+            "bus": np.tile(net.bus_ids[net.der_bus], n).astype(np.int64),
+            "kind": np.tile(np.asarray(net.der_kinds, dtype=str), n),
+            "q_mvar": res.q_mvar.reshape(-1),
+        }
 
     def bus_v() -> Columns:
-        return label | {"time": np.repeat(time.asi8, net.n_bus), "bus": np.tile(net.bus_ids, n).astype(np.int64),
-                        "v_pu": res.vm.reshape(-1)}
+        return label | {
+            "time": np.repeat(time.asi8, net.n_bus),
+            "bus": np.tile(net.bus_ids, n).astype(np.int64),
+            "v_pu": res.vm.reshape(-1),
+        }
 
     build = {"der_q": der_q, "bus_v": bus_v}
     return {name: build[name]() for name in tables}
@@ -106,19 +149,35 @@ def partial_summary(steps: pd.DataFrame) -> pd.DataFrame:
     """Sums, counts and extremes per configuration of one task's rows (combined by
     `summarize`)."""
     s = steps.assign(
-        energy=steps.losses_kw * steps.step_h, lb_energy=steps.lower_bound_kw * steps.step_h,
-        lb_missing=steps.lower_bound_kw.isna().astype(np.int64), not_ok=(steps.status != OK).astype(np.int64),
+        energy=steps.losses_kw * steps.step_h,
+        lb_energy=steps.lower_bound_kw * steps.step_h,
+        lb_missing=steps.lower_bound_kw.isna().astype(np.int64),
+        not_ok=(steps.status != OK).astype(np.int64),
         vv=(steps.voltage_violation_pu > VIOLATION_PU).astype(np.int64),
         exc=(steps.excursion_mvar > EXCURSION_MVAR).astype(np.int64),
-        solver_known=steps.solver_ms.notna().astype(np.int64), certified=(steps.certified_by != "").astype(np.int64))
+        solver_known=steps.solver_ms.notna().astype(np.int64),
+        certified=(steps.certified_by != "").astype(np.int64),
+    )
     g = s.groupby(KEYS, sort=False, observed=True)
-    return pd.DataFrame({
-        "steps": g.size(), "hours": g.step_h.sum(), "energy_kwh": g.energy.sum(), "not_ok_steps": g.not_ok.sum(),
-        "voltage_violation_steps": g.vv.sum(), "vmin_pu": g.vmin_pu.min(), "vmax_pu": g.vmax_pu.max(),
-        "max_excursion_mvar": g.excursion_mvar.max(), "excursion_steps": g.exc.sum(),
-        "lower_bound_kwh": g.lb_energy.sum(), "lb_missing": g.lb_missing.sum(), "wall_s": g.wall_ms.sum() / 1e3,
-        "solver_s": g.solver_ms.sum() / 1e3, "solver_known": g.solver_known.sum(), "certified": g.certified.sum(),
-    }).reset_index()
+    return pd.DataFrame(
+        {
+            "steps": g.size(),
+            "hours": g.step_h.sum(),
+            "energy_kwh": g.energy.sum(),
+            "not_ok_steps": g.not_ok.sum(),
+            "voltage_violation_steps": g.vv.sum(),
+            "vmin_pu": g.vmin_pu.min(),
+            "vmax_pu": g.vmax_pu.max(),
+            "max_excursion_mvar": g.excursion_mvar.max(),
+            "excursion_steps": g.exc.sum(),
+            "lower_bound_kwh": g.lb_energy.sum(),
+            "lb_missing": g.lb_missing.sum(),
+            "wall_s": g.wall_ms.sum() / 1e3,
+            "solver_s": g.solver_ms.sum() / 1e3,
+            "solver_known": g.solver_known.sum(),
+            "certified": g.certified.sum(),
+        }
+    ).reset_index()
 
 
 def summarize(partials: list[pd.DataFrame], order: list[tuple]) -> pd.DataFrame:
@@ -128,8 +187,22 @@ def summarize(partials: list[pd.DataFrame], order: list[tuple]) -> pd.DataFrame:
     the same steps, from the socp rows (else the acopf rows), NaN unless every step has one."""
     p = pd.concat(partials, ignore_index=True)
     g = p.groupby(KEYS, sort=False)
-    sums = g[["steps", "hours", "energy_kwh", "not_ok_steps", "voltage_violation_steps", "excursion_steps",
-              "lower_bound_kwh", "lb_missing", "wall_s", "solver_s", "solver_known", "certified"]].sum()
+    sums = g[
+        [
+            "steps",
+            "hours",
+            "energy_kwh",
+            "not_ok_steps",
+            "voltage_violation_steps",
+            "excursion_steps",
+            "lower_bound_kwh",
+            "lb_missing",
+            "wall_s",
+            "solver_s",
+            "solver_known",
+            "certified",
+        ]
+    ].sum()
     out = sums.join(g.vmin_pu.min()).join(g.vmax_pu.max()).join(g.max_excursion_mvar.max())
     out = out.reindex(pd.MultiIndex.from_tuples(order, names=KEYS)).reset_index()
     out["avg_loss_kw"] = out.energy_kwh / out.hours
@@ -141,12 +214,30 @@ def summarize(partials: list[pd.DataFrame], order: list[tuple]) -> pd.DataFrame:
     bound = out[out.strategy.isin(BOUND_FROM) & (out.lb_missing == 0)].copy()
     bound["rank"] = bound.strategy.map(BOUND_FROM.index)
     bound = bound.sort_values("rank").drop_duplicates(["case", "k", "night_mode"]).set_index(["case", "k", "night_mode"])
-    out["lower_bound_kwh"] = pd.MultiIndex.from_frame(out[["case", "k", "night_mode"]]).map(
-        bound.lower_bound_kwh.to_dict().get).astype(float)
+    out["lower_bound_kwh"] = (
+        pd.MultiIndex.from_frame(out[["case", "k", "night_mode"]]).map(bound.lower_bound_kwh.to_dict().get).astype(float)
+    )
     out["gap_kwh"] = out.energy_kwh - out.lower_bound_kwh
     out["gap_pct"] = 100 * out.gap_kwh / out.lower_bound_kwh
-    cols = ["steps", "hours", "avg_loss_kw", "energy_kwh", "no_action_kwh", "savings_pct", "not_ok_steps",
-            "voltage_violation_steps", "vmin_pu", "vmax_pu", "max_excursion_mvar", "excursion_steps",
-            "lower_bound_kwh", "gap_kwh", "gap_pct", "wall_s", "solver_s", "certified_share"]
+    cols = [
+        "steps",
+        "hours",
+        "avg_loss_kw",
+        "energy_kwh",
+        "no_action_kwh",
+        "savings_pct",
+        "not_ok_steps",
+        "voltage_violation_steps",
+        "vmin_pu",
+        "vmax_pu",
+        "max_excursion_mvar",
+        "excursion_steps",
+        "lower_bound_kwh",
+        "gap_kwh",
+        "gap_pct",
+        "wall_s",
+        "solver_s",
+        "certified_share",
+    ]
     ints = ["steps", "not_ok_steps", "voltage_violation_steps", "excursion_steps"]
     return out[KEYS + cols].astype({c: np.int64 for c in ints})

@@ -48,8 +48,7 @@ class Task:
         return f"tasks/{self.id}.parquet"
 
     def as_dict(self) -> dict:
-        return asdict(self) | {"night_modes": list(self.night_modes), "strategies": list(self.strategies),
-                               "file": self.file}
+        return asdict(self) | {"night_modes": list(self.night_modes), "strategies": list(self.strategies), "file": self.file}
 
 
 @dataclass(frozen=True)
@@ -97,8 +96,7 @@ def plan_tasks(config: StudyConfig, period: Period) -> list[Task]:
                 for rows in chunks:
                     t0, t1 = period.index[rows.start], period.index[rows.stop - 1]
                     ident = f"{_slug(case)}_{_slug(source)}_k{k:g}_{t0:%Y%m%dT%H%M}"
-                    tasks.append(Task(ident, case, config.night_modes, source, float(k), names, t0.isoformat(),
-                                      t1.isoformat()))
+                    tasks.append(Task(ident, case, config.night_modes, source, float(k), names, t0.isoformat(), t1.isoformat()))
     return tasks
 
 
@@ -108,8 +106,16 @@ def task_input(task: Task, config: StudyConfig, period: Period) -> TaskInput:
     first = index.get_loc(pd.Timestamp(task.start))
     last = index.get_loc(pd.Timestamp(task.end))
     stop = min(last + 2, len(index))
-    return TaskInput(task, period.profiles.iloc[first:stop][["load", "pv", "wind"]], period.night[first:stop],
-                     last + 1 - first, period.step_h, config.forecast_dir, config.detail_tables, config.acopf_solver)
+    return TaskInput(
+        task,
+        period.profiles.iloc[first:stop][["load", "pv", "wind"]],
+        period.night[first:stop],
+        last + 1 - first,
+        period.step_h,
+        config.forecast_dir,
+        config.detail_tables,
+        config.acopf_solver,
+    )
 
 
 def run_task(inp: TaskInput) -> TaskOutput:
@@ -121,24 +127,30 @@ def run_task(inp: TaskInput) -> TaskOutput:
     t = inp.task
     with threadpool_limits(1):
         step = pd.Timedelta(hours=inp.step_h)
-        time, night = inp.profiles.index[:inp.n_steps], inp.night[:inp.n_steps]
+        time, night = inp.profiles.index[: inp.n_steps], inp.night[: inp.n_steps]
         steps, detail = [], {name: [] for name in inp.detail}
         ran: list[tuple[Scenario, dict[str, StrategyResult]]] = []
         for mode in t.night_modes:
-            scenario = chunk_scenario(t.case, mode, t.forecast, inp.profiles, inp.night, inp.n_steps, step,
-                                      inp.forecast_dir)
+            scenario = chunk_scenario(t.case, mode, t.forecast, inp.profiles, inp.night, inp.n_steps, step, inp.forecast_dir)
             same = next((results for earlier, results in ran if earlier.same_data(scenario)), None)
             results = {}
             for name in t.strategies:
                 takes_solver = "solver" in get_strategy(name).options  # the AC OPF entries
-                res = results[name] = replace(same[name], wall_ms=0.0) if same is not None else \
-                    run_strategy(name, scenario, t.k, **({"solver": inp.acopf_solver} if takes_solver else {}))
+                res = results[name] = (
+                    replace(same[name], wall_ms=0.0)
+                    if same is not None
+                    else run_strategy(name, scenario, t.k, **({"solver": inp.acopf_solver} if takes_solver else {}))
+                )
                 steps.append(step_rows(t.case, mode, t.forecast, time, inp.step_h, night, res))
                 for table, columns in detail_rows(t.case, mode, t.forecast, time, res, inp.detail).items():
                     detail[table].append(columns)
             if same is None:
                 ran.append((scenario, results))
         table = stack(steps, STEP_COLUMNS, time.tz)
-    return TaskOutput(t, table, partial_summary(table),
-                      {name: stack(parts, DETAIL_COLUMNS[name], time.tz) for name, parts in detail.items()},
-                      elapsed_ms(start) / 1e3)
+    return TaskOutput(
+        t,
+        table,
+        partial_summary(table),
+        {name: stack(parts, DETAIL_COLUMNS[name], time.tz) for name, parts in detail.items()},
+        elapsed_ms(start) / 1e3,
+    )
