@@ -28,11 +28,19 @@ _DTYPES = {"bus_ids": int, "bus_type": int, "f": int, "t": int, "status": bool, 
 
 @dataclass(frozen=True)
 class DER:
-    """An inverter-based unit: `bus` is the internal bus index, `rating_mw` its P̄ = S̄ (MW)."""
+    """A DER unit: `bus` is the internal bus index, `rating_mw` its rated active power P̄
+    (MW), `s_mva` its nameplate apparent power S̄ (MVA; None = P̄, as for the paper's PV
+    and DFIG units)."""
 
     bus: int
     kind: DerKind
     rating_mw: float
+    s_mva: float | None = None
+
+    @property
+    def s_rated_mva(self) -> float:
+        """Nameplate apparent power S̄ (MVA)."""
+        return self.rating_mw if self.s_mva is None else self.s_mva
 
 
 @dataclass(frozen=True, eq=False)
@@ -123,6 +131,11 @@ class Network:
                 raise NetworkError(f"{self.name}: DER at bus index {d.bus} outside 0..{self.n_bus - 1}")
             if not (np.isfinite(d.rating_mw) and d.rating_mw > 0):
                 raise NetworkError(f"{self.name}: DER at bus {self.bus_ids[d.bus]} has rating {d.rating_mw} MW; must be > 0")
+            if not (np.isfinite(d.s_rated_mva) and d.s_rated_mva >= d.rating_mw):
+                raise NetworkError(
+                    f"{self.name}: DER at bus {self.bus_ids[d.bus]} has S̄ {d.s_rated_mva} MVA; must be finite and ≥ "
+                    f"its rated P {d.rating_mw} MW"
+                )
 
     # ----- sizes and lookups -------------------------------------------------------
     @property
@@ -147,6 +160,11 @@ class Network:
     @property
     def der_rating_mw(self) -> np.ndarray:
         return np.array([d.rating_mw for d in self.ders], dtype=float)
+
+    @property
+    def der_s_mva(self) -> np.ndarray:
+        """Nameplate apparent power S̄ of each DER (MVA)."""
+        return np.array([d.s_rated_mva for d in self.ders], dtype=float)
 
     @property
     def der_kinds(self) -> tuple[DerKind, ...]:

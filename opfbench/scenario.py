@@ -113,6 +113,10 @@ class Scenario:
         """Reactive load at each DER's own bus (S, n_der) MVAr — what LLMA measures."""
         return self.load_scale[:, None] * self.net.load_q_mvar[self.net.der_bus][None, :]
 
+    def load_p_at_der_mw(self) -> np.ndarray:
+        """Active load at each DER's own bus (S, n_der) MW — what a DER's meter sees of it."""
+        return self.load_scale[:, None] * self.net.load_p_mw[self.net.der_bus][None, :]
+
     @classmethod
     def from_profiles(
         cls,
