@@ -1,9 +1,19 @@
 """DER reactive capability (paper §III). All quantities in MW/MVAr; Q positive =
 injected (over-excited). Limits are symmetric: Qmin = −Qmax.
 
-- PV: S̄ = P̄; |Q| ≤ P·tan(acos 0.8) = 0.75·P and |Q| ≤ √(S̄² − P²).
+- PV (the paper's): |Q| ≤ P·tan(acos 0.8) = 0.75·P and |Q| ≤ √(S̄² − P²) (S̄ = P̄ unless
+  the unit's nameplate says more).
 - DFIG: piecewise-linear in p = P/P̄: Qmax/P̄ = 1 for p ≤ 0.4; −5/6·p + 4/3 for 0.4 < p < 1;
   0.5 at p = 1.
+- inverter (a generic inverter-coupled unit: the PV, wind, biomass and hydro static
+  generators of real grids): |Q| ≤ |P|·tan(acos 0.90) and |Q| ≤ √(S̄² − P²). The power
+  factor range cos φ 0.90 under- to over-excited is the one VDE-AR-N 4105:2018-11 (§5.7.2,
+  reactive power; units above 4.6 kVA) requires of generating units in German LV grids;
+  a unit sized S̄ = P̄/0.90 meets it up to full output. Its active power may be slightly
+  negative (SimBench's wind profiles: −1e-5 p.u., the turbine's own consumption at
+  standstill), so |P| enters the power-factor limit.
+- "Q at night" (night mode connected-q, beyond the paper): the solar units' S-limit
+  √(S̄² − P²) alone, no power-factor limit.
 - Reserve coefficient k ∈ [0, 1]: only (1 − k)·Qmax may be used for loss minimization.
 """
 
@@ -17,16 +27,24 @@ from opfbench.errors import InputError
 
 PF_MIN = 0.8
 TAN_PHI_MAX = float(np.tan(np.arccos(PF_MIN)))  # 0.75
+#: The generic inverter's power-factor range (VDE-AR-N 4105:2018-11, §5.7.2).
+INVERTER_PF_MIN = 0.90
+INVERTER_TAN_PHI_MAX = float(np.tan(np.arccos(INVERTER_PF_MIN)))  # 0.4843
 P_TOLERANCE = 1e-9  # MW: P may exceed the rating by round-off only
+KINDS = ("PV", "DFIG", "inverter")
 
 
-def _check_p(p_mw: np.ndarray, rating_mw: np.ndarray) -> None:
+def _check_p(p_mw: np.ndarray, rating_mw: np.ndarray, floor_mw: np.ndarray | None = None) -> None:
+    """P finite, rating > 0, P ≤ rating and P ≥ 0 (or ≥ −floor_mw where a unit may consume)."""
     if not np.all(np.isfinite(p_mw)):
         raise InputError("DER active power contains NaN or inf")
     if np.any(rating_mw <= 0):
         raise InputError(f"DER rating must be positive, got {np.min(rating_mw)} MW")
-    if np.any(p_mw < -P_TOLERANCE):
-        raise InputError(f"DER active power must be ≥ 0 MW, got {np.min(p_mw)} MW")
+    low = -P_TOLERANCE if floor_mw is None else -np.asarray(floor_mw) - P_TOLERANCE
+    if np.any(p_mw < low):
+        k = np.unravel_index(np.argmin(p_mw - low), np.shape(p_mw))
+        bound = "0" if floor_mw is None else "−S̄"
+        raise InputError(f"DER active power must be ≥ {bound}, got {np.asarray(p_mw)[k]:.6g} MW")
     over = p_mw - rating_mw
     if np.any(over > P_TOLERANCE):
         k = np.unravel_index(np.argmax(over), over.shape)
@@ -43,19 +61,21 @@ def check_reserve(k: float | np.ndarray) -> np.ndarray:
     return k_arr
 
 
-def pv_qmax(p_mw: np.ndarray, rating_mw: np.ndarray) -> np.ndarray:
-    """PV inverter: min(P·tan(acos 0.8), √(S̄² − P²)) in MVAr (S̄ = P̄ = rating)."""
-    p, s = np.asarray(p_mw, float), np.asarray(rating_mw, float)
-    _check_p(p, s)
-    p = np.clip(p, 0.0, s)
+def pv_qmax(p_mw: np.ndarray, rating_mw: np.ndarray, s_mva: np.ndarray | None = None) -> np.ndarray:
+    """PV inverter: min(P·tan(acos 0.8), √(S̄² − P²)) in MVAr (S̄ = `s_mva`, default P̄)."""
+    p, r = np.asarray(p_mw, float), np.asarray(rating_mw, float)
+    s = r if s_mva is None else np.asarray(s_mva, float)
+    _check_p(p, r)
+    p = np.clip(p, 0.0, r)
     return np.minimum(p * TAN_PHI_MAX, np.sqrt(np.maximum(s**2 - p**2, 0.0)))
 
 
-def pv_qmax_night(p_mw: np.ndarray, rating_mw: np.ndarray) -> np.ndarray:
+def pv_qmax_night(p_mw: np.ndarray, rating_mw: np.ndarray, s_mva: np.ndarray | None = None) -> np.ndarray:
     """'Q at night' variant beyond the paper: S-limited only, √(S̄² − P²), no PF limit."""
-    p, s = np.asarray(p_mw, float), np.asarray(rating_mw, float)
-    _check_p(p, s)
-    return np.sqrt(np.maximum(s**2 - np.clip(p, 0.0, s) ** 2, 0.0))
+    p, r = np.asarray(p_mw, float), np.asarray(rating_mw, float)
+    s = r if s_mva is None else np.asarray(s_mva, float)
+    _check_p(p, r)
+    return np.sqrt(np.maximum(s**2 - np.clip(p, 0.0, r) ** 2, 0.0))
 
 
 def dfig_qmax(p_mw: np.ndarray, rating_mw: np.ndarray) -> np.ndarray:
@@ -67,21 +87,48 @@ def dfig_qmax(p_mw: np.ndarray, rating_mw: np.ndarray) -> np.ndarray:
     return s * np.where(pu <= 0.4, 1.0, -5.0 / 6.0 * pu + 4.0 / 3.0)
 
 
-def qmax(kinds: Sequence[str], p_mw: np.ndarray, rating_mw: np.ndarray, pv_night_q: bool = False) -> np.ndarray:
-    """Physical Qmax (MVAr) of each DER; `p_mw` shaped (n_der,) or (S, n_der).
+def inverter_qmax(p_mw: np.ndarray, rating_mw: np.ndarray, s_mva: np.ndarray, night: bool = False) -> np.ndarray:
+    """Generic inverter: min(|P|·tan(acos 0.90), √(S̄² − P²)) in MVAr; `night` the S-limit
+    alone ("Q at night"). P may be as low as −S̄ (a unit's own consumption)."""
+    p, r, s = np.asarray(p_mw, float), np.asarray(rating_mw, float), np.asarray(s_mva, float)
+    _check_p(p, r, floor_mw=s)
+    s_limit = np.sqrt(np.maximum(s**2 - p**2, 0.0))
+    return s_limit if night else np.minimum(np.abs(p) * INVERTER_TAN_PHI_MAX, s_limit)
 
-    `pv_night_q=True` applies the S-only limit to PV units (the "Q at night" variant).
-    """
+
+def qmax(
+    kinds: Sequence[str],
+    p_mw: np.ndarray,
+    rating_mw: np.ndarray,
+    s_mva: np.ndarray | None = None,
+    night_q: bool | np.ndarray = False,
+) -> np.ndarray:
+    """Physical Qmax (MVAr) of each DER; `p_mw` shaped (n_der,) or (S, n_der), `s_mva` the
+    nameplate S̄ per DER (default P̄). `night_q` (a bool, or a bool array broadcasting to
+    `p_mw`) marks where a PV or inverter unit has the S-only "Q at night" limit; DFIG
+    units keep their curve."""
     kinds_arr = np.asarray(kinds)
-    unknown = set(kinds_arr) - {"PV", "DFIG"}
+    unknown = set(kinds_arr.tolist()) - set(KINDS)
     if unknown:
-        raise InputError(f"unknown DER kind(s) {sorted(unknown)}; expected PV or DFIG")
+        raise InputError(f"unknown DER kind(s) {sorted(unknown)}; expected one of {', '.join(KINDS)}")
     p = np.asarray(p_mw, float)
     rating = np.broadcast_to(np.asarray(rating_mw, float), p.shape)
-    pv_limit = pv_qmax_night if pv_night_q else pv_qmax
-    return np.where(kinds_arr == "PV", pv_limit(p, rating), dfig_qmax(p, rating))
+    s = rating if s_mva is None else np.broadcast_to(np.asarray(s_mva, float), p.shape)
+    night = np.broadcast_to(np.asarray(night_q, dtype=bool), p.shape)
+    out = np.zeros(p.shape)
+    for kind in set(kinds_arr.tolist()):
+        cols = kinds_arr == kind
+        pc, rc, sc, nc = p[..., cols], rating[..., cols], s[..., cols], night[..., cols]
+        if kind == "DFIG":
+            out[..., cols] = dfig_qmax(pc, rc)
+        elif kind == "PV":
+            out[..., cols] = np.where(nc, pv_qmax_night(pc, rc, sc), pv_qmax(pc, rc, sc)) if nc.any() else pv_qmax(pc, rc, sc)
+        else:
+            day = inverter_qmax(pc, rc, sc)
+            out[..., cols] = np.where(nc, inverter_qmax(pc, rc, sc, night=True), day) if nc.any() else day
+    return out
 
 
 def usable_qmax(kinds: Sequence[str], p_mw: np.ndarray, rating_mw: np.ndarray, k: float, pv_night_q: bool = False) -> np.ndarray:
     """(1 − k)·Qmax: the part of the capability that loss minimization may use (MVAr)."""
-    return (1.0 - check_reserve(k)) * qmax(kinds, p_mw, rating_mw, pv_night_q)
+    return (1.0 - check_reserve(k)) * qmax(kinds, p_mw, rating_mw, night_q=pv_night_q)

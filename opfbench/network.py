@@ -4,6 +4,15 @@ Storage follows MATPOWER: loads in MW/MVAr, branch impedances in p.u. on `base_m
 the bus's base kV. Buses keep their external numbers (`bus_ids`); every array indexed by
 bus uses the *internal* position 0..n-1. Sign convention: injections positive into the
 grid, loads positive when consuming.
+
+Loads are elements: `load_bus` names the bus of each (several may share a bus); the bus
+arrays `load_p_mw`/`load_q_mvar` are the nominal (stored) totals per bus. A scenario gives
+either one scale on those totals or every element's own P and Q (`opfbench.scenario`).
+
+DER kinds (`DER.kind`, capability in `opfbench.capability`): "PV" and "DFIG" are the
+paper's units; "inverter" is a generic inverter-coupled unit (PV, wind, biomass, hydro
+static generators of real grids) with a nameplate S̄ and the VDE-AR-N 4105 power-factor
+range. `DER.energy` is its primary energy: the night modes act on the solar units.
 """
 
 from __future__ import annotations
@@ -18,29 +27,40 @@ import scipy.sparse as sp
 
 from opfbench.errors import NetworkError
 
-DerKind = Literal["PV", "DFIG"]
+DerKind = Literal["PV", "DFIG", "inverter"]
+DER_KINDS: tuple[str, ...] = ("PV", "DFIG", "inverter")
+DerEnergy = Literal["solar", "wind", "biomass", "hydro", "other"]
+DER_ENERGIES: tuple[str, ...] = ("solar", "wind", "biomass", "hydro", "other")
+_KIND_ENERGY = {"PV": "solar", "DFIG": "wind", "inverter": "other"}
 
 _BUS_ARRAYS = ("bus_ids", "bus_type", "base_kv", "load_p_mw", "load_q_mvar", "gs_mw", "bs_mvar", "vmin", "vmax")
-_BRANCH_ARRAYS = ("f", "t", "r", "x", "b", "tap", "shift", "status")
+_BRANCH_ARRAYS = ("f", "t", "r", "x", "b", "g", "tap", "shift", "status")
 _GEN_ARRAYS = ("gen_bus", "gen_p_mw", "gen_q_mvar", "gen_vset")
-_DTYPES = {"bus_ids": int, "bus_type": int, "f": int, "t": int, "status": bool, "gen_bus": int}
+_DTYPES = {"bus_ids": int, "bus_type": int, "f": int, "t": int, "status": bool, "gen_bus": int, "load_bus": int}
 
 
 @dataclass(frozen=True)
 class DER:
     """A DER unit: `bus` is the internal bus index, `rating_mw` its rated active power P̄
     (MW), `s_mva` its nameplate apparent power S̄ (MVA; None = P̄, as for the paper's PV
-    and DFIG units)."""
+    and DFIG units), `energy` its primary energy (None = the kind's: PV solar, DFIG wind,
+    inverter other)."""
 
     bus: int
     kind: DerKind
     rating_mw: float
     s_mva: float | None = None
+    energy: DerEnergy | None = None
 
     @property
     def s_rated_mva(self) -> float:
         """Nameplate apparent power S̄ (MVA)."""
         return self.rating_mw if self.s_mva is None else self.s_mva
+
+    @property
+    def primary_energy(self) -> str:
+        """Primary energy: `energy`, or the kind's when not given."""
+        return _KIND_ENERGY.get(self.kind, "other") if self.energy is None else self.energy
 
 
 @dataclass(frozen=True, eq=False)
@@ -49,7 +69,11 @@ class Network:
 
     Arrays (length n_bus): bus_ids, base_kv, load_p_mw, load_q_mvar, gs_mw, bs_mvar,
     vmin, vmax, bus_type (1 PQ, 2 PV, 3 slack). Arrays (length n_branch): f, t (internal
-    bus indices), r, x, b (p.u.), tap (ratio, 1.0 = none), shift (degrees), status (bool).
+    bus indices), r, x, b (p.u.), g (p.u.: the π model's shunt conductance, g/2 at each
+    end like b — pandapower's BR_G, e.g. a transformer's iron losses; empty = none), tap
+    (ratio, 1.0 = none), shift (degrees), status (bool). `load_bus` (n_load,): the bus of
+    each load element (empty = one element per bus with a nonzero nominal load, the
+    MATPOWER convention).
     Fixed generators (other than the slack's) are kept as gen_bus/gen_p_mw/gen_q_mvar/
     gen_vset: at PV buses the solver holds |V| = gen_vset, elsewhere they are P/Q
     injections.
@@ -86,9 +110,16 @@ class Network:
     gen_q_mvar: np.ndarray = field(default_factory=lambda: np.zeros(0))
     gen_vset: np.ndarray = field(default_factory=lambda: np.zeros(0))
     ders: tuple[DER, ...] = ()
+    g: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    load_bus: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=int))
 
     def __post_init__(self) -> None:
-        for name in _BUS_ARRAYS + _BRANCH_ARRAYS + _GEN_ARRAYS:
+        if np.size(self.g) == 0:
+            object.__setattr__(self, "g", np.zeros(len(self.f)))
+        if np.size(self.load_bus) == 0:
+            nominal = (np.asarray(self.load_p_mw) != 0) | (np.asarray(self.load_q_mvar) != 0)
+            object.__setattr__(self, "load_bus", np.flatnonzero(nominal))
+        for name in _BUS_ARRAYS + _BRANCH_ARRAYS + _GEN_ARRAYS + ("load_bus",):
             arr = np.array(getattr(self, name), dtype=_DTYPES.get(name, float))
             arr.setflags(write=False)
             object.__setattr__(self, name, arr)
@@ -107,7 +138,9 @@ class Network:
                     )
         if not (np.isfinite(self.base_mva) and self.base_mva > 0):
             raise NetworkError(f"{self.name}: base_mva must be a finite positive number, got {self.base_mva}")
-        for name in ("f", "t", "gen_bus"):
+        if self.load_bus.ndim != 1:
+            raise NetworkError(f"{self.name}: load_bus must be 1-D, got shape {self.load_bus.shape}")
+        for name in ("f", "t", "gen_bus", "load_bus"):
             arr = getattr(self, name)
             if arr.size and (arr.min() < 0 or arr.max() >= self.n_bus):
                 raise NetworkError(f"{self.name}: {name} refers to a bus index outside 0..{self.n_bus - 1}")
@@ -125,8 +158,10 @@ class Network:
             i = crossed[0]
             raise NetworkError(f"{self.name}: bus {self.bus_ids[i]} has Vmin {self.vmin[i]:g} > Vmax {self.vmax[i]:g} p.u.")
         for d in self.ders:
-            if d.kind not in ("PV", "DFIG"):
-                raise NetworkError(f"{self.name}: unknown DER kind {d.kind!r}; expected PV or DFIG")
+            if d.kind not in DER_KINDS:
+                raise NetworkError(f"{self.name}: unknown DER kind {d.kind!r}; expected one of {', '.join(DER_KINDS)}")
+            if d.primary_energy not in DER_ENERGIES:
+                raise NetworkError(f"{self.name}: unknown DER energy {d.energy!r}; expected one of {', '.join(DER_ENERGIES)}")
             if not 0 <= d.bus < self.n_bus:
                 raise NetworkError(f"{self.name}: DER at bus index {d.bus} outside 0..{self.n_bus - 1}")
             if not (np.isfinite(d.rating_mw) and d.rating_mw > 0):
@@ -171,12 +206,39 @@ class Network:
         return tuple(d.kind for d in self.ders)
 
     @property
+    def der_solar(self) -> np.ndarray:
+        """Bool per DER: a solar unit (what the night modes switch off or give "Q at night")."""
+        return np.array([d.primary_energy == "solar" for d in self.ders], dtype=bool)
+
+    @property
+    def n_load(self) -> int:
+        return len(self.load_bus)
+
+    @cached_property
+    def load_incidence(self) -> sp.csr_matrix:
+        """(n_bus, n_load) 0/1 matrix summing load elements onto their buses."""
+        n = self.n_load
+        return sp.csr_matrix((np.ones(n), (self.load_bus, np.arange(n))), shape=(self.n_bus, n))
+
+    @property
     def pv_buses(self) -> np.ndarray:
         """Internal indices of voltage-controlled (PV) buses, excluding the slack."""
         return np.flatnonzero(self.bus_type == 2)
 
     def with_changes(self, **changes) -> "Network":
-        """A copy with some fields replaced (the network itself is immutable)."""
+        """A copy with some fields replaced (the network itself is immutable). A new branch
+        count without `g` keeps a conductance-free network conductance-free (and refuses to
+        guess a nonzero one); replacing the loads without `load_bus` re-derives the load
+        elements of a network that had the default ones."""
+        n_new = len(changes.get("f", self.f))
+        if "g" not in changes and n_new != self.n_branch:
+            if self.g.any():
+                raise NetworkError(f"{self.name}: the branches change but g (branch shunt conductance) is not given")
+            changes["g"] = np.zeros(0)
+        if "load_bus" not in changes and any(k in changes for k in ("load_p_mw", "load_q_mvar", "bus_ids")):
+            nominal = np.flatnonzero((self.load_p_mw != 0) | (self.load_q_mvar != 0))
+            if np.array_equal(self.load_bus, nominal):
+                changes["load_bus"] = np.zeros(0, dtype=int)
         return replace(self, **changes)
 
     # ----- electrical matrices -----------------------------------------------------
@@ -209,7 +271,7 @@ class Network:
         ys = on / (self.r + 1j * self.x)
         bc = on * self.b
         tap = self.tap * np.exp(1j * np.deg2rad(self.shift))
-        ytt = ys + 1j * bc / 2
+        ytt = ys + 1j * bc / 2 if not self.g.any() else ys + (on * self.g + 1j * bc) / 2
         yff = ytt / (tap * np.conj(tap))
         yft = -ys / np.conj(tap)
         ytf = -ys / tap
@@ -309,6 +371,7 @@ class Network:
             "branches": int(self.status.sum()),
             "branches_open": int((~self.status).sum()),
             "ders": len(self.ders),
+            "loads": self.n_load,
             "meshed": self.meshed,
             "load_mw": float(self.load_p_mw.sum()),
             "load_mvar": float(self.load_q_mvar.sum()),

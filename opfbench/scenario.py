@@ -1,12 +1,18 @@
 """Operating points a strategy is asked to handle: S snapshots of load and DER output.
 
-Loads follow `load_scale` × the case's nominal loads; DER active power is given in MW
-per unit (P^C, the current output) and optionally a forecast P^F for Algorithm 3.
+Loads are given one of two ways: `load_scale` (S,) × the case's nominal loads (every load
+follows one profile, the special case the shipped cases use), or every load element's own
+P and Q (S, n_load) MW/MVAr (`Scenario.from_series`: a real grid's per-load profiles).
+DER active power is given in MW per unit (P^C, the current output) and optionally a
+forecast P^F for Algorithm 3. Everything downstream reads the loads through the accessors
+`injections`, `load_q_at_der_mvar`, `load_p_at_der_mw` and `bus_load_mva`, and the
+capability through `qmax_mvar`, so both forms run every strategy and formulation alike.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 
@@ -18,46 +24,84 @@ from opfbench.powerflow import bus_injections
 
 @dataclass(frozen=True, eq=False)
 class Scenario:
-    """S snapshots on one network. Arrays: load_scale (S,), der_p_mw (S, n_der) MW,
-    der_p_forecast_mw (S, n_der) MW or None. A single snapshot may give der_p_mw as
+    """S snapshots on one network. Arrays: load_scale (S,) — or None when the per-load
+    load_p_mw and load_q_mvar (S, n_load) MW/MVAr are given instead —, der_p_mw (S, n_der)
+    MW, der_p_forecast_mw (S, n_der) MW or None. A single snapshot may give der_p_mw as
     (n_der,). The constructor copies its inputs into read-only arrays and checks shapes
     against the network (a transposed array is an error, never reshaped), that values
-    are real and finite, loads ≥ 0 and 0 ≤ P ≤ rating — for the forecast P^F too: a
-    forecast outside the plant's range is refused, never clipped here (a caller that
-    turns a forecaster's output into P^F clips it explicitly). pv_night_q (S,) bool or None:
-    snapshots where PV units have the S-limited "Q at night" capability (night mode
+    are real and finite, load_scale ≥ 0 and P ≤ rating with P ≥ 0 (PV, DFIG) or P ≥ −S̄
+    (an inverter unit's own consumption) — for the forecast P^F too: a forecast outside the
+    plant's range is refused, never clipped here (a caller that turns a forecaster's output
+    into P^F clips it explicitly). Per-load P and Q may have either sign (negative = the
+    element injects, e.g. SimBench's capacitive load Q). pv_night_q (S,) bool or None:
+    snapshots where the solar units have the S-limited "Q at night" capability (night mode
     "connected-q")."""
 
     net: Network
-    load_scale: np.ndarray
+    load_scale: np.ndarray | None
     der_p_mw: np.ndarray
     der_p_forecast_mw: np.ndarray | None = None
     pv_night_q: np.ndarray | None = None
+    load_p_mw: np.ndarray | None = None
+    load_q_mvar: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         n_der = len(self.net.ders)
-        ls = _real_array("load_scale", self.load_scale)
-        if ls.ndim > 1:
-            raise InputError(f"scenario: load_scale must be a number or a 1-D array (S,), got shape {ls.shape}")
-        ls = np.atleast_1d(ls)
-        p = _der_array("der_p_mw", self.der_p_mw, ls.shape[0], n_der)
-        _check_finite("load_scale", ls)
+        if self.load_scale is None:
+            n_snap = self._check_loads()
+        else:
+            if self.load_p_mw is not None or self.load_q_mvar is not None:
+                raise InputError("scenario: give either load_scale or the per-load load_p_mw and load_q_mvar, not both")
+            ls = _real_array("load_scale", self.load_scale)
+            if ls.ndim > 1:
+                raise InputError(f"scenario: load_scale must be a number or a 1-D array (S,), got shape {ls.shape}")
+            ls = np.atleast_1d(ls)
+            _check_finite("load_scale", ls)
+            if np.any(ls < 0):
+                raise InputError(f"scenario: load_scale must be ≥ 0, got {ls.min()} at index {int(np.argmin(ls))}")
+            object.__setattr__(self, "load_scale", _frozen(ls))
+            n_snap = ls.shape[0]
+        p = _der_array("der_p_mw", self.der_p_mw, n_snap, n_der)
         _check_finite("der_p_mw", p)
-        if np.any(ls < 0):
-            raise InputError(f"scenario: load_scale must be ≥ 0, got {ls.min()} at index {int(np.argmin(ls))}")
         self._check_range("der_p_mw", p)
-        object.__setattr__(self, "load_scale", _frozen(ls))
         object.__setattr__(self, "der_p_mw", _frozen(p))
         if self.der_p_forecast_mw is not None:
-            pf = _der_array("der_p_forecast_mw", self.der_p_forecast_mw, ls.shape[0], n_der)
+            pf = _der_array("der_p_forecast_mw", self.der_p_forecast_mw, n_snap, n_der)
             _check_finite("der_p_forecast_mw", pf)
             self._check_range("der_p_forecast_mw", pf)
             object.__setattr__(self, "der_p_forecast_mw", _frozen(pf))
         if self.pv_night_q is not None:
             mask = np.array(self.pv_night_q, dtype=bool)
-            if mask.shape != ls.shape:
-                raise InputError(f"scenario: pv_night_q must have shape (S,) = {ls.shape}, got {mask.shape}")
+            if mask.shape != (n_snap,):
+                raise InputError(f"scenario: pv_night_q must have shape (S,) = ({n_snap},), got {mask.shape}")
             object.__setattr__(self, "pv_night_q", _frozen(mask))
+
+    def _check_loads(self) -> int:
+        """Per-load P and Q: both given, (S, n_load), real and finite; returns S."""
+        if self.load_p_mw is None or self.load_q_mvar is None:
+            raise InputError("scenario: without load_scale both load_p_mw and load_q_mvar (S, n_load) are needed")
+        n_load = self.net.n_load
+        arrays = {}
+        for label in ("load_p_mw", "load_q_mvar"):
+            arr = _real_array(label, getattr(self, label))
+            if arr.ndim != 2 or arr.shape[1] != n_load:
+                raise InputError(
+                    f"scenario: {label} must have shape (S, n_load) = (S, {n_load}) (n_load from the network), got {arr.shape}"
+                )
+            _check_finite(label, arr)
+            arrays[label] = arr
+        if arrays["load_p_mw"].shape != arrays["load_q_mvar"].shape:
+            raise InputError(
+                f"scenario: load_p_mw {arrays['load_p_mw'].shape} and load_q_mvar {arrays['load_q_mvar'].shape} differ in shape"
+            )
+        for label, arr in arrays.items():
+            object.__setattr__(self, label, _frozen(arr))
+        return arrays["load_p_mw"].shape[0]
+
+    @property
+    def per_load(self) -> bool:
+        """True when every load element has its own P and Q (no load_scale)."""
+        return self.load_scale is None
 
     def same_data(self, other: "Scenario") -> bool:
         """The same network object and the same snapshots — loads, DER P, forecast and the
@@ -73,20 +117,26 @@ class Scenario:
         return (
             self.net is other.net
             and equal(self.load_scale, other.load_scale)
+            and equal(self.load_p_mw, other.load_p_mw)
+            and equal(self.load_q_mvar, other.load_q_mvar)
             and equal(self.der_p_mw, other.der_p_mw)
             and equal(self.der_p_forecast_mw, other.der_p_forecast_mw)
             and equal(night_q(self), night_q(other))
         )
 
     def _check_range(self, label: str, p: np.ndarray) -> None:
-        """0 ≤ P ≤ rating (MW) per DER, up to round-off."""
-        rating = self.net.der_rating_mw
-        bad = (p < 0) | (p > rating * (1 + 1e-9))
+        """P ≤ rating (MW) per DER, up to round-off, and P ≥ 0 — or P ≥ −S̄ for an inverter
+        unit, which may draw its own consumption."""
+        net = self.net
+        rating = net.der_rating_mw
+        floor = np.where(np.array([kind == "inverter" for kind in net.der_kinds], dtype=bool), -net.der_s_mva, 0.0)
+        bad = (p < floor) | (p > rating * (1 + 1e-9))
         if np.any(bad):
             s, d = np.argwhere(bad)[0]
+            low = "0" if floor[d] == 0 else "−S̄"
             raise InputError(
-                f"scenario: {label} must lie in [0, rating] MW; snapshot {s}, DER {d} "
-                f"(bus {self.net.bus_ids[self.net.ders[d].bus]}): {p[s, d]:.6g} MW, rating {rating[d]:.6g} MW"
+                f"scenario: {label} must lie in [{low}, rating] MW; snapshot {s}, DER {d} "
+                f"(bus {net.bus_ids[net.ders[d].bus]}): {p[s, d]:.6g} MW, rating {rating[d]:.6g} MW"
             )
 
     @classmethod
@@ -101,20 +151,53 @@ class Scenario:
         forecast = None if forecast_der_scale is None else [forecast_der_scale * rating]
         return cls(net, np.array([load_scale]), np.array([der_scale * rating]), forecast)
 
+    @classmethod
+    def from_series(
+        cls,
+        net: Network,
+        load_p_mw: np.ndarray,
+        load_q_mvar: np.ndarray,
+        der_p_mw: np.ndarray,
+        der_p_forecast_mw: np.ndarray | None = None,
+    ) -> "Scenario":
+        """Snapshots of every load's own P and Q (S, n_load) and every DER's P (S, n_der)."""
+        return cls(net, None, der_p_mw, der_p_forecast_mw, load_p_mw=load_p_mw, load_q_mvar=load_q_mvar)
+
     @property
     def n_snapshots(self) -> int:
-        return self.load_scale.shape[0]
+        return self.der_p_mw.shape[0]
+
+    @cached_property
+    def _bus_load(self) -> np.ndarray:
+        """(S, n_bus) complex MVA: the per-load P + jQ summed onto the buses."""
+        assert self.load_p_mw is not None and self.load_q_mvar is not None
+        out = (self.net.load_incidence @ (self.load_p_mw + 1j * self.load_q_mvar).T).T
+        out = np.ascontiguousarray(out)
+        out.setflags(write=False)
+        return out
+
+    def bus_load_mva(self) -> np.ndarray:
+        """Load per bus (S, n_bus) complex MVA (P + jQ, positive = consumed)."""
+        if self.load_scale is None:
+            return self._bus_load
+        return self.load_scale[:, None] * (self.net.load_p_mw + 1j * self.net.load_q_mvar)[None, :]
 
     def injections(self, der_q_mvar: np.ndarray) -> np.ndarray:
         """Bus injections (S, n_bus) complex MW for DER reactive setpoints (S, n_der) MVAr."""
+        if self.load_scale is None:
+            return bus_injections(self.net, self.der_p_mw, der_q_mvar, bus_load_mva=self._bus_load)
         return bus_injections(self.net, self.der_p_mw, der_q_mvar, self.load_scale)
 
     def load_q_at_der_mvar(self) -> np.ndarray:
         """Reactive load at each DER's own bus (S, n_der) MVAr — what LLMA measures."""
+        if self.load_scale is None:
+            return np.ascontiguousarray(self._bus_load.imag[:, self.net.der_bus])
         return self.load_scale[:, None] * self.net.load_q_mvar[self.net.der_bus][None, :]
 
     def load_p_at_der_mw(self) -> np.ndarray:
         """Active load at each DER's own bus (S, n_der) MW — what a DER's meter sees of it."""
+        if self.load_scale is None:
+            return np.ascontiguousarray(self._bus_load.real[:, self.net.der_bus])
         return self.load_scale[:, None] * self.net.load_p_mw[self.net.der_bus][None, :]
 
     @classmethod
@@ -128,9 +211,10 @@ class Scenario:
         forecast_wind_pu: np.ndarray | None = None,
     ) -> "Scenario":
         """Snapshots from per-unit profiles (S,): loads follow `load_pu` × nominal load;
-        PV units `pv_pu` × rating; DFIG units `wind_pu` × rating (the mapping rule of
-        `opfbench.data.profiles`). Forecast profiles, when given, set P^F the same way."""
-        is_pv = np.array([kind == "PV" for kind in net.der_kinds])
+        solar units `pv_pu` × rating; every other unit (DFIG, wind, …) `wind_pu` × rating
+        (the mapping rule of `opfbench.data.profiles`). Forecast profiles, when given, set
+        P^F the same way."""
+        is_pv = net.der_solar
         load = _real_array("load_pu", load_pu)
         if load.ndim != 1:
             raise InputError(f"scenario: load_pu must be a 1-D profile (S,), got shape {load.shape}")
@@ -156,25 +240,39 @@ class Scenario:
 
     def take(self, rows: np.ndarray | slice) -> "Scenario":
         """The sub-scenario of some snapshots."""
-        fc = None if self.der_p_forecast_mw is None else self.der_p_forecast_mw[rows]
-        night_q = None if self.pv_night_q is None else self.pv_night_q[rows]
-        return Scenario(self.net, self.load_scale[rows], self.der_p_mw[rows], fc, night_q)
+
+        def part(arr: np.ndarray | None) -> np.ndarray | None:
+            return None if arr is None else arr[rows]
+
+        return Scenario(
+            self.net,
+            part(self.load_scale),
+            self.der_p_mw[rows],
+            part(self.der_p_forecast_mw),
+            part(self.pv_night_q),
+            part(self.load_p_mw),
+            part(self.load_q_mvar),
+        )
+
+    def without_forecast(self) -> "Scenario":
+        """The same snapshots with no forecast P^F (and no "Q at night" mask)."""
+        return Scenario(self.net, self.load_scale, self.der_p_mw, load_p_mw=self.load_p_mw, load_q_mvar=self.load_q_mvar)
 
     # ----- "Q at night" (night mode connected-q) -------------------------------------------
     def with_night_q(self, mask: np.ndarray) -> "Scenario":
-        """This scenario with PV units S-limited (|Q| ≤ √(S̄² − P²), no PF limit) at the
-        snapshots where `mask` (S,) is True."""
-        return Scenario(self.net, self.load_scale, self.der_p_mw, self.der_p_forecast_mw, mask)
+        """This scenario with the solar units S-limited (|Q| ≤ √(S̄² − P²), no PF limit) at
+        the snapshots where `mask` (S,) is True."""
+        return Scenario(self.net, self.load_scale, self.der_p_mw, self.der_p_forecast_mw, mask, self.load_p_mw, self.load_q_mvar)
 
     def qmax_mvar(self, p_mw: np.ndarray | None = None) -> np.ndarray:
         """(S, n_der) physical Qmax at active power `p_mw` (default P^C), MVAr, with the
-        "Q at night" capability for PV units at the `pv_night_q` snapshots."""
+        "Q at night" capability for the solar units at the `pv_night_q` snapshots."""
         p = self.der_p_mw if p_mw is None else p_mw
-        kinds, rating = self.net.der_kinds, self.net.der_rating_mw
-        day = qmax(kinds, p, rating)
+        net = self.net
+        kinds, rating, s_rated = net.der_kinds, net.der_rating_mw, net.der_s_mva
         if self.pv_night_q is None or not self.pv_night_q.any():
-            return day
-        return np.where(self.pv_night_q[:, None], qmax(kinds, p, rating, pv_night_q=True), day)
+            return qmax(kinds, p, rating, s_rated)
+        return qmax(kinds, p, rating, s_rated, night_q=self.pv_night_q[:, None] & net.der_solar[None, :])
 
 
 def _real_array(label: str, value: object) -> np.ndarray:

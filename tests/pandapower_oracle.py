@@ -8,7 +8,7 @@ import numpy as np
 import pandapower as pp
 from pandapower.converter.pypower import from_ppc
 
-from opfbench.bench.pandapower_opf import to_ppc
+from opfbench.io.matpower import to_ppc
 from opfbench.network import Network
 
 

@@ -13,9 +13,9 @@ import opfbench.bench.opf as bench_opf
 import opfbench.bench.pf as bench_pf
 from opfbench.bench.pf_large import measure, scaling
 from opfbench.bench.profiles import paper_day_scenario
-from opfbench.cases import load_case
 from opfbench.errors import NetworkError
-from opfbench.matpower import load_case_file
+from opfbench.io import load_network
+from opfbench.io.matpower import load_case_file
 from opfbench.powerflow import bus_injections, solve_pf
 
 PF_KEYS = {
@@ -115,4 +115,4 @@ def test_opf_bench_without_peer(no_peers, capsys):
 
 
 def test_load_case_names_the_large_feeders():
-    assert load_case("feeder1k").n_bus == 990
+    assert load_network("feeder1k").n_bus == 990

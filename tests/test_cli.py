@@ -25,10 +25,10 @@ def test_pf_der_scale_applies_to_every_der(capsys):
     """84.26 kW (paper feeder, every DER at 0.8 × rating, Q = 0) and 202.68 kW (no DER
     output) are pandapower's Newton–Raphson losses on the same network: the independent
     source is computed here, not copied."""
-    from opfbench.cases import load_case
+    from opfbench.io import load_network
     from tests.pandapower_oracle import pandapower_pf
 
-    net = load_case("paper33")
+    net = load_network("paper33")
     _, full = _json(capsys, ["pf", "paper33", "--der-scale", "0.8", "--json"])
     _, none = _json(capsys, ["pf", "paper33", "--der-scale", "0", "--json"])
     zero = np.zeros(len(net.ders))

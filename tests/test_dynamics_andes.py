@@ -8,15 +8,15 @@ import pytest
 
 pytest.importorskip("andes")
 
-from opfbench.cases import load_case  # noqa: E402
 from opfbench.dynamics.andes_ref import CROSS_CHECK_PARAMS, MILD_FAULT, andes_system, mild_fault_comparison  # noqa: E402
 from opfbench.dynamics.model import build_model  # noqa: E402
+from opfbench.io import load_network  # noqa: E402
 from opfbench.registry import run_strategy  # noqa: E402
 from opfbench.scenario import Scenario  # noqa: E402
 
 
 def test_andes_power_flow_is_our_start():
-    net = load_case("paper33")
+    net = load_network("paper33")
     sc = Scenario.snapshot(net)
     model = build_model(sc, run_strategy("llma", sc, 0.0).q_mvar[0], CROSS_CHECK_PARAMS)
     ss = andes_system(model, MILD_FAULT)

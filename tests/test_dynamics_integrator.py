@@ -6,14 +6,14 @@ import pytest
 from scipy.integrate import solve_ivp
 from threadpoolctl import threadpool_limits
 
-from opfbench.cases import load_case
 from opfbench.dynamics.model import build_model
 from opfbench.dynamics.params import FaultParams, ModelParams
 from opfbench.dynamics.simulate import recovery_ms, segments, simulate
+from opfbench.io import load_network
 from opfbench.registry import run_strategy
 from opfbench.scenario import Scenario
 
-NET = load_case("paper33")
+NET = load_network("paper33")
 SCENARIO = Scenario.snapshot(NET)
 FAULT = FaultParams(bus=27, t_end_s=1.2)
 

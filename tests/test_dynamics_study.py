@@ -5,11 +5,11 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from opfbench.cases import load_case
 from opfbench.dynamics.params import FaultParams
 from opfbench.dynamics.study import StudyConfig, fault_table, operating_point, recovery_summary, run_study
+from opfbench.io import load_network
 
-NET = load_case("paper33")
+NET = load_network("paper33")
 
 
 def _table(config: StudyConfig, time: str | None = None) -> pd.DataFrame:

@@ -11,10 +11,10 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from opfbench.cases import load_case
 from opfbench.cli import main
 from opfbench.errors import DataError, InputError
 from opfbench.forecasting.outputs import load_forecast
+from opfbench.io import load_network
 from opfbench.scenario import Scenario
 from tests.test_matpower import GOOD
 
@@ -74,7 +74,7 @@ def test_out_of_memory_is_one_message_naming_the_case(capsys, monkeypatch):
     def too_big(name):
         raise MemoryError
 
-    monkeypatch.setattr("opfbench.cases.load_case", too_big)  # the command imports it when it runs
+    monkeypatch.setattr("opfbench.io.load_case", too_big)  # the command imports it when it runs
     code, err = _cli(capsys, ["pf", "case10000"])
     assert code == 2 and err == (
         "opfbench pf: error: out of memory on case 'case10000': the problem is too large "
@@ -84,15 +84,15 @@ def test_out_of_memory_is_one_message_naming_the_case(capsys, monkeypatch):
 
 # ----- the shared network is immutable ----------------------------------------------------
 def test_cached_network_arrays_are_read_only():
-    net = load_case("paper33")
+    net = load_network("paper33")
     for name in ("load_p_mw", "load_q_mvar", "r", "x", "vmin", "vmax", "bus_ids", "status", "f"):
         with pytest.raises(ValueError, match="read-only"):
             getattr(net, name)[0] = 0
-    assert load_case("paper33").load_p_mw.sum() == pytest.approx(3.715)
+    assert load_network("paper33").load_p_mw.sum() == pytest.approx(3.715)
 
 
 def test_network_copies_the_callers_arrays():
-    net = load_case("case33bw")
+    net = load_network("case33bw")
     load = np.array(net.load_p_mw)
     other = net.with_changes(load_p_mw=load)
     load[:] = 0  # the caller's array stays writable and the network does not see the change
@@ -102,7 +102,7 @@ def test_network_copies_the_callers_arrays():
 def test_network_refuses_negative_r_and_crossed_limits():
     from opfbench.errors import NetworkError
 
-    net = load_case("case33bw")
+    net = load_network("case33bw")
     with pytest.raises(NetworkError, match=r"branch 3 \(3-4\) has negative resistance"):
         net.with_changes(r=np.where(np.arange(net.n_branch) == 2, -0.01, net.r))
     with pytest.raises(NetworkError, match="bus 7 has Vmin 1.05 > Vmax 1"):
@@ -114,7 +114,7 @@ def test_network_refuses_negative_r_and_crossed_limits():
 # ----- Scenario ------------------------------------------------------------------------------
 @pytest.fixture(scope="module")
 def net():
-    return load_case("paper33")
+    return load_network("paper33")
 
 
 def test_scenario_refuses_transposed_der_array(net):

@@ -7,10 +7,10 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from opfbench.cases import load_case
 from opfbench.errors import InputError
 from opfbench.formulations.acopf import run_acopf
 from opfbench.formulations.dominance import opf_dominance
+from opfbench.io import load_network
 from opfbench.registry import run_strategy
 from opfbench.result import StrategyResult
 from opfbench.scenario import Scenario
@@ -23,7 +23,7 @@ def no_action(scenario: Scenario) -> StrategyResult:
 
 @pytest.fixture(scope="module")
 def random60():
-    net = load_case("paper33")
+    net = load_network("paper33")
     rng = np.random.default_rng(2024)
     n = 60
     return Scenario(net, rng.uniform(0.2, 1.4, n), rng.uniform(0.0, 1.0, (n, 5)) * net.der_rating_mw)
@@ -46,7 +46,7 @@ def test_acopf_never_worse_than_no_action(random60, k):
 def test_acopf_never_worse_than_the_local_rules(case, k):
     """≥ 50 random scenarios: AC OPF ≤ LLMA and LFMA (under the same k) wherever the
     rule's point is voltage-feasible. Exceptions would be listed with their scenario."""
-    net = load_case(case)
+    net = load_network(case)
     rng = np.random.default_rng(11)
     n = 60
     scenario = Scenario(net, rng.uniform(0.2, 1.4, n), rng.uniform(0.0, 1.0, (n, 5)) * net.der_rating_mw)

@@ -8,19 +8,19 @@ import numpy as np
 import pytest
 
 from opfbench.capability import usable_qmax
-from opfbench.cases import load_case
 from opfbench.errors import InputError, NetworkError
 from opfbench.formulations import socp as socp_module
 from opfbench.formulations.acopf import CERTIFY_RTOL, ac_opf, run_acopf
 from opfbench.formulations.cache import PER_THREAD, per_thread
 from opfbench.formulations.socp import build_socp, relaxation, run_socp
+from opfbench.io import load_network
 from opfbench.registry import run_strategy
 from opfbench.scenario import Scenario
 
 
 def random_snapshots(case: str, n: int, seed: int = 7) -> Scenario:
     """n independent snapshots: load scale U[0.2, 1.2], each DER's P U[0, rating]."""
-    net = load_case(case)
+    net = load_network(case)
     rng = np.random.default_rng(seed)
     return Scenario(net, rng.uniform(0.2, 1.2, n), rng.uniform(0.0, 1.0, (n, len(net.ders))) * net.der_rating_mw)
 
@@ -117,7 +117,7 @@ def test_paper_slack_rule_reuses_the_unrestricted_optimum_only_where_the_slack_i
     """Light load and DER at full output make the slack export on some snapshots: only those
     are solved again under slack P ≥ 0; every snapshot agrees with a relaxation built with
     the rule from the start."""
-    net = load_case("paper33")
+    net = load_network("paper33")
     rng = np.random.default_rng(5)
     n = 16
     scenario = Scenario(net, rng.uniform(0.1, 1.0, n), rng.uniform(0.5, 1.0, (n, len(net.ders))) * net.der_rating_mw)
@@ -148,7 +148,7 @@ def test_paper_setup_takes_the_fast_path_unless_ipopt_is_asked_for():
 
 
 def test_solver_objects_are_not_shared_between_threads_or_callers():
-    net = load_case("paper33")
+    net = load_network("paper33")
     assert build_socp(net) is not build_socp(net)
     assert relaxation(net) is relaxation(net) and ac_opf(net) is ac_opf(net)
     other = {}
@@ -168,7 +168,7 @@ def test_k_as_an_array_is_refused(run):
 def test_vmin_above_vmax_is_a_network_error_before_any_solve(run):
     """Refused with the bus and both limits named — by the network itself where it checks
     its limits, else by the OPF problem before any model is built."""
-    net = load_case("paper33")
+    net = load_network("paper33")
     vmin = net.vmin.copy()
     vmin[7] = net.vmax[7] + 0.05
     with pytest.raises(NetworkError, match=rf"bus {net.bus_ids[7]} has .*1\.15.*1\.1"):
@@ -181,7 +181,7 @@ def test_unknown_solver_option_is_refused():
 
 
 def test_per_thread_cache_keeps_the_most_recent_objects():
-    net = load_case("paper33")
+    net = load_network("paper33")
     first = per_thread(net, "probe-0", object)
     assert per_thread(net, "probe-0", object) is first
     for i in range(1, PER_THREAD + 1):
@@ -192,7 +192,7 @@ def test_per_thread_cache_keeps_the_most_recent_objects():
 def test_an_infeasible_relaxation_settles_the_step_without_ipopt():
     """Twice the nominal load and no Q (k = 1) pull paper33 below 0.9 p.u.: the SOCP proves
     the AC OPF infeasible, so the fast path records it without IPOPT; IPOPT agrees."""
-    net = load_case("paper33")
+    net = load_network("paper33")
     scenario = Scenario(net, np.array([1.0, 2.0, 3.0]), np.zeros((3, len(net.ders))))
     fast = run_acopf(scenario, 1.0)
     assert list(fast.status) == ["ok", "infeasible", "infeasible"]

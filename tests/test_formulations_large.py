@@ -14,16 +14,16 @@ import casadi as ca
 import numpy as np
 import pytest
 
-from opfbench.cases import load_case
 from opfbench.formulations.acopf import build_acopf, run_acopf
 from opfbench.formulations.socp import build_socp
+from opfbench.io import load_network
 from opfbench.network import DER, Network
 from opfbench.scenario import Scenario
 
 
 def replicated_feeder(copies: int) -> Network:
     """paper33 with its non-slack part repeated `copies` times around the slack bus."""
-    base = load_case("paper33")
+    base = load_network("paper33")
     if base.slack != 0 or np.any(base.bus_type[1:] != 1):
         raise AssertionError("paper33 is expected to have the slack first and PQ buses elsewhere")
     m = base.n_bus - 1
@@ -62,7 +62,7 @@ def test_replicated_feeder_ac_opf_is_paper33s_per_copy():
     copies = 3
     net = replicated_feeder(copies)
     assert net.n_bus == 1 + 32 * copies and not net.meshed and len(net.ders) == 5 * copies
-    single = run_acopf(Scenario.snapshot(load_case("paper33"), 1.0, 0.8), 0.0, solver="ipopt")
+    single = run_acopf(Scenario.snapshot(load_network("paper33"), 1.0, 0.8), 0.0, solver="ipopt")
     for solver in ("auto", "ipopt"):
         res = run_acopf(Scenario.snapshot(net, 1.0, 0.8), 0.0, solver=solver)
         assert res.status[0] == "ok"

@@ -7,16 +7,16 @@ import numpy as np
 import pytest
 
 from opfbench.bench.pf_large import day96
-from opfbench.cases import load_case
 from opfbench.formulations import socp
 from opfbench.formulations.acopf import CERTIFY_RTOL, run_acopf
 from opfbench.formulations.problem import snapshot_data
 from opfbench.formulations.socp import branch_scale, build_socp
+from opfbench.io import load_network
 from opfbench.scenario import Scenario
 
 
 def test_branch_scale_is_the_power_below_each_branch():
-    net = load_case("paper33")
+    net = load_network("paper33")
     s = branch_scale(net) * net.base_mva  # MVA
     head = np.flatnonzero(net.parent == net.slack)
     total = max(np.abs(net.load_p_mw + 1j * net.load_q_mvar).sum(), net.der_rating_mw.sum())
@@ -30,7 +30,7 @@ def test_branch_scale_is_the_power_below_each_branch():
 def test_scaling_leaves_the_relaxation_unchanged(case, monkeypatch):
     """Any α > 0 describes the same cone: the bound with the scaling equals the textbook
     (unscaled, α = 1) cone's."""
-    net = load_case(case)
+    net = load_network(case)
     rng = np.random.default_rng(3)
     scenario = Scenario(net, rng.uniform(0.4, 1.2, 6), rng.uniform(0.0, 1.0, (6, len(net.ders))) * net.der_rating_mw)
     data = snapshot_data(scenario, 0.2)

@@ -8,9 +8,9 @@ import numpy as np
 import pytest
 
 from opfbench.bench.profiles import paper_day_scenario
-from opfbench.cases import load_case
 from opfbench.formulations.problem import snapshot_data
 from opfbench.formulations.socp import build_socp, data_vector
+from opfbench.io import load_network
 from opfbench.scenario import Scenario
 
 
@@ -50,7 +50,7 @@ def test_screened_answers_are_the_full_programs_optimum_on_the_paper_day(k):
 def test_a_wrong_guess_is_refused_and_changes_no_digit():
     """Guessing that every DER sits at its upper Q limit at light load (where they do not)
     fails the check; the answer is the one a solver without that guess gives, to the digit."""
-    net = load_case("paper33")
+    net = load_network("paper33")
     relax, fresh = build_socp(net), build_socp(net)
     b = _offsets(relax, Scenario.snapshot(net, 0.5, 0.7), 0.0)[0]
     program = relax.program
@@ -71,7 +71,7 @@ def test_a_wrong_guess_is_refused_and_changes_no_digit():
 def test_a_q_limit_of_zero_fixes_the_der_at_zero():
     """At night with the PV disconnected its Q limit is 0 (its two bounds coincide): the
     screened program keeps its upper row as Q = 0 and accepts a multiplier of either sign."""
-    net = load_case("paper33")
+    net = load_network("paper33")
     relax = build_socp(net)
     scenario = Scenario.snapshot(net, 0.8, 0.0)
     data = snapshot_data(scenario, 0.0)

@@ -6,11 +6,11 @@ import cvxpy as cp
 import numpy as np
 import pytest
 
-from opfbench.cases import load_case
 from opfbench.errors import InputError, NetworkError
 from opfbench.formulations.acopf import run_acopf
 from opfbench.formulations.problem import snapshot_data
-from opfbench.formulations.socp import DistFlowSocp, JabrSocp, build_socp, data_vector, run_socp
+from opfbench.formulations.socp import DistFlowSocp, build_socp, data_vector, run_socp
+from opfbench.io import load_network
 from opfbench.scenario import Scenario
 
 BOUND_SLACK = 1e-6  # relative: solver tolerances of both sides
@@ -23,7 +23,7 @@ def random_scenario(net, n: int, seed: int) -> Scenario:
 
 @pytest.mark.parametrize("case, n, exact", [("paper33", 20, True), ("case69-der", 8, True), ("paper33-meshed", 20, False)])
 def test_lower_bound_below_ac_opf(case, n, exact):
-    net = load_case(case)
+    net = load_network(case)
     scenario = random_scenario(net, n, seed=7)
     for k in (0.0, 0.5):
         opf = run_acopf(scenario, k)
@@ -44,7 +44,7 @@ def test_lower_bound_below_ac_opf(case, n, exact):
 
 
 def test_relaxation_setpoints_are_optimal_when_exact():
-    net = load_case("paper33")
+    net = load_network("paper33")
     scenario = random_scenario(net, 10, seed=3)
     socp, opf = run_socp(scenario, 0.0), run_acopf(scenario, 0.0)
     assert np.all(socp.status == "ok") and set(socp.extra["model"]) == {"distflow"}
@@ -54,14 +54,14 @@ def test_relaxation_setpoints_are_optimal_when_exact():
 
 
 def test_meshed_feeder_uses_jabr_and_its_point_is_ac_evaluated():
-    net = load_case("paper33-meshed")
+    net = load_network("paper33-meshed")
     res = run_socp(Scenario.snapshot(net, 1.0, 0.8), 0.0)
     assert res.extra["model"][0] == "jabr" and res.status[0] == "ok"
     assert res.lower_bound_kw[0] < res.losses_kw[0]
 
 
 def test_jabr_and_distflow_agree_on_a_radial_feeder():
-    net = load_case("paper33")
+    net = load_network("paper33")
     data = snapshot_data(Scenario.snapshot(net, 0.9, 0.6), 0.2)
     args = (data.s_fixed[0], data.q_limit[0])
     dist, jabr = build_socp(net, model="distflow").solve(*args), build_socp(net, model="jabr").solve(*args)
@@ -77,7 +77,7 @@ def test_direct_clarabel_path_matches_cvxpy_solve(model):
     DistFlow, 3.1e-7 for Jabr). Q within 1e-5 p.u. for both: the losses are flat in Q near
     the optimum, so 1e-8 in the objective leaves Q loose (measured up to 1.0e-6 for the
     full program, 5.6e-6 for the screened Jabr answer, against cvxpy's defaults)."""
-    net = load_case("paper33")
+    net = load_network("paper33")
     relax = build_socp(net, model=model)
     program = relax.program
     for scale in (0.5, 1.2):
@@ -97,28 +97,44 @@ def test_direct_clarabel_path_matches_cvxpy_solve(model):
 
 
 def test_infeasible_voltage_band_is_certified():
-    net = load_case("paper33")
+    net = load_network("paper33")
     tight = net.with_changes(vmin=np.full(net.n_bus, 0.99), vmax=np.full(net.n_bus, 1.0))
     res = run_socp(Scenario.snapshot(tight, 1.2, 0.5), 0.0)
     assert res.status[0] == "infeasible" and res.extra["fallback"][0] == "no-action"
     assert np.isnan(res.lower_bound_kw[0]) and np.all(res.q_mvar == 0)
 
 
-def test_distflow_refuses_what_it_does_not_model():
-    net = load_case("paper33")
-    tapped = net.with_changes(tap=np.where(np.arange(net.n_branch) == 3, 1.02, net.tap))
-    with pytest.raises(NetworkError, match="tap ratio 1"):
-        DistFlowSocp(tapped)
-    JabrSocp(tapped)  # the bus-injection model handles taps
+def test_distflow_models_transformers_exactly():
+    """Taps at a branch's parent or child end, a phase shift and a shunt conductance (a
+    transformer's iron losses) on a radial feeder: DistFlow's bound equals Jabr's and the
+    AC losses of its setpoints, and the AC OPF's losses."""
+    net = load_network("paper33")
+    k = np.arange(net.n_branch)
+    flip = k == 10  # its tap at the child end
+    tapped = net.with_changes(
+        f=np.where(flip, net.t, net.f),
+        t=np.where(flip, net.f, net.t),
+        tap=np.select([k == 3, flip], [1.02, 0.97], 1.0),
+        shift=np.where(k == 5, 30.0, 0.0),
+        g=np.where(k == 0, 0.002, 0.0),
+    )
+    scenario = Scenario.snapshot(tapped, 1.0, 0.8)
+    dist, jabr = run_socp(scenario, 0.0, model="distflow"), run_socp(scenario, 0.0, model="jabr")
+    assert dist.extra["model"][0] == "distflow" and run_socp(scenario, 0.0).extra["model"][0] == "distflow"
+    assert dist.lower_bound_kw[0] == pytest.approx(jabr.lower_bound_kw[0], rel=1e-6)
+    assert dist.losses_kw[0] == pytest.approx(dist.lower_bound_kw[0], rel=1e-6)
+    assert run_acopf(scenario, 0.0).losses_kw[0] == pytest.approx(dist.lower_bound_kw[0], rel=1e-6)
+    plain = run_socp(Scenario.snapshot(net, 1.0, 0.8), 0.0, model="distflow").lower_bound_kw[0]
+    assert abs(plain - dist.lower_bound_kw[0]) > 1.0  # the transformers change the problem
     with pytest.raises(NetworkError, match="radial"):
-        DistFlowSocp(load_case("paper33-meshed"))
+        DistFlowSocp(load_network("paper33-meshed"))
     with pytest.raises(InputError, match="unknown SOCP model"):
         build_socp(net, model="sdp")
 
 
 def test_line_charging_is_modelled_exactly():
     """With π-model charging, DistFlow (charging as bus shunts) and the exact AC OPF agree."""
-    base = load_case("paper33")
+    base = load_network("paper33")
     net = base.with_changes(b=np.full(base.n_branch, 0.002))
     scenario = Scenario.snapshot(net, 1.0, 0.8)
     opf = run_acopf(scenario, 0.0)

@@ -14,8 +14,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from opfbench.cases import load_case
 from opfbench.data import paper_day
+from opfbench.io import load_network
 from opfbench.registry import STRATEGY_NAMES, run_strategy
 from opfbench.result import OK
 from opfbench.scenario import Scenario
@@ -35,7 +35,7 @@ SLOW = {"acopf-paper"}
 @pytest.fixture(scope="module")
 def day_scenario() -> Scenario:
     day = paper_day()
-    return Scenario.from_profiles(load_case("paper33"), day["load"].to_numpy(), day["pv"].to_numpy(), day["wind"].to_numpy())
+    return Scenario.from_profiles(load_network("paper33"), day["load"].to_numpy(), day["pv"].to_numpy(), day["wind"].to_numpy())
 
 
 def test_every_registered_strategy_has_a_pinned_energy():

@@ -8,15 +8,16 @@ import numpy as np
 import pytest
 
 from opfbench.bench.pf_large import day96
-from opfbench.cases import feeder, load_case, place_ders
+from opfbench.cases import feeder, place_ders
 from opfbench.cli import main
+from opfbench.io import load_network
 from opfbench.powerflow import bus_injections, solve_pf, solve_pf_batch
 from opfbench.registry import run_strategy
 from opfbench.strategies.local import lfma_trace
 
 
 def test_one_copy_is_case33bw_with_place_ders():
-    one, base = feeder(1), load_case("case33bw")
+    one, base = feeder(1), load_network("case33bw")
     assert np.abs(one.ybus - base.ybus).max() == 0
     assert np.array_equal(one.load_p_mw, base.load_p_mw) and np.array_equal(one.bus_ids, base.bus_ids)
     placed = place_ders(base, "x")
@@ -24,7 +25,7 @@ def test_one_copy_is_case33bw_with_place_ders():
 
 
 def test_feeder1k_follows_the_rule():
-    net, base = load_case("feeder1k"), load_case("case33bw")
+    net, base = load_network("feeder1k"), load_network("case33bw")
     c = 30
     assert net.n_bus == 33 * c and net.n_branch == 33 * c - 1 and not net.meshed
     assert len(net.ders) == 5 * c and net.summary()["load_mw"] == pytest.approx(base.load_p_mw.sum())
@@ -36,8 +37,8 @@ def test_feeder1k_follows_the_rule():
 def test_feeder1k_losses_and_voltages_stay_those_of_case33bw():
     """Each copy repeats case33bw's voltage drops at 1/c of its load, so vmin is case33bw's
     less the trunk's drop and losses case33bw's plus the trunk's (a few kW)."""
-    net = load_case("feeder1k")
-    r, base = solve_pf(net, bus_injections(net)), solve_pf(load_case("case33bw"), bus_injections(load_case("case33bw")))
+    net = load_network("feeder1k")
+    r, base = solve_pf(net, bus_injections(net)), solve_pf(load_network("case33bw"), bus_injections(load_network("case33bw")))
     assert r.converged
     assert 0 < r.losses_kw - base.losses_kw < 10
     assert 0 < base.extreme_voltage("min")[0] - r.extreme_voltage("min")[0] < 0.005
@@ -46,7 +47,7 @@ def test_feeder1k_losses_and_voltages_stay_those_of_case33bw():
 def test_feeder1k_agrees_with_pandapower():
     from pandapower_oracle import pandapower_pf
 
-    net = load_case("feeder1k")
+    net = load_network("feeder1k")
     rng = np.random.default_rng(2)
     p, q = rng.uniform(0, 1, len(net.ders)) * net.der_rating_mw, rng.uniform(-0.3, 0.3, len(net.ders)) * net.der_rating_mw
     ours = solve_pf(net, bus_injections(net, p, q, 1.2))
@@ -82,7 +83,7 @@ def test_pf_command_on_feeder1k(capsys):
     out = json.loads(capsys.readouterr().out)
     assert out["converged"] and out["losses_kw"] == pytest.approx(
         solve_pf(
-            load_case("feeder1k"), bus_injections(load_case("feeder1k"), 0.8 * load_case("feeder1k").der_rating_mw)
+            load_network("feeder1k"), bus_injections(load_network("feeder1k"), 0.8 * load_network("feeder1k").der_rating_mw)
         ).losses_kw,
         abs=1e-6,
     )

@@ -3,9 +3,10 @@
 import numpy as np
 import pytest
 
-from opfbench.cases import CASE_NAMES, load_case
+from opfbench.cases import CASE_NAMES
 from opfbench.errors import CaseFormatError, InputError
-from opfbench.matpower import load_case_file, read_matpower
+from opfbench.io import load_network
+from opfbench.io.matpower import load_case_file, read_matpower
 
 GOOD = """function mpc = tiny
 mpc.version = '2';
@@ -54,12 +55,12 @@ def test_good_file_applies_ohm_and_kw_conversions(tmp_path):
 
 @pytest.mark.parametrize("name", CASE_NAMES)
 def test_shipped_cases_load(name):
-    net = load_case(name)
+    net = load_network(name)
     assert net.n_bus >= 33 and not np.isnan(net.r).any()
 
 
 def test_case141_power_factor_conversion():
-    net = load_case("case141")
+    net = load_network("case141")
     nz = net.load_p_mw > 0
     pf = net.load_p_mw[nz] / np.hypot(net.load_p_mw[nz], net.load_q_mvar[nz])
     assert np.allclose(pf, 0.85)
@@ -124,4 +125,4 @@ def test_missing_file_and_unknown_case(tmp_path):
     with pytest.raises(CaseFormatError, match="cannot read"):
         load_case_file(tmp_path / "nope.m")
     with pytest.raises(InputError, match="unknown case 'nope'"):
-        load_case("nope")
+        load_network("nope")

@@ -3,12 +3,12 @@
 import numpy as np
 import pytest
 
-from opfbench.cases import load_case
 from opfbench.errors import NetworkError
+from opfbench.io import load_network
 
 
 def test_paper33_topology():
-    net = load_case("paper33")
+    net = load_network("paper33")
     ids = net.bus_ids
     parent_of = {int(ids[j]): int(ids[p]) for j, p in enumerate(net.parent) if p >= 0}
     assert parent_of[2] == 1 and parent_of[19] == 2 and parent_of[23] == 3 and parent_of[26] == 6
@@ -22,12 +22,12 @@ def test_paper33_topology():
 
 
 def test_meshed_variant_closes_the_five_ties():
-    net = load_case("paper33-meshed")
+    net = load_network("paper33-meshed")
     assert net.meshed and net.status.all() and net.n_branch == 37
 
 
 def test_parent_branch_connects_parent():
-    net = load_case("case69")
+    net = load_network("case69")
     for j in range(net.n_bus):
         k = net.parent_branch[j]
         if k >= 0:
@@ -35,7 +35,7 @@ def test_parent_branch_connects_parent():
 
 
 def test_opening_a_line_islands_buses():
-    net = load_case("case33bw")
+    net = load_network("case33bw")
     status = net.status.copy()
     status[net.parent_branch[net.index_of(30)]] = False  # line 29–30
     with pytest.raises(NetworkError, match=r"islanded .*30, 31, 32, 33"):

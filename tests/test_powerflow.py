@@ -3,13 +3,13 @@
 import numpy as np
 import pytest
 
-from opfbench.cases import load_case
 from opfbench.errors import InputError
+from opfbench.io import load_network
 from opfbench.powerflow import bus_injections, solve_pf, solve_pf_batch
 
 
 def _pf(name, der_mw=0.0, load_scale=1.0):
-    net = load_case(name)
+    net = load_network(name)
     return solve_pf(net, bus_injections(net, der_mw, 0.0, load_scale))
 
 
@@ -36,7 +36,7 @@ def test_paper33_nominal_with_der_at_0_8():
 
 
 def test_losses_equal_power_balance():
-    net = load_case("paper33")
+    net = load_network("paper33")
     r = solve_pf(net, bus_injections(net, 0.3, 0.1, 1.1))
     balance = r.slack_s_mva.real + net.der_rating_mw.size * 0.3 - 1.1 * net.load_p_mw.sum()
     assert r.losses_kw == pytest.approx(balance * 1e3, abs=1e-4)  # NR tolerance 1e-9 p.u. on 10 MVA
@@ -45,18 +45,18 @@ def test_losses_equal_power_balance():
 def test_heavy_load_reports_non_convergence():
     r = _pf("paper33", load_scale=10.0)
     assert not r.converged
-    batch = solve_pf_batch(load_case("paper33"), bus_injections(load_case("paper33"), 0.0, 0.0, np.array([1.0, 10.0])))
+    batch = solve_pf_batch(load_network("paper33"), bus_injections(load_network("paper33"), 0.0, 0.0, np.array([1.0, 10.0])))
     assert list(batch.converged) == [True, False]
 
 
 def test_nan_injection_is_a_clear_error():
-    net = load_case("paper33")
+    net = load_network("paper33")
     with pytest.raises(InputError, match="NaN"):
         bus_injections(net, np.array([0.1, np.nan, 0.1, 0.1, 0.1]))
 
 
 def _random_points(name, n, seed):
-    net = load_case(name)
+    net = load_network(name)
     rng = np.random.default_rng(seed)
     for _ in range(n):
         yield (
@@ -94,7 +94,7 @@ def test_batched_agrees_with_single(name):
 
 
 def test_batched_warm_start_converges_to_the_same_point_in_fewer_iterations():
-    net = load_case("paper33")
+    net = load_network("paper33")
     s = bus_injections(net, np.array([[0.3] * 5, [0.5] * 5]), np.array([[0.1] * 5, [-0.1] * 5]), np.array([1.0, 0.8]))
     cold = solve_pf_batch(net, s)
     near = bus_injections(net, np.array([[0.31] * 5, [0.5] * 5]), np.array([[0.1] * 5, [-0.1] * 5]), np.array([1.0, 0.8]))
@@ -111,7 +111,7 @@ def test_case_with_pv_bus_and_tap_matches_pandapower(tmp_path):
     """A meshed-free 4-bus case with a voltage-controlled bus and an off-nominal tap."""
     from pandapower_oracle import pandapower_pf
 
-    from opfbench.matpower import load_case_file
+    from opfbench.io.matpower import load_case_file
 
     path = tmp_path / "case4pv.m"
     path.write_text(CASE4_PV)

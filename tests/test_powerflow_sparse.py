@@ -5,8 +5,8 @@ import numpy as np
 import pytest
 from test_powerflow import CASE4_PV
 
-from opfbench.cases import load_case
-from opfbench.matpower import load_case_file
+from opfbench.io import load_network
+from opfbench.io.matpower import load_case_file
 from opfbench.powerflow import SPARSE_MIN_BUSES, bus_injections, solve_pf, solve_pf_batch, uses_sparse
 
 
@@ -23,7 +23,7 @@ def _injections(net, n, seed):
 
 @pytest.mark.parametrize("name", ["paper33", "case69-der", "case141-der", "paper33-meshed"])
 def test_sparse_newton_equals_dense(name):
-    net = load_case(name)
+    net = load_network(name)
     for row in _injections(net, 10, seed=11):
         dense, sparse = solve_pf(net, row, sparse=False), solve_pf(net, row, sparse=True)
         assert dense.converged and sparse.converged
@@ -33,7 +33,7 @@ def test_sparse_newton_equals_dense(name):
 
 @pytest.mark.parametrize("name", ["paper33", "case69-der", "case141-der", "paper33-meshed"])
 def test_sparse_batch_equals_dense_batch(name):
-    net = load_case(name)
+    net = load_network(name)
     s = _injections(net, 48, seed=5)
     dense, sparse = solve_pf_batch(net, s, sparse=False), solve_pf_batch(net, s, sparse=True)
     assert dense.converged.all() and sparse.converged.all()
@@ -53,12 +53,12 @@ def test_sparse_newton_with_pv_bus_and_tap(tmp_path):
 
 
 def test_sparse_reports_non_convergence():
-    net = load_case("paper33")
+    net = load_network("paper33")
     assert not solve_pf(net, bus_injections(net, 0.0, 0.0, 10.0), sparse=True).converged
     batch = solve_pf_batch(net, bus_injections(net, 0.0, 0.0, np.array([1.0, 10.0])), sparse=True)
     assert list(batch.converged) == [True, False]
 
 
 def test_dense_below_the_threshold_sparse_from_it():
-    assert not uses_sparse(load_case("case69")) and load_case("case69").n_bus < SPARSE_MIN_BUSES
-    assert uses_sparse(load_case("case141")) and uses_sparse(load_case("feeder1k"))
+    assert not uses_sparse(load_network("case69")) and load_network("case69").n_bus < SPARSE_MIN_BUSES
+    assert uses_sparse(load_network("case141")) and uses_sparse(load_network("feeder1k"))

@@ -3,8 +3,8 @@
 import numpy as np
 import pytest
 
-from opfbench.cases import load_case
 from opfbench.errors import InputError
+from opfbench.io import load_network
 from opfbench.registry import FORMULATIONS, LOCAL_RULES, STRATEGIES, STRATEGY_NAMES, get_strategy, run_strategy
 from opfbench.result import StrategyResult
 from opfbench.scenario import Scenario
@@ -18,7 +18,7 @@ def test_registry_partitions_strategies():
 
 @pytest.mark.parametrize("name", STRATEGY_NAMES)
 def test_every_registered_strategy_returns_the_record(name):
-    net = load_case("paper33")
+    net = load_network("paper33")
     scenario = Scenario.snapshot(net, 1.0, 0.8, 0.9 if STRATEGIES[name].uses_forecast else None)
     res = run_strategy(name, scenario, 0.2)
     assert isinstance(res, StrategyResult)
@@ -33,12 +33,12 @@ def test_acopf_paper_pins_the_papers_setup():
     spec = get_strategy("acopf-paper")
     assert spec.fixed == {"fallback": "paper", "slack_export": False}
     assert spec.options == {"solver": "auto"}  # the fast path, or IPOPT on every step
-    res = run_strategy("acopf-paper", Scenario.snapshot(load_case("paper33")), 0.0)
+    res = run_strategy("acopf-paper", Scenario.snapshot(load_network("paper33")), 0.0)
     assert res.extra["slack_export"] is False
 
 
 def test_unknown_strategy_and_option_are_input_errors():
-    scenario = Scenario.snapshot(load_case("paper33"))
+    scenario = Scenario.snapshot(load_network("paper33"))
     with pytest.raises(InputError, match="unknown strategy 'nope'"):
         run_strategy("nope", scenario, 0.0)
     with pytest.raises(InputError, match="takes no option safe"):

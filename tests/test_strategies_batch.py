@@ -9,8 +9,8 @@ import pytest
 import opfbench.strategies.local as local
 from opfbench.bench.local import bench_local
 from opfbench.bench.profiles import paper_day_scenario
-from opfbench.cases import load_case
 from opfbench.errors import InputError
+from opfbench.io import load_network
 from opfbench.powerflow import PowerFlowResult, solve_pf_batch
 from opfbench.registry import run_strategy
 from opfbench.scenario import Scenario
@@ -18,7 +18,7 @@ from opfbench.strategies.table import forecast_p_mw, format_table, loss_table
 
 
 def paper33(load_scales: list[float]) -> Scenario:
-    net = load_case("paper33")
+    net = load_network("paper33")
     return Scenario(net, load_scales, np.tile(0.8 * net.der_rating_mw, (len(load_scales), 1)))
 
 
@@ -75,7 +75,7 @@ def test_bad_reserve_raises_input_error(k) -> None:
 def test_loss_table_matches_direct_runs() -> None:
     table = loss_table(ks=(0.0, 0.5), der_scale=0.5)
     assert len(table) == 2 * 2 * 3 and set(table["status"]) == {"ok"}
-    net = load_case("paper33")
+    net = load_network("paper33")
     p_now = 0.5 * net.der_rating_mw
     np.testing.assert_allclose(forecast_p_mw(p_now, net.der_rating_mw), 0.6 * net.der_rating_mw)
     np.testing.assert_allclose(forecast_p_mw(0.9 * net.der_rating_mw, net.der_rating_mw), net.der_rating_mw)

@@ -10,7 +10,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from opfbench.capability import qmax
-from opfbench.cases import load_case
+from opfbench.io import load_network
 from opfbench.scenario import Scenario
 from opfbench.strategies.local import lfma, lfma_trace, llma, no_action
 from tests.strategies_feeders import radial_feeder
@@ -94,7 +94,7 @@ def test_k_one_is_exactly_no_action(scenario: Scenario) -> None:
 
 
 def paper33_scenario(seed: int, n: int = 200, forecast: bool = False, case: str = "paper33") -> Scenario:
-    net = load_case(case)
+    net = load_network(case)
     rng = np.random.default_rng(seed)
     rating = net.der_rating_mw
     p_fc = rng.uniform(0, 1, (n, len(rating))) * rating if forecast else None

@@ -9,7 +9,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from opfbench.cases import load_case
+from opfbench.io import load_network
 from opfbench.network import Network
 from opfbench.powerflow import PowerFlowResult
 from opfbench.scenario import Scenario
@@ -19,7 +19,7 @@ from tests.strategies_feeders import radial_feeder
 
 def operating_points(case: str, n: int, seed: int) -> Scenario:
     """n operating points: load scale U[0.1, 2.0], each DER's P uniform in [0, rating]."""
-    net = load_case(case)
+    net = load_network(case)
     rng = np.random.default_rng(seed)
     return Scenario(net, rng.uniform(0.1, 2.0, n), rng.uniform(0, 1, (n, len(net.ders))) * net.der_rating_mw)
 

@@ -12,7 +12,8 @@ import pytest
 from opfbench.cli import main
 from opfbench.errors import DataError, InputError
 from opfbench.study import StudyConfig
-from opfbench.study.runner import prepare, resolve_period, run_study
+from opfbench.study.periods import resolve_period
+from opfbench.study.runner import prepare, run_study
 from opfbench.study.scenarios import chunk_scenario
 
 LOCAL = ("no-action", "llma", "lfma")

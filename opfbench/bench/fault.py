@@ -13,17 +13,17 @@ from __future__ import annotations
 
 import os
 
-from opfbench.cases import load_case
 from opfbench.dynamics.model import build_model
 from opfbench.dynamics.params import FaultParams, ModelParams
 from opfbench.dynamics.simulate import simulate
 from opfbench.dynamics.study import StudyConfig, operating_point, run_study
+from opfbench.io import load_network
 from opfbench.registry import run_strategy
 from opfbench.timing import best_ms
 
 
 def run() -> dict:
-    net = load_case("paper33")
+    net = load_network("paper33")
     point = operating_point(net)
     model = build_model(point.scenario, run_strategy("lfma", point.scenario, 0.0).q_mvar[0], ModelParams())
     fault = FaultParams(bus=27)

@@ -39,10 +39,10 @@ import numpy as np
 
 from opfbench.bench.pandapower_opf import PandapowerOpf
 from opfbench.bench.profiles import paper_day_scenario
-from opfbench.cases import load_case
 from opfbench.formulations.acopf import build_acopf
 from opfbench.formulations.problem import snapshot_data
 from opfbench.formulations.socp import build_socp, forget_solves
+from opfbench.io import load_network
 from opfbench.network import Network
 from opfbench.powerflow import solve_pf_batch
 from opfbench.registry import run_strategy
@@ -69,7 +69,7 @@ def daily_scenario(net: Network, n: int = 200) -> Scenario:
 def bench_opf(n: int = 200, case: str = "paper33", k: float = 0.0) -> dict:
     """Time IPOPT (warm), SOCP and pandapower runopp over `n` snapshots; see the module doc."""
     load_before = os.getloadavg()
-    net = load_case(case)
+    net = load_network(case)
     scenario = daily_scenario(net, n)
     data = snapshot_data(scenario, k)
     opf, relax = build_acopf(net), build_socp(net)

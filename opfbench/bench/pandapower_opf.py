@@ -17,39 +17,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from opfbench.io.matpower import to_ppc
 from opfbench.network import Network
 from opfbench.timing import elapsed_ms, now
 
 PIPS_TOLERANCE = 1e-10
 PIPS_OPTIONS = {f"PDIPM_{name}TOL": PIPS_TOLERANCE for name in ("GRAD", "COMP", "COST", "FEAS")}
-
-
-def to_ppc(net: Network) -> dict:
-    """MATPOWER version-2 case dict of `net` at nominal load: the slack generator
-    (unbounded P/Q) first, then the case's fixed generators (P, Q, voltage setpoint),
-    branches as in-service/out-of-service π models. DERs are not included."""
-    n = net.n_bus
-    bus = np.zeros((n, 13))
-    bus[:, 0] = np.arange(1, n + 1)
-    bus[:, 1] = net.bus_type
-    bus[:, 2], bus[:, 3] = net.load_p_mw, net.load_q_mvar
-    bus[:, 4], bus[:, 5] = net.gs_mw, net.bs_mvar
-    bus[:, 6], bus[:, 7], bus[:, 9], bus[:, 10] = 1, 1.0, net.base_kv, 1
-    bus[:, 11], bus[:, 12] = net.vmax, net.vmin
-    gen = np.zeros((1 + len(net.gen_bus), 21))
-    # bus, Pg, Qg, Qmax, Qmin, Vg, mBase, status, Pmax, Pmin
-    cols = [0, 1, 2, 3, 4, 5, 6, 7, 8, 9]
-    gen[0, cols] = [net.slack + 1, 0, 0, 1e4, -1e4, net.v_slack, net.base_mva, 1, 1e4, -1e4]
-    for row, (b, p, q, vset) in enumerate(zip(net.gen_bus, net.gen_p_mw, net.gen_q_mvar, net.gen_vset, strict=True), start=1):
-        gen[row, cols] = [b + 1, p, q, 1e4, -1e4, vset, net.base_mva, 1, p, p]
-    branch = np.zeros((net.n_branch, 13))
-    branch[:, 0], branch[:, 1] = net.f + 1, net.t + 1
-    branch[:, 2], branch[:, 3], branch[:, 4] = net.r, net.x, net.b
-    branch[:, 8] = np.where(net.tap == 1.0, 0.0, net.tap)
-    branch[:, 9] = net.shift
-    branch[:, 10] = net.status
-    branch[:, 11], branch[:, 12] = -360, 360
-    return {"version": "2", "baseMVA": net.base_mva, "bus": bus, "gen": gen, "branch": branch}
 
 
 @dataclass(frozen=True)

@@ -16,9 +16,9 @@ import warnings
 
 import numpy as np
 
-from opfbench.bench.pandapower_opf import to_ppc
 from opfbench.bench.profiles import paper_day_scenario
 from opfbench.errors import NetworkError
+from opfbench.io.matpower import to_ppc
 from opfbench.network import Network
 from opfbench.powerflow import bus_injections, solve_pf, solve_pf_batch
 from opfbench.timing import best_ms, elapsed_ms, now

@@ -10,6 +10,8 @@
 - `feeder1k`, `feeder10k`: large radial feeders (990 and 9 999 buses), copies of
   case33bw on a stiff trunk with DER in every copy (`opfbench.cases.feeder`);
   `feeder(c)` builds the same rule for any number of copies c.
+
+Cases are loaded by spec through `opfbench.io.load_case` (shipped names, files, SimBench).
 """
 
 from __future__ import annotations
@@ -21,8 +23,7 @@ from pathlib import Path
 import numpy as np
 
 from opfbench.cases.feeder import SHIPPED_COPIES, replicated_feeder
-from opfbench.errors import InputError
-from opfbench.matpower import load_case_file
+from opfbench.io.matpower import load_case_file
 from opfbench.network import DER, Network
 
 PAPER_PV_BUSES = (10, 16, 19, 29)
@@ -95,15 +96,6 @@ CASE_NAMES = tuple(_BUILDERS)
 
 
 @lru_cache(maxsize=None)
-def _shipped(name: str) -> Network:
+def shipped_network(name: str) -> Network:
+    """The shipped case `name` (one of `CASE_NAMES`), built once per process."""
     return _BUILDERS[name]()
-
-
-def load_case(name_or_path: str) -> Network:
-    """A shipped case by name, or a MATPOWER `.m` file by path."""
-    if name_or_path in _BUILDERS:
-        return _shipped(name_or_path)
-    path = Path(name_or_path)
-    if path.suffix == ".m" and path.exists():
-        return load_case_file(path)
-    raise InputError(f"unknown case {name_or_path!r}: give one of {', '.join(CASE_NAMES)} or the path of a MATPOWER .m file")

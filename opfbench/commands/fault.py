@@ -92,10 +92,10 @@ def _params(args: argparse.Namespace) -> ModelParams:
 
 
 def run(args: argparse.Namespace) -> int:
-    from opfbench.cases import load_case  # the simulation (numba) loads only when a study runs
     from opfbench.dynamics.study import StudyConfig, operating_point, run_study, write_study
+    from opfbench.io import load_network  # the simulation (numba) loads only when a study runs
 
-    net = load_case(args.case)
+    net = load_network(args.case)
     if args.duration_ms < 0:
         raise InputError(f"--duration-ms must be ≥ 0, got {args.duration_ms:g}")
     if args.fault_impedance < 0:

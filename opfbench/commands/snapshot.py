@@ -69,11 +69,11 @@ def _options(args: argparse.Namespace) -> dict:
 
 
 def run(args: argparse.Namespace) -> int:
-    from opfbench.cases import load_case
+    from opfbench.io import load_network
     from opfbench.scenario import Scenario
 
     options = _options(args)
-    net = load_case(args.case)
+    net = load_network(args.case)
     scenario = Scenario.snapshot(net, args.load_scale, args.der_scale, args.forecast_der_scale)
     result = run_strategy(args.strategy, scenario, args.k, **options)
     out = result.snapshot_json(0)

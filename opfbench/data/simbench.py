@@ -33,6 +33,19 @@ LOAD_PROFILES = {
 }
 
 
+def simbench_time_index(time: pd.Series, name: str) -> pd.DatetimeIndex:
+    """SimBench's ``time`` column (``dd.mm.yyyy HH:MM``, German local clock with daylight
+    saving) as a strictly increasing tz-aware (Europe/Berlin) 15-min index: the skipped
+    hour is absent in the data, the repeated one is resolved by order."""
+    try:
+        local = pd.DatetimeIndex(pd.to_datetime(time, format="%d.%m.%Y %H:%M"))
+        index = local.tz_localize(SIMBENCH_TZ, ambiguous="infer", nonexistent="raise")
+    except (ValueError, TypeError) as exc:  # pytz/zoneinfo errors subclass ValueError
+        raise DataError(f"{name}: column 'time' cannot be read as Europe/Berlin local time ({exc})") from exc
+    check_time_index(index, name, SIMBENCH_STEP)
+    return index
+
+
 def parse_simbench_profiles(source: Source, columns: dict[str, str]) -> pd.DataFrame:
     """Read the SimBench ``columns`` (output name -> file column) of a profile table
     (path, ``.gz`` path or text) onto a tz-aware (Europe/Berlin) 15-min index.
@@ -45,12 +58,7 @@ def parse_simbench_profiles(source: Source, columns: dict[str, str]) -> pd.DataF
     missing = [c for c in ("time", *columns.values()) if c not in table.columns]
     if missing:
         raise DataError(f"{name}: column(s) {missing} missing")
-    try:
-        local = pd.DatetimeIndex(pd.to_datetime(table["time"], format="%d.%m.%Y %H:%M"))
-        index = local.tz_localize(SIMBENCH_TZ, ambiguous="infer", nonexistent="raise")
-    except (ValueError, TypeError) as exc:  # pytz/zoneinfo errors subclass ValueError
-        raise DataError(f"{name}: column 'time' cannot be read as Europe/Berlin local time ({exc})") from exc
-    check_time_index(index, name, SIMBENCH_STEP)
+    index = simbench_time_index(table["time"], name)
     out = pd.DataFrame(index=index)
     for col, src in columns.items():
         values = pd.to_numeric(table[src], errors="coerce")

@@ -257,11 +257,11 @@ def run_andes(model: DynamicModel, fault: FaultParams) -> tuple[np.ndarray, np.n
 def mild_fault_comparison(fault: FaultParams = MILD_FAULT) -> dict:
     """Ours vs ANDES on the paper feeder at the reference operating point with LFMA (k = 0)
     setpoints: recovery times per bus, max |ΔV|, wall times."""
-    from opfbench.cases import load_case
+    from opfbench.io import load_network
     from opfbench.registry import run_strategy
     from opfbench.scenario import Scenario
 
-    net = load_case("paper33")
+    net = load_network("paper33")
     sc = Scenario.snapshot(net)
     model = build_model(sc, run_strategy("lfma", sc, 0.0).q_mvar[0], CROSS_CHECK_PARAMS)
     ours = simulate(model, fault)

@@ -205,7 +205,10 @@ class ParametricConeProgram:
     vector variables `data_vars` are data θ, fixed per solve (they must not enter the
     objective), solved by persistent Clarabel instances with bound screening."""
 
-    def __init__(self, problem: cp.Problem, data_vars: Sequence[cp.Variable], settings: clarabel.DefaultSettings):
+    def __init__(
+        self, problem: cp.Problem, data_vars: Sequence[cp.Variable], settings: clarabel.DefaultSettings, screening: bool = True
+    ):
+        self.screening = screening
         if problem.parameters():
             raise ValueError("write the data as variables (data_vars), not cvxpy parameters")
         data, _, _ = problem.get_problem_data(cp.CLARABEL)
@@ -296,7 +299,7 @@ class ParametricConeProgram:
     def solve(self, b: np.ndarray) -> ConeSolve:
         """Solve at the constraint offset `b` (a row of `offsets`), screened where the check
         allows (module docstring)."""
-        if not self._bounds.size:
+        if not (self.screening and self._bounds.size):
             solution, statuses, iterations = self.full.solve(b)
             return _answer(solution, _vector(solution.x), statuses, iterations, 1, False)
         bounds = _BoundState(self, b)

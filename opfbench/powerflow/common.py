@@ -96,11 +96,14 @@ def bus_injections(
     der_p_mw: np.ndarray | float = 0.0,
     der_q_mvar: np.ndarray | float = 0.0,
     load_scale: np.ndarray | float = 1.0,
+    bus_load_mva: np.ndarray | None = None,
 ) -> np.ndarray:
-    """Net complex injection per bus (MW + jMVAr): fixed gens + DER − load_scale·load.
+    """Net complex injection per bus (MW + jMVAr): fixed gens + DER − load.
 
-    `der_p_mw`/`der_q_mvar` are shaped (n_der,) or (S, n_der); `load_scale` is a scalar
-    or (S,). Returns (n_bus,) or (S, n_bus).
+    The load is `load_scale`·(nominal load), or `bus_load_mva` (S, n_bus) complex MVA
+    when given (e.g. the per-load P and Q of a real grid summed onto the buses;
+    `load_scale` is then ignored). `der_p_mw`/`der_q_mvar` are shaped (n_der,) or
+    (S, n_der); `load_scale` is a scalar or (S,). Returns (n_bus,) or (S, n_bus).
     """
     der_s = np.asarray(der_p_mw, dtype=float) + 1j * np.asarray(der_q_mvar, dtype=float)
     scale = np.asarray(load_scale, dtype=float)
@@ -112,10 +115,16 @@ def bus_injections(
     if np.any(scale < 0):
         raise InputError(f"{net.name}: load scale must be non-negative, got {scale.min()}")
     der_s = np.broadcast_to(der_s, der_s.shape[:-1] + (len(net.ders),)) if der_s.ndim else np.full(len(net.ders), der_s)
-    load = net.load_p_mw + 1j * net.load_q_mvar
     fixed = np.zeros(net.n_bus, dtype=complex)
     np.add.at(fixed, net.gen_bus, net.gen_p_mw + 1j * net.gen_q_mvar)
-    base = fixed - scale[..., None] * load
+    if bus_load_mva is None:
+        load = net.load_p_mw + 1j * net.load_q_mvar
+        base = fixed - scale[..., None] * load
+    else:
+        bus_load = np.asarray(bus_load_mva, dtype=complex)
+        if bus_load.shape[-1] != net.n_bus or not np.all(np.isfinite(bus_load)):
+            raise InputError(f"{net.name}: bus loads must be finite, shaped (..., {net.n_bus}), got {bus_load.shape}")
+        base = fixed - bus_load
     lead = np.broadcast_shapes(base.shape[:-1], der_s.shape[:-1])
     out = np.broadcast_to(base, lead + (net.n_bus,)).copy()
     np.add.at(out, (..., net.der_bus), np.broadcast_to(der_s, lead + der_s.shape[-1:]))

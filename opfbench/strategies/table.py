@@ -16,9 +16,9 @@ from typing import Sequence
 import numpy as np
 import pandas as pd
 
-from opfbench.cases import load_case
 from opfbench.commands.common import fraction
 from opfbench.errors import OpfbenchError
+from opfbench.io import load_network
 from opfbench.registry import LOCAL_RULES, STRATEGIES, run_strategy
 from opfbench.scenario import Scenario
 
@@ -41,7 +41,7 @@ def loss_table(
 ) -> pd.DataFrame:
     """One row per (forecast, k, strategy): losses_kw, excursion_mvar, status, vmin.
     `forecast` is False (plain rules) or True (Algorithm 3 with the forecast rule above)."""
-    net = load_case(case)
+    net = load_network(case)
     scenarios = {  # every DER at the same share of its rating, so the rule is a share too
         False: Scenario.snapshot(net, load_scale, der_scale),
         True: Scenario.snapshot(net, load_scale, der_scale, min(forecast_factor * der_scale, 1.0)),

@@ -5,17 +5,18 @@ from __future__ import annotations
 
 import os
 import sys
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import pandas as pd
 
-from opfbench.cases import load_case
+from opfbench.io import load_network
 from opfbench.registry import FORMULATIONS
 from opfbench.study.config import StudyConfig
 from opfbench.study.execution import STOPPED, execute
-from opfbench.study.periods import Period, resolve_period
+from opfbench.study.periods import Period
 from opfbench.study.progress import Progress
+from opfbench.study.scenarios import study_period
 from opfbench.study.store import RunStore
 from opfbench.study.tasks import Task, TaskOutput, plan_tasks, task_input
 from opfbench.timing import elapsed_ms, now
@@ -40,8 +41,8 @@ class StudyRun:
 def prepare(config: StudyConfig) -> tuple[StudyConfig, Period, list[Task]]:
     """Resolve the period, load the cases, plan the tasks — everything that can refuse the
     input, before any work."""
-    period = resolve_period(config.period, config.night, config.step_minutes)
-    config = config.with_period(period.step_h * 60, period.step_h * len(period.index))
+    period, cases = study_period(config.cases, config.forecast, config.period, config.night, config.step_minutes)
+    config = replace(config.with_period(period.step_h * 60, period.step_h * len(period.index)), notes=config.notes + cases.notes)
     models = [s for s in config.forecast if s not in ("off", "oracle") and config.strategies_for(s)]
     if models:  # a missing or incomplete forecast file is refused here, not in a worker
         from opfbench.forecasting import load_forecast
@@ -49,7 +50,7 @@ def prepare(config: StudyConfig) -> tuple[StudyConfig, Period, list[Task]]:
         for model in models:
             load_forecast(config.forecast_dir, "pv", model)
     for case in config.cases:
-        net = load_case(case)
+        net = load_network(case)
         if any(s in FORMULATIONS for s in config.strategies) and "off" in config.forecast:
             from opfbench.formulations.problem import check_supported
 
@@ -71,10 +72,10 @@ def run_study(
     propagates after the finished tasks are saved; `StudyRun.kept` counts them then."""
     say = (lambda msg: None) if quiet else (lambda msg: print(msg, file=sys.stderr, flush=True))
     start = now()
-    for note in config.notes:
-        say(note)
     store = RunStore(out, say)
     config, period, tasks = prepare(config)
+    for note in config.notes:
+        say(note)
     run = StudyRun(store.out, config, period, tasks)
     with store:
         done = store.open(config, period, tasks, command or [], fresh)

@@ -3,15 +3,24 @@
 The chunk carries one step beyond its end when the period has one (`ahead` rows), so the
 oracle forecast (P^F at t = the actual output at t + 1 step) is the same whatever the
 chunking; at the period's last step the forecast repeats the current output.
+
+A case with its own time series (a SimBench grid) takes every load's P and Q and every
+DER's P from its series at the chunk's instants (the worker loads the case by spec,
+cached per process); the chunk's load/pv/wind profiles only give the instants then. Night
+modes act on its solar units as on the paper's PV. `check_cases` refuses, before any
+work, what such a case cannot run: a model's forecasts (they forecast the BSRN plant of
+the paper day, not the grid's own units) and a period outside its series.
 """
 
 from __future__ import annotations
 
+from dataclasses import dataclass, replace
+
 import numpy as np
 import pandas as pd
 
-from opfbench.cases import load_case
-from opfbench.errors import DataError
+from opfbench.errors import DataError, InputError
+from opfbench.io import Case, load_case
 from opfbench.scenario import Scenario
 
 
@@ -58,7 +67,10 @@ def chunk_scenario(
     further row, if present, is the next step). Night mode "disconnected" zeroes PV
     output (and its forecast) in the night hours; "connected-q" gives PV units the
     S-limited capability there."""
-    net = load_case(case)
+    own = load_case(case)
+    if own.series is not None:
+        return _series_scenario(own, night_mode, forecast, profiles.index, night, n_steps)
+    net = own.network
     load, pv_all, wind_all = (profiles[c].to_numpy() for c in ("load", "pv", "wind"))
     pv_all = pv_all * ~night if night_mode == "disconnected" else pv_all
     pv, wind = pv_all[:n_steps], wind_all[:n_steps]
@@ -74,3 +86,78 @@ def chunk_scenario(
     if night_mode == "connected-q":
         scenario = scenario.with_night_q(night[:n_steps])
     return scenario
+
+
+def _series_scenario(
+    case: Case, night_mode: str, forecast: str, times: pd.DatetimeIndex, night: np.ndarray, n_steps: int
+) -> Scenario:
+    """The scenario of a case's own series at the first `n_steps` of `times` (a further
+    instant, if present, is the next step, for the oracle); night modes on its solar units."""
+    load_p, load_q, der_p = case.series.rows(times) if case.series is not None else (None, None, None)
+    assert load_p is not None and load_q is not None and der_p is not None
+    if night_mode == "disconnected":
+        der_p = np.where(night[:, None] & case.network.der_solar[None, :], 0.0, der_p)
+    ahead = None
+    if forecast == "oracle":
+        ahead = np.vstack([der_p[1 : n_steps + 1], der_p[len(der_p) - 1 :]])[:n_steps]
+    scenario = Scenario.from_series(case.network, load_p[:n_steps], load_q[:n_steps], der_p[:n_steps], ahead)
+    if night_mode == "connected-q":
+        scenario = scenario.with_night_q(night[:n_steps])
+    return scenario
+
+
+@dataclass(frozen=True)
+class CaseCheck:
+    """What `check_cases` found: the native step of the cases' own series (minutes, None
+    when no case has one), whether some cases have none, the series' sources, and the
+    cases' notes (one line each)."""
+
+    native_minutes: float | None
+    mixed: bool
+    sources: tuple[str, ...]
+    notes: tuple[str, ...]
+
+
+def check_cases(cases: tuple[str, ...], forecasts: tuple[str, ...]) -> CaseCheck:
+    """Load every case (InputError & co. for a bad spec) and refuse a model's forecast on
+    a case with its own series (the models forecast the BSRN plant of the paper day)."""
+    loaded = [load_case(c) for c in cases]
+    own = [c.series for c in loaded if c.series is not None]
+    steps = {series.step / pd.Timedelta(minutes=1) for series in own}
+    if len(steps) > 1:
+        raise InputError(f"the cases' own series have different steps ({sorted(steps)} min): run them separately")
+    models = [f for f in forecasts if f not in ("off", "oracle")]
+    if own and models:
+        spec = next(c.spec for c in loaded if c.series is not None)
+        raise InputError(
+            f"forecast {models[0]!r}: the models' forecasts are of the BSRN Payerne PV plant (the paper day's data), "
+            f"not of {spec}'s own units; use --forecast off oracle on cases with their own profiles"
+        )
+    notes = tuple(f"note: {c.spec}: {n}" for c in loaded for n in c.notes)
+    sources = tuple(dict.fromkeys(series.source for series in own))
+    return CaseCheck(steps.pop() if steps else None, bool(own) and len(own) < len(loaded), sources, notes)
+
+
+def study_period(cases: tuple[str, ...], forecasts: tuple[str, ...], period: str, night: str, step_minutes: float | None):
+    """(Period, CaseCheck) of a study: the period at the cases' native step when they have
+    their own series, checked to lie inside those series; cases with and without their
+    own series together only where both give the same instants (e.g. the year, or with
+    --step-minutes)."""
+    from opfbench.study.periods import resolve_period
+
+    check = check_cases(cases, forecasts)
+    resolved = resolve_period(period, night, step_minutes, check.native_minutes)
+    if check.mixed and not resolve_period(period, night, step_minutes).index.equals(resolved.index):
+        raise InputError(
+            f"period {period!r}: cases with their own profiles (simbench:…) run at their {check.native_minutes:g}-min steps, "
+            "the others at the period's own step (the paper day: 1 min); give --step-minutes (e.g. 15) to run them "
+            "together, or run them separately"
+        )
+    index = resolved.index
+    for spec in cases:
+        series = load_case(spec).series
+        if series is not None and (index[0] < series.index[0] or index[-1] > series.index[-1]):
+            raise InputError(
+                f"period {index[0]} .. {index[-1]} leaves {spec}'s profiles ({series.index[0]} .. {series.index[-1]})"
+            )
+    return replace(resolved, sources=resolved.sources + check.sources), check

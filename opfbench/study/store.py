@@ -92,9 +92,9 @@ def _git_commit() -> str | None:
 
 
 def _case_info(case: str) -> dict:
-    from opfbench.cases import load_case
+    from opfbench.io import load_network
 
-    net = load_case(case)
+    net = load_network(case)
     return {
         "buses": int(net.n_bus),
         "ders": [{"bus": int(net.bus_ids[d.bus]), "kind": d.kind, "rating_mw": float(d.rating_mw)} for d in net.ders],

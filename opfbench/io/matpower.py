@@ -1,4 +1,5 @@
-"""Reader for MATPOWER version-2 case files (`.m`).
+"""MATPOWER version-2 case files (`.m`): the reader, the generators-as-DER mapping and the
+writer (`to_ppc`: a Network as a MATPOWER case dict).
 
 Reads `mpc.baseMVA`, `mpc.bus`, `mpc.gen`, `mpc.branch` and `mpc.gencost`, and executes
 only the trailing conversions that MATPOWER's distribution cases use (ohm → p.u. for
@@ -10,6 +11,13 @@ that is not UTF-8 text; a non-numeric or non-finite entry; a non-finite or non-p
 baseMVA; a fractional bus number or bus type; a negative branch resistance (it would make
 negative losses and a meaningless loss bound); VMIN > VMAX at a bus; a power factor
 outside (0, 1]; the ohm → p.u. conversion with a zero or negative BASE_KV at bus row 1.
+
+DER from generators (`der=gens` in a case spec, `--der gens` on the command line): every
+in-service generator other than the slack's becomes a DER of the generic "inverter" kind
+(a solar unit; `opfbench.capability`) at its bus: rated P̄ = PMAX (PG where PMAX ≤ 0),
+S̄ = P̄/der_pf (default 0.90), stored output PG; its bus becomes a PQ bus (the DER's Q is
+what the strategies set, not a voltage setpoint). A generator with no positive P̄, or
+with PG outside [0, P̄], is refused.
 """
 
 from __future__ import annotations
@@ -21,7 +29,7 @@ from pathlib import Path
 import numpy as np
 
 from opfbench.errors import CaseFormatError, NetworkError
-from opfbench.network import Network
+from opfbench.network import DER, Network
 
 BUS_COLS, GEN_COLS, BRANCH_COLS = 13, 10, 11  # minimum columns MATPOWER v2 requires
 _MATRICES = ("bus", "gen", "branch", "gencost")
@@ -243,6 +251,12 @@ def _apply_conversions(case: MatpowerCase, statements: list[tuple[int, str]]) ->
 
 def to_network(case: MatpowerCase, name: str | None = None) -> Network:
     """Build the shared `Network` from a parsed case; validates bus references and slack."""
+    return _network(case, name)[0]
+
+
+def _network(case: MatpowerCase, name: str | None = None, der_pf: float | None = None) -> tuple[Network, np.ndarray]:
+    """(network, stored DER P (n_der,) MW); `der_pf` not None turns the non-slack
+    generators into DER (see the module docstring)."""
     label = name or Path(case.path).stem
     bus, gen, branch = case.bus, case.gen, case.branch
     for matrix, arr, cols in (
@@ -291,6 +305,9 @@ def to_network(case: MatpowerCase, name: str | None = None) -> Network:
     if slack_gens.size == 0:
         raise CaseFormatError(f"{case.path}: no in-service generator at the reference bus {ids[slack]}")
     others = np.flatnonzero(gen_on & (gbus != slack))
+    ders, der_p = _gens_as_ders(case, gbus, others, der_pf) if der_pf is not None else ((), np.zeros(0))
+    if der_pf is not None:
+        others = others[:0]
     # PV buses without an in-service generator behave as PQ buses (MATPOWER does the same).
     btype = btype.copy()
     btype[(btype == 2) & ~np.isin(np.arange(len(ids)), gbus[others])] = 1
@@ -301,7 +318,7 @@ def to_network(case: MatpowerCase, name: str | None = None) -> Network:
         raise CaseFormatError(f"{case.path}: mpc.branch row {zero_z[0] + 1}: zero impedance (r = x = 0)")
     tap = np.where(branch[:, 8] == 0, 1.0, branch[:, 8])
     try:
-        return Network(
+        net = Network(
             name=label,
             base_mva=case.base_mva,
             bus_ids=ids,
@@ -327,11 +344,71 @@ def to_network(case: MatpowerCase, name: str | None = None) -> Network:
             gen_p_mw=gen[others, 1].copy(),
             gen_q_mvar=gen[others, 2].copy(),
             gen_vset=gen[others, 5].copy(),
+            ders=ders,
         )
     except NetworkError as exc:
         raise CaseFormatError(f"{case.path}: {exc}") from None
+    return net, der_p
+
+
+def _gens_as_ders(case: MatpowerCase, gbus: np.ndarray, rows: np.ndarray, der_pf: float) -> tuple[tuple[DER, ...], np.ndarray]:
+    """The generators `rows` as inverter DER (see the module docstring) and their PG."""
+    if not 0 < der_pf <= 1:
+        raise CaseFormatError(f"{case.path}: der-pf must lie in (0, 1], got {der_pf}")
+    ders, stored = [], []
+    for k in rows:
+        pg, pmax = float(case.gen[k, 1]), float(case.gen[k, 8])
+        rating = pmax if pmax > 0 else pg
+        if not rating > 0:
+            raise CaseFormatError(f"{case.path}: mpc.gen row {k + 1}: PMAX {pmax:g} and PG {pg:g} MW give no positive DER rating")
+        if not -1e-9 <= pg <= rating * (1 + 1e-9):
+            raise CaseFormatError(f"{case.path}: mpc.gen row {k + 1}: PG {pg:g} MW outside [0, PMAX = {rating:g}] MW")
+        ders.append(DER(int(gbus[k]), "inverter", rating, rating / der_pf, "solar"))
+        stored.append(min(max(pg, 0.0), rating))
+    return tuple(ders), np.array(stored, dtype=float)
 
 
 def load_case_file(path: str | Path, name: str | None = None) -> Network:
     """Read a MATPOWER `.m` file straight into a `Network`."""
     return to_network(read_matpower(path), name)
+
+
+def read_case_file(path: str | Path, name: str | None = None, der_pf: float | None = None) -> tuple[Network, np.ndarray]:
+    """(network, stored DER P) of a MATPOWER `.m` file; `der_pf` not None maps its
+    non-slack generators to DER with S̄ = P̄/der_pf."""
+    return _network(read_matpower(path), name, der_pf)
+
+
+def to_ppc(net: Network) -> dict:
+    """MATPOWER version-2 case dict of `net` at nominal load: the slack generator
+    (unbounded P/Q) first, then the case's fixed generators (P, Q, voltage setpoint),
+    branches as in-service/out-of-service π models. DERs are not included. A branch's
+    shunt conductance g (a transformer's iron losses) has no MATPOWER column: it is
+    written as bus shunt conductance GS at both ends (g/2 at the to end, g/2/tap² at the
+    from end: the same power flow; MATPOWER counts it as shunt, not branch, losses)."""
+    n = net.n_bus
+    bus = np.zeros((n, 13))
+    bus[:, 0] = np.arange(1, n + 1)
+    bus[:, 1] = net.bus_type
+    bus[:, 2], bus[:, 3] = net.load_p_mw, net.load_q_mvar
+    bus[:, 4], bus[:, 5] = net.gs_mw, net.bs_mvar
+    if net.g.any():
+        on = net.status.astype(float)
+        np.add.at(bus[:, 4], net.f, on * net.g / 2 / net.tap**2 * net.base_mva)
+        np.add.at(bus[:, 4], net.t, on * net.g / 2 * net.base_mva)
+    bus[:, 6], bus[:, 7], bus[:, 9], bus[:, 10] = 1, 1.0, net.base_kv, 1
+    bus[:, 11], bus[:, 12] = net.vmax, net.vmin
+    gen = np.zeros((1 + len(net.gen_bus), 21))
+    # bus, Pg, Qg, Qmax, Qmin, Vg, mBase, status, Pmax, Pmin
+    cols = [0, 1, 2, 3, 4, 5, 6, 7, 8, 9]
+    gen[0, cols] = [net.slack + 1, 0, 0, 1e4, -1e4, net.v_slack, net.base_mva, 1, 1e4, -1e4]
+    for row, (b, p, q, vset) in enumerate(zip(net.gen_bus, net.gen_p_mw, net.gen_q_mvar, net.gen_vset, strict=True), start=1):
+        gen[row, cols] = [b + 1, p, q, 1e4, -1e4, vset, net.base_mva, 1, p, p]
+    branch = np.zeros((net.n_branch, 13))
+    branch[:, 0], branch[:, 1] = net.f + 1, net.t + 1
+    branch[:, 2], branch[:, 3], branch[:, 4] = net.r, net.x, net.b
+    branch[:, 8] = np.where(net.tap == 1.0, 0.0, net.tap)
+    branch[:, 9] = net.shift
+    branch[:, 10] = net.status
+    branch[:, 11], branch[:, 12] = -360, 360
+    return {"version": "2", "baseMVA": net.base_mva, "bus": bus, "gen": gen, "branch": branch}

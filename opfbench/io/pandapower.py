@@ -1,0 +1,617 @@
+"""pandapower net → `Network`: the conversion, element by element, with pandapower's own
+models so that our power flow and pandapower's `runpp` (default options) agree.
+
+- **Buses**: in-service buses; closed bus-bus switches (z_ohm ≤ 0) fuse their buses (the
+  lowest pandapower index names the fused bus); open ones leave them apart; a closed
+  bus-bus switch with z_ohm > 0 is an impedance branch (r : x = 2 : 1, pandapower's
+  default `switch_rx_ratio`). Voltage limits from `min_vm_pu`/`max_vm_pu` (0.9/1.1 where
+  not given).
+- **Lines**: r, x from ohm/km × length / parallel; charging b = 2π·f·C·length·parallel
+  and conductance g from `g_us_per_km`, both as the π model's shunts (p.u. on the
+  from bus's voltage and the net's `sn_mva`).
+- **Two-winding transformers**: short-circuit impedance from vk/vkr on the transformer's
+  rating, referred to the low-voltage side's tap-adjusted voltage; iron losses (pfe_kw)
+  and magnetizing current (i0_percent) as the shunt of pandapower's T model (default
+  `trafo_model="t"`), turned into the equivalent π (pandapower's `_wye_delta`); the
+  off-nominal ratio (vn_hv/vn_lv)/(bus ratio) with the tap position (`tap_side`,
+  `tap_pos` − `tap_neutral`, `tap_step_percent` and `tap_step_degree`, the "Ratio"/
+  "Symmetrical" tap changer; "Ideal" phase shifters) and the phase shift `shift_degree`.
+  A transformer without `tap_changer_type` has no active tap, as in pandapower 3.x.
+- **Switches on branches**: an open line or transformer switch opens that end; a branch
+  open at one end hangs at the other with its charging (an auxiliary bus at the open
+  end, as pandapower builds it); open at both ends, it is left out.
+- **Parallel branches** between the same two buses with the same tap and shift are merged
+  into one (admittances add; the same power flow and losses), so two transformers in
+  parallel do not make a radial feeder look meshed.
+- **External grid**: exactly one in service; the slack at its `vm_pu` (its `va_degree`
+  only rotates every angle). Its `s_sc_max_mva`/`rx_max`, when given, are the upstream
+  source of the fault study.
+- **Loads**: one load element per in-service load, P = p_mw·scaling, Q = q_mvar·scaling,
+  constant power (voltage-dependent ZIP shares are refused). Several may share a bus.
+- **Static generators → DER** of the generic "inverter" kind: rated P̄ = the larger of
+  p_mw·scaling and `max_p_mw` (the stored output counts as full output, as in SimBench),
+  nameplate S̄ = the larger of `sn_mva` and P̄/der_pf (default der_pf 0.90: the
+  VDE-AR-N 4105 power factor at full output, see `opfbench.capability`); energy from the
+  `type` (PV → solar, wind → wind, …, SimBench's aggregated LV renewables "lv_RES" →
+  solar). The stored output P, Q is kept as the net's stored operating point.
+- **Shunts**: p_mw/q_mvar × step × (bus voltage / shunt voltage)² as bus shunts.
+- Buses the in-service branches leave unconnected to the slack are dropped with their
+  elements (as pandapower sets them out of service), and said so in a note.
+
+Refused, with the table and index named (never dropped silently): voltage-controlled
+`gen`, three-winding transformers, storage, impedance elements, ward equivalents, motors,
+DC lines and converters, FACTS devices, unbalanced elements, tabular tap changers, a
+second tap changer, a net with no or two external grids, voltage-dependent loads, a
+static generator without a positive rating.
+"""
+
+from __future__ import annotations
+
+import math
+import re
+from dataclasses import dataclass
+
+import numpy as np
+import pandas as pd
+
+from opfbench.errors import CaseFormatError, NetworkError
+from opfbench.network import DER, Network
+
+DEFAULT_DER_PF = 0.90  # S̄ = P̄ / 0.90: VDE-AR-N 4105's cos φ 0.90 at full output
+SWITCH_RX_RATIO = 2.0  # pandapower's default `switch_rx_ratio`
+DEFAULT_VMIN, DEFAULT_VMAX = 0.9, 1.1
+
+#: Element tables the converter cannot map, with the reason it gives.
+REFUSED_TABLES = {
+    "gen": "voltage-controlled generators (PV buses) are not modelled by the local rules and formulations",
+    "trafo3w": "three-winding transformers are not modelled",
+    "storage": "storage units are not modelled (their charging schedule is not part of the benchmark)",
+    "impedance": "impedance elements are not modelled",
+    "ward": "ward equivalents are not modelled",
+    "xward": "extended ward equivalents are not modelled",
+    "motor": "motors are not modelled (give them as loads)",
+    "dcline": "DC lines are not modelled",
+    "line_dc": "DC lines are not modelled",
+    "bus_dc": "DC buses are not modelled",
+    "vsc": "voltage-source converters are not modelled",
+    "vsc_stacked": "voltage-source converters are not modelled",
+    "vsc_bipolar": "voltage-source converters are not modelled",
+    "source_dc": "DC sources are not modelled",
+    "load_dc": "DC loads are not modelled",
+    "svc": "FACTS devices are not modelled",
+    "ssc": "FACTS devices are not modelled",
+    "tcsc": "FACTS devices are not modelled",
+    "asymmetric_load": "unbalanced (per-phase) elements are not modelled",
+    "asymmetric_sgen": "unbalanced (per-phase) elements are not modelled",
+}
+#: sgen `type` patterns → primary energy (first match wins; case-insensitive).
+ENERGY_OF_TYPE = (
+    (r"pv|solar|lv_res", "solar"),
+    (r"wind|wp", "wind"),
+    (r"biomass|bm|biogas", "biomass"),
+    (r"hydro|water", "hydro"),
+)
+
+
+@dataclass(frozen=True)
+class Converted:
+    """A converted net: the network, which pandapower row each load element and DER came
+    from, the stored operating point (MW/MVAr per element) and notes on what was done."""
+
+    network: Network
+    load_index: np.ndarray
+    sgen_index: np.ndarray
+    stored_load_p_mw: np.ndarray
+    stored_load_q_mvar: np.ndarray
+    stored_der_p_mw: np.ndarray
+    stored_der_q_mvar: np.ndarray
+    bus_of: dict[int, int]
+    short_circuit: tuple[float, float] | None
+    notes: tuple[str, ...]
+
+
+def _col(table: pd.DataFrame, name: str, default: float) -> np.ndarray:
+    """A numeric column as floats, NaN (and a missing column) replaced by `default`."""
+    if name not in table:
+        return np.full(len(table), default, dtype=float)
+    return pd.to_numeric(table[name], errors="coerce").fillna(default).to_numpy(dtype=float)
+
+
+def _flag(table: pd.DataFrame, name: str, default: bool) -> np.ndarray:
+    if name not in table:
+        return np.full(len(table), default, dtype=bool)
+    return table[name].astype(object).where(table[name].notna(), default).astype(bool).to_numpy()
+
+
+def _refuse_unmapped(pnet, label: str) -> None:
+    for table, reason in REFUSED_TABLES.items():
+        df = pnet.get(table) if hasattr(pnet, "get") else None
+        if isinstance(df, pd.DataFrame) and len(df):
+            active = df.index[_flag(df, "in_service", True)] if "in_service" in df else df.index
+            if len(active):
+                more = f" (and {len(active) - 1} more)" if len(active) > 1 else ""
+                raise CaseFormatError(f"{label}: table '{table}' index {active[0]}{more}: {reason}")
+
+
+class _Fuse:
+    """Union-find over pandapower bus indices (closed bus-bus switches); the smallest index
+    of a group represents it."""
+
+    def __init__(self, buses: np.ndarray):
+        self.parent = {int(b): int(b) for b in buses}
+
+    def find(self, b: int) -> int:
+        root = b
+        while self.parent[root] != root:
+            root = self.parent[root]
+        while self.parent[b] != root:
+            self.parent[b], b = root, self.parent[b]
+        return root
+
+    def join(self, a: int, b: int) -> None:
+        ra, rb = self.find(a), self.find(b)
+        if ra != rb:
+            self.parent[max(ra, rb)] = min(ra, rb)
+
+
+@dataclass
+class _Branches:
+    """Branch rows being collected (pandapower bus indices at this stage; -1 = open end)."""
+
+    f: list[int]
+    t: list[int]
+    r: list[float]
+    x: list[float]
+    b: list[float]
+    g: list[float]
+    tap: list[float]
+    shift: list[float]
+    kv_f: list[float]
+    kv_t: list[float]
+
+    @classmethod
+    def empty(cls) -> "_Branches":
+        return cls([], [], [], [], [], [], [], [], [], [])
+
+    def add(self, f, t, r, x, b, g, tap, shift, kv_f, kv_t) -> None:
+        for name, value in zip(
+            ("f", "t", "r", "x", "b", "g", "tap", "shift", "kv_f", "kv_t"),
+            (f, t, r, x, b, g, tap, shift, kv_f, kv_t),
+            strict=True,
+        ):
+            getattr(self, name).extend(np.atleast_1d(value).tolist())
+
+
+def _open_ends(pnet, et: str, table: pd.DataFrame, ends: tuple[str, str]) -> tuple[np.ndarray, np.ndarray]:
+    """(open at the first end, open at the second) per row: an open switch of type `et`
+    between the element and that end's bus, or that bus out of service."""
+    sw = pnet.switch
+    sw = sw[(sw.et == et) & ~_flag(sw, "closed", True)]
+    in_service_bus = pnet.bus.in_service.astype(bool)
+    pairs = set(zip(sw.element.astype(int), sw.bus.astype(int), strict=True))
+    out = []
+    for end in ends:
+        bus = table[end].to_numpy()
+        opened = np.array([(int(i), int(bb)) in pairs for i, bb in zip(table.index, bus, strict=True)], dtype=bool)
+        opened |= ~in_service_bus.reindex(bus).fillna(False).to_numpy(dtype=bool)
+        out.append(opened)
+    return out[0], out[1]
+
+
+def _lines(pnet, br: _Branches, label: str) -> None:
+    line = pnet.line[_flag(pnet.line, "in_service", True)]
+    if not len(line):
+        return
+    vn = pnet.bus.vn_kv.astype(float)
+    kv_f = vn.reindex(line.from_bus).to_numpy()
+    z_base = kv_f**2 / pnet.sn_mva
+    length, par = _col(line, "length_km", 0.0), _col(line, "parallel", 1.0)
+    r = _col(line, "r_ohm_per_km", 0.0) * length / z_base / par
+    x = _col(line, "x_ohm_per_km", 0.0) * length / z_base / par
+    b = 2 * pnet.f_hz * math.pi * _col(line, "c_nf_per_km", 0.0) * 1e-9 * z_base * length * par
+    g = _col(line, "g_us_per_km", 0.0) * 1e-6 * z_base * length * par
+    open_f, open_t = _open_ends(pnet, "l", line, ("from_bus", "to_bus"))
+    f = np.where(open_f, -1, line.from_bus.to_numpy(dtype=np.int64))
+    t = np.where(open_t, -1, line.to_bus.to_numpy(dtype=np.int64))
+    br.add(f, t, r, x, b, g, np.ones(len(line)), np.zeros(len(line)), kv_f, vn.reindex(line.to_bus).to_numpy())
+
+
+def _tap_changer(trafo: pd.DataFrame, label: str) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(vn_hv, vn_lv, extra shift in degrees) after the tap changers, as pandapower 3.x's
+    `_calc_tap_from_dataframe` without characteristic tables."""
+    vnh, vnl = _col(trafo, "vn_hv_kv", np.nan), _col(trafo, "vn_lv_kv", np.nan)
+    shift = np.zeros(len(trafo))
+    raw = trafo["tap_changer_type"] if "tap_changer_type" in trafo else pd.Series(None, index=trafo.index, dtype=object)
+    kind = raw.astype(object).where(raw.notna(), "").astype(str).str.strip()
+    if "tap2_pos" in trafo and "tap2_changer_type" in trafo:
+        second = trafo["tap2_pos"].notna().to_numpy() & trafo["tap2_changer_type"].notna().to_numpy()
+        if second.any():
+            raise CaseFormatError(
+                f"{label}: table 'trafo' index {trafo.index[second][0]}: a second tap changer (tap2_*) is not modelled"
+            )
+    tabular = _flag(trafo, "tap_dependency_table", False) | (kind.to_numpy() == "Tabular")
+    if tabular.any():
+        i = trafo.index[tabular][0]
+        raise CaseFormatError(f"{label}: table 'trafo' index {i}: tabular tap changers (characteristic tables) are not modelled")
+    unknown = ~kind.isin(["", "None", "nan", "Ratio", "Symmetrical", "Ideal"]).to_numpy()
+    if unknown.any():
+        i = trafo.index[unknown][0]
+        raise CaseFormatError(f"{label}: table 'trafo' index {i}: unknown tap_changer_type {kind[i]!r}")
+    diff = _col(trafo, "tap_pos", np.nan) - _col(trafo, "tap_neutral", np.nan)
+    diff = np.nan_to_num(diff, nan=0.0)
+    step_pct, step_deg = _col(trafo, "tap_step_percent", 0.0), _col(trafo, "tap_step_degree", 0.0)
+    side = trafo["tap_side"].astype(str).to_numpy() if "tap_side" in trafo else np.full(len(trafo), "hv")
+    ratio_type = kind.isin(["Ratio", "Symmetrical"]).to_numpy()
+    ideal = (kind == "Ideal").to_numpy()
+    for which, vn, direction in (("hv", vnh, 1.0), ("lv", vnl, -1.0)):
+        here = side == which
+        m = ratio_type & here
+        if m.any():  # pandapower's complex tap changer: magnitude and angle of the step
+            du = vn[m] * step_pct[m] * diff[m] / 100
+            ang = np.deg2rad(step_deg[m])
+            shift[m] += np.rad2deg(np.arctan(direction * du * np.sin(ang) / (vn[m] + du * np.cos(ang))))
+            vn[m] = np.sqrt((vn[m] + du * np.cos(ang)) ** 2 + (du * np.sin(ang)) ** 2)
+        m = ideal & here
+        if m.any():
+            by_degree = step_deg[m] != 0
+            shift[m] += np.where(
+                by_degree, direction * diff[m] * step_deg[m], direction * 2 * np.rad2deg(np.arcsin(diff[m] * step_pct[m] / 200))
+            )
+    return vnh, vnl, shift
+
+
+def _trafos(pnet, br: _Branches, label: str) -> None:
+    trafo = pnet.trafo[_flag(pnet.trafo, "in_service", True)]
+    if not len(trafo):
+        return
+    for col in ("leakage_resistance_ratio_hv", "leakage_reactance_ratio_hv"):
+        ratio = _col(trafo, col, 0.5)
+        if np.any(ratio != 0.5):
+            i = trafo.index[ratio != 0.5][0]
+            raise CaseFormatError(f"{label}: table 'trafo' index {i}: {col} ≠ 0.5 (an asymmetric T model) is not modelled")
+    vn = pnet.bus.vn_kv.astype(float)
+    vn_hv_bus, vn_lv_bus = vn.reindex(trafo.hv_bus).to_numpy(), vn.reindex(trafo.lv_bus).to_numpy()
+    vnh, vnl, tap_shift = _tap_changer(trafo, label)
+    sn, par = _col(trafo, "sn_mva", np.nan), _col(trafo, "parallel", 1.0)
+    vk, vkr = _col(trafo, "vk_percent", np.nan), _col(trafo, "vkr_percent", 0.0)
+    bad = ~np.isfinite(sn * vk * vnh * vnl) | (sn <= 0) | (vk <= 0)
+    if bad.any():
+        i = trafo.index[bad][0]
+        raise CaseFormatError(
+            f"{label}: table 'trafo' index {i}: sn_mva, vk_percent, vn_hv_kv and vn_lv_kv must be positive numbers"
+        )
+    z_ref = (vnl / vn_lv_bus) ** 2 * pnet.sn_mva  # referred to the LV side's tap-adjusted voltage
+    z = vk / 100 / sn * z_ref
+    r = vkr / 100 / sn * z_ref
+    x = np.sign(z) * np.sqrt(z**2 - r**2)
+    r, x = r / par, x / par
+    # magnetizing branch (pandapower's `_calc_y_from_dataframe`), p.u. on the LV bus base:
+    # rated at the table's vn_lv_kv, referred through the tap-adjusted LV voltage
+    vn_lv_rated = _col(trafo, "vn_lv_kv", np.nan)
+    pfe_mw = _col(trafo, "pfe_kw", 0.0) * 1e-3
+    ym_mva = _col(trafo, "i0_percent", 0.0) / 100 * sn
+    b_mva = -np.sqrt(np.maximum(ym_mva**2 - pfe_mw**2, 0.0))
+    scale = (vn_lv_bus**2 / pnet.sn_mva) * par / vn_lv_rated**2 / (vnl / vn_lv_rated) ** 2
+    g_pu, b_pu = pfe_mw * scale, b_mva * scale
+    r, x, g_pu, b_pu = _wye_delta(r, x, g_pu, b_pu)
+    ratio = (vnh / vnl) / (vn_hv_bus / vn_lv_bus)
+    shift = _col(trafo, "shift_degree", 0.0) + tap_shift
+    open_f, open_t = _open_ends(pnet, "t", trafo, ("hv_bus", "lv_bus"))
+    f = np.where(open_f, -1, trafo.hv_bus.to_numpy(dtype=np.int64))
+    t = np.where(open_t, -1, trafo.lv_bus.to_numpy(dtype=np.int64))
+    br.add(f, t, r, x, b_pu, g_pu, ratio, shift, vn_hv_bus, vn_lv_bus)
+
+
+def _wye_delta(r: np.ndarray, x: np.ndarray, g: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, ...]:
+    """The T model (series impedance split 1:1 around the magnetizing admittance g + jb)
+    as its equivalent π: series r + jx and the shunt g + jb split between the two ends
+    (pandapower's `_wye_delta` with leakage ratios 0.5; the two shunts are then equal)."""
+    r, x, g, b = (np.array(a, dtype=float) for a in (r, x, g, b))
+    t = (g != 0) | (b != 0)
+    za = zb = (r[t] + 1j * x[t]) / 2
+    zc = 1 / (g[t] + 1j * b[t])
+    total = za * zb + za * zc + zb * zc
+    z_series = total / zc
+    y_end = 1 / (total / zb)
+    r[t], x[t] = z_series.real, z_series.imag
+    g[t], b[t] = 2 * y_end.real, 2 * y_end.imag
+    return r, x, g, b
+
+
+def _energy(kind: object) -> str:
+    text = "" if kind is None or (isinstance(kind, float) and math.isnan(kind)) else str(kind)
+    for pattern, energy in ENERGY_OF_TYPE:
+        if re.search(pattern, text, flags=re.IGNORECASE):
+            return energy
+    return "other"
+
+
+def from_pandapower(pnet, name: str, der_pf: float = DEFAULT_DER_PF, label: str | None = None) -> Converted:
+    """Convert a pandapower net (see the module docstring); `label` names it in errors."""
+    label = label or name
+    if not 0 < der_pf <= 1:
+        raise CaseFormatError(f"{label}: der_pf must lie in (0, 1], got {der_pf}")
+    _refuse_unmapped(pnet, label)
+    notes: list[str] = []
+    bus = pnet.bus
+    on_bus = bus.index[_flag(bus, "in_service", True)].to_numpy(dtype=int)
+    ext = pnet.ext_grid[_flag(pnet.ext_grid, "in_service", True)]
+    if len(ext) != 1:
+        raise CaseFormatError(
+            f"{label}: needs exactly one in-service external grid (table 'ext_grid'), found {len(ext)}"
+            + (f" (index {', '.join(str(i) for i in ext.index)})" if len(ext) else "")
+        )
+
+    fuse = _Fuse(bus.index.to_numpy(dtype=int))
+    br = _Branches.empty()
+    sw = pnet.switch
+    bb = sw[(sw.et == "b") & _flag(sw, "closed", True)] if len(sw) else sw
+    z_sw = _col(bb, "z_ohm", 0.0) if len(bb) else np.zeros(0)
+    for (_, row), z in zip(bb.iterrows(), z_sw, strict=True):
+        a, c = int(row.bus), int(row.element)
+        if z > 0:  # an impedance branch (pandapower's switch_rx_ratio)
+            kv = float(bus.vn_kv[a])
+            zpu = z / (kv**2 / pnet.sn_mva)
+            br.add(
+                a,
+                c,
+                zpu * SWITCH_RX_RATIO / math.hypot(1, SWITCH_RX_RATIO),
+                zpu / math.hypot(1, SWITCH_RX_RATIO),
+                0.0,
+                0.0,
+                1.0,
+                0.0,
+                kv,
+                float(bus.vn_kv[c]),
+            )
+        else:
+            fuse.join(a, c)
+    _lines(pnet, br, label)
+    _trafos(pnet, br, label)
+
+    f = np.array([fuse.find(v) if v >= 0 else -1 for v in br.f], dtype=int)
+    t = np.array([fuse.find(v) if v >= 0 else -1 for v in br.t], dtype=int)
+    r, x, b, g = (np.array(getattr(br, k), dtype=float) for k in ("r", "x", "b", "g"))
+    tap, shift = np.array(br.tap, dtype=float), np.array(br.shift, dtype=float)
+    both_open = (f < 0) & (t < 0)
+    keep = ~both_open & ~((f == t) & (f >= 0))  # a branch inside a fused bus carries nothing
+    # auxiliary buses at open ends
+    reps = sorted({fuse.find(int(v)) for v in on_bus})
+    next_id = int(bus.index.max()) + 1
+    aux_kv: list[float] = []
+    for k in np.flatnonzero(keep & ((f < 0) | (t < 0))):
+        kv = br.kv_f[k] if f[k] < 0 else br.kv_t[k]
+        if f[k] < 0:
+            f[k] = next_id
+        else:
+            t[k] = next_id
+        aux_kv.append(kv)
+        next_id += 1
+    n_aux = len(aux_kv)
+    if n_aux:
+        notes.append(
+            f"{n_aux} branch end(s) opened by a switch or an out-of-service bus: the branch hangs at its other end (auxiliary bus, as pandapower)"
+        )
+    f, t, r, x, b, g, tap, shift = (a[keep] for a in (f, t, r, x, b, g, tap, shift))
+    f, t, r, x, b, g, tap, shift, merged = _merge_parallel(f, t, r, x, b, g, tap, shift)
+    if merged:
+        notes.append(f"{merged} parallel branch(es) merged with their twin (same buses, tap and shift): the same power flow")
+    bridged = _bridges(f, t) & (shift != 0)
+    if bridged.any():
+        shift = np.where(bridged, 0.0, shift)
+        notes.append(
+            f"the phase shift of {int(bridged.sum())} transformer(s) on no loop dropped: it only rotates the angles beyond "
+            "it (no |V|, flow or loss changes); angles are reported without it"
+        )
+
+    ids = np.array(reps + list(range(int(bus.index.max()) + 1, next_id)), dtype=int)
+    pos = {int(v): k for k, v in enumerate(ids)}
+    slack_pp = fuse.find(int(ext.bus.iloc[0]))
+    if slack_pp not in pos:
+        raise CaseFormatError(f"{label}: the external grid's bus {int(ext.bus.iloc[0])} is out of service")
+    kv = np.concatenate([bus.vn_kv.reindex(reps).to_numpy(dtype=float), np.array(aux_kv, dtype=float)])
+    reachable = _reachable(len(ids), np.array([pos[v] for v in f]), np.array([pos[v] for v in t]), pos[slack_pp])
+    if not reachable.all():
+        lost = ids[~reachable]
+        notes.append(
+            f"{lost.size} bus(es) not connected to the external grid dropped with their elements, as pandapower "
+            f"leaves them out of service: {', '.join(str(i) for i in lost[:12])}{' …' if lost.size > 12 else ''}"
+        )
+    keep_bus = np.flatnonzero(reachable)
+    renum = -np.ones(len(ids), dtype=int)
+    renum[keep_bus] = np.arange(keep_bus.size)
+    fi, ti = renum[[pos[v] for v in f]], renum[[pos[v] for v in t]]
+    branch_ok = (fi >= 0) & (ti >= 0)
+    bus_of = {int(b_): int(renum[pos[fuse.find(int(b_))]]) for b_ in on_bus if renum[pos[fuse.find(int(b_))]] >= 0}
+    ids, kv = ids[keep_bus], kv[keep_bus]
+    n = ids.size
+    lo = pd.Series(_col(bus, "min_vm_pu", DEFAULT_VMIN), index=bus.index)
+    hi = pd.Series(_col(bus, "max_vm_pu", DEFAULT_VMAX), index=bus.index)
+    vmin, vmax = np.full(n, -np.inf), np.full(n, np.inf)
+    for b_, k in bus_of.items():  # a fused bus takes the tightest limits of its members
+        vmin[k], vmax[k] = max(vmin[k], lo[b_]), min(vmax[k], hi[b_])
+    for k in np.flatnonzero(~np.isfinite(vmin)):  # an auxiliary bus: the limits of the bus it hangs at
+        j = np.concatenate([ti[fi == k], fi[ti == k]])[0]
+        vmin[k], vmax[k] = vmin[j], vmax[j]
+
+    # loads
+    load = pnet.load[_flag(pnet.load, "in_service", True)]
+    zip_cols = [
+        c
+        for c in (
+            "const_z_percent",
+            "const_i_percent",
+            "const_z_p_percent",
+            "const_i_p_percent",
+            "const_z_q_percent",
+            "const_i_q_percent",
+        )
+        if c in load
+    ]
+    for c in zip_cols:
+        bad = _col(load, c, 0.0) != 0
+        if bad.any():
+            raise CaseFormatError(
+                f"{label}: table 'load' index {load.index[bad][0]}: {c} ≠ 0 (a voltage-dependent load) is not modelled; loads are constant power"
+            )
+    load_at = np.array([bus_of.get(int(v), -1) for v in load.bus], dtype=int)
+    lscale = _col(load, "scaling", 1.0)
+    lp, lq = _col(load, "p_mw", 0.0) * lscale, _col(load, "q_mvar", 0.0) * lscale
+    dropped_loads = int((load_at < 0).sum())
+    keep_load = load_at >= 0
+    load_index = load.index.to_numpy()[keep_load]
+    load_bus, lp, lq = load_at[keep_load], lp[keep_load], lq[keep_load]
+
+    # static generators → DER
+    sgen = pnet.sgen[_flag(pnet.sgen, "in_service", True)]
+    sg_at = np.array([bus_of.get(int(v), -1) for v in sgen.bus], dtype=int)
+    sscale = _col(sgen, "scaling", 1.0)
+    sp, sq = _col(sgen, "p_mw", 0.0) * sscale, _col(sgen, "q_mvar", 0.0) * sscale
+    rating = np.maximum(sp, _col(sgen, "max_p_mw", 0.0))
+    bad = (rating <= 0) & (sg_at >= 0)
+    if bad.any():
+        i = sgen.index[bad][0]
+        raise CaseFormatError(
+            f"{label}: table 'sgen' index {i}: no positive rating (p_mw·scaling and max_p_mw ≤ 0): it cannot be a DER"
+        )
+    s_rated = np.maximum(_col(sgen, "sn_mva", 0.0), rating / der_pf)
+    types = sgen["type"].tolist() if "type" in sgen else [None] * len(sgen)
+    keep_sg = sg_at >= 0
+    dropped_sgens = int((~keep_sg).sum())
+    ders = tuple(
+        DER(int(sg_at[i]), "inverter", float(rating[i]), float(s_rated[i]), _energy(types[i]))  # type: ignore[arg-type]
+        for i in np.flatnonzero(keep_sg)
+    )
+    if dropped_loads or dropped_sgens:
+        notes.append(
+            f"{dropped_loads} load(s) and {dropped_sgens} static generator(s) at dropped or out-of-service buses left out"
+        )
+
+    # shunts
+    gs, bs = np.zeros(n), np.zeros(n)
+    shunt = pnet.shunt[_flag(pnet.shunt, "in_service", True)] if len(pnet.shunt) else pnet.shunt
+    if len(shunt):
+        if _flag(shunt, "step_dependency_table", False).any():
+            i = shunt.index[_flag(shunt, "step_dependency_table", False)][0]
+            raise CaseFormatError(f"{label}: table 'shunt' index {i}: shunt characteristic tables are not modelled")
+        at = np.array([bus_of.get(int(v), -1) for v in shunt.bus], dtype=int)
+        vbus = bus.vn_kv.reindex(shunt.bus).to_numpy(dtype=float)
+        vsh = np.where(np.isfinite(_col(shunt, "vn_kv", np.nan)), _col(shunt, "vn_kv", np.nan), vbus)
+        factor = _col(shunt, "step", 1.0) * (vbus / vsh) ** 2
+        ok = at >= 0
+        np.add.at(gs, at[ok], (_col(shunt, "p_mw", 0.0) * factor)[ok])
+        np.add.at(bs, at[ok], -(_col(shunt, "q_mvar", 0.0) * factor)[ok])
+
+    bus_p, bus_q = np.zeros(n), np.zeros(n)
+    np.add.at(bus_p, load_bus, lp)
+    np.add.at(bus_q, load_bus, lq)
+    slack = int(renum[pos[slack_pp]])
+    btype = np.ones(n, dtype=int)
+    btype[slack] = 3
+    va = float(ext.va_degree.iloc[0]) if "va_degree" in ext else 0.0
+    if np.isfinite(va) and va != 0:
+        notes.append(f"the external grid's angle {va:g}° only rotates every bus angle; angles are reported relative to it")
+    vm = float(ext.vm_pu.iloc[0])
+    if not (np.isfinite(vm) and vm > 0):
+        raise CaseFormatError(f"{label}: table 'ext_grid' index {ext.index[0]}: vm_pu must be a positive number, got {vm}")
+    try:
+        network = Network(
+            name=name,
+            base_mva=float(pnet.sn_mva),
+            bus_ids=ids,
+            bus_type=btype,
+            base_kv=kv,
+            load_p_mw=bus_p,
+            load_q_mvar=bus_q,
+            gs_mw=gs,
+            bs_mvar=bs,
+            vmin=vmin,
+            vmax=vmax,
+            f=fi[branch_ok],
+            t=ti[branch_ok],
+            r=r[branch_ok],
+            x=x[branch_ok],
+            b=b[branch_ok],
+            g=g[branch_ok],
+            tap=tap[branch_ok],
+            shift=shift[branch_ok],
+            status=np.ones(int(branch_ok.sum()), dtype=bool),
+            slack=slack,
+            v_slack=vm,
+            ders=ders,
+            load_bus=load_bus if load_bus.size else np.zeros(0, dtype=int),
+        )
+    except NetworkError as exc:
+        raise CaseFormatError(f"{label}: {exc}") from None
+    sc = None
+    s_sc, rx = _col(ext, "s_sc_max_mva", np.nan)[0], _col(ext, "rx_max", np.nan)[0]
+    if np.isfinite(s_sc) and s_sc > 0:
+        sc = (float(s_sc), float(rx) if np.isfinite(rx) else 0.0)
+    return Converted(
+        network,
+        load_index,
+        sgen.index.to_numpy()[keep_sg],
+        lp,
+        lq,
+        sp[keep_sg],
+        sq[keep_sg],
+        bus_of,
+        sc,
+        tuple(notes),
+    )
+
+
+def _merge_parallel(f, t, r, x, b, g, tap, shift):
+    """Merge branches with the same (from, to) buses, tap and shift into one: series
+    admittances and shunts add (exact for the π model with a common ideal transformer)."""
+    groups: dict[tuple, list[int]] = {}
+    for k in range(len(f)):
+        groups.setdefault((int(f[k]), int(t[k]), float(tap[k]), float(shift[k])), []).append(k)
+    rows, merged = [], 0
+    out = {name: [] for name in ("f", "t", "r", "x", "b", "g", "tap", "shift")}
+    for (fk, tk, tp, sh), members in groups.items():
+        ys = sum(1 / complex(r[k], x[k]) for k in members)
+        z = 1 / ys
+        merged += len(members) - 1
+        rows.append(members[0])
+        for name, value in zip(
+            out, (fk, tk, z.real, z.imag, sum(b[k] for k in members), sum(g[k] for k in members), tp, sh), strict=True
+        ):
+            out[name].append(value)
+    arrays = [np.array(out[name], dtype=int if name in ("f", "t") else float) for name in out]
+    return (*arrays, merged)
+
+
+def _bridges(f: np.ndarray, t: np.ndarray) -> np.ndarray:
+    """Bool per branch: a bridge (on no cycle), i.e. removing it splits its component."""
+    import scipy.sparse as sp
+    from scipy.sparse.csgraph import connected_components
+
+    ids, inv = np.unique(np.concatenate([f, t]), return_inverse=True)
+    fi, ti = inv[: len(f)], inv[len(f) :]
+    n = ids.size
+
+    def parts(mask: np.ndarray) -> int:
+        graph = sp.csr_matrix((np.ones(int(mask.sum())), (fi[mask], ti[mask])), shape=(n, n))
+        return connected_components(graph, directed=False)[0]
+
+    base = parts(np.ones(len(f), dtype=bool))
+    out = np.zeros(len(f), dtype=bool)
+    if len(f) == n - base:  # a forest: every branch is a bridge
+        return np.ones(len(f), dtype=bool)
+    for k in range(len(f)):
+        mask = np.ones(len(f), dtype=bool)
+        mask[k] = False
+        out[k] = parts(mask) > base
+    return out
+
+
+def _reachable(n: int, f: np.ndarray, t: np.ndarray, root: int) -> np.ndarray:
+    import scipy.sparse as sp
+    from scipy.sparse.csgraph import breadth_first_order
+
+    graph = sp.csr_matrix((np.ones(len(f)), (f, t)), shape=(n, n))
+    order = breadth_first_order(graph, root, directed=False, return_predecessors=False)
+    seen = np.zeros(n, dtype=bool)
+    seen[order] = True
+    return seen

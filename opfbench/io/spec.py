@@ -1,0 +1,120 @@
+"""Case specs: the one string that names a case everywhere (command line, config, task,
+worker, tables).
+
+    SOURCE[?der=DER&der-pf=PF]
+
+SOURCE is a shipped case name (`opfbench cases`), the path of a MATPOWER `.m` file or of a
+pandapower net saved with `pandapower.to_json` (`.json`), or `simbench:CODE` (a SimBench LV
+or MV grid code, e.g. `simbench:1-MV-rural--0-sw`). Options:
+
+- `der=gens` (MATPOWER files): the case's non-slack generators become DER
+  (`opfbench.io.matpower`); `der=BUS:KIND:MW[:ENERGY],…`: DER placed at those buses
+  (external bus numbers; KIND PV or DFIG — the paper's units, S̄ = P̄ — or inverter, a
+  generic inverter with S̄ = P̄/der-pf; ENERGY solar, wind, biomass, hydro or other,
+  default: PV solar, DFIG wind, inverter solar). Only on a case without DER.
+- `der-pf=PF` in (0, 1]: the generic inverters' rating S̄ = P̄/PF where the source gives
+  no larger nameplate (pandapower/SimBench static generators, generators as DER, `der=`
+  inverters). Default 0.90, VDE-AR-N 4105's power factor at full output.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from opfbench.errors import InputError
+from opfbench.network import DER_ENERGIES, DER_KINDS
+
+SIMBENCH = "simbench:"
+
+
+@dataclass(frozen=True)
+class CaseSpec:
+    """A parsed case spec (see the module docstring)."""
+
+    source: str
+    der: str | None = None
+    der_pf: float | None = None
+
+    @property
+    def text(self) -> str:
+        """The canonical spec string."""
+        opts = [f"der={self.der}"] if self.der is not None else []
+        opts += [f"der-pf={self.der_pf:g}"] if self.der_pf is not None else []
+        return self.source + ("?" + "&".join(opts) if opts else "")
+
+    @property
+    def kind(self) -> str:
+        """ "simbench", "matpower", "pandapower" or "shipped"."""
+        if self.source.startswith(SIMBENCH):
+            return "simbench"
+        if self.source.endswith(".m"):
+            return "matpower"
+        if self.source.endswith(".json"):
+            return "pandapower"
+        return "shipped"
+
+
+def parse_spec(text: str) -> CaseSpec:
+    """The CaseSpec of `text`; InputError naming the option for a malformed one."""
+    if not isinstance(text, str) or not text.strip():
+        raise InputError(f"case spec must be a non-empty string, got {text!r}")
+    source, sep, query = text.strip().partition("?")
+    der, der_pf = None, None
+    for part in query.split("&") if sep else ():
+        key, eq, value = part.partition("=")
+        if not eq or not value:
+            raise InputError(f"case {text!r}: option {part!r} must be key=value (der=…, der-pf=…)")
+        if key == "der":
+            der = value
+        elif key == "der-pf":
+            try:
+                der_pf = float(value)
+            except ValueError:
+                raise InputError(f"case {text!r}: der-pf must be a number in (0, 1], got {value!r}") from None
+            if not 0 < der_pf <= 1:
+                raise InputError(f"case {text!r}: der-pf must lie in (0, 1], got {value}")
+        else:
+            raise InputError(f"case {text!r}: unknown option {key!r} (der, der-pf)")
+    spec = CaseSpec(source, der, der_pf)
+    if der is not None and der != "gens":
+        parse_der_list(der, text)
+    if der == "gens" and spec.kind != "matpower":
+        raise InputError(f"case {text!r}: der=gens reads a MATPOWER file's generators; this case is {spec.kind}")
+    return spec
+
+
+@dataclass(frozen=True)
+class DerEntry:
+    """One `der=` item: external bus number, kind, rated P̄ (MW), primary energy."""
+
+    bus: int
+    kind: str
+    rating_mw: float
+    energy: str
+
+
+def parse_der_list(value: str, spec: str) -> tuple[DerEntry, ...]:
+    """`BUS:KIND:MW[:ENERGY],…` → entries; InputError naming the item otherwise."""
+    kinds = {k.lower(): k for k in DER_KINDS}
+    out = []
+    for item in value.split(","):
+        parts = item.strip().split(":")
+        if len(parts) not in (3, 4):
+            raise InputError(f"case {spec!r}: DER {item!r} must be BUS:KIND:MW[:ENERGY], e.g. 10:PV:0.5")
+        bus_text, kind_text, mw_text = parts[:3]
+        try:
+            bus = int(bus_text)
+            mw = float(mw_text)
+        except ValueError:
+            raise InputError(f"case {spec!r}: DER {item!r}: BUS must be a bus number and MW a number") from None
+        kind = kinds.get(kind_text.lower())
+        if kind is None:
+            raise InputError(f"case {spec!r}: DER {item!r}: KIND must be one of {', '.join(DER_KINDS)}")
+        if not (mw > 0 and mw < float("inf")):
+            raise InputError(f"case {spec!r}: DER {item!r}: MW must be a positive number")
+        default = {"PV": "solar", "DFIG": "wind"}.get(kind, "solar")
+        energy = parts[3].lower() if len(parts) == 4 else default
+        if energy not in DER_ENERGIES:
+            raise InputError(f"case {spec!r}: DER {item!r}: ENERGY must be one of {', '.join(DER_ENERGIES)}")
+        out.append(DerEntry(bus, kind, mw, energy))
+    return tuple(out)
