@@ -15,6 +15,7 @@ import numpy as np
 from opfbench.commands.common import fraction
 from opfbench.dynamics.params import FORECASTS, SENSITIVITY_VARIANTS, FaultParams, ModelParams
 from opfbench.errors import InputError
+from opfbench.io.case import Case
 from opfbench.jsonio import print_json
 from opfbench.registry import STRATEGY_NAMES
 
@@ -47,11 +48,22 @@ def register(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument("--load-scale", type=fraction, default=1.0, help="multiplier on the nominal loads (default 1)")
     p.add_argument("--der-scale", type=fraction, default=0.8, help="DER output as a fraction of rating (default 0.8)")
-    p.add_argument("--time", default=None, help="HH:MM: the paper day's minute as operating point instead")
+    p.add_argument(
+        "--time",
+        default=None,
+        help="HH:MM: the paper day's minute as operating point instead; on a case with its own profiles "
+        "(simbench:CODE) a local date and time, e.g. 2016-11-08T12:00",
+    )
     p.add_argument("--motor-share", type=_number, default=0.5, help="share of each load's P in motors, 0..1")
     p.add_argument("--motor-inertia", type=_number, default=0.2, help="motor H, s (default 0.2)")
     p.add_argument("--torque", choices=("quadratic", "constant"), default="quadratic", help="motor load torque law")
-    p.add_argument("--source-impedance", type=_number, default=0.2, help="upstream source reactance, p.u.")
+    p.add_argument(
+        "--source-impedance",
+        type=_number,
+        default=None,
+        help="upstream source reactance, p.u. (default 0.2; a case with its upstream grid's short-circuit data — "
+        "pandapower's ext_grid s_sc_max_mva/rx_max, SimBench's CIGRE values — takes R and X from it)",
+    )
     p.add_argument(
         "--emf",
         type=_number,
@@ -81,9 +93,12 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.set_defaults(func=run)
 
 
-def _params(args: argparse.Namespace) -> ModelParams:
-    base = ModelParams()
-    src = replace(base.source, impedance_pu=args.source_impedance, emf="reset" if args.emf is None else "given", emf_pu=args.emf)
+def _params(args: argparse.Namespace, case: Case) -> ModelParams:
+    from opfbench.dynamics.study import case_source
+
+    base = ModelParams() if args.source_impedance is not None else case_source(case, ModelParams())
+    impedance = base.source.impedance_pu if args.source_impedance is None else args.source_impedance
+    src = replace(base.source, impedance_pu=impedance, emf="reset" if args.emf is None else "given", emf_pu=args.emf)
     mot = replace(base.motors, share=args.motor_share, h_s=args.motor_inertia, torque=args.torque)
     inv = replace(base.inverters, active=args.active, area_c_trip=args.area_c_trip)
     params = ModelParams(src, mot, inv)
@@ -92,10 +107,11 @@ def _params(args: argparse.Namespace) -> ModelParams:
 
 
 def run(args: argparse.Namespace) -> int:
-    from opfbench.dynamics.study import StudyConfig, operating_point, run_study, write_study
-    from opfbench.io import load_network  # the simulation (numba) loads only when a study runs
+    from opfbench.dynamics.study import StudyConfig, operating_point, run_study, write_study  # numba: only when a study runs
+    from opfbench.io import load_case
 
-    net = load_network(args.case)
+    case = load_case(args.case)
+    net = case.network
     if args.duration_ms < 0:
         raise InputError(f"--duration-ms must be ≥ 0, got {args.duration_ms:g}")
     if args.fault_impedance < 0:
@@ -122,12 +138,12 @@ def run(args: argparse.Namespace) -> int:
         tuple(args.k),
         tuple(args.forecast),
         variants,
-        _params(args),
+        _params(args, case),
         fault,
         args.workers,
     )
     config.check(net)
-    point = operating_point(net, args.load_scale, args.der_scale, args.time)
+    point = operating_point(net, args.load_scale, args.der_scale, args.time, case)
     records, timings = run_study(config, point, progress=None if args.json else print)
     if args.out is not None:
         write_study(args.out, records, config, point, timings, ["opfbench", "fault", *sys.argv[2:]])

@@ -105,14 +105,14 @@ def andes_system(model: DynamicModel, fault: FaultParams):
             "Sn": base,
             "Vn1": vn,
             "Vn2": vn,
-            "r": 0.0,
+            "r": model.params.source.resistance_pu,
             "x": model.params.source.impedance_pu,
         },
     )
 
     # static loads: what is left of the model's diagonal after the network and motors
     y_static = np.diag(model.y - net.ybus).copy()
-    y_static[net.slack] -= 1.0 / (1j * model.params.source.impedance_pu)
+    y_static[net.slack] -= 1.0 / model.params.source.z_pu
     y_static[model.mot_bus] -= model.mot_y
     s_static = np.conj(y_static) * np.abs(model.v0) ** 2 * base  # MVA consumed
     for i in np.flatnonzero(np.abs(s_static) > 1e-12):

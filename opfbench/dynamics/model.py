@@ -156,7 +156,7 @@ def prefault_flow(
     otherwise the source EMF |E| = emf_pu is the slack of the power flow."""
     net = scenario.net
     s = scenario.injections(np.asarray(q_mvar, float)[None, :])[0]
-    z_src = 1j * params.source.impedance_pu
+    z_src = params.source.z_pu
     if emf_pu is None:
         pf = solve_pf(net, s, tol=PF_TOLERANCE)
         if not pf.converged:
@@ -179,10 +179,10 @@ def build_model(
     base = net.base_mva
     v0, emf = prefault_flow(scenario, q_mvar, params, emf_pu)
     mp, ip = params.motors, params.inverters
-    load = scenario.load_scale[0] * (net.load_p_mw + 1j * net.load_q_mvar)
+    load = scenario.bus_load_mva()[0]
 
     y = np.array(net.ybus, dtype=complex)
-    z_src = 1j * params.source.impedance_pu
+    z_src = params.source.z_pu
     y[net.slack, net.slack] += 1.0 / z_src
     i_const = np.zeros(net.n_bus, dtype=complex)
     i_const[net.slack] += emf / z_src
@@ -222,8 +222,8 @@ def build_model(
 
     der_p = scenario.der_p_mw[0]
     rating = net.der_rating_mw
-    is_pv = np.array([k == "PV" for k in net.der_kinds])
-    s_rated = np.where(is_pv, rating, np.hypot(der_p, qmax(net.der_kinds, der_p, rating)))
+    is_dfig = np.array([k == "DFIG" for k in net.der_kinds], dtype=bool)  # inverters: their nameplate S̄
+    s_rated = np.where(is_dfig, np.hypot(der_p, qmax(net.der_kinds, der_p, rating)), net.der_s_mva)
     vd = np.abs(v0[net.der_bus])
     p0, q0 = der_p / base, np.asarray(q_mvar, float) / base
     inv_par = (

@@ -33,8 +33,9 @@ RECOVERY_PU = 0.9  # the recovery threshold |V| ≥ 0.9 p.u.
 
 @dataclass(frozen=True)
 class SourceParams:
-    """Upstream Thevenin source at the slack bus: impedance `impedance_pu` (reactance, p.u.
-    on the case base). `emf`: "reset" — |E| set for each operating point so the slack bus
+    """Upstream Thevenin source at the slack bus: impedance `resistance_pu` + j·`impedance_pu`
+    (p.u. on the case base; a case with its upstream grid's short-circuit data sets both,
+    `opfbench.dynamics.study.case_source`). `emf`: "reset" — |E| set for each operating point so the slack bus
     sits at its scheduled voltage before the fault; "held" — |E| of the no-action
     operating point, kept for every strategy; "given" — |E| = `emf_pu`. E is constant
     during the simulation in every mode."""
@@ -42,6 +43,12 @@ class SourceParams:
     impedance_pu: float = 0.2
     emf: EmfMode = "reset"
     emf_pu: float | None = None
+    resistance_pu: float = 0.0
+
+    @property
+    def z_pu(self) -> complex:
+        """The source impedance R + jX (p.u.)."""
+        return self.resistance_pu + 1j * self.impedance_pu
 
 
 @dataclass(frozen=True)
@@ -149,6 +156,8 @@ class ModelParams:
             raise InputError(f"motor inertia H must be > 0 s, got {m.h_s}")
         if not s.impedance_pu > 0:
             raise InputError(f"source impedance must be > 0 p.u., got {s.impedance_pu}")
+        if not s.resistance_pu >= 0:
+            raise InputError(f"source resistance must be ≥ 0 p.u., got {s.resistance_pu}")
         if s.emf == "given" and (s.emf_pu is None or not s.emf_pu > 0):
             raise InputError("EMF mode 'given' needs a positive EMF in p.u. (--emf)")
         if s.emf not in ("reset", "held", "given"):

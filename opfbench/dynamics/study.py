@@ -24,6 +24,7 @@ from opfbench.dynamics.model import build_model, prefault_flow
 from opfbench.dynamics.params import FORECASTS, FaultParams, ModelParams
 from opfbench.dynamics.simulate import DIVERGED, NOT_RECOVERED, RECOVERED, Simulation, check_fault, simulate
 from opfbench.errors import InputError
+from opfbench.io import Case
 from opfbench.jsonio import write_atomic, write_json
 from opfbench.network import Network
 from opfbench.registry import get_strategy, run_strategy
@@ -40,10 +41,27 @@ class OperatingPoint:
     label: str
 
 
-def operating_point(net: Network, load_scale: float = 1.0, der_scale: float = 0.8, time: str | None = None) -> OperatingPoint:
+def operating_point(
+    net: Network, load_scale: float = 1.0, der_scale: float = 0.8, time: str | None = None, case: Case | None = None
+) -> OperatingPoint:
     """Nominal loads × load_scale with every DER at der_scale × rating (the oracle
     forecast of a snapshot is the snapshot itself), or the paper day's minute `time`
-    ("HH:MM", local time) with the next minute as the oracle forecast."""
+    ("HH:MM", local time) with the next minute as the oracle forecast — or, for a `case`
+    with its own time series, the step of its profiles at `time` (local date and time,
+    e.g. 2016-11-08T12:00) with the next step as the oracle forecast."""
+    if time is not None and case is not None and case.series is not None:
+        from opfbench.study.periods import local_time
+
+        when = local_time(time)
+        series = case.series
+        row = series.index.get_indexer([when])[0]
+        if row < 0:
+            raise InputError(
+                f"--time {time!r} is not a step of {case.spec}'s profiles ({series.index[0]} .. {series.index[-1]}, every {series.step})"
+            )
+        now, ahead = (case.scenario_at(series.index[k : k + 1]) for k in (row, min(row + 1, len(series.index) - 1)))
+        sc = Scenario.from_series(net, now.load_p_mw, now.load_q_mvar, now.der_p_mw, ahead.der_p_mw)
+        return OperatingPoint(sc, f"{case.spec} profiles at {when.isoformat()}")
     if time is None:
         sc = Scenario.snapshot(net, load_scale, der_scale, forecast_der_scale=der_scale)
         return OperatingPoint(sc, f"load {load_scale:g} × nominal, DER at {der_scale:g} × rating")
@@ -186,7 +204,7 @@ def run_study(config: StudyConfig, point: OperatingPoint, progress=None) -> tupl
     faults = [replace(config.fault, bus=b) for b in config.fault_buses]
     setpoints: dict[tuple[str, float, str], np.ndarray] = {}
     for fc in config.forecasts:
-        sc = point.scenario if fc == "oracle" else Scenario(net, point.scenario.load_scale, point.scenario.der_p_mw)
+        sc = point.scenario if fc == "oracle" else point.scenario.without_forecast()
         for name in config.strategies:
             if fc != "off" and not get_strategy(name).uses_forecast:
                 continue
@@ -195,7 +213,7 @@ def run_study(config: StudyConfig, point: OperatingPoint, progress=None) -> tupl
                 if res.status[0] not in ("ok",) and not str(res.status[0]).startswith("fallback"):
                     raise InputError(f"strategy {name} at k = {k:g} gave status {res.status[0]} on this operating point")
                 setpoints[name, k, fc] = res.q_mvar[0]
-    sc_off = Scenario(net, point.scenario.load_scale, point.scenario.der_p_mw)
+    sc_off = point.scenario.without_forecast()
     jobs, keys = [], []
     for label, params in variants.items():
         emf = params.source.emf_pu if params.source.emf == "given" else None
@@ -353,3 +371,15 @@ def recovery_summary(table: pd.DataFrame) -> pd.DataFrame:
     out["delta_fault_bus_ms"] = out["fault_bus_recovery_ms"] - out.pop("na_fault")
     out["delta_feeder_ms"] = out["feeder_recovery_ms"] - out.pop("na_feeder")
     return out.reset_index(drop=True)
+
+
+def case_source(case: Case, params: ModelParams) -> ModelParams:
+    """`params` with the upstream source of `case`'s short-circuit data, where it has some:
+    |Z| = base_mva / S″k (p.u. on the case base, the Thevenin impedance of the upstream grid
+    at rated voltage, IEC 60909 with c = 1), split by its R/X ratio."""
+    if case.short_circuit is None:
+        return params
+    s_sc, rx = case.short_circuit
+    z = case.network.base_mva / s_sc
+    x = z / np.hypot(1.0, rx)
+    return replace(params, source=replace(params.source, impedance_pu=float(x), resistance_pu=float(rx * x)))
