@@ -27,6 +27,12 @@ the fast path's batched power flow, IPOPT where needed, the AC evaluation):
   `fast_path_max_rel_diff`: the largest relative difference of its losses from the
   fast path's.
 
+and on 1-MV-rural (SimBench, 101 buses, 102 DER) over the paper day's date at 15 min of its
+own profiles (`bench_mv`), the same per-step costs `mv_socp_step_ms` and `mv_acopf_step_ms`
+(target ≤ 3 ms each), the certified share, and pandapower `runopp` on SimBench's own net
+at every 12th step (`mv_pandapower_runopp_ms`, with its losses checked against our AC
+OPF's at the same steps).
+
 Medians in ms; `ratio_*` = pandapower median / ours. The machine's load average is
 recorded because the timings depend on it.
 """
@@ -36,13 +42,14 @@ from __future__ import annotations
 import os
 
 import numpy as np
+import pandas as pd
 
 from opfbench.bench.pandapower_opf import PandapowerOpf
 from opfbench.bench.profiles import paper_day_scenario
 from opfbench.formulations.acopf import build_acopf
 from opfbench.formulations.problem import snapshot_data
 from opfbench.formulations.socp import build_socp, forget_solves
-from opfbench.io import load_network
+from opfbench.io import load_case, load_network
 from opfbench.network import Network
 from opfbench.powerflow import solve_pf_batch
 from opfbench.registry import run_strategy
@@ -50,6 +57,19 @@ from opfbench.scenario import Scenario
 from opfbench.timing import elapsed_ms, now
 
 AGREEMENT_KW = 1e-2  # pandapower's and our optimal losses agree when this close
+MV_CASE = "1-MV-rural--0-sw"
+TARGET_MV_STEP_MS = 3.0
+
+
+def element_loads(scenario: Scenario) -> tuple[np.ndarray, np.ndarray]:
+    """(P, Q) (S, n_load) per load element: the scenario's own, or load_scale × the nominal
+    load of a network with one load element per bus (the MATPOWER convention)."""
+    if scenario.load_p_mw is not None and scenario.load_q_mvar is not None:
+        return scenario.load_p_mw, scenario.load_q_mvar
+    net = scenario.net
+    assert scenario.load_scale is not None and np.unique(net.load_bus).size == net.n_load
+    scale = scenario.load_scale[:, None]
+    return scale * net.load_p_mw[net.load_bus], scale * net.load_q_mvar[net.load_bus]
 
 
 def daily_scenario(net: Network, n: int = 200) -> Scenario:
@@ -74,7 +94,7 @@ def bench_opf(n: int = 200, case: str = "paper33", k: float = 0.0) -> dict:
     data = snapshot_data(scenario, k)
     opf, relax = build_acopf(net), build_socp(net)
     try:
-        peer = PandapowerOpf(net)
+        peer = PandapowerOpf.of_network(net)
     except ImportError:  # the peer is optional (pip install -e '.[bench]')
         peer = None
 
@@ -96,7 +116,8 @@ def bench_opf(n: int = 200, case: str = "paper33", k: float = 0.0) -> dict:
         socp_wall[i] = elapsed_ms(t0)
 
     q_mvar_limit = data.q_limit * net.base_mva
-    peers = [] if peer is None else [peer.solve(scenario.load_scale[i], scenario.der_p_mw[i], q_mvar_limit[i]) for i in range(n)]
+    load_p, load_q = element_loads(scenario)
+    peers = [] if peer is None else [peer.solve(load_p[i], load_q[i], scenario.der_p_mw[i], q_mvar_limit[i]) for i in range(n)]
 
     ipopt_ok = np.array([s.success for s in warm])
     q_opf = np.array([s.q_pu for s in warm]) * net.base_mva
@@ -181,6 +202,83 @@ def bench_paper_day(case: str = "paper33", k: float = 0.0, repeats: int = 3) -> 
     }
 
 
+def _span(values: np.ndarray) -> list[float | None]:
+    """[min, max] of `values` ([None, None] when empty)."""
+    return [float(values.min()), float(values.max())] if values.size else [None, None]
+
+
+def bench_mv(code: str = MV_CASE, k: float = 0.0, repeats: int = 3, peer_every: int = 12) -> dict:
+    """Per-step cost of `socp` and `acopf` on a SimBench MV grid over the paper day's date at
+    15 min of its own profiles, each repeat on a fresh scenario with no solves shared; runopp
+    on every `peer_every`-th step of SimBench's own net. See the module doc."""
+    from opfbench.data import PAPER_DAY
+    from opfbench.data.profiles import PAPER_DAY_TZ
+
+    case = load_case(f"simbench:{code}")
+    index = pd.date_range(PAPER_DAY, periods=96, freq="15min", tz=PAPER_DAY_TZ)
+    day = case.scenario_at(index)
+    n = day.n_snapshots
+
+    def fresh() -> Scenario:
+        forget_solves()
+        return Scenario.from_series(day.net, day.load_p_mw, day.load_q_mvar, day.der_p_mw)
+
+    def step_ms(strategy: str):
+        scenario = fresh()
+        start = now()
+        res = run_strategy(strategy, scenario, k)
+        return elapsed_ms(start) / n, res
+
+    start = now()
+    run_strategy("acopf", day.take(slice(0, 4)), k, solver="ipopt")  # builds the per-thread SOCP and AC OPF
+    build_s = elapsed_ms(start) / 1e3
+    socp_ms, acopf_ms = [], []
+    for _ in range(repeats):
+        socp_ms.append(step_ms("socp")[0])
+        ms, acopf = step_ms("acopf")
+        acopf_ms.append(ms)
+    rows = np.arange(0, n, peer_every)
+    out = {
+        "mv_case": code,
+        "mv_steps": n,
+        "mv_buses": case.network.n_bus,
+        "mv_ders": len(case.network.ders),
+        "mv_socp_step_ms": float(np.median(socp_ms)),
+        "mv_acopf_step_ms": float(np.median(acopf_ms)),
+        "mv_socp_step_ms_runs": socp_ms,
+        "mv_acopf_step_ms_runs": acopf_ms,
+        "mv_build_s": build_s,
+        "mv_certified_share": float(np.mean(acopf.extra["certified_by"] == "socp")),
+        "mv_acopf_not_ok_steps": int((acopf.status != "ok").sum()),
+        "mv_target_step_ms": TARGET_MV_STEP_MS,
+        "mv_pandapower_runopp_ms": None,
+    }
+    try:
+        peer = PandapowerOpf.of_simbench(code, case.load_index, case.der_index)
+    except ImportError:
+        return out
+    q_limit = (1.0 - k) * day.qmax_mvar()
+    peers = [peer.solve(day.load_p_mw[i], day.load_q_mvar[i], day.der_p_mw[i], q_limit[i]) for i in rows]
+    ok = np.array([p.converged for p in peers], dtype=bool)
+    # runopp's setpoints in the AC power flow (ours = pandapower's runpp to 1e-8 kW on SimBench):
+    # what its solution loses against our certified optimum; and its OPF's own reported losses,
+    # which on SimBench's transformers differ from its power flow at the same setpoints
+    q_pp = np.array([p.q_mvar for p in peers])[ok]
+    at_pp = solve_pf_batch(day.net, day.take(rows[ok]).injections(q_pp)).losses_kw if ok.any() else np.zeros(0)
+    excess = at_pp - acopf.losses_kw[rows[ok]]
+    model_gap = np.array([p.losses_kw for p in peers])[ok] - at_pp
+    pp_ms = float(np.median([p.wall_ms for p in peers]))
+    return out | {
+        "mv_pandapower_runopp_ms": pp_ms,
+        "mv_pandapower_snapshots": len(rows),
+        "mv_pandapower_failures": int((~ok).sum()),
+        "mv_pandapower_excess_kw": _span(excess),
+        "mv_pandapower_opf_vs_pf_kw": _span(model_gap),
+        "ratio_mv_socp_step_vs_pandapower": pp_ms / out["mv_socp_step_ms"],
+        "ratio_mv_acopf_step_vs_pandapower": pp_ms / out["mv_acopf_step_ms"],
+    }
+
+
 def run() -> dict:
     day = bench_paper_day()
     figures = bench_opf()
@@ -189,6 +287,7 @@ def run() -> dict:
         "ratio_acopf_step_vs_pandapower": None if pp_ms is None else pp_ms / day["acopf_step_ms"],
         "ratio_socp_step_vs_pandapower": None if pp_ms is None else pp_ms / day["socp_step_ms"],
     }
+    figures |= bench_mv()
     figures["loadavg_after"] = [round(x, 2) for x in os.getloadavg()]
     return figures
 
@@ -225,3 +324,23 @@ def print_table(f: dict) -> None:
         f"  socp                  {f['socp_step_ms']:.2f} ms  (after acopf on the same scenario:"
         f" {f['socp_shared_step_ms']:.3f} ms) → {versus(f['ratio_socp_step_vs_pandapower'])}"
     )
+    if "mv_socp_step_ms" not in f:
+        return
+    print(
+        f"{f['mv_case']} ({f['mv_buses']} buses, {f['mv_ders']} DER), {f['mv_steps']} steps of its own profiles, per step "
+        f"(target ≤ {f['mv_target_step_ms']:g} ms):"
+    )
+    print(
+        f"  socp                  {f['mv_socp_step_ms']:.2f} ms  (runs {', '.join(f'{v:.2f}' for v in f['mv_socp_step_ms_runs'])})"
+    )
+    print(
+        f"  acopf (fast path)     {f['mv_acopf_step_ms']:.2f} ms  (runs {', '.join(f'{v:.2f}' for v in f['mv_acopf_step_ms_runs'])});"
+        f" certified by the SOCP {f['mv_certified_share']:.1%}"
+    )
+    if f["mv_pandapower_runopp_ms"] is not None:
+        print(
+            f"  pandapower runopp     {f['mv_pandapower_runopp_ms']:.1f} ms median on {f['mv_pandapower_snapshots']} steps, "
+            f"{f['mv_pandapower_failures']} failures; its setpoints lose {f['mv_pandapower_excess_kw'][0]:.3g} … "
+            f"{f['mv_pandapower_excess_kw'][1]:.3g} kW to our AC OPF (its own OPF reports "
+            f"{f['mv_pandapower_opf_vs_pf_kw'][0]:.3g} … {f['mv_pandapower_opf_vs_pf_kw'][1]:.3g} kW vs its power flow)"
+        )

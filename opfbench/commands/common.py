@@ -7,7 +7,13 @@ import math
 
 from opfbench.jsonio import print_json
 
-__all__ = ["add_operating_point", "fraction", "print_json"]
+__all__ = ["CASE_HELP", "add_case_options", "add_operating_point", "case_spec", "fraction", "print_json"]
+
+CASE_HELP = (
+    "a shipped case (see `opfbench cases`), a MATPOWER .m or pandapower .json file, or simbench:CODE "
+    "(a SimBench LV/MV grid with its own profiles, e.g. simbench:1-MV-rural--0-sw); options ?der=…&der-pf=… "
+    "as --der/--der-pf"
+)
 
 
 def fraction(text: str) -> float:
@@ -28,3 +34,29 @@ def add_operating_point(parser: argparse.ArgumentParser) -> None:
         "--der-scale", type=fraction, default=0.8, help="DER active power as a fraction of rating, 0..1 (default 0.8)"
     )
     parser.add_argument("--json", action="store_true", help="print one JSON object")
+
+
+def add_case_options(parser: argparse.ArgumentParser) -> None:
+    """--der and --der-pf: DER on a user's own case, and the generic inverters' rating."""
+    parser.add_argument(
+        "--der",
+        default=None,
+        help="DER on a case without any: 'gens' (a MATPOWER file's non-slack generators) or BUS:KIND:MW[:ENERGY],… "
+        "(KIND PV, DFIG or inverter; e.g. 10:PV:0.6,27:DFIG:0.6); the same as the case option ?der=",
+    )
+    parser.add_argument(
+        "--der-pf",
+        type=float,
+        default=None,
+        help="generic inverters' rating S̄ = P̄/PF where the source gives no larger one (default 0.90: "
+        "VDE-AR-N 4105's cos φ 0.90 at full output); the same as ?der-pf=",
+    )
+
+
+def case_spec(case: str, args: argparse.Namespace) -> str:
+    """`case` with the --der/--der-pf options added to its spec (`opfbench.io.spec`)."""
+    opts = [f"der={args.der}"] if getattr(args, "der", None) is not None else []
+    opts += [f"der-pf={args.der_pf:g}"] if getattr(args, "der_pf", None) is not None else []
+    if not opts:
+        return case
+    return case + ("&" if "?" in case else "?") + "&".join(opts)

@@ -12,7 +12,7 @@ from pathlib import Path
 
 import numpy as np
 
-from opfbench.commands.common import fraction
+from opfbench.commands.common import CASE_HELP, add_case_options, case_spec, fraction
 from opfbench.dynamics.params import FORECASTS, SENSITIVITY_VARIANTS, FaultParams, ModelParams
 from opfbench.errors import InputError
 from opfbench.io.case import Case
@@ -33,7 +33,8 @@ def _number(text: str) -> float:
 
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("fault", help="fault ride-through study: recovery times per bus × strategy × k")
-    p.add_argument("case", help="shipped case name or path to a MATPOWER .m file")
+    p.add_argument("case", help=CASE_HELP)
+    add_case_options(p)
     p.add_argument("--fault-bus", nargs="+", required=True, help="bus number(s) to fault, or 'all'")
     p.add_argument("--fault-impedance", type=_number, default=0.02, help="fault reactance, p.u. (default 0.02)")
     p.add_argument("--duration-ms", type=_number, default=150.0, help="fault duration, ms (default 150)")
@@ -110,7 +111,7 @@ def run(args: argparse.Namespace) -> int:
     from opfbench.dynamics.study import StudyConfig, operating_point, run_study, write_study  # numba: only when a study runs
     from opfbench.io import load_case
 
-    case = load_case(args.case)
+    case = load_case(case_spec(args.case, args))
     net = case.network
     if args.duration_ms < 0:
         raise InputError(f"--duration-ms must be ≥ 0, got {args.duration_ms:g}")
@@ -132,7 +133,7 @@ def run(args: argparse.Namespace) -> int:
         bus=0, impedance_pu=args.fault_impedance, duration_s=args.duration_ms / 1e3, t_end_s=args.t_end, step_s=args.step_ms / 1e3
     )
     config = StudyConfig(
-        args.case,
+        case.spec,
         buses,
         tuple(args.strategies),
         tuple(args.k),

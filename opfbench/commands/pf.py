@@ -10,7 +10,7 @@ import argparse
 
 import numpy as np
 
-from opfbench.commands.common import fraction, print_json
+from opfbench.commands.common import CASE_HELP, add_case_options, case_spec, fraction, print_json
 from opfbench.errors import InputError
 
 DEFAULT_LOAD_SCALE, DEFAULT_DER_SCALE = 1.0, 0.8
@@ -18,9 +18,8 @@ DEFAULT_LOAD_SCALE, DEFAULT_DER_SCALE = 1.0, 0.8
 
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("pf", help="AC power flow (Newton–Raphson) on a case")
-    p.add_argument(
-        "case", help="shipped case name (see `opfbench cases`), a MATPOWER .m or pandapower .json file, or simbench:CODE"
-    )
+    p.add_argument("case", help=CASE_HELP)
+    add_case_options(p)
     p.add_argument(
         "--load-scale",
         type=fraction,
@@ -55,7 +54,7 @@ def run(args: argparse.Namespace) -> int:
     scaled = args.load_scale is not None or args.der_scale is not None
     if args.time is not None and scaled:
         raise InputError("--time takes loads and DER output from the case's profiles: drop --load-scale/--der-scale")
-    case = load_case(args.case)
+    case = load_case(case_spec(args.case, args))
     net = case.network
     der_q = np.zeros(len(net.ders))
     when = None

@@ -10,7 +10,7 @@ import sys
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from opfbench.commands.common import fraction
+from opfbench.commands.common import add_case_options, case_spec, fraction
 from opfbench.errors import InputError
 from opfbench.jsonio import print_json
 from opfbench.registry import STRATEGY_NAMES
@@ -19,6 +19,17 @@ from opfbench.study.config import ACOPF_SOLVERS, CHUNKS, DEFAULT_KS, DEFAULT_NIG
 
 if TYPE_CHECKING:
     from opfbench.study.runner import StudyRun
+
+SUITES = ("simbench",)
+
+
+def suite_cases(suite: str | None) -> list[str]:
+    """The case specs of a field suite (none for None)."""
+    if suite is None:
+        return []
+    from opfbench.io.simbench import SUITE
+
+    return [f"simbench:{code}" for code in SUITE]
 
 
 def _workers(text: str) -> int:
@@ -40,12 +51,22 @@ def _minutes(text: str) -> float:
 
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("run", help="run the study (default: the paper day on paper33, every strategy)")
-    p.add_argument(
+    cases = p.add_mutually_exclusive_group()
+    cases.add_argument(
         "--case",
         nargs="+",
-        default=["paper33"],
-        help="shipped case names or MATPOWER .m paths, e.g. paper33 case69-der case141-der paper33-meshed",
+        default=None,
+        help="case specs (default paper33): shipped names, MATPOWER .m or pandapower .json paths, simbench:CODE, "
+        "e.g. paper33 case69-der simbench:1-MV-rural--0-sw",
     )
+    cases.add_argument(
+        "--suite",
+        choices=SUITES,
+        default=None,
+        help="a field suite instead of --case: simbench = every SimBench LV and MV grid of scenario 0, switch "
+        "variant sw, on its own profiles (the report checks the ranking claim per grid)",
+    )
+    add_case_options(p)
     p.add_argument(
         "--strategies", nargs="+", default=list(STRATEGY_NAMES), choices=STRATEGY_NAMES, help="default: every registered strategy"
     )
@@ -139,7 +160,7 @@ def run(args: argparse.Namespace) -> int:
         )
     check_year_dir(args.year_dir)
     config = StudyConfig.build(
-        cases=args.case,
+        cases=[case_spec(c, args) for c in suite_cases(args.suite) or args.case or ["paper33"]],
         strategies=args.strategies,
         ks=args.k,
         night_modes=args.night_modes,

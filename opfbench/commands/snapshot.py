@@ -4,14 +4,15 @@ from __future__ import annotations
 
 import argparse
 
-from opfbench.commands.common import add_operating_point, fraction, print_json
+from opfbench.commands.common import CASE_HELP, add_case_options, add_operating_point, case_spec, fraction, print_json
 from opfbench.errors import InputError
 from opfbench.registry import STRATEGIES, STRATEGY_NAMES, get_strategy, run_strategy
 
 
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("snapshot", help="run one strategy on one operating point")
-    p.add_argument("case", help="shipped case name (see `opfbench cases`) or path to a MATPOWER .m file")
+    p.add_argument("case", help=CASE_HELP)
+    add_case_options(p)
     p.add_argument("--strategy", required=True, choices=STRATEGY_NAMES)
     p.add_argument("--k", type=fraction, default=0.0, help="reactive reserve coefficient in [0, 1] (default 0)")
     add_operating_point(p)
@@ -73,7 +74,7 @@ def run(args: argparse.Namespace) -> int:
     from opfbench.scenario import Scenario
 
     options = _options(args)
-    net = load_network(args.case)
+    net = load_network(case_spec(args.case, args))
     scenario = Scenario.snapshot(net, args.load_scale, args.der_scale, args.forecast_der_scale)
     result = run_strategy(args.strategy, scenario, args.k, **options)
     out = result.snapshot_json(0)

@@ -106,8 +106,8 @@ def _read(spec: CaseSpec) -> Case:
             case.series,
             case.short_circuit,
             case.notes + (NO_DER_NOTE,),
-            case.load_names,
-            case.der_names,
+            case.load_index,
+            case.der_index,
         )
     return case
 
@@ -125,7 +125,7 @@ def _with_listed_ders(case: Case, spec: CaseSpec, der_pf: float) -> Case:
             )
         s = e.rating_mw / der_pf if e.kind == "inverter" else None
         ders.append(DER(net.index_of(e.bus), e.kind, e.rating_mw, s, e.energy))  # type: ignore[arg-type]
-    return Case(spec.text, net.with_changes(ders=tuple(ders)), None, case.series, case.short_circuit, case.notes, case.load_names)
+    return Case(spec.text, net.with_changes(ders=tuple(ders)), None, case.series, case.short_circuit, case.notes, case.load_index)
 
 
 def _pandapower_case(spec: CaseSpec, der_pf: float) -> Case:
@@ -151,6 +151,6 @@ def _pandapower_case(spec: CaseSpec, der_pf: float) -> Case:
         None,
         conv.short_circuit,
         conv.notes,
-        tuple(f"load {i}" for i in conv.load_index),
-        tuple(f"sgen {i}" for i in conv.sgen_index),
+        conv.load_index,
+        conv.sgen_index,
     )

@@ -76,7 +76,9 @@ class Case:
     element as the source stores them (None: the source has no per-element operating
     point, e.g. a MATPOWER file's DER); `series`: the case's own time series or None;
     `short_circuit`: (S″k MVA, R/X) of the upstream grid at the slack, None when the
-    source gives none; `notes`: what the conversion did that a user should know."""
+    source gives none; `notes`: what the conversion did that a user should know;
+    `load_index` / `der_index`: the source's row of each load element and DER (the
+    pandapower `load` and `sgen` index; None for sources without such rows)."""
 
     spec: str
     network: Network
@@ -84,8 +86,8 @@ class Case:
     series: CaseSeries | None = None
     short_circuit: tuple[float, float] | None = None
     notes: tuple[str, ...] = ()
-    load_names: tuple[str, ...] = ()
-    der_names: tuple[str, ...] = ()
+    load_index: np.ndarray | None = None
+    der_index: np.ndarray | None = None
 
     @property
     def name(self) -> str:

@@ -193,6 +193,6 @@ def simbench_case(spec: str, code: str, der_pf: float = DEFAULT_DER_PF) -> Case:
         _series(net, conv, code),
         short_circuit,
         tuple(notes) + conv.notes,
-        tuple(f"load {i}" for i in conv.load_index),
-        tuple(f"sgen {i}" for i in conv.sgen_index),
+        conv.load_index,
+        conv.sgen_index,
     )

@@ -79,6 +79,30 @@ def ranking(inputs: Inputs) -> Claim:
     )
 
 
+def ranking_per_case(summary: pd.DataFrame) -> pd.DataFrame:
+    """The ranking claim (LFMA < LLMA < no action) checked per case over its (night mode, k)
+    configurations, forecast off: how many are ordered, and the verdict of that case."""
+    e = _energy(summary, ["no-action", "llma", "lfma"]).dropna()
+    rows = []
+    for case in dict.fromkeys(summary["case"]):
+        sub = e[e.index.get_level_values("case") == case] if len(e) else e
+        if sub.empty or sub.shape[1] < 3:
+            rows.append({"case": case, "ordered": 0, "configurations": 0, "verdict": NA, "first exception": ""})
+            continue
+        ok = (sub["lfma"] < sub["llma"] - TOL_KWH) & (sub["llma"] < sub["no-action"] - TOL_KWH)
+        first = "" if ok.all() else _where(sub.index[~ok][0])
+        rows.append(
+            {
+                "case": case,
+                "ordered": int(ok.sum()),
+                "configurations": len(ok),
+                "verdict": HOLDS if ok.all() else FAILS,
+                "first exception": first,
+            }
+        )
+    return pd.DataFrame(rows)
+
+
 def forecast_savings(inputs: Inputs) -> Claim:
     claim = "Forecast-aware rules cut losses up to 30 % vs no action"
     figure = f"up to {paper.FORECAST_SAVINGS_PCT:g} %"

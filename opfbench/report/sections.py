@@ -6,7 +6,7 @@ from __future__ import annotations
 from typing import TYPE_CHECKING
 
 from opfbench.report import plots, tables
-from opfbench.report.claims import claims
+from opfbench.report.claims import claims, ranking_per_case
 from opfbench.report.inputs import Inputs
 from opfbench.report.page import Block, Section, table
 from opfbench.report.price import DEFAULT_CURRENCY, DEFAULT_PRICE_PER_KWH, DEFAULT_PRICE_SOURCE
@@ -27,6 +27,18 @@ def _plots(found: list[plots.Plot]) -> list[Block]:
     return [Block("plot", plot=p) for p in found]
 
 
+def _ders(ders: list[dict]) -> str:
+    """The DER of a case: each one for a few, counts and total rating per kind for many."""
+    if not ders:
+        return "none"
+    if len(ders) <= 8:
+        return ", ".join(f"{d.get('kind')} at bus {d.get('bus')} ({d.get('rating_mw')} MW)" for d in ders)
+    kinds: dict[str, list[float]] = {}
+    for d in ders:
+        kinds.setdefault(str(d.get("kind")), []).append(float(d.get("rating_mw") or 0.0))
+    return f"{len(ders)} units (" + ", ".join(f"{k}: {len(v)}, {sum(v):.3g} MW" for k, v in kinds.items()) + ")"
+
+
 def metadata(inputs: Inputs, price: tuple[float, str, str]) -> Section:
     sec = Section("metadata", "Run metadata")
     m = inputs.manifest
@@ -36,9 +48,8 @@ def metadata(inputs: Inputs, price: tuple[float, str, str]) -> Section:
     versions = ", ".join(f"{k} {v}" for k, v in (m.get("versions") or {}).items())
     timings, machine = m.get("timings") or {}, m.get("machine") or {}
     cases = "; ".join(
-        f"{name}: {c.get('buses')} buses, DER "
-        + ", ".join(f"{d.get('kind')} at bus {d.get('bus')} ({d.get('rating_mw')} MW)" for d in c.get("ders", []))
-        + f", limits [{c.get('vmin_pu')}, {c.get('vmax_pu')}] p.u."
+        f"{name}: {c.get('buses')} buses, DER {_ders(c.get('ders', []))}, limits [{c.get('vmin_pu')}, {c.get('vmax_pu')}] p.u."
+        + (f", own profiles: {c['series']}" if c.get("series") else "")
         for name, c in (m.get("cases") or {}).items()
     )
     items = [
@@ -123,6 +134,27 @@ def losses(inputs: Inputs, price: tuple[float, str, str]) -> Section:
     else:
         sec.blocks += _missing(inputs, "der_q.parquet")
     return sec
+
+
+def grids(inputs: Inputs) -> Section:
+    """Per-grid leaderboard and the ranking claim checked per grid ("the rules work on any feeder")."""
+    sec = Section(
+        "grids",
+        "Per-grid leaderboard",
+        "Every strategy's share of the AC OPF's loss reduction, (E_no-action − E)/(E_no-action − E_acopf), per case "
+        "and k (forecast off, PV connected at night), and the paper's ranking claim LFMA < LLMA < no action checked "
+        "on each grid separately.",
+    )
+    if inputs.summary is None:
+        return sec.add(*_missing(inputs, "summary.csv"))
+    notes = [
+        (case, note) for case, info in ((inputs.manifest or {}).get("cases") or {}).items() for note in info.get("notes", [])
+    ]
+    for case, note in notes:
+        sec.add(Block("note", text=f"{case}: {note}"))
+    sec.add(table(ranking_per_case(inputs.summary), "The ranking claim per grid (forecast off, every night mode and k)"))
+    board = tables.leaderboard(inputs.summary)
+    return sec.add(table(board, "Leaderboard per grid and k (rank 1 = lowest energy)", collapse_over=60))
 
 
 def convergence(inputs: Inputs) -> Section:
@@ -361,6 +393,7 @@ SECTIONS = (
     ("claims", "The paper's claims", paper_claims),
     ("metadata", "Run metadata", metadata),
     ("losses", "Losses and savings", losses),
+    ("grids", "Per-grid leaderboard", grids),
     ("convergence", "Convergence of the formulations", convergence),
     ("year", "A year (2016 at 15 min)", year),
     ("night", "Night hours", night),

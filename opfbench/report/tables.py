@@ -16,6 +16,7 @@ from opfbench.report import paper
 STATUSES = ("ok", "fallback-cold", "fallback-socp", "fallback-no-action", "infeasible", "solver-failed", "pf-diverged")
 CONFIG = ["case", "strategy", "k", "night_mode", "forecast"]
 REFERENCE_NIGHT = "connected"
+TOL_KWH = 1e-6  # energies closer than this count as equal
 """The night mode of the tables that fix one (the paper's main setting)."""
 
 
@@ -271,3 +272,40 @@ def convergence_summary(summary: pd.DataFrame) -> pd.DataFrame:
 def wall_times(summary: pd.DataFrame) -> pd.DataFrame:
     """Wall and solver time (s) per configuration."""
     return order(summary[CONFIG + ["steps", "wall_s", "solver_s"]])
+
+
+OPF_REFERENCE = "acopf"
+"""The optimum a leaderboard measures every strategy against."""
+
+
+def leaderboard(summary: pd.DataFrame, night_mode: str = REFERENCE_NIGHT) -> pd.DataFrame:
+    """Per case × k (forecast off, one night mode), every strategy other than no action by
+    its share of the AC OPF's loss reduction, (E_no-action − E)/(E_no-action − E_acopf) in %
+    (— where the OPF reduces nothing), with its energy, voltage violations and not-ok steps;
+    ranked per case and k, best first."""
+    sub = summary[(summary["forecast"] == "off") & (summary["night_mode"] == night_mode)]
+    rows = []
+    for (case, k), grp in sub.groupby(["case", "k"], sort=False):
+        ref = grp.loc[grp["strategy"] == OPF_REFERENCE, "energy_kwh"]
+        na = grp["no_action_kwh"].iloc[0]
+        reduction = na - float(ref.iloc[0]) if len(ref) else np.nan
+        for r in grp[grp["strategy"] != "no-action"].itertuples(index=False):
+            share = 100 * (na - r.energy_kwh) / reduction if reduction > TOL_KWH else np.nan
+            rows.append(
+                {
+                    "case": case,
+                    "k": k,
+                    "strategy": r.strategy,
+                    "energy_kwh": r.energy_kwh,
+                    "savings_pct": r.savings_pct,
+                    "opf_share_pct": share,
+                    "voltage_violation_steps": r.voltage_violation_steps,
+                    "not_ok_steps": r.not_ok_steps,
+                }
+            )
+    columns = ["case", "k", "strategy", "energy_kwh", "savings_pct", "opf_share_pct", "voltage_violation_steps", "not_ok_steps"]
+    out = pd.DataFrame(rows, columns=columns)
+    if out.empty:
+        return out
+    out["rank"] = out.groupby(["case", "k"])["energy_kwh"].rank(method="min").astype(int)
+    return out.sort_values(["case", "k", "rank"], kind="stable").reset_index(drop=True)

@@ -92,14 +92,18 @@ def _git_commit() -> str | None:
 
 
 def _case_info(case: str) -> dict:
-    from opfbench.io import load_network
+    from opfbench.io import load_case
 
-    net = load_network(case)
+    loaded = load_case(case)
+    net = loaded.network
     return {
         "buses": int(net.n_bus),
         "ders": [{"bus": int(net.bus_ids[d.bus]), "kind": d.kind, "rating_mw": float(d.rating_mw)} for d in net.ders],
         "vmin_pu": float(net.vmin.min()),
         "vmax_pu": float(net.vmax.max()),
+        "loads": int(net.n_load),
+        "series": None if loaded.series is None else loaded.series.source,
+        "notes": list(loaded.notes),
     }
 
 
