@@ -5,7 +5,8 @@ Specs (`opfbench.io.spec`): a shipped name (`opfbench.cases`), a MATPOWER `.m` f
 (`opfbench.io.matpower`, reader and writer), a pandapower net saved as `.json`
 (`opfbench.io.pandapower`) or `simbench:CODE` (`opfbench.io.simbench`), each with the
 options `der=` and `der-pf=`. Cases are cached per process by spec (files also by their
-modification time and size), so a worker that runs many tasks of one case reads it once.
+modification time and size), so a worker that runs many tasks of one case reads it once;
+SimBench grids, slow to extract, also on disk across processes (`opfbench.io.cache`).
 """
 
 from __future__ import annotations
@@ -21,7 +22,7 @@ from opfbench.io.case import Case, CaseSeries
 from opfbench.io.spec import CaseSpec, parse_der_list, parse_spec
 from opfbench.network import DER, Network
 
-__all__ = ["Case", "CaseSeries", "CaseSpec", "load_case", "load_network", "parse_spec"]
+__all__ = ["NO_DER_NOTE", "Case", "CaseSeries", "CaseSpec", "load_case", "load_network", "parse_spec"]
 
 CACHE_SIZE = 32  # cases kept per process (a SimBench MV grid with its profiles: ~20 MB)
 NO_DER_NOTE = (
@@ -73,9 +74,11 @@ def _read(spec: CaseSpec) -> Case:
 
     der_pf = DEFAULT_DER_PF if spec.der_pf is None else spec.der_pf
     if spec.kind == "simbench":
+        from opfbench.io.cache import cached_case
         from opfbench.io.simbench import simbench_case
 
-        case = simbench_case(spec.text, spec.source.removeprefix("simbench:"), der_pf)
+        code = spec.source.removeprefix("simbench:")
+        case = cached_case(spec.text, lambda: simbench_case(spec.text, code, der_pf))
     elif spec.kind == "matpower":
         from opfbench.io.matpower import read_case_file
 

@@ -128,6 +128,11 @@ def _night(index: pd.DatetimeIndex, night: str) -> np.ndarray:
     return night_mask_window(index, start, end).to_numpy()
 
 
+def period_index(period: str, step_minutes: float | None = None, native_minutes: float | None = None) -> pd.DatetimeIndex:
+    """The steps of `period` alone (no profiles), as `resolve_period` takes them."""
+    return _window(period, step_minutes, native_minutes)[0]
+
+
 def resolve_period(period: str, night: str, step_minutes: float | None = None, native_minutes: float | None = None) -> Period:
     """The period's steps, profiles and night mask (InputError for unknown periods or
     windows outside the data); `native_minutes`: the step of the cases' own series."""

@@ -143,21 +143,23 @@ def study_period(cases: tuple[str, ...], forecasts: tuple[str, ...], period: str
     their own series, checked to lie inside those series; cases with and without their
     own series together only where both give the same instants (e.g. the year, or with
     --step-minutes)."""
-    from opfbench.study.periods import resolve_period
+    from opfbench.study.periods import period_index, resolve_period
 
     check = check_cases(cases, forecasts)
-    resolved = resolve_period(period, night, step_minutes, check.native_minutes)
-    if check.mixed and not resolve_period(period, night, step_minutes).index.equals(resolved.index):
-        raise InputError(
-            f"period {period!r}: cases with their own profiles (simbench:…) run at their {check.native_minutes:g}-min steps, "
-            "the others at the period's own step (the paper day: 1 min); give --step-minutes (e.g. 15) to run them "
-            "together, or run them separately"
-        )
-    index = resolved.index
+    if step_minutes is not None and not step_minutes > 0:
+        raise InputError(f"step must be a positive number of minutes, got {step_minutes}")
+    index = period_index(period, step_minutes, check.native_minutes)
     for spec in cases:
         series = load_case(spec).series
         if series is not None and (index[0] < series.index[0] or index[-1] > series.index[-1]):
             raise InputError(
                 f"period {index[0]} .. {index[-1]} leaves {spec}'s profiles ({series.index[0]} .. {series.index[-1]})"
             )
+    if check.mixed and not period_index(period, step_minutes).equals(index):
+        raise InputError(
+            f"period {period!r}: cases with their own profiles (simbench:…) run at their {check.native_minutes:g}-min steps, "
+            "the others at the period's own step (the paper day: 1 min); give --step-minutes (e.g. 15) to run them "
+            "together, or run them separately"
+        )
+    resolved = resolve_period(period, night, step_minutes, check.native_minutes)
     return replace(resolved, sources=resolved.sources + check.sources), check
