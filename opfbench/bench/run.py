@@ -7,8 +7,17 @@ on 2 workers, once. Also checks that the paper-day tables are identical (timing 
 aside).
 
     python -m opfbench.bench run [--json] [--year] [--repeats N]
+    python -m opfbench.bench run --suite [--json]
 
 Targets (issue 11): paper day ≤ 20 s and year ≤ 300 s on 2 cores.
+
+`--suite` times the field suite instead (`opfbench run --suite simbench`: the ten SimBench
+LV/MV grids on their own profiles, every strategy, k ∈ {0, 0.4}, every night mode and
+forecast, 2 workers): one step (`suite_step_s`: start-up, reading the grids, building the
+solvers, the report — what a run pays once) and the week 2016-06-20..27 at 15 min
+(`suite_week_s`); the year is extrapolated as the one-step run plus 52.3 × the week's
+cost beyond it (`suite_year_est_min`). Target (issue 20): the suite's year ≤ 30 minutes on
+2 cores.
 """
 
 from __future__ import annotations
@@ -26,11 +35,17 @@ from opfbench.timing import elapsed_ms, now
 
 TARGET_DAY_S = 20.0
 TARGET_YEAR_S = 300.0
+TARGET_SUITE_YEAR_MIN = 30.0
+SUITE_WEEK = "2016-06-20T00:00..2016-06-27T00:00"
+SUITE_STEP = "2016-06-20T00:00..2016-06-20T00:15"
+SUITE_GRID = ("--suite", "simbench", "--k", "0", "0.4", "--workers", "2")
+YEAR_STEPS, WEEK_STEPS = 35136, 672
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--year", action="store_true", help="also time the year 2016 at 15 min on 2 workers")
     parser.add_argument("--repeats", type=int, default=3, help="paper-day runs per worker count (median reported)")
+    parser.add_argument("--suite", action="store_true", help="time the field suite (SimBench) over a week instead")
 
 
 def _timed(out: Path, *args: str) -> float:
@@ -46,7 +61,28 @@ def _same(a: Path, b: Path) -> bool:
     return pd.read_parquet(a / "steps.parquet").drop(columns=drop).equals(pd.read_parquet(b / "steps.parquet").drop(columns=drop))
 
 
+def run_suite() -> dict:
+    """The field suite: one step and a week on 2 workers, the year extrapolated (module doc)."""
+    with tempfile.TemporaryDirectory(prefix="opfbench-bench-suite-") as tmp:
+        root = Path(tmp)
+        _timed(root / "warm", *SUITE_GRID, "--period", SUITE_STEP)  # reads the grids once into the disk cache
+        step = _timed(root / "step", *SUITE_GRID, "--period", SUITE_STEP)
+        week = _timed(root / "week", *SUITE_GRID, "--period", SUITE_WEEK)
+        tasks = len(pd.read_parquet(root / "week" / "steps.parquet").groupby(["case", "strategy", "k", "night_mode", "forecast"]))
+    year_s = step + (week - step) * (YEAR_STEPS - 1) / (WEEK_STEPS - 1)
+    return {
+        "suite_step_s": step,
+        "suite_week_s": week,
+        "suite_year_est_min": year_s / 60,
+        "suite_configurations": tasks,
+        "suite_week": SUITE_WEEK,
+        "target_suite_year_min": TARGET_SUITE_YEAR_MIN,
+    }
+
+
 def run(args: argparse.Namespace | None = None) -> dict:
+    if args is not None and args.suite:
+        return run_suite()
     repeats = max(1, args.repeats) if args is not None else 3
     with tempfile.TemporaryDirectory(prefix="opfbench-bench-run-") as tmp:
         root = Path(tmp)
@@ -76,6 +112,12 @@ def _runs(times: list[float]) -> str:
 
 
 def print_table(f: dict) -> None:
+    if "suite_week_s" in f:
+        print("opfbench run --suite simbench, k 0 and 0.4, every strategy, night mode and forecast, 2 workers")
+        print(f"  one step       : {f['suite_step_s']:8.1f} s (start-up, grids, solvers, report)")
+        print(f"  week {f['suite_week']}: {f['suite_week_s']:8.1f} s, {f['suite_configurations']} configurations")
+        print(f"  year (estimate): {f['suite_year_est_min']:8.1f} min (target ≤ {f['target_suite_year_min']:.0f} min)")
+        return
     print("opfbench run, default grid, wall time including start-up")
     print(f"  paper day, 1 worker : {f['day_s_1worker']:8.1f} s median of {f['repeats']} ({_runs(f['day_s_1worker_runs'])})")
     print(
