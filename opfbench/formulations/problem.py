@@ -317,12 +317,20 @@ def evaluated_result(
 ) -> StrategyResult:
     """A formulation's result: setpoints `q_pu` (S, n_der) evaluated by the batched AC power
     flow (or `pf`, that evaluation already done), with extra["ac_feasible"] (the point
-    meets every limit, `OpfProblem.feasible`) and the scalar extra["slack_export"]."""
+    meets every limit, `OpfProblem.feasible`) and the scalar extra["slack_export"].
+
+    `lower_bound_kw` (the relaxation's, per snapshot) bounds the losses of the points that
+    meet the limits, so the result carries it only where its own point does; elsewhere
+    (no feasible point found: infeasible, solver-failed, a point applied anyway under the
+    paper's policy) the bound is NaN there and kept as extra["relaxation_bound_kw"]."""
     net = scenario.net
     q_mvar = np.asarray(q_pu, dtype=float).reshape(scenario.n_snapshots, len(net.ders)) * net.base_mva
     if pf is None:
         pf = solve_pf_batch(net, scenario.injections(q_mvar))
-    extra = extra | {"ac_feasible": problem.feasible(pf, data.s_fixed), "slack_export": problem.slack_export}
+    feasible = problem.feasible(pf, data.s_fixed)
+    record: dict[str, object] = {**extra, "ac_feasible": feasible, "slack_export": problem.slack_export}
+    record["relaxation_bound_kw"] = lower_bound_kw
+    lower_bound_kw = np.where(feasible, lower_bound_kw, np.nan)
     flows = np.asarray(power_flows, dtype=np.int64) + 1
     return StrategyResult.from_setpoints(
         strategy,
@@ -334,5 +342,5 @@ def evaluated_result(
         pf=pf,
         status=status,
         lower_bound_kw=lower_bound_kw,
-        extra=extra,
+        extra=record,
     )

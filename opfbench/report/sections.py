@@ -3,7 +3,7 @@ input: the section says which command produces it."""
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Callable
 
 from opfbench.report import plots, tables
 from opfbench.report.claims import claims
@@ -74,6 +74,22 @@ def metadata(inputs: Inputs, price: tuple[float, str, str]) -> Section:
     return sec
 
 
+def _diverged_note(summary: pd.DataFrame) -> list[Block]:
+    """A note naming the configurations with steps whose power flow did not converge."""
+    bad = tables.diverged(summary)
+    if bad.empty:
+        return []
+    return [
+        Block(
+            "note",
+            text=f"{len(bad)} configuration(s) have steps whose power flow did not converge (pf-diverged: "
+            f"{int(bad['pf_diverged_steps'].sum())} steps in all): such a step has no loss or voltage figure, so "
+            "their energy, savings and gap are not given (—), and their average loss and voltages are over the "
+            "steps that converged (pf_converged_steps).",
+        )
+    ]
+
+
 def _energy_tables(s: pd.DataFrame, price: tuple[float, str, str], over: str = "") -> list[Block]:
     """Energy per strategy × k for each night mode, then savings % and money saved per year
     vs no action with PV connected at night; `over` qualifies the period (e.g. " over the year")."""
@@ -111,6 +127,7 @@ def losses(inputs: Inputs, price: tuple[float, str, str]) -> Section:
     if inputs.summary is None:
         return sec.add(*_missing(inputs, "summary.csv"))
     s = inputs.summary
+    sec.blocks += _diverged_note(s)
     sec.blocks += _energy_tables(s, price)
     money = tables.losses(s, price[0])
     full = money.rename(columns={"money_per_day": f"{price[1]} per day", "money_per_year": f"{price[1]} per year"})
@@ -294,6 +311,7 @@ def voltage(inputs: Inputs) -> Section:
     limits = {name: (c.get("vmin_pu"), c.get("vmax_pu")) for name, c in ((inputs.manifest or {}).get("cases") or {}).items()}
     if limits:
         sec.add(Block("note", text="Limits: " + "; ".join(f"{n} [{lo}, {hi}] p.u." for n, (lo, hi) in limits.items())))
+    sec.blocks += _diverged_note(inputs.summary)
     sec.add(table(tables.voltage(inputs.summary)))
     exc = tables.excursions(inputs.summary)
     if exc.empty:
@@ -355,9 +373,9 @@ def paper_claims(inputs: Inputs) -> Section:
     return sec.add(Block("claims", claims=claims(inputs)))
 
 
-PRICED = {metadata, losses, year}
+PRICED: set[Callable[..., Section]] = {metadata, losses, year}
 """Builders that also take the energy price (currency per kWh, currency, source)."""
-SECTIONS = (
+SECTIONS: tuple[tuple[str, str, Callable[..., Section]], ...] = (
     ("claims", "The paper's claims", paper_claims),
     ("metadata", "Run metadata", metadata),
     ("losses", "Losses and savings", losses),

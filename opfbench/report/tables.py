@@ -7,6 +7,8 @@ E/E_no-action) with E_no-action the same case/k/night mode, forecast off (summar
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 import pandas as pd
 
@@ -17,6 +19,21 @@ STATUSES = ("ok", "fallback-cold", "fallback-socp", "fallback-no-action", "infea
 CONFIG = ["case", "strategy", "k", "night_mode", "forecast"]
 REFERENCE_NIGHT = "connected"
 """The night mode of the tables that fix one (the paper's main setting)."""
+FIGURE_STEPS = ("pf_converged_steps", "pf_diverged_steps")
+"""summary.csv's counts of steps with and without a converged power flow (a summary
+written before they existed has none: every step there had a figure or none was counted)."""
+
+
+def figure_steps(summary: pd.DataFrame) -> list[str]:
+    """The `FIGURE_STEPS` columns `summary` has."""
+    return [c for c in FIGURE_STEPS if c in summary.columns]
+
+
+def diverged(summary: pd.DataFrame) -> pd.DataFrame:
+    """The configurations with steps whose power flow did not converge (no loss or voltage figure)."""
+    if "pf_diverged_steps" not in summary.columns:
+        return summary.iloc[:0]
+    return summary[summary["pf_diverged_steps"] > 0]
 
 
 def order(frame: pd.DataFrame) -> pd.DataFrame:
@@ -31,11 +48,12 @@ def order(frame: pd.DataFrame) -> pd.DataFrame:
 
 
 def losses(summary: pd.DataFrame, price_per_kwh: float) -> pd.DataFrame:
-    """Per configuration: avg kW, kWh, savings % and money saved per day and per year
-    (the run's savings scaled to 24 h and to 365 days) at `price_per_kwh`."""
+    """Per configuration: avg kW (over the steps with a converged power flow, counted
+    beside it), kWh, savings % and money saved per day and per year (the run's savings
+    scaled to 24 h and to 365 days) at `price_per_kwh`."""
     days = summary["hours"] / 24.0
     saved_per_day = (summary["no_action_kwh"] - summary["energy_kwh"]) / days
-    out = summary[CONFIG + ["avg_loss_kw", "energy_kwh", "savings_pct"]].assign(
+    out = summary[CONFIG + ["avg_loss_kw", *figure_steps(summary), "energy_kwh", "savings_pct"]].assign(
         saved_kwh_per_day=saved_per_day,
         money_per_day=saved_per_day * price_per_kwh,
         money_per_year=saved_per_day * price_per_kwh * 365.0,
@@ -152,7 +170,7 @@ def night_vs_paper(summary: pd.DataFrame, k: float = 0.0) -> pd.DataFrame:
     ours = summary[(summary["forecast"] == "off") & np.isclose(summary["k"], k)]
     for case in sorted(ours["case"].unique()):
         for strategy in paper.NIGHT_TABLE["connected"]:
-            row: dict[str, object] = {"case": case, "strategy": strategy}
+            row: dict[str, Any] = {"case": case, "strategy": strategy}
             for mode in ("connected", "disconnected"):
                 row[f"paper {mode} kWh"] = paper.NIGHT_TABLE[mode][strategy][1]
             for mode in ("connected", "disconnected", "connected-q"):
@@ -173,12 +191,14 @@ def gap(summary: pd.DataFrame) -> pd.DataFrame:
 
 def voltage(summary: pd.DataFrame) -> pd.DataFrame:
     """Per case × strategy (over every k, night mode and forecast): steps outside the case's
-    limits, lowest and highest voltage."""
+    limits, lowest and highest voltage — over the steps with a converged power flow,
+    counted beside them (a diverged step has no voltage figure)."""
     g = summary.groupby(["case", "strategy"])
     out = pd.DataFrame(
         {
             "configurations": g.size(),
             "steps": g["steps"].sum(),
+            **{c: g[c].sum() for c in figure_steps(summary)},
             "steps outside limits": g["voltage_violation_steps"].sum(),
             "vmin_pu": g["vmin_pu"].min(),
             "vmax_pu": g["vmax_pu"].max(),

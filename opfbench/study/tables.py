@@ -5,6 +5,8 @@ built from per-task partial sums so that a year never has to sit in memory at on
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 import pandas as pd
 
@@ -48,7 +50,7 @@ def _certified_by(res: StrategyResult) -> np.ndarray:
     return np.full(res.n_snapshots, "", dtype=object)
 
 
-Columns = dict[str, object]  # column name → array of the part's rows, or one value for all of them
+Columns = dict[str, Any]  # column name → array of the part's rows, or one value for all of them
 
 
 def step_rows(
@@ -148,8 +150,11 @@ def stack(parts: list[Columns], columns: list[str], tz) -> pd.DataFrame:
 def partial_summary(steps: pd.DataFrame) -> pd.DataFrame:
     """Sums, counts and extremes per configuration of one task's rows (combined by
     `summarize`)."""
+    measured = steps.losses_kw.notna()  # a converged power flow: the step has a loss and voltage figure
     s = steps.assign(
         energy=steps.losses_kw * steps.step_h,
+        measured=measured.astype(np.int64),
+        measured_h=steps.step_h.where(measured, 0.0),
         lb_energy=steps.lower_bound_kw * steps.step_h,
         lb_missing=steps.lower_bound_kw.isna().astype(np.int64),
         not_ok=(steps.status != OK).astype(np.int64),
@@ -163,6 +168,8 @@ def partial_summary(steps: pd.DataFrame) -> pd.DataFrame:
         {
             "steps": g.size(),
             "hours": g.step_h.sum(),
+            "pf_converged_steps": g.measured.sum(),
+            "measured_hours": g.measured_h.sum(),
             "energy_kwh": g.energy.sum(),
             "not_ok_steps": g.not_ok.sum(),
             "voltage_violation_steps": g.vv.sum(),
@@ -182,15 +189,22 @@ def partial_summary(steps: pd.DataFrame) -> pd.DataFrame:
 
 def summarize(partials: list[pd.DataFrame], order: list[tuple]) -> pd.DataFrame:
     """The summary (one row per configuration, in `order` of KEYS tuples) from
-    `partial_summary` frames. no_action_kwh: no action's energy for the same case, k and
-    night mode with forecast off; lower_bound_kwh: the SOCP bound (slack may export) over
-    the same steps, from the socp rows (else the acopf rows), NaN unless every step has one."""
+    `partial_summary` frames. A step whose power flow did not converge (pf-diverged) has
+    no loss or voltage figure: pf_diverged_steps counts them, pf_converged_steps the
+    others — the steps avg_loss_kw, vmin_pu, vmax_pu and voltage_violation_steps are
+    over; energy_kwh (the period's) is NaN unless every step has a figure, and so are the
+    savings and gaps built on it. no_action_kwh: no action's energy for the same case, k
+    and night mode with forecast off; lower_bound_kwh: the SOCP bound (slack may export)
+    over the same steps, from the socp rows (else the acopf rows), NaN unless every step
+    has one."""
     p = pd.concat(partials, ignore_index=True)
     g = p.groupby(KEYS, sort=False)
     sums = g[
         [
             "steps",
             "hours",
+            "pf_converged_steps",
+            "measured_hours",
             "energy_kwh",
             "not_ok_steps",
             "voltage_violation_steps",
@@ -205,7 +219,9 @@ def summarize(partials: list[pd.DataFrame], order: list[tuple]) -> pd.DataFrame:
     ].sum()
     out = sums.join(g.vmin_pu.min()).join(g.vmax_pu.max()).join(g.max_excursion_mvar.max())
     out = out.reindex(pd.MultiIndex.from_tuples(order, names=KEYS)).reset_index()
-    out["avg_loss_kw"] = out.energy_kwh / out.hours
+    out["pf_diverged_steps"] = out.steps - out.pf_converged_steps
+    out["avg_loss_kw"] = (out.energy_kwh / out.measured_hours).where(out.pf_converged_steps > 0)
+    out["energy_kwh"] = out.energy_kwh.where(out.pf_diverged_steps == 0)  # a period's energy needs every step's
     out["solver_s"] = out.solver_s.where(out.solver_known > 0)
     out["certified_share"] = out.certified / out.steps
     base = out[(out.strategy == "no-action") & (out.forecast == "off")].set_index(["case", "k", "night_mode"]).energy_kwh
@@ -238,6 +254,8 @@ def summarize(partials: list[pd.DataFrame], order: list[tuple]) -> pd.DataFrame:
         "wall_s",
         "solver_s",
         "certified_share",
+        "pf_converged_steps",
+        "pf_diverged_steps",
     ]
-    ints = ["steps", "not_ok_steps", "voltage_violation_steps", "excursion_steps"]
+    ints = ["steps", "not_ok_steps", "voltage_violation_steps", "excursion_steps", "pf_converged_steps", "pf_diverged_steps"]
     return out[KEYS + cols].astype({c: np.int64 for c in ints})
