@@ -8,8 +8,12 @@ line is an error: a case file is data, and we do not guess what unknown code mea
 Refused with a `CaseFormatError` naming the file (and matrix, row, column or line): a file
 that is not UTF-8 text; a non-numeric or non-finite entry; a non-finite or non-positive
 baseMVA; a fractional bus number or bus type; a negative branch resistance (it would make
-negative losses and a meaningless loss bound); VMIN > VMAX at a bus; a power factor
-outside (0, 1]; the ohm → p.u. conversion with a zero or negative BASE_KV at bus row 1.
+negative losses and a meaningless loss bound); VMIN > VMAX at a bus; a bus number
+outside 1..2^53 − 1 or listed twice; a bus of type 4 (isolated); an in-service generator
+with QMAX < QMIN or PMAX < PMIN; a power factor outside (0, 1]; the ohm → p.u.
+conversion with a zero or negative BASE_KV at bus row 1. What the network itself
+checks (bus types, voltage limits and setpoints, zero impedance, islands) comes back
+as a `CaseFormatError` naming the file.
 """
 
 from __future__ import annotations
@@ -24,6 +28,7 @@ from opfbench.errors import CaseFormatError, NetworkError
 from opfbench.network import Network
 
 BUS_COLS, GEN_COLS, BRANCH_COLS = 13, 10, 11  # minimum columns MATPOWER v2 requires
+MAX_BUS_NUMBER = 2**53 - 1  # the largest whole number a file's floating-point entry holds exactly
 _MATRICES = ("bus", "gen", "branch", "gencost")
 
 
@@ -263,11 +268,20 @@ def to_network(case: MatpowerCase, name: str | None = None) -> Network:
         raise CaseFormatError(
             f"{case.path}: mpc.bus row {i + 1} (bus {bus[i, 0]:.0f}): VMIN {bus[i, 12]:g} > VMAX {bus[i, 11]:g} p.u."
         )
-    ids = bus[:, 0].astype(int)
-    if len(set(ids)) != len(ids):
-        dup = ids[np.flatnonzero(np.bincount(np.unique(ids, return_inverse=True)[1]) > 1)[0]]
-        raise CaseFormatError(f"{case.path}: mpc.bus lists bus {dup} more than once")
-    pos = {b: k for k, b in enumerate(ids)}
+    bad_id = np.flatnonzero((bus[:, 0] < 1) | (bus[:, 0] > MAX_BUS_NUMBER))
+    if bad_id.size:
+        raise CaseFormatError(
+            f"{case.path}: mpc.bus row {bad_id[0] + 1}, column 1 (BUS_I): bus number {bus[bad_id[0], 0]:g} outside "
+            f"1..{MAX_BUS_NUMBER} (a positive whole number, exact in the file's floating-point numbers)"
+        )
+    ids = bus[:, 0].astype(np.int64)
+    unique, first = np.unique(ids, return_index=True)
+    if unique.size != ids.size:
+        row = np.setdiff1d(np.arange(ids.size), first)[0]
+        raise CaseFormatError(
+            f"{case.path}: mpc.bus row {row + 1} lists bus {ids[row]} again (first at row {np.flatnonzero(ids == ids[row])[0] + 1})"
+        )
+    pos = {int(b): k for k, b in enumerate(ids)}
 
     def lookup(matrix: str, row: int, col_name: str, bus_id: float) -> int:
         if int(bus_id) not in pos:
@@ -278,15 +292,20 @@ def to_network(case: MatpowerCase, name: str | None = None) -> Network:
     t = np.array([lookup("branch", k, "to bus", v) for k, v in enumerate(branch[:, 1])], dtype=int)
     gbus = np.array([lookup("gen", k, "bus", v) for k, v in enumerate(gen[:, 0])], dtype=int)
 
-    btype = bus[:, 1].astype(int)
-    bad_type = np.flatnonzero(~np.isin(btype, (1, 2, 3, 4)))
+    bad_type = np.flatnonzero(~np.isin(bus[:, 1], (1, 2, 3, 4)))
     if bad_type.size:
-        raise CaseFormatError(f"{case.path}: mpc.bus row {bad_type[0] + 1}: unknown bus type {btype[bad_type[0]]}")
+        raise CaseFormatError(
+            f"{case.path}: mpc.bus row {bad_type[0] + 1}: unknown bus type {bus[bad_type[0], 1]:g} "
+            "(1 PQ, 2 PV, 3 reference, 4 isolated)"
+        )
+    btype = bus[:, 1].astype(int)
     slacks = np.flatnonzero(btype == 3)
     if slacks.size != 1:
         raise CaseFormatError(f"{case.path}: mpc.bus needs exactly one reference bus (type 3), found {slacks.size}")
     slack = int(slacks[0])
+    _check_isolated(case, btype, f, t, branch[:, 10] > 0)
     gen_on = gen[:, 7] > 0
+    _check_gen_limits(case, gen, gen_on)
     slack_gens = np.flatnonzero(gen_on & (gbus == slack))
     if slack_gens.size == 0:
         raise CaseFormatError(f"{case.path}: no in-service generator at the reference bus {ids[slack]}")
@@ -296,9 +315,6 @@ def to_network(case: MatpowerCase, name: str | None = None) -> Network:
     btype[(btype == 2) & ~np.isin(np.arange(len(ids)), gbus[others])] = 1
     r, x = branch[:, 2], branch[:, 3]
     status = branch[:, 10] > 0
-    zero_z = np.flatnonzero(status & (r == 0) & (x == 0))
-    if zero_z.size:
-        raise CaseFormatError(f"{case.path}: mpc.branch row {zero_z[0] + 1}: zero impedance (r = x = 0)")
     tap = np.where(branch[:, 8] == 0, 1.0, branch[:, 8])
     try:
         return Network(
@@ -330,6 +346,38 @@ def to_network(case: MatpowerCase, name: str | None = None) -> Network:
         )
     except NetworkError as exc:
         raise CaseFormatError(f"{case.path}: {exc}") from None
+
+
+def _check_isolated(case: MatpowerCase, btype: np.ndarray, f: np.ndarray, t: np.ndarray, on: np.ndarray) -> None:
+    """MATPOWER's bus type 4 (isolated) is refused: wired in by an in-service branch it
+    contradicts itself; left alone it would be an island (MATPOWER drops such buses —
+    we do not guess which the file meant)."""
+    isolated = np.flatnonzero(btype == 4)
+    if not isolated.size:
+        return
+    i = isolated[0]
+    rows = np.flatnonzero(on & ((f == i) | (t == i))) + 1
+    bus_id = f"{case.bus[i, 0]:.0f}"
+    if rows.size:
+        raise CaseFormatError(
+            f"{case.path}: mpc.bus row {i + 1}: bus {bus_id} has type 4 (isolated) but in-service mpc.branch row(s) "
+            f"{', '.join(map(str, rows[:10]))} connect it; give it type 1 (PQ) or take those branches out of service"
+        )
+    raise CaseFormatError(
+        f"{case.path}: mpc.bus row {i + 1}: bus {bus_id} has type 4 (isolated); remove the bus (and its out-of-service "
+        "branches and generators) from the case: a study network has no isolated buses"
+    )
+
+
+def _check_gen_limits(case: MatpowerCase, gen: np.ndarray, on: np.ndarray) -> None:
+    """In-service generators need QMAX ≥ QMIN and PMAX ≥ PMIN."""
+    for hi, lo, label in ((3, 4, "Q"), (8, 9, "P")):
+        crossed = np.flatnonzero(on & (gen[:, hi] < gen[:, lo]))
+        if crossed.size:
+            g = crossed[0]
+            raise CaseFormatError(
+                f"{case.path}: mpc.gen row {g + 1} (bus {gen[g, 0]:.0f}): {label}MAX {gen[g, hi]:g} < {label}MIN {gen[g, lo]:g}"
+            )
 
 
 def load_case_file(path: str | Path, name: str | None = None) -> Network:

@@ -24,6 +24,17 @@ _BUS_ARRAYS = ("bus_ids", "bus_type", "base_kv", "load_p_mw", "load_q_mvar", "gs
 _BRANCH_ARRAYS = ("f", "t", "r", "x", "b", "tap", "shift", "status")
 _GEN_ARRAYS = ("gen_bus", "gen_p_mw", "gen_q_mvar", "gen_vset")
 _DTYPES = {"bus_ids": int, "bus_type": int, "f": int, "t": int, "status": bool, "gen_bus": int}
+BUS_TYPES = {1: "PQ", 2: "PV", 3: "slack"}  # MATPOWER's codes; its 4 (isolated) is not a bus of the network
+V_SETPOINT_PU = (0.5, 1.5)
+"""Voltage magnitudes a slack or a voltage-controlled generator may be held at (p.u.);
+outside, the value is a typo (a sign, kV for p.u.), never a distribution feeder."""
+V_LIMIT_MAX_PU = 2.0
+"""The largest voltage limit (p.u.) accepted; vmin lies in [0, vmax]."""
+
+
+def _frozen(arr: np.ndarray) -> np.ndarray:
+    arr.setflags(write=False)
+    return arr
 
 
 @dataclass(frozen=True)
@@ -55,9 +66,14 @@ class Network:
     injections.
 
     The network is immutable: the constructor copies every array and makes the copies
-    read-only, so a shared (cached) network cannot be changed by one caller for all
-    others. It checks array lengths, finite values, non-negative branch resistance and
-    vmin ≤ vmax per bus, and that every bus is connected to the slack.
+    read-only, and every array it derives (Y-bus — the sparse matrix's data, indices and
+    indptr too —, branch admittances, the BFS tree) is read-only as well, so a shared
+    (cached) network cannot be changed by one caller for all others. It checks array
+    lengths, finite values, unique bus numbers, bus types (one slack, of type 3, at
+    `slack`), non-negative branch resistance, no in-service branch of zero impedance,
+    positive taps, 0 ≤ vmin ≤ vmax ≤ V_LIMIT_MAX_PU per bus, the slack's and the PV
+    generators' voltage setpoints within V_SETPOINT_PU, and that every bus is connected
+    to the slack.
     """
 
     name: str
@@ -89,10 +105,15 @@ class Network:
 
     def __post_init__(self) -> None:
         for name in _BUS_ARRAYS + _BRANCH_ARRAYS + _GEN_ARRAYS:
-            arr = np.array(getattr(self, name), dtype=_DTYPES.get(name, float))
-            arr.setflags(write=False)
-            object.__setattr__(self, name, arr)
+            object.__setattr__(self, name, _frozen(_array(self.name, name, getattr(self, name))))
+        for name in ("base_mva", "v_slack"):
+            object.__setattr__(self, name, _number(self.name, name, getattr(self, name)))
+        if isinstance(self.slack, bool) or not isinstance(self.slack, (int, np.integer)):
+            raise NetworkError(f"{self.name}: slack must be a bus index (an integer), got {self.slack!r}")
+        object.__setattr__(self, "slack", int(self.slack))
         self._check_arrays()
+        self._check_buses()
+        self._check_voltages()
         self._check_connected()
 
     def _check_arrays(self) -> None:
@@ -113,6 +134,20 @@ class Network:
                 raise NetworkError(f"{self.name}: {name} refers to a bus index outside 0..{self.n_bus - 1}")
         if not 0 <= self.slack < self.n_bus:
             raise NetworkError(f"{self.name}: slack index {self.slack} outside 0..{self.n_bus - 1}")
+        zero_z = np.flatnonzero(self.status & (self.r == 0) & (self.x == 0))
+        if zero_z.size:
+            k = zero_z[0]
+            raise NetworkError(
+                f"{self.name}: in-service branch {k + 1} ({self.bus_ids[self.f[k]]}-{self.bus_ids[self.t[k]]}) has zero "
+                "impedance (r = x = 0)"
+            )
+        bad_tap = np.flatnonzero(self.tap <= 0)
+        if bad_tap.size:
+            k = bad_tap[0]
+            raise NetworkError(
+                f"{self.name}: branch {k + 1} ({self.bus_ids[self.f[k]]}-{self.bus_ids[self.t[k]]}) has tap ratio "
+                f"{self.tap[k]:g}; it must be > 0 (1 = no transformer)"
+            )
         neg_r = np.flatnonzero(self.r < 0)
         if neg_r.size:
             k = neg_r[0]
@@ -120,10 +155,6 @@ class Network:
                 f"{self.name}: branch {k + 1} ({self.bus_ids[self.f[k]]}-{self.bus_ids[self.t[k]]}) has negative "
                 f"resistance r = {self.r[k]:.6g} p.u.; negative r makes negative losses and is refused"
             )
-        crossed = np.flatnonzero(self.vmin > self.vmax)
-        if crossed.size:
-            i = crossed[0]
-            raise NetworkError(f"{self.name}: bus {self.bus_ids[i]} has Vmin {self.vmin[i]:g} > Vmax {self.vmax[i]:g} p.u.")
         for d in self.ders:
             if d.kind not in ("PV", "DFIG"):
                 raise NetworkError(f"{self.name}: unknown DER kind {d.kind!r}; expected PV or DFIG")
@@ -136,6 +167,51 @@ class Network:
                     f"{self.name}: DER at bus {self.bus_ids[d.bus]} has S̄ {d.s_rated_mva} MVA; must be finite and ≥ "
                     f"its rated P {d.rating_mw} MW"
                 )
+
+    def _check_buses(self) -> None:
+        """Unique bus numbers; bus types 1/2/3 with exactly one slack (type 3), at `slack`."""
+        ids, first = np.unique(self.bus_ids, return_index=True)
+        if ids.size < self.n_bus:
+            dup = self.bus_ids[np.setdiff1d(np.arange(self.n_bus), first)[0]]
+            raise NetworkError(f"{self.name}: bus number {dup} is used by more than one bus")
+        unknown = np.flatnonzero(~np.isin(self.bus_type, list(BUS_TYPES)))
+        if unknown.size:
+            i = unknown[0]
+            raise NetworkError(
+                f"{self.name}: bus {self.bus_ids[i]} has type {self.bus_type[i]}; expected "
+                + ", ".join(f"{code} ({kind})" for code, kind in BUS_TYPES.items())
+            )
+        slacks = np.flatnonzero(self.bus_type == 3)
+        if slacks.tolist() != [self.slack]:
+            marked = ", ".join(str(b) for b in self.bus_ids[slacks]) or "none"
+            raise NetworkError(
+                f"{self.name}: slack is bus {self.bus_ids[self.slack]} (index {self.slack}) but bus_type marks "
+                f"{marked} as the slack (type 3); exactly the slack bus must have type 3"
+            )
+
+    def _check_voltages(self) -> None:
+        """0 ≤ vmin ≤ vmax ≤ V_LIMIT_MAX_PU per bus; the slack's and PV generators'
+        setpoints within V_SETPOINT_PU."""
+        bad = np.flatnonzero((self.vmin < 0) | (self.vmin > self.vmax) | (self.vmax > V_LIMIT_MAX_PU))
+        if bad.size:
+            i = bad[0]
+            raise NetworkError(
+                f"{self.name}: bus {self.bus_ids[i]} has voltage limits Vmin {self.vmin[i]:g}, Vmax {self.vmax[i]:g} p.u.; "
+                f"they must satisfy 0 ≤ Vmin ≤ Vmax ≤ {V_LIMIT_MAX_PU:g}" + (f" ({bad.size} such buses)" if bad.size > 1 else "")
+            )
+        lo, hi = V_SETPOINT_PU
+        if not lo <= self.v_slack <= hi:
+            raise NetworkError(
+                f"{self.name}: slack voltage {self.v_slack:g} p.u. (bus {self.bus_ids[self.slack]}) outside [{lo:g}, {hi:g}] p.u."
+            )
+        held = np.isin(self.gen_bus, self.pv_buses)
+        bad = np.flatnonzero(held & ~((self.gen_vset >= lo) & (self.gen_vset <= hi)))
+        if bad.size:
+            g = bad[0]
+            raise NetworkError(
+                f"{self.name}: generator at PV bus {self.bus_ids[self.gen_bus[g]]} holds |V| = {self.gen_vset[g]:g} p.u., "
+                f"outside [{lo:g}, {hi:g}] p.u."
+            )
 
     # ----- sizes and lookups -------------------------------------------------------
     @property
@@ -192,15 +268,15 @@ class Network:
         vals = np.concatenate([yff, yft, ytf, ytt, (self.gs_mw + 1j * self.bs_mvar) / self.base_mva])
         y = sp.csr_matrix((vals, (rows, cols)), shape=(n, n))  # duplicates are summed
         y.sort_indices()
+        for part in (y.data, y.indices, y.indptr):
+            part.setflags(write=False)
         return y
 
     @cached_property
     def ybus(self) -> np.ndarray:
         """Dense complex bus admittance matrix (p.u.), read-only; n_bus² entries, so only
         for small feeders — large ones use `ybus_sparse`."""
-        y = self.ybus_sparse.toarray()
-        y.setflags(write=False)
-        return y
+        return _frozen(self.ybus_sparse.toarray())
 
     @cached_property
     def branch_admittances(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
@@ -213,7 +289,7 @@ class Network:
         yff = ytt / (tap * np.conj(tap))
         yft = -ys / np.conj(tap)
         ytf = -ys / tap
-        return yff, yft, ytf, ytt
+        return _frozen(yff), _frozen(yft), _frozen(ytf), _frozen(ytt)
 
     # ----- topology ----------------------------------------------------------------
     @cached_property
@@ -230,14 +306,14 @@ class Network:
         """
         n = self.n_bus
         adjacency: list[list[tuple[int, int]]] = [[] for _ in range(n)]
-        for k in np.flatnonzero(self.status):
-            adjacency[self.f[k]].append((self.t[k], k))
-            adjacency[self.t[k]].append((self.f[k], k))
+        for b in np.flatnonzero(self.status):
+            adjacency[self.f[b]].append((int(self.t[b]), int(b)))
+            adjacency[self.t[b]].append((int(self.f[b]), int(b)))
         parent = np.full(n, -1)
         parent_branch = np.full(n, -1)
         seen = np.zeros(n, dtype=bool)
         seen[self.slack] = True
-        order = []
+        order: list[int] = []
         queue = deque([self.slack])
         while queue:
             i = queue.popleft()
@@ -248,7 +324,7 @@ class Network:
                     parent[j] = i
                     parent_branch[j] = k
                     queue.append(j)
-        return np.array(order), parent, parent_branch
+        return _frozen(np.array(order)), _frozen(parent), _frozen(parent_branch)
 
     def _check_connected(self) -> None:
         order = self._bfs[0]
@@ -314,3 +390,37 @@ class Network:
             "load_mvar": float(self.load_q_mvar.sum()),
             "base_mva": self.base_mva,
         }
+
+
+def _array(network: str, name: str, value: object) -> np.ndarray:
+    """`value` as a copy of the field's dtype; NetworkError naming the field for what is
+    not numeric (text, complex, None, ragged rows) or an integer field given fractions."""
+    kind = _DTYPES.get(name, float)
+    try:
+        raw = np.array(value)
+    except ValueError:
+        raise NetworkError(f"{network}: {name} is not a regular array (rows of different lengths)") from None
+    if raw.dtype.kind not in "biuf":
+        raise NetworkError(f"{network}: {name} must be real numbers, got {raw.dtype} values")
+    if kind is bool:
+        if raw.size and not np.all(np.isin(raw, (0, 1))):
+            raise NetworkError(f"{network}: {name} must be true/false (1/0)")
+        return raw.astype(bool)
+    if kind is int and raw.dtype.kind == "f":
+        whole = np.isfinite(raw) & (raw == np.round(raw)) & (np.abs(raw) < 2.0**53)
+        if not np.all(whole):
+            bad = raw.reshape(-1)[np.flatnonzero(~whole.reshape(-1))[0]]
+            raise NetworkError(f"{network}: {name} must be whole numbers, got {bad:g}")
+    if kind is int and raw.dtype.kind == "u" and raw.size and raw.max() > np.iinfo(np.int64).max:
+        raise NetworkError(f"{network}: {name} value {raw.max()} does not fit a 64-bit integer")
+    return raw.astype(kind)
+
+
+def _number(network: str, name: str, value: object) -> float:
+    """`value` as a finite float; NetworkError naming the field otherwise."""
+    if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, float, np.integer, np.floating)):
+        raise NetworkError(f"{network}: {name} must be a real number, got {value!r}")
+    number = float(value)
+    if not np.isfinite(number):
+        raise NetworkError(f"{network}: {name} must be finite, got {number}")
+    return number

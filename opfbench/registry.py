@@ -17,6 +17,8 @@ import importlib
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Callable, Literal
 
+import numpy as np
+
 from opfbench.errors import InputError
 
 if TYPE_CHECKING:
@@ -52,6 +54,14 @@ class StrategySpec:
         if unknown:
             allowed = ", ".join(self.options) or "none"
             raise InputError(f"strategy {self.name!r} takes no option {', '.join(unknown)} (options: {allowed})")
+        for key, value in options.items():  # of the default's type: 'false' is not False
+            default = self.options[key]
+            kind = (bool, np.bool_) if isinstance(default, bool) else type(default)
+            if not isinstance(value, kind):
+                raise InputError(
+                    f"strategy {self.name!r}: option {key} must be a {type(default).__name__} like its default "
+                    f"{default!r}, got {value!r}"
+                )
         result = self.runner(scenario, k, **(self.options | options | self.fixed))
         return result if result.strategy == self.name else dataclasses.replace(result, strategy=self.name)
 

@@ -105,7 +105,7 @@ def test_network_refuses_negative_r_and_crossed_limits():
     net = load_case("case33bw")
     with pytest.raises(NetworkError, match=r"branch 3 \(3-4\) has negative resistance"):
         net.with_changes(r=np.where(np.arange(net.n_branch) == 2, -0.01, net.r))
-    with pytest.raises(NetworkError, match="bus 7 has Vmin 1.05 > Vmax 1"):
+    with pytest.raises(NetworkError, match="bus 7 has voltage limits Vmin 1.05, Vmax 1 p.u."):
         net.with_changes(vmin=np.where(np.arange(net.n_bus) == 6, 1.05, net.vmin), vmax=np.ones(net.n_bus))
     with pytest.raises(NetworkError, match=r"load_p_mw has shape \(32,\), expected \(33,\)"):
         net.with_changes(load_p_mw=net.load_p_mw[:-1])
