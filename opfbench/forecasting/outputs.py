@@ -77,10 +77,11 @@ def load_forecast(directory: str | Path, dataset: str, model: str) -> pd.Series:
     """Test-part one-step forecasts (kW) of `model` written by `write_outputs`.
 
     `model` may also be "actual". The index is tz-aware (UTC). The values must be
-    finite and within [0, rating] of the plant (the rating the run's JSON beside the CSV
-    records, or without that file the rating of the embedded dataset's plant); a timestamp that is not ISO 8601 with an offset, a non-numeric or
-    out-of-range value, a file that is not UTF-8 is a `DataError` naming file, column
-    and line — never clipped, never skipped.
+    finite and within [0, rating] of the embedded dataset's plant — the plant the
+    benchmark scales them by; the run's JSON beside the CSV, when present, must record
+    that rating (a forecast of another plant is refused, not rescaled). A timestamp that
+    is not ISO 8601 with an offset, a non-numeric or out-of-range value, a file that is
+    not UTF-8 is a `DataError` naming file, column and line — never clipped, never skipped.
     """
     path = forecast_path(directory, dataset, "csv")
     if not path.is_file():
@@ -110,16 +111,22 @@ def load_forecast(directory: str | Path, dataset: str, model: str) -> pd.Series:
 
 
 def _rating_kw(meta: Path, dataset: str) -> float:
-    if not meta.exists():
-        from opfbench.forecasting.datasets import forecast_dataset
+    """The rating (kW) of the embedded dataset's plant, after checking that the forecast
+    run's JSON `meta` (when present) records the same."""
+    from opfbench.forecasting.datasets import forecast_dataset
 
-        return forecast_dataset(dataset).rating_kw
+    rating = forecast_dataset(dataset).rating_kw
+    if not meta.exists():
+        return rating
     try:
-        rating = float(json.loads(meta.read_text(encoding="utf-8"))["run"]["rating_kw"])
-    except (OSError, ValueError, KeyError, TypeError) as exc:
-        raise DataError(f"{meta}: no readable run.rating_kw ({exc})") from None
-    if not (np.isfinite(rating) and rating > 0):
-        raise DataError(f"{meta}: run.rating_kw must be a positive number, got {rating}")
+        recorded = json.loads(meta.read_text(encoding="utf-8"))["run"]["rating_kw"]
+    except (OSError, UnicodeDecodeError, ValueError, KeyError, TypeError) as exc:
+        raise DataError(f"{meta}: no readable run.rating_kw ({type(exc).__name__}: {exc})") from None
+    if isinstance(recorded, bool) or not isinstance(recorded, (int, float)) or float(recorded) != rating:
+        raise DataError(
+            f"{meta}: run.rating_kw is {recorded!r}, but the {dataset} plant the benchmark uses is rated {rating:g} kW; "
+            f"these forecasts are of another plant — rerun `opfbench forecast --dataset {dataset} --out {meta.parent}`"
+        )
     return rating
 
 

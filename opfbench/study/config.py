@@ -16,6 +16,7 @@ import re
 from dataclasses import asdict, dataclass, field, replace
 
 from opfbench.errors import InputError
+from opfbench.forecasting.names import MODEL_NAMES
 from opfbench.registry import FORMULATIONS, STRATEGY_NAMES
 from opfbench.report.price import DEFAULT_CURRENCY, DEFAULT_PRICE_PER_KWH, DEFAULT_PRICE_SOURCE
 
@@ -23,6 +24,7 @@ NIGHT_MODES = ("connected", "disconnected", "connected-q")
 DEFAULT_KS = (0.0, 0.2, 0.4, 0.6, 0.8)
 DEFAULT_NIGHT = "20:00-05:00"
 CHUNKS = ("auto", "6h", "day", "week", "month")
+FORECAST_SOURCES = ("off", "oracle")  # besides a forecasting model's name (`opfbench.forecasting.names`)
 #: The optional long tables (`study.tables.detail_rows`), in the order they are written.
 DETAIL_TABLES = ("der_q", "bus_v")
 SHORT_PERIOD_H = 48.0  # periods up to two days: 6-hour chunks ("auto") and the per-DER Q table by default
@@ -94,6 +96,13 @@ class StudyConfig:
         for k in self.ks:
             if not 0.0 <= float(k) <= 1.0:
                 raise InputError(f"reserve coefficient k must lie in [0, 1], got {k}")
+        for source in self.forecast:
+            if source not in FORECAST_SOURCES + MODEL_NAMES:
+                raise InputError(
+                    f"unknown forecast source {source!r}; choose {', '.join(FORECAST_SOURCES)} or a forecasting model's "
+                    f"name ({', '.join(MODEL_NAMES)}), whose forecasts are read from the forecast folder "
+                    f"({self.forecast_dir})"
+                )
         if self.chunk not in CHUNKS:
             raise InputError(f"unknown chunk {self.chunk!r}; choose from {', '.join(CHUNKS)}")
         check_night(self.night)

@@ -25,7 +25,7 @@ def model_pv_forecast_pu(
     anywhere else a missing forecast is an error. `pv_now` has one value per step of
     `index` plus, when the period goes on, the next step's."""
     from opfbench.data import load_pv_minute
-    from opfbench.forecasting import load_forecast
+    from opfbench.forecasting.outputs import load_forecast
 
     series = load_forecast(forecast_dir, "pv", model) / load_pv_minute().attrs["rating_kw"]
     n = len(index)
@@ -41,7 +41,7 @@ def model_pv_forecast_pu(
             f"daylight step(s) of the period, first {first}; the forecasts cover "
             f"{series.index[0]} .. {series.index[-1]}"
         )
-    return np.clip(np.where(missing, pv_now[:n], ahead), 0.0, 1.0)
+    return np.where(missing, pv_now[:n], ahead)  # in [0, 1]: `load_forecast` refuses values outside the rating
 
 
 def chunk_scenario(
