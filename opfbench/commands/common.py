@@ -4,10 +4,11 @@ from __future__ import annotations
 
 import argparse
 import math
+from pathlib import Path
 
 from opfbench.jsonio import print_json
 
-__all__ = ["add_operating_point", "fraction", "print_json"]
+__all__ = ["add_operating_point", "fraction", "path", "print_json"]
 
 
 def fraction(text: str) -> float:
@@ -19,6 +20,16 @@ def fraction(text: str) -> float:
     if not math.isfinite(value) or value < 0:
         raise argparse.ArgumentTypeError(f"must be a finite number ≥ 0, got {text}")
     return value
+
+
+def path(text: str) -> Path:
+    """argparse type: a file or folder path — not empty (that would silently mean the
+    current folder) and without NUL bytes."""
+    if not text.strip():
+        raise argparse.ArgumentTypeError("an empty path; give a file or folder name (. for the current folder)")
+    if "\x00" in text:
+        raise argparse.ArgumentTypeError(f"{text!r} contains a NUL byte")
+    return Path(text)
 
 
 def add_operating_point(parser: argparse.ArgumentParser) -> None:

@@ -8,11 +8,10 @@ import argparse
 import math
 import sys
 from dataclasses import replace
-from pathlib import Path
 
 import numpy as np
 
-from opfbench.commands.common import fraction
+from opfbench.commands.common import fraction, path
 from opfbench.dynamics.params import FORECASTS, SENSITIVITY_VARIANTS, FaultParams, ModelParams
 from opfbench.errors import InputError
 from opfbench.jsonio import print_json
@@ -76,7 +75,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--t-end", type=_number, default=3.0, help="simulated time, s (default 3)")
     p.add_argument("--step-ms", type=_number, default=1.0, help="fixed step, ms (default 1)")
     p.add_argument("--workers", type=int, default=1, help="processes (default 1)")
-    p.add_argument("--out", type=Path, default=None, help="write fault.parquet, traces.parquet, manifest.json here")
+    p.add_argument("--out", type=path, default=None, help="write fault.parquet, traces.parquet, manifest.json here")
     p.add_argument("--json", action="store_true", help="print a list, one record per simulation")
     p.set_defaults(func=run)
 

@@ -12,6 +12,7 @@ import sys
 from dataclasses import replace
 from typing import TYPE_CHECKING
 
+from opfbench.commands.common import path
 from opfbench.errors import InputError
 from opfbench.forecasting.names import FORECAST_DATASETS, MODEL_NAMES
 from opfbench.jsonio import print_json
@@ -38,7 +39,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         help=f"comma-separated subset of {','.join(MODEL_NAMES)} (persistence always runs: it is the skill reference)",
     )
     parser.add_argument("--quick", action="store_true", help="smoke run: a few days of data, 2 short epochs")
-    parser.add_argument("--out", metavar="DIR", help="write forecast_<dataset>.csv/.json/.html into DIR")
+    parser.add_argument("--out", metavar="DIR", type=path, help="write forecast_<dataset>.csv/.json/.html into DIR")
     parser.add_argument("--seed", type=int, default=0, help=f"random seed in [0, {SEED_MAX}] (default 0)")
     parser.add_argument(
         "--weather",
@@ -70,13 +71,13 @@ def run(args: argparse.Namespace) -> int:
         if args.threads < 1:
             raise InputError(f"--threads must be >= 1, got {args.threads}")
         settings = replace(settings, threads=args.threads)
-    if args.out:  # before the computation, not after it
+    if args.out is not None:  # before the computation, not after it
         check_out_dir(args.out)
     dataset = forecast_dataset(args.dataset).lag_weather(1 if args.weather == "previous" else 0)
     result = run_comparison(dataset, models, settings, args.seed, progress=lambda msg: print(msg, file=sys.stderr))
-    if args.out:
-        for path in write_outputs(result, args.out):
-            print(f"wrote {path}", file=sys.stderr)
+    if args.out is not None:
+        for written in write_outputs(result, args.out):
+            print(f"wrote {written}", file=sys.stderr)
     if args.json:
         print_json(result.metrics_table())
     else:

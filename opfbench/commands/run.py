@@ -10,8 +10,7 @@ import sys
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from opfbench.commands.common import fraction
-from opfbench.errors import InputError
+from opfbench.commands.common import fraction, path
 from opfbench.jsonio import print_json
 from opfbench.registry import STRATEGY_NAMES
 from opfbench.report.price import DEFAULT_CURRENCY, DEFAULT_PRICE_PER_KWH, DEFAULT_PRICE_SOURCE
@@ -63,7 +62,9 @@ def register(sub: argparse._SubParsersAction) -> None:
         help="forecast sources: off, oracle (next step's actual) and/or a model name whose PV "
         "forecasts `opfbench forecast --dataset pv --out DIR` wrote (default: off oracle)",
     )
-    p.add_argument("--forecast-dir", default="reports/forecast", help="where model forecasts are (default reports/forecast)")
+    p.add_argument(
+        "--forecast-dir", type=path, default="reports/forecast", help="where model forecasts are (default reports/forecast)"
+    )
     p.add_argument(
         "--acopf-solver",
         choices=ACOPF_SOLVERS,
@@ -73,14 +74,14 @@ def register(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument(
         "--fault-dir",
-        type=Path,
+        type=path,
         default=None,
         help="a fault study's folder (`opfbench fault ... --out DIR`) for the report's fault section "
         "(default reports/fault, when it holds one)",
     )
     p.add_argument(
         "--year-dir",
-        type=Path,
+        type=path,
         default=None,
         help="a year run's folder (`opfbench run --period year --out DIR`) for the report's year section "
         "(default reports/year when it holds one, else the committed docs/year summary)",
@@ -119,7 +120,7 @@ def register(sub: argparse._SubParsersAction) -> None:
         help=f"price of lost energy per kWh for the report (default {DEFAULT_PRICE_PER_KWH} {DEFAULT_CURRENCY}, Eurostat 2023-H2 non-household)",
     )
     p.add_argument("--currency", default=DEFAULT_CURRENCY)
-    p.add_argument("--out", type=Path, default=Path("reports/run"), help="run folder (default reports/run)")
+    p.add_argument("--out", type=path, default=Path("reports/run"), help="run folder (default reports/run)")
     p.add_argument("--fresh", action="store_true", help="discard a previous run of another configuration in --out")
     p.add_argument("--quiet", action="store_true", help="no progress output")
     p.add_argument("--json", action="store_true", help="print the summary as JSON")
@@ -128,16 +129,13 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 def run(args: argparse.Namespace) -> int:
     source = DEFAULT_PRICE_SOURCE if args.price == DEFAULT_PRICE_PER_KWH else "--price"
-    from opfbench.report.sources import check_year_dir, holds_fault_study
+    from opfbench.report.inputs import checked_sources
+    from opfbench.report.sources import holds_forecasts
     from opfbench.study.runner import run_study
     from opfbench.study.store import finished_tasks
 
-    if args.fault_dir is not None and not holds_fault_study(args.fault_dir):
-        raise InputError(
-            f"--fault-dir {args.fault_dir} holds no fault study (fault.parquet); "
-            f"write one with `opfbench fault CASE --out {args.fault_dir}`"
-        )
-    check_year_dir(args.year_dir)
+    forecast_dir = Path(args.forecast_dir)  # the report's forecast section only when it holds a forecast run
+    checked_sources(forecast_dir if holds_forecasts(forecast_dir) else None, args.fault_dir, args.year_dir)  # before any work
     config = StudyConfig.build(
         cases=args.case,
         strategies=args.strategies,
@@ -150,7 +148,7 @@ def run(args: argparse.Namespace) -> int:
         chunk=args.chunk,
         detail=args.detail,
         acopf_solver=args.acopf_solver,
-        forecast_dir=args.forecast_dir,
+        forecast_dir=str(args.forecast_dir),
         price_per_kwh=args.price,
         currency=args.currency,
         price_source=source,
@@ -183,6 +181,8 @@ def finish_run(result: StudyRun, args: argparse.Namespace) -> int:
     forecast, fault, year = report_sources(forecast_dir if holds_forecasts(forecast_dir) else None, args.fault_dir, args.year_dir)
     report = write_report(result.out, forecast, fault, year_dir=year)
     summary = result.summary
+    if summary is None:  # run_study returns a summary unless interrupted, and then raises
+        raise RuntimeError(f"the run in {result.out} ended without a summary")
     if args.json:
         print_json(summary.to_dict(orient="records"))
         return 0
