@@ -26,7 +26,7 @@ def test_pf_der_scale_applies_to_every_der(capsys):
     output) are pandapower's Newton–Raphson losses on the same network: the independent
     source is computed here, not copied."""
     from opfbench.cases import load_case
-    from tests.pandapower_oracle import pandapower_pf
+    from tests.support.pandapower_oracle import pandapower_pf
 
     net = load_case("paper33")
     _, full = _json(capsys, ["pf", "paper33", "--der-scale", "0.8", "--json"])

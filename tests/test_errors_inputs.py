@@ -16,24 +16,30 @@ from opfbench.cli import main
 from opfbench.errors import DataError, InputError
 from opfbench.forecasting.outputs import load_forecast
 from opfbench.scenario import Scenario
-from tests.test_matpower import GOOD
+from tests.support.matpower_texts import TINY_CASE
 
 # ----- case files ------------------------------------------------------------------------
 _BUS1 = "\t1\t3\t0\t0\t0\t0\t1\t1\t0\t12.66"
 _PF_LINES = "pf = {};\nmpc.bus(:, QD) = mpc.bus(:, PD) * sin(acos(pf));\n"
 BAD_CASES = {
-    "fractional bus id": (GOOD.replace("\t3\t1\t90", "\t2.9\t1\t90"), "mpc.bus row 3, column 1 (BUS_I): 2.9 is not an integer"),
-    "fractional branch end": (GOOD.replace("\t2\t3\t0.4930", "\t2\t3.5\t0.4930"), "mpc.branch row 2, column 2 (T_BUS): 3.5"),
-    "negative resistance": (GOOD.replace("0.4930", "-0.4930"), "mpc.branch row 2 (2-3): negative resistance BR_R = -0.493"),
+    "fractional bus id": (
+        TINY_CASE.replace("\t3\t1\t90", "\t2.9\t1\t90"),
+        "mpc.bus row 3, column 1 (BUS_I): 2.9 is not an integer",
+    ),
+    "fractional branch end": (TINY_CASE.replace("\t2\t3\t0.4930", "\t2\t3.5\t0.4930"), "mpc.branch row 2, column 2 (T_BUS): 3.5"),
+    "negative resistance": (TINY_CASE.replace("0.4930", "-0.4930"), "mpc.branch row 2 (2-3): negative resistance BR_R = -0.493"),
     "infinite baseMVA": (
-        GOOD.replace("mpc.baseMVA = 10;", "mpc.baseMVA = Inf;"),
+        TINY_CASE.replace("mpc.baseMVA = 10;", "mpc.baseMVA = Inf;"),
         "mpc.baseMVA must be a finite positive number, got inf",
     ),
-    "baseKV 0 with ohm conversion": (GOOD.replace(_BUS1, _BUS1[:-5] + "0"), "line 24: Vbase from mpc.bus row 1 BASE_KV = 0 kV"),
-    "power factor 2": (GOOD + _PF_LINES.format(2), "line 28: power factor pf = 2 must lie in (0, 1]"),
-    "power factor 0": (GOOD + _PF_LINES.format(0), "line 28: power factor pf = 0 must lie in (0, 1]"),
+    "baseKV 0 with ohm conversion": (
+        TINY_CASE.replace(_BUS1, _BUS1[:-5] + "0"),
+        "line 24: Vbase from mpc.bus row 1 BASE_KV = 0 kV",
+    ),
+    "power factor 2": (TINY_CASE + _PF_LINES.format(2), "line 28: power factor pf = 2 must lie in (0, 1]"),
+    "power factor 0": (TINY_CASE + _PF_LINES.format(0), "line 28: power factor pf = 0 must lie in (0, 1]"),
     "Vmin above Vmax": (
-        GOOD.replace("12.66\t1\t1.1\t0.9;\n\t3", "12.66\t1\t0.9\t1.1;\n\t3"),
+        TINY_CASE.replace("12.66\t1\t1.1\t0.9;\n\t3", "12.66\t1\t0.9\t1.1;\n\t3"),
         "mpc.bus row 2 (bus 2): VMIN 1.1 > VMAX 0.9",
     ),
 }
@@ -58,7 +64,10 @@ def test_malformed_case_file_exit_2_naming_file_and_row(capsys, tmp_path, label)
 @pytest.mark.parametrize(
     ("data", "message"),
     [
-        (GOOD.replace("%% in Volts", "%% in Volts \xe9").encode("latin-1"), "not a text MATPOWER file (byte 763 is not UTF-8)"),
+        (
+            TINY_CASE.replace("%% in Volts", "%% in Volts \xe9").encode("latin-1"),
+            "not a text MATPOWER file (byte 763 is not UTF-8)",
+        ),
         (b"\x00\x01\x02mpc" * 10, "not a text MATPOWER file (contains NUL bytes)"),
         (bytes(range(256)), "is not UTF-8"),
     ],

@@ -11,7 +11,6 @@ import pytest
 
 from opfbench.bench.opf import daily_scenario
 from opfbench.capability import qmax
-from opfbench.cases import load_case
 from opfbench.cli import main
 from opfbench.errors import InputError
 from opfbench.formulations import acopf
@@ -20,11 +19,6 @@ from opfbench.formulations.problem import STATUSES, VOLTAGE_TOLERANCE, snapshot_
 from opfbench.formulations.socp import run_socp
 from opfbench.powerflow import solve_pf
 from opfbench.scenario import Scenario
-
-
-@pytest.fixture(scope="module")
-def paper33():
-    return load_case("paper33")
 
 
 @pytest.fixture(scope="module")
