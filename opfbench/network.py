@@ -257,9 +257,9 @@ class Network:
 
     # ----- electrical matrices -----------------------------------------------------
     @cached_property
-    def ybus_sparse(self) -> sp.csr_matrix:
-        """Sparse (CSR) complex bus admittance matrix (p.u.), MATPOWER's makeYbus
-        conventions; every diagonal entry is stored, even when zero."""
+    def _ybus_csr(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The Y-bus's CSR arrays (data, indices, indptr), read-only: canonical (sorted
+        indices, duplicates summed), every diagonal entry stored."""
         yff, yft, ytf, ytt = self.branch_admittances
         n = self.n_bus
         diag = np.arange(n)
@@ -268,8 +268,16 @@ class Network:
         vals = np.concatenate([yff, yft, ytf, ytt, (self.gs_mw + 1j * self.bs_mvar) / self.base_mva])
         y = sp.csr_matrix((vals, (rows, cols)), shape=(n, n))  # duplicates are summed
         y.sort_indices()
-        for part in (y.data, y.indices, y.indptr):
-            part.setflags(write=False)
+        return _frozen(y.data), _frozen(y.indices), _frozen(y.indptr)
+
+    @property
+    def ybus_sparse(self) -> sp.csr_matrix:
+        """Sparse (CSR) complex bus admittance matrix (p.u.), MATPOWER's makeYbus
+        conventions; every diagonal entry is stored, even when zero. Each call returns a
+        new matrix over the network's read-only arrays: a value cannot be written, and a
+        change of structure (a new entry) stays in the caller's matrix."""
+        y = sp.csr_matrix(self._ybus_csr, shape=(self.n_bus, self.n_bus), copy=False)
+        y.has_canonical_format = True
         return y
 
     @cached_property

@@ -4,8 +4,11 @@ never a traceback, never a silently wrong result. One test per class of input.""
 from __future__ import annotations
 
 import json
+import re
 import subprocess
 import sys
+from importlib import resources
+from pathlib import Path
 
 import numpy as np
 import pandas as pd
@@ -16,7 +19,7 @@ from opfbench.cli import main
 from opfbench.errors import DataError, InputError
 from opfbench.forecasting.outputs import load_forecast
 from opfbench.scenario import Scenario
-from tests.support.matpower_texts import TINY_CASE
+from tests.support.matpower_texts import TINY_CASE, with_entry
 
 # ----- case files ------------------------------------------------------------------------
 _BUS1 = "\t1\t3\t0\t0\t0\t0\t1\t1\t0\t12.66"
@@ -49,6 +52,74 @@ def _cli(capsys: pytest.CaptureFixture, argv: list[str]) -> tuple[int, str]:
     code = main(argv)
     err = capsys.readouterr().err
     return code, err
+
+
+_CASE33 = (Path(str(resources.files("opfbench.cases") / "matpower" / "case33bw.m"))).read_text()
+# (file text, what the message must say) — each refused by pf and by the local rules alike
+BAD_VALUES = {
+    "duplicated bus 7": (with_entry(_CASE33, "bus", 8, 1, "7"), "mpc.bus row 8 lists bus 7 again (first at row 7)"),
+    "bus number 2^63": (
+        with_entry(_CASE33, "bus", 2, 1, "9223372036854775808"),
+        "mpc.bus row 2, column 1 (BUS_I): bus number 9.22337e+18 outside 1..9007199254740991",
+    ),
+    "bus number 0": (with_entry(TINY_CASE, "bus", 3, 1, "0"), "mpc.bus row 3, column 1 (BUS_I): bus number 0 outside"),
+    "wired-in isolated bus": (
+        with_entry(_CASE33, "bus", 7, 2, "4"),
+        "mpc.bus row 7: bus 7 has type 4 (isolated) but in-service mpc.branch row(s) 6, 7 connect it",
+    ),
+    "huge bus type": (with_entry(TINY_CASE, "bus", 2, 2, "1e300"), "mpc.bus row 2: unknown bus type 1e+300"),
+    "generator QMAX < QMIN": (with_entry(TINY_CASE, "gen", 1, 4, "-20"), "mpc.gen row 1 (bus 1): QMAX -20 < QMIN -10"),
+    "generator PMAX < PMIN": (with_entry(TINY_CASE, "gen", 1, 10, "20"), "mpc.gen row 1 (bus 1): PMAX 10 < PMIN 20"),
+    "slack voltage -1": (with_entry(TINY_CASE, "gen", 1, 6, "-1"), "slack voltage -1 p.u. (bus 1) outside [0.5, 1.5] p.u."),
+    "slack voltage 12.66 (kV for p.u.)": (with_entry(TINY_CASE, "gen", 1, 6, "12.66"), "slack voltage 12.66 p.u."),
+    "voltage limits -5 / 50": (
+        with_entry(with_entry(TINY_CASE, "bus", 2, 13, "-5"), "bus", 2, 12, "50"),
+        "bus 2 has voltage limits Vmin -5, Vmax 50 p.u.; they must satisfy 0 ≤ Vmin ≤ Vmax ≤ 2",
+    ),
+    "zero-impedance branch": (
+        with_entry(with_entry(TINY_CASE, "branch", 2, 3, "0"), "branch", 2, 4, "0"),
+        "in-service branch 2 (2-3) has zero impedance (r = x = 0)",
+    ),
+}
+
+
+@pytest.mark.parametrize("label", BAD_VALUES)
+@pytest.mark.parametrize("command", [["pf"], ["snapshot", "--strategy", "llma"]])
+def test_case_values_outside_their_domain_exit_2_naming_them(capsys, tmp_path, label, command):
+    text, message = BAD_VALUES[label]
+    path = tmp_path / "case.m"
+    path.write_text(text)
+    code, err = _cli(capsys, [command[0], str(path), *command[1:]])
+    assert code == 2 and err.count("\n") == 1 and "Traceback" not in err, err
+    assert err.startswith(f"opfbench {command[0]}: error: {path}") and message in err, err
+
+
+def test_an_isolated_bus_is_refused_not_turned_into_a_load_bus(tmp_path):
+    from opfbench.errors import CaseFormatError
+    from opfbench.matpower import load_case_file
+
+    text = with_entry(with_entry(TINY_CASE, "bus", 3, 2, "4"), "branch", 2, 11, "0")  # bus 3 type 4, its branch out
+    path = tmp_path / "isolated.m"
+    path.write_text(text)
+    with pytest.raises(CaseFormatError, match="mpc.bus row 3: bus 3 has type 4 .isolated.; remove the bus"):
+        load_case_file(path)
+
+
+def test_strategy_options_are_type_checked(net):
+    from opfbench.registry import run_strategy
+
+    scenario = Scenario.snapshot(net)
+    for name, options, message in (
+        ("acopf", {"slack_export": "false"}, "option slack_export must be a bool like its default True, got 'false'"),
+        ("acopf", {"slack_export": 0}, "option slack_export must be a bool like its default True, got 0"),
+        ("socp", {"slack_export": None}, "option slack_export must be a bool"),
+        ("llma", {"safe": "yes"}, "option safe must be a bool like its default False, got 'yes'"),
+        ("acopf", {"fallback": 1}, "option fallback must be a str like its default 'chain', got 1"),
+    ):
+        with pytest.raises(InputError, match=message):
+            run_strategy(name, scenario, 0.0, **options)
+    exporting = run_strategy("acopf", scenario, 0.0, slack_export=np.bool_(False))
+    assert exporting.extra["slack_export"] is False
 
 
 @pytest.mark.parametrize("label", BAD_CASES)
@@ -98,6 +169,77 @@ def test_cached_network_arrays_are_read_only():
         with pytest.raises(ValueError, match="read-only"):
             getattr(net, name)[0] = 0
     assert load_case("paper33").load_p_mw.sum() == pytest.approx(3.715)
+
+
+def _nominal_losses_kw(net) -> float:
+    from opfbench.powerflow import bus_injections, solve_pf
+
+    return float(solve_pf(net, bus_injections(net, 0.8 * net.der_rating_mw, 0.0, 1.0)).losses_kw)
+
+
+@pytest.mark.filterwarnings("ignore::scipy.sparse.SparseEfficiencyWarning")  # the refused new entry
+@pytest.mark.parametrize("case", ["paper33", "case141-der"])  # the dense and the sparse solvers
+def test_derived_solver_data_is_read_only_and_never_shared_writable(case):
+    net = load_case(case)
+    before = _nominal_losses_kw(net)
+    y = net.ybus_sparse
+    writes = {
+        "Y-bus data": lambda: y.data.__setitem__(0, 0),
+        "Y-bus indices": lambda: y.indices.__setitem__(0, 1),
+        "Y-bus indptr": lambda: y.indptr.__setitem__(1, 0),
+        "Y-bus entry": lambda: y.__setitem__((0, 0), 5.0),
+        "Y-bus new entry": lambda: y.__setitem__((0, net.n_bus - 1), 100.0),
+        "Y-bus scaled in place": lambda: y.__imul__(2.0),
+        "dense Y-bus": lambda: net.ybus.__setitem__((0, 0), 0),
+        "branch admittance": lambda: net.branch_admittances[0].__setitem__(0, 0),
+        "BFS parent": lambda: net.parent.__setitem__(3, 0),
+        "BFS order": lambda: net.bfs_order.__setitem__(0, 2),
+        "BFS parent branch": lambda: net.parent_branch.__setitem__(3, 0),
+    }
+    refused = []
+    for label, write in writes.items():
+        with pytest.raises(ValueError, match="read-only"):
+            write()
+        refused.append(label)
+    assert refused == list(writes)
+    assert net.ybus_sparse is not net.ybus_sparse  # each caller gets its own matrix object over the frozen arrays
+    assert _nominal_losses_kw(load_case(case)) == before > 0
+
+
+def test_with_changes_refuses_an_inconsistent_network():
+    from opfbench.errors import NetworkError
+
+    net = load_case("paper33")
+    n = net.n_bus
+    at = np.arange(n)
+    bad = {
+        "slack moved without its type": ({"slack": 5}, "slack is bus 6 (index 5) but bus_type marks 1 as the slack"),
+        "two slack buses": ({"bus_type": np.where(at == 5, 3, net.bus_type)}, "marks 1, 6 as the slack"),
+        "no slack type": ({"bus_type": np.ones(n, dtype=int)}, "marks none as the slack"),
+        "type 4": ({"bus_type": np.where(at == 5, 4, net.bus_type)}, "bus 6 has type 4; expected 1 (PQ), 2 (PV), 3 (slack)"),
+        "slack index as text": ({"slack": "0"}, "slack must be a bus index (an integer), got '0'"),
+        "slack voltage -1": ({"v_slack": -1.0}, "slack voltage -1 p.u. (bus 1) outside [0.5, 1.5]"),
+        "slack voltage NaN": ({"v_slack": float("nan")}, "v_slack must be finite, got nan"),
+        "slack voltage as text": ({"v_slack": "1.0"}, "v_slack must be a real number, got '1.0'"),
+        "limits -5 / 50": (
+            {"vmin": np.where(at == 4, -5.0, net.vmin), "vmax": np.where(at == 4, 50.0, net.vmax)},
+            "bus 5 has voltage limits Vmin -5, Vmax 50 p.u.; they must satisfy 0 ≤ Vmin ≤ Vmax ≤ 2",
+        ),
+        "duplicated bus number": ({"bus_ids": np.where(at == 7, 7, net.bus_ids)}, "bus number 7 is used by more than one bus"),
+        "fractional bus number": ({"bus_ids": net.bus_ids + 0.5}, "bus_ids must be whole numbers, got 1.5"),
+        "bus numbers as text": ({"bus_ids": net.bus_ids.astype(str)}, "bus_ids must be real numbers, got <U"),
+        "zero impedance": (
+            {"r": np.where(np.arange(net.n_branch) == 3, 0, net.r), "x": np.where(np.arange(net.n_branch) == 3, 0, net.x)},
+            "in-service branch 4 (4-5) has zero impedance",
+        ),
+        "tap 0": ({"tap": np.where(np.arange(net.n_branch) == 3, 0.0, net.tap)}, "branch 4 (4-5) has tap ratio 0"),
+        "complex resistance": ({"r": net.r + 1j}, "r must be real numbers, got complex128"),
+    }
+    for changes, message in bad.values():
+        with pytest.raises(NetworkError, match=re.escape(message)):
+            net.with_changes(**changes)
+    moved = net.with_changes(slack=5, bus_type=np.where(at == 5, 3, np.where(at == 0, 1, net.bus_type)))
+    assert moved.slack == 5 and moved.bfs_order[0] == 5  # a consistent move is fine
 
 
 def test_network_copies_the_callers_arrays():

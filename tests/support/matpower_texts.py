@@ -52,3 +52,21 @@ mpc.branch = [
 \t400\t1\t0.003\t0.006\t0\t0\t0\t0\t1.025\t0\t1;
 ];
 """
+
+
+def with_entry(text: str, matrix: str, row_id: float, column: int, value: str) -> str:
+    """`text` with column `column` (1-based, as MATPOWER counts) of the `mpc.<matrix>` rows
+    whose first entry is `row_id` set to `value`."""
+    out, inside = [], False
+    for line in text.split("\n"):
+        if line.startswith(f"mpc.{matrix} = ["):
+            inside = True
+        elif inside and line.startswith("];"):
+            inside = False
+        elif inside and line.startswith("\t"):
+            cols = line.rstrip(";").split("\t")
+            if float(cols[1]) == row_id:
+                cols[column] = value
+                line = "\t".join(cols) + ";"
+        out.append(line)
+    return "\n".join(out)
