@@ -6,8 +6,10 @@ branch r/x, kW → MW for loads, kVA → MW/MVAr at a fixed power factor). Any o
 line is an error: a case file is data, and we do not guess what unknown code means.
 
 Refused with a `CaseFormatError` naming the file (and matrix, row, column or line): a file
-that is not UTF-8 text; a non-numeric or non-finite entry; a non-finite or non-positive
-baseMVA; a fractional bus number or bus type; a negative branch resistance (it would make
+that is not UTF-8 text (a leading byte-order mark is dropped); a matrix defined twice; an
+entry that is not a MATLAB number (Python's 1_0 or ١٠ are not) or not finite; a
+non-finite or non-positive baseMVA; an ohm → p.u. conversion that over- or underflows;
+a status other than 0 or 1; in-service generators at one bus holding different VG; a fractional bus number or bus type; a negative branch resistance (it would make
 negative losses and a meaningless loss bound); VMIN > VMAX at a bus; a bus number
 outside 1..2^53 − 1 or listed twice; a bus of type 4 (isolated); an in-service generator
 with QMAX < QMIN or PMAX < PMIN; a power factor outside (0, 1]; the ohm → p.u.
@@ -30,6 +32,7 @@ from opfbench.network import Network
 BUS_COLS, GEN_COLS, BRANCH_COLS = 13, 10, 11  # minimum columns MATPOWER v2 requires
 MAX_BUS_NUMBER = 2**53 - 1  # the largest whole number a file's floating-point entry holds exactly
 _MATRICES = ("bus", "gen", "branch", "gencost")
+_NUMBER = re.compile(r"^[+-]?(?:(?:\d+\.?\d*|\.\d+)(?:[eE][+-]?\d+)?|Inf|inf|NaN|nan)$", re.ASCII)
 
 
 @dataclass
@@ -93,11 +96,13 @@ def read_matpower(path: str | Path) -> MatpowerCase:
         raise CaseFormatError(f"{path}: not a text MATPOWER file (byte {exc.start} is not UTF-8)") from None
     if "\x00" in text:
         raise CaseFormatError(f"{path}: not a text MATPOWER file (contains NUL bytes)")
+    text = text.removeprefix("\ufeff")  # a byte-order mark, as some editors write
     name = str(path)
     lines = [(i + 1, _strip_comment(raw)) for i, raw in enumerate(text.splitlines())]
     lines = [(i, s) for i, s in lines if s]
 
     matrices: dict[str, np.ndarray] = {}
+    opened: dict[str, int] = {}  # matrix -> line it is defined at
     base_mva: float | None = None
     trailing: list[tuple[int, str]] = []
     i = 0
@@ -108,6 +113,9 @@ def read_matpower(path: str | Path) -> MatpowerCase:
             key = m_start.group(1)
             if key not in _MATRICES:
                 raise CaseFormatError(f"{name}, line {lineno}: unsupported matrix mpc.{key}")
+            if key in opened:
+                raise CaseFormatError(f"{name}, line {lineno}: mpc.{key} is defined a second time (first at line {opened[key]})")
+            opened[key] = lineno
             body: list[tuple[int, str]] = []
             rest = m_start.group(2)
             i += 1
@@ -172,12 +180,11 @@ def _parse_matrix(name: str, key: str, body: list[tuple[int, str]]) -> np.ndarra
                 continue
             values = []
             for col, tok in enumerate(tokens, start=1):
-                try:
-                    values.append(float(tok))
-                except ValueError:
+                if not _NUMBER.match(tok):  # MATLAB's number syntax (Python's float() also reads 1_0 and ١٠)
                     raise CaseFormatError(
                         f"{name}: mpc.{key} row {len(rows) + 1} (line {lineno}), column {col}: non-numeric entry {tok!r}"
-                    ) from None
+                    )
+                values.append(float(tok))
             rows.append(values)
             row_lines.append(lineno)
     if not rows:
@@ -224,7 +231,16 @@ def _apply_conversions(case: MatpowerCase, statements: list[tuple[int, str]]) ->
         elif s == _OHM_TO_PU:
             if "Vbase" not in env or "Sbase" not in env:
                 raise CaseFormatError(f"{case.path}, line {lineno}: ohm→p.u. conversion before Vbase/Sbase are defined")
-            case.branch[:, 2:4] /= env["Vbase"] ** 2 / env["Sbase"]
+            ohms = case.branch[:, 2:4].copy()
+            with np.errstate(all="ignore"):
+                z_base = env["Vbase"] ** 2 / env["Sbase"]
+                case.branch[:, 2:4] /= z_base
+            lost = ~np.isfinite(case.branch[:, 2:4]) | ((case.branch[:, 2:4] == 0) & (ohms != 0))
+            if not (np.isfinite(z_base) and z_base > 0) or lost.any():
+                raise CaseFormatError(
+                    f"{case.path}, line {lineno}: the ohm → p.u. conversion over- or underflows (base impedance "
+                    f"{z_base:g} ohm from BASE_KV {case.bus[0, 9]:g} kV and baseMVA {case.base_mva:g}): check those two"
+                )
         elif s == _KW_TO_MW:
             case.bus[:, 2:4] /= 1e3
         elif m := _PF_SET.match(s):
@@ -303,9 +319,17 @@ def to_network(case: MatpowerCase, name: str | None = None) -> Network:
     if slacks.size != 1:
         raise CaseFormatError(f"{case.path}: mpc.bus needs exactly one reference bus (type 3), found {slacks.size}")
     slack = int(slacks[0])
+    for matrix, arr, col, col_name in (("branch", branch, 10, "BR_STATUS"), ("gen", gen, 7, "GEN_STATUS")):
+        bad = np.flatnonzero(~np.isin(arr[:, col], (0, 1)))
+        if bad.size:
+            raise CaseFormatError(
+                f"{case.path}: mpc.{matrix} row {bad[0] + 1}, column {col + 1} ({col_name}): {arr[bad[0], col]:g}; "
+                "a status is 1 (in service) or 0 (out of service)"
+            )
     _check_isolated(case, btype, f, t, branch[:, 10] > 0)
     gen_on = gen[:, 7] > 0
     _check_gen_limits(case, gen, gen_on)
+    _check_gen_voltages(case, gen, gen_on, gbus)
     slack_gens = np.flatnonzero(gen_on & (gbus == slack))
     if slack_gens.size == 0:
         raise CaseFormatError(f"{case.path}: no in-service generator at the reference bus {ids[slack]}")
@@ -377,6 +401,19 @@ def _check_gen_limits(case: MatpowerCase, gen: np.ndarray, on: np.ndarray) -> No
             g = crossed[0]
             raise CaseFormatError(
                 f"{case.path}: mpc.gen row {g + 1} (bus {gen[g, 0]:.0f}): {label}MAX {gen[g, hi]:g} < {label}MIN {gen[g, lo]:g}"
+            )
+
+
+def _check_gen_voltages(case: MatpowerCase, gen: np.ndarray, on: np.ndarray, gbus: np.ndarray) -> None:
+    """In-service generators at the same bus hold one voltage (VG): two different ones
+    leave it to the reading program which wins (MATPOWER: the last)."""
+    first: dict[int, int] = {}
+    for g in np.flatnonzero(on):
+        k = first.setdefault(int(gbus[g]), int(g))
+        if gen[g, 5] != gen[k, 5]:
+            raise CaseFormatError(
+                f"{case.path}: mpc.gen rows {k + 1} and {g + 1} (bus {gen[g, 0]:.0f}) hold different voltages VG "
+                f"{gen[k, 5]:g} and {gen[g, 5]:g} p.u.; give them one"
             )
 
 

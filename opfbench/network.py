@@ -9,7 +9,7 @@ grid, loads positive when consuming.
 from __future__ import annotations
 
 from collections import deque
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field, fields, replace
 from functools import cached_property
 from typing import Literal
 
@@ -29,7 +29,10 @@ V_SETPOINT_PU = (0.5, 1.5)
 """Voltage magnitudes a slack or a voltage-controlled generator may be held at (p.u.);
 outside, the value is a typo (a sign, kV for p.u.), never a distribution feeder."""
 V_LIMIT_MAX_PU = 2.0
-"""The largest voltage limit (p.u.) accepted; vmin lies in [0, vmax]."""
+"""The largest voltage limit (p.u.) accepted; vmin lies in [0, vmax], vmax in
+[V_SETPOINT_PU[0], V_LIMIT_MAX_PU] (a band below 0.5 p.u. is no feeder's)."""
+BASE_MVA_RANGE = (1e-3, 1e6)
+"""Power bases (MVA) accepted: 1 kVA to 1 TVA; beyond, per-unit arithmetic over- or underflows."""
 
 
 def _frozen(arr: np.ndarray) -> np.ndarray:
@@ -69,11 +72,11 @@ class Network:
     read-only, and every array it derives (Y-bus — the sparse matrix's data, indices and
     indptr too —, branch admittances, the BFS tree) is read-only as well, so a shared
     (cached) network cannot be changed by one caller for all others. It checks array
-    lengths, finite values, unique bus numbers, bus types (one slack, of type 3, at
-    `slack`), non-negative branch resistance, no in-service branch of zero impedance,
-    positive taps, 0 ≤ vmin ≤ vmax ≤ V_LIMIT_MAX_PU per bus, the slack's and the PV
-    generators' voltage setpoints within V_SETPOINT_PU, and that every bus is connected
-    to the slack.
+    lengths, finite values, base_mva within BASE_MVA_RANGE, unique bus numbers, bus
+    types (one slack, of type 3, at `slack`), non-negative branch resistance, in-service
+    branches joining two buses through a non-zero impedance, positive taps, phase shifts
+    within ±360°, finite branch admittances, voltage limits, base kV and setpoints
+    (`_check_voltages`), and that every bus is connected to the slack.
     """
 
     name: str
@@ -108,9 +111,12 @@ class Network:
             object.__setattr__(self, name, _frozen(_array(self.name, name, getattr(self, name))))
         for name in ("base_mva", "v_slack"):
             object.__setattr__(self, name, _number(self.name, name, getattr(self, name)))
+        if not isinstance(self.name, str):
+            raise NetworkError(f"a network's name must be text, got {self.name!r}")
         if isinstance(self.slack, bool) or not isinstance(self.slack, (int, np.integer)):
             raise NetworkError(f"{self.name}: slack must be a bus index (an integer), got {self.slack!r}")
         object.__setattr__(self, "slack", int(self.slack))
+        object.__setattr__(self, "ders", _der_tuple(self.name, self.ders))
         self._check_arrays()
         self._check_buses()
         self._check_voltages()
@@ -126,28 +132,17 @@ class Network:
                     raise NetworkError(
                         f"{self.name}: {name} has a non-finite value at position {int(np.argmin(np.isfinite(arr)))}"
                     )
-        if not (np.isfinite(self.base_mva) and self.base_mva > 0):
-            raise NetworkError(f"{self.name}: base_mva must be a finite positive number, got {self.base_mva}")
+        if not BASE_MVA_RANGE[0] <= self.base_mva <= BASE_MVA_RANGE[1]:
+            raise NetworkError(
+                f"{self.name}: base_mva {self.base_mva:g} MVA outside [{BASE_MVA_RANGE[0]:g}, {BASE_MVA_RANGE[1]:g}] MVA"
+            )
         for name in ("f", "t", "gen_bus"):
             arr = getattr(self, name)
             if arr.size and (arr.min() < 0 or arr.max() >= self.n_bus):
                 raise NetworkError(f"{self.name}: {name} refers to a bus index outside 0..{self.n_bus - 1}")
         if not 0 <= self.slack < self.n_bus:
             raise NetworkError(f"{self.name}: slack index {self.slack} outside 0..{self.n_bus - 1}")
-        zero_z = np.flatnonzero(self.status & (self.r == 0) & (self.x == 0))
-        if zero_z.size:
-            k = zero_z[0]
-            raise NetworkError(
-                f"{self.name}: in-service branch {k + 1} ({self.bus_ids[self.f[k]]}-{self.bus_ids[self.t[k]]}) has zero "
-                "impedance (r = x = 0)"
-            )
-        bad_tap = np.flatnonzero(self.tap <= 0)
-        if bad_tap.size:
-            k = bad_tap[0]
-            raise NetworkError(
-                f"{self.name}: branch {k + 1} ({self.bus_ids[self.f[k]]}-{self.bus_ids[self.t[k]]}) has tap ratio "
-                f"{self.tap[k]:g}; it must be > 0 (1 = no transformer)"
-            )
+        self._check_branches()
         neg_r = np.flatnonzero(self.r < 0)
         if neg_r.size:
             k = neg_r[0]
@@ -167,6 +162,29 @@ class Network:
                     f"{self.name}: DER at bus {self.bus_ids[d.bus]} has S̄ {d.s_rated_mva} MVA; must be finite and ≥ "
                     f"its rated P {d.rating_mw} MW"
                 )
+
+    def _check_branches(self) -> None:
+        """In-service branches join two buses through a non-zero impedance; taps > 0, phase
+        shifts within ±360°, and the π-model admittances they give finite."""
+
+        def refuse(k: int, problem: str) -> None:
+            raise NetworkError(f"{self.name}: branch {k + 1} ({self.bus_ids[self.f[k]]}-{self.bus_ids[self.t[k]]}) {problem}")
+
+        on = self.status
+        for rows, problem in (
+            (on & (self.f == self.t), "connects a bus to itself"),
+            (on & (self.r == 0) & (self.x == 0), "is in service with zero impedance (r = x = 0)"),
+            (self.tap <= 0, "has tap ratio {tap:g}; it must be > 0 (1 = no transformer)"),
+            (np.abs(self.shift) > 360, "has phase shift {shift:g}°; it must lie within ±360°"),
+        ):
+            bad = np.flatnonzero(rows)
+            if bad.size:
+                refuse(int(bad[0]), problem.format(tap=self.tap[bad[0]], shift=self.shift[bad[0]]))
+        with np.errstate(all="ignore"):
+            finite = np.logical_and.reduce([np.isfinite(y) for y in self.branch_admittances])
+        if not finite.all():
+            k = int(np.flatnonzero(~finite)[0])
+            refuse(k, f"has an admittance that is not a finite number (r {self.r[k]:g}, x {self.x[k]:g}, tap {self.tap[k]:g})")
 
     def _check_buses(self) -> None:
         """Unique bus numbers; bus types 1/2/3 with exactly one slack (type 3), at `slack`."""
@@ -190,16 +208,21 @@ class Network:
             )
 
     def _check_voltages(self) -> None:
-        """0 ≤ vmin ≤ vmax ≤ V_LIMIT_MAX_PU per bus; the slack's and PV generators'
-        setpoints within V_SETPOINT_PU."""
-        bad = np.flatnonzero((self.vmin < 0) | (self.vmin > self.vmax) | (self.vmax > V_LIMIT_MAX_PU))
+        """0 ≤ vmin ≤ vmax per bus, vmax within [V_SETPOINT_PU[0], V_LIMIT_MAX_PU]; the
+        slack's and PV generators' setpoints within V_SETPOINT_PU; base kV ≥ 0."""
+        lo, hi = V_SETPOINT_PU
+        bad = np.flatnonzero((self.vmin < 0) | (self.vmin > self.vmax) | (self.vmax > V_LIMIT_MAX_PU) | (self.vmax < lo))
         if bad.size:
             i = bad[0]
             raise NetworkError(
                 f"{self.name}: bus {self.bus_ids[i]} has voltage limits Vmin {self.vmin[i]:g}, Vmax {self.vmax[i]:g} p.u.; "
-                f"they must satisfy 0 ≤ Vmin ≤ Vmax ≤ {V_LIMIT_MAX_PU:g}" + (f" ({bad.size} such buses)" if bad.size > 1 else "")
+                f"they must satisfy 0 ≤ Vmin ≤ Vmax and {lo:g} ≤ Vmax ≤ {V_LIMIT_MAX_PU:g}"
+                + (f" ({bad.size} such buses)" if bad.size > 1 else "")
             )
-        lo, hi = V_SETPOINT_PU
+        negative_kv = np.flatnonzero(self.base_kv < 0)
+        if negative_kv.size:
+            i = negative_kv[0]
+            raise NetworkError(f"{self.name}: bus {self.bus_ids[i]} has base voltage {self.base_kv[i]:g} kV; it must be ≥ 0")
         if not lo <= self.v_slack <= hi:
             raise NetworkError(
                 f"{self.name}: slack voltage {self.v_slack:g} p.u. (bus {self.bus_ids[self.slack]}) outside [{lo:g}, {hi:g}] p.u."
@@ -223,7 +246,9 @@ class Network:
         return len(self.f)
 
     def index_of(self, bus_id: int) -> int:
-        """Internal index of the bus with external number `bus_id`."""
+        """Internal index of the bus with external number `bus_id` (an integer)."""
+        if isinstance(bus_id, (bool, np.bool_)) or not isinstance(bus_id, (int, np.integer)):
+            raise NetworkError(f"{self.name}: a bus number is an integer, got {bus_id!r}")
         hits = np.flatnonzero(self.bus_ids == bus_id)
         if hits.size == 0:
             raise NetworkError(f"{self.name}: no bus numbered {bus_id}")
@@ -252,7 +277,11 @@ class Network:
         return np.flatnonzero(self.bus_type == 2)
 
     def with_changes(self, **changes) -> "Network":
-        """A copy with some fields replaced (the network itself is immutable)."""
+        """A copy with some fields replaced (the network itself is immutable), checked
+        like a new network."""
+        unknown = sorted(set(changes) - {f.name for f in fields(self)})
+        if unknown:
+            raise NetworkError(f"{self.name}: a network has no field {', '.join(unknown)}")
         return replace(self, **changes)
 
     # ----- electrical matrices -----------------------------------------------------
@@ -422,6 +451,24 @@ def _array(network: str, name: str, value: object) -> np.ndarray:
     if kind is int and raw.dtype.kind == "u" and raw.size and raw.max() > np.iinfo(np.int64).max:
         raise NetworkError(f"{network}: {name} value {raw.max()} does not fit a 64-bit integer")
     return raw.astype(kind)
+
+
+def _der_tuple(network: str, ders: object) -> tuple[DER, ...]:
+    """`ders` as a tuple of DER units whose bus is an index (an integer) and whose ratings
+    are real numbers; NetworkError naming the unit otherwise."""
+    try:
+        units = tuple(ders)  # type: ignore[arg-type]
+    except TypeError:
+        raise NetworkError(f"{network}: ders must be a sequence of DER units, got {ders!r}") from None
+    for i, d in enumerate(units):
+        if not isinstance(d, DER):
+            raise NetworkError(f"{network}: ders[{i}] is {d!r}, not a DER unit")
+        if isinstance(d.bus, (bool, np.bool_)) or not isinstance(d.bus, (int, np.integer)):
+            raise NetworkError(f"{network}: ders[{i}] has bus {d.bus!r}; a DER's bus is an internal bus index (an integer)")
+        for label, value in (("rating_mw", d.rating_mw), ("s_mva", d.s_mva)):
+            if value is not None and (isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, float, np.number))):
+                raise NetworkError(f"{network}: ders[{i}] has {label} {value!r}; it must be a real number")
+    return units
 
 
 def _number(network: str, name: str, value: object) -> float:

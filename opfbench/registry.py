@@ -49,7 +49,17 @@ class StrategySpec:
         return getattr(importlib.import_module(module), func)
 
     def run(self, scenario: Scenario, k: float, **options) -> StrategyResult:
-        """Run on every snapshot of `scenario`; the result carries this entry's name."""
+        """Run on every snapshot of `scenario`; the result carries this entry's name.
+        InputError for a scenario that is not a `Scenario`, a k that is not one real
+        number (text, true/false), an unknown option or one not of its default's type."""
+        from opfbench.scenario import Scenario
+
+        if not isinstance(scenario, Scenario):
+            raise InputError(
+                f"strategy {self.name!r} runs on a Scenario (e.g. Scenario.snapshot(net)), got {type(scenario).__name__}"
+            )
+        if isinstance(k, (bool, np.bool_)) or not isinstance(k, (int, float, np.number, np.ndarray)):
+            raise InputError(f"reserve coefficient k must be a number in [0, 1], got {k!r}")
         unknown = sorted(set(options) - set(self.options))
         if unknown:
             allowed = ", ".join(self.options) or "none"

@@ -35,11 +35,17 @@ class Scenario:
     pv_night_q: np.ndarray | None = None
 
     def __post_init__(self) -> None:
+        if not isinstance(self.net, Network):
+            raise InputError(
+                f"scenario: net must be a Network (e.g. opfbench.cases.load_case('paper33')), got {type(self.net).__name__}"
+            )
         n_der = len(self.net.ders)
         ls = _real_array("load_scale", self.load_scale)
         if ls.ndim > 1:
             raise InputError(f"scenario: load_scale must be a number or a 1-D array (S,), got shape {ls.shape}")
         ls = np.atleast_1d(ls)
+        if ls.size == 0:
+            raise InputError("scenario: no snapshot (load_scale is empty)")
         p = _der_array("der_p_mw", self.der_p_mw, ls.shape[0], n_der)
         _check_finite("load_scale", ls)
         _check_finite("der_p_mw", p)
@@ -54,7 +60,10 @@ class Scenario:
             self._check_range("der_p_forecast_mw", pf)
             object.__setattr__(self, "der_p_forecast_mw", _frozen(pf))
         if self.pv_night_q is not None:
-            mask = np.array(self.pv_night_q, dtype=bool)
+            raw = np.array(self.pv_night_q)
+            if raw.dtype != bool and not (raw.dtype.kind in "iu" and np.isin(raw, (0, 1)).all()):
+                raise InputError(f"scenario: pv_night_q must be true/false per snapshot, got {raw.dtype} values")
+            mask = raw.astype(bool)
             if mask.shape != ls.shape:
                 raise InputError(f"scenario: pv_night_q must have shape (S,) = {ls.shape}, got {mask.shape}")
             object.__setattr__(self, "pv_night_q", _frozen(mask))
@@ -185,10 +194,9 @@ def _real_array(label: str, value: object) -> np.ndarray:
         raise InputError(f"scenario: {label} is not a regular array (rows of different lengths)") from None
     if np.iscomplexobj(arr):
         raise InputError(f"scenario: {label} must be real, got complex values")
-    try:
-        return np.array(arr, dtype=float)
-    except (TypeError, ValueError):
-        raise InputError(f"scenario: {label} must be numeric, got {arr.dtype} values") from None
+    if arr.dtype.kind not in "iuf":  # text ('1' would convert), true/false, objects
+        raise InputError(f"scenario: {label} must be numeric, got {arr.dtype} values")
+    return np.array(arr, dtype=float)
 
 
 def _der_array(label: str, value: object, n_snap: int, n_der: int) -> np.ndarray:

@@ -74,11 +74,43 @@ BAD_VALUES = {
     "slack voltage 12.66 (kV for p.u.)": (with_entry(TINY_CASE, "gen", 1, 6, "12.66"), "slack voltage 12.66 p.u."),
     "voltage limits -5 / 50": (
         with_entry(with_entry(TINY_CASE, "bus", 2, 13, "-5"), "bus", 2, 12, "50"),
-        "bus 2 has voltage limits Vmin -5, Vmax 50 p.u.; they must satisfy 0 ≤ Vmin ≤ Vmax ≤ 2",
+        "bus 2 has voltage limits Vmin -5, Vmax 50 p.u.; they must satisfy 0 ≤ Vmin ≤ Vmax and 0.5 ≤ Vmax ≤ 2",
     ),
     "zero-impedance branch": (
         with_entry(with_entry(TINY_CASE, "branch", 2, 3, "0"), "branch", 2, 4, "0"),
-        "in-service branch 2 (2-3) has zero impedance (r = x = 0)",
+        "branch 2 (2-3) is in service with zero impedance (r = x = 0)",
+    ),
+    "branch from a bus to itself": (with_entry(TINY_CASE, "branch", 2, 2, "2"), "branch 2 (2-2) connects a bus to itself"),
+    "phase shift 1e308°": (with_entry(TINY_CASE, "branch", 2, 10, "1e308"), "branch 2 (2-3) has phase shift 1e+308°"),
+    "tap 1e-300": (with_entry(TINY_CASE, "branch", 2, 9, "1e-300"), "branch 2 (2-3) has an admittance that is not a finite"),
+    "branch status 2": (with_entry(TINY_CASE, "branch", 2, 11, "2"), "mpc.branch row 2, column 11 (BR_STATUS): 2; a status is 1"),
+    "branch status 0.5": (with_entry(TINY_CASE, "branch", 2, 11, "0.5"), "(BR_STATUS): 0.5; a status is 1 (in service) or 0"),
+    "generator status -1": (with_entry(TINY_CASE, "gen", 1, 8, "-1"), "mpc.gen row 1, column 8 (GEN_STATUS): -1"),
+    "two slack generators, two voltages": (
+        TINY_CASE.replace("mpc.gen = [\n", "mpc.gen = [\n\t1\t0\t0\t10\t-10\t1.05\t100\t1\t10" + "\t0" * 12 + ";\n"),
+        "mpc.gen rows 1 and 2 (bus 1) hold different voltages VG 1.05 and 1 p.u.",
+    ),
+    "voltage limits [0, 0]": (
+        with_entry(with_entry(TINY_CASE, "bus", 2, 12, "0"), "bus", 2, 13, "0"),
+        "bus 2 has voltage limits Vmin 0, Vmax 0 p.u.; they must satisfy 0 ≤ Vmin ≤ Vmax and 0.5 ≤ Vmax ≤ 2",
+    ),
+    "negative base kV": (with_entry(TINY_CASE, "bus", 2, 10, "-12.66"), "bus 2 has base voltage -12.66 kV; it must be ≥ 0"),
+    "base kV 1e308 in the ohm conversion": (
+        with_entry(TINY_CASE, "bus", 1, 10, "1e308"),
+        "line 26: the ohm → p.u. conversion over- or underflows (base impedance inf ohm from BASE_KV 1e+308 kV",
+    ),
+    "baseMVA 1e-308": (TINY_CASE.replace("mpc.baseMVA = 10;", "mpc.baseMVA = 1e-308;"), "conversion over- or underflows"),
+    "baseMVA 1e9 in a p.u. case": (
+        TINY_CASE.replace("mpc.baseMVA = 10;", "mpc.baseMVA = 1e9;").split("[PQ, PV")[0],
+        "base_mva 1e+09 MVA outside [0.001, 1e+06] MVA",
+    ),
+    "Python-only number 1_00": (with_entry(TINY_CASE, "bus", 2, 3, "1_00"), "column 3: non-numeric entry '1_00'"),
+    "Arabic-Indic digits": (with_entry(TINY_CASE, "bus", 2, 3, "١٠٠"), "column 3: non-numeric entry '١٠٠'"),
+    "a matrix defined twice": (
+        TINY_CASE.replace(
+            "mpc.gencost = [", "mpc.bus = [\n\t9\t1\t0\t0\t0\t0\t1\t1\t0\t12.66\t1\t1.1\t0.9;\n];\nmpc.gencost = ["
+        ),
+        "line 16: mpc.bus is defined a second time (first at line 4)",
     ),
 }
 
@@ -92,6 +124,23 @@ def test_case_values_outside_their_domain_exit_2_naming_them(capsys, tmp_path, l
     code, err = _cli(capsys, [command[0], str(path), *command[1:]])
     assert code == 2 and err.count("\n") == 1 and "Traceback" not in err, err
     assert err.startswith(f"opfbench {command[0]}: error: {path}") and message in err, err
+
+
+def test_a_byte_order_mark_and_windows_line_ends_read_as_the_plain_file(tmp_path):
+    from opfbench.matpower import load_case_file
+
+    plain, marked = tmp_path / "plain.m", tmp_path / "marked.m"
+    plain.write_text(TINY_CASE)
+    marked.write_bytes(("\ufeff" + TINY_CASE.replace("\n", "\r\n")).encode("utf-8"))
+    a, b = load_case_file(plain), load_case_file(marked)
+    assert np.array_equal(a.ybus.view(float), b.ybus.view(float)) and np.array_equal(a.load_p_mw, b.load_p_mw)
+
+
+def test_a_diverging_flow_prints_no_floating_point_warnings(tmp_path):
+    path = tmp_path / "huge.m"
+    path.write_text(with_entry(TINY_CASE, "bus", 2, 5, "1e300"))  # Gs 1e300 MW
+    proc = subprocess.run([sys.executable, "-m", "opfbench", "pf", str(path), "--json"], capture_output=True, text=True)
+    assert proc.returncode == 1 and proc.stderr == "" and json.loads(proc.stdout)["losses_kw"] is None
 
 
 def test_an_isolated_bus_is_refused_not_turned_into_a_load_bus(tmp_path):
@@ -223,14 +272,14 @@ def test_with_changes_refuses_an_inconsistent_network():
         "slack voltage as text": ({"v_slack": "1.0"}, "v_slack must be a real number, got '1.0'"),
         "limits -5 / 50": (
             {"vmin": np.where(at == 4, -5.0, net.vmin), "vmax": np.where(at == 4, 50.0, net.vmax)},
-            "bus 5 has voltage limits Vmin -5, Vmax 50 p.u.; they must satisfy 0 ≤ Vmin ≤ Vmax ≤ 2",
+            "bus 5 has voltage limits Vmin -5, Vmax 50 p.u.; they must satisfy 0 ≤ Vmin ≤ Vmax and 0.5 ≤ Vmax ≤ 2",
         ),
         "duplicated bus number": ({"bus_ids": np.where(at == 7, 7, net.bus_ids)}, "bus number 7 is used by more than one bus"),
         "fractional bus number": ({"bus_ids": net.bus_ids + 0.5}, "bus_ids must be whole numbers, got 1.5"),
         "bus numbers as text": ({"bus_ids": net.bus_ids.astype(str)}, "bus_ids must be real numbers, got <U"),
         "zero impedance": (
             {"r": np.where(np.arange(net.n_branch) == 3, 0, net.r), "x": np.where(np.arange(net.n_branch) == 3, 0, net.x)},
-            "in-service branch 4 (4-5) has zero impedance",
+            "branch 4 (4-5) is in service with zero impedance (r = x = 0)",
         ),
         "tap 0": ({"tap": np.where(np.arange(net.n_branch) == 3, 0.0, net.tap)}, "branch 4 (4-5) has tap ratio 0"),
         "complex resistance": ({"r": net.r + 1j}, "r must be real numbers, got complex128"),
@@ -240,6 +289,41 @@ def test_with_changes_refuses_an_inconsistent_network():
             net.with_changes(**changes)
     moved = net.with_changes(slack=5, bus_type=np.where(at == 5, 3, np.where(at == 0, 1, net.bus_type)))
     assert moved.slack == 5 and moved.bfs_order[0] == 5  # a consistent move is fine
+
+
+def test_wrong_types_through_the_python_api_name_what_is_wrong():
+    from opfbench.errors import NetworkError
+    from opfbench.network import DER
+    from opfbench.registry import run_strategy
+
+    net = load_case("paper33")
+    scenario = Scenario.snapshot(net)
+    refused = [
+        (NetworkError, lambda: net.with_changes(name=None), "a network's name must be text, got None"),
+        (NetworkError, lambda: net.with_changes(ders=("PV",)), "ders[0] is 'PV', not a DER unit"),
+        (NetworkError, lambda: net.with_changes(ders=(DER(3.5, "PV", 0.5),)), "ders[0] has bus 3.5; a DER's bus is an"),
+        (NetworkError, lambda: net.with_changes(ders=(DER(True, "PV", 0.5),)), "ders[0] has bus True"),
+        (NetworkError, lambda: net.with_changes(ders=(DER(3, "PV", "0.5"),)), "ders[0] has rating_mw '0.5'; it must be a"),
+        (NetworkError, lambda: net.with_changes(colour="red"), "paper33: a network has no field colour"),
+        (NetworkError, lambda: net.index_of("5"), "paper33: a bus number is an integer, got '5'"),
+        (InputError, lambda: load_case(None), "a case is a shipped case's name or a MATPOWER .m file's path, got None"),
+        (InputError, lambda: Scenario("paper33", np.ones(1), np.zeros((1, 5))), "scenario: net must be a Network"),
+        (InputError, lambda: Scenario(net, "1", np.zeros((1, 5))), "scenario: load_scale must be numeric, got <U1"),
+        (InputError, lambda: Scenario(net, True, np.zeros((1, 5))), "scenario: load_scale must be numeric, got bool"),
+        (InputError, lambda: Scenario(net, np.zeros(0), np.zeros((0, 5))), "scenario: no snapshot (load_scale is empty)"),
+        (InputError, lambda: Scenario(net, np.ones(1), np.zeros((1, 5)), pv_night_q=np.array(["no"])), "pv_night_q must be"),
+        (InputError, lambda: Scenario(net, np.ones(1), np.zeros((1, 5)), pv_night_q=[2]), "pv_night_q must be true/false"),
+        (InputError, lambda: run_strategy("llma", scenario, "0"), "reserve coefficient k must be a number in [0, 1], got '0'"),
+        (InputError, lambda: run_strategy("llma", scenario, True), "reserve coefficient k must be a number in [0, 1], got True"),
+        (InputError, lambda: run_strategy("llma", net, 0.0), "strategy 'llma' runs on a Scenario (e.g. Scenario.snapshot"),
+        (InputError, lambda: run_strategy("acopf", None, 0.0), "strategy 'acopf' runs on a Scenario (e.g. Scenario.snapshot"),
+    ]
+    for error, call, message in refused:
+        with pytest.raises(error, match=re.escape(message)):
+            call()
+    listed = net.with_changes(ders=list(net.ders))
+    assert isinstance(listed.ders, tuple)  # a list handed in cannot change the network afterwards
+    assert run_strategy("llma", scenario, np.float64(0.2)).losses_kw[0] == run_strategy("llma", scenario, 0.2).losses_kw[0]
 
 
 def test_network_copies_the_callers_arrays():

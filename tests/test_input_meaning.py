@@ -52,6 +52,14 @@ def no_run(monkeypatch):
             "offset: 2016-10-30T02:30:00+02:00 (the first) or 2016-10-30T02:30:00+01:00 (the second)",
         ),
         ("2017-01-01..2017-01-02", "period '2017-01-01..2017-01-02' leaves the data: they cover 2016-01-01T00:00:00+01:00"),
+        ("0001-01-01..2016-06-29", "period: 0001-01-01 lies outside the data, which cover 2016-01-01T00:00:00+01:00"),
+        ("2016-06-28T24:00..2016-06-29", "period: cannot read time '2016-06-28T24:00'"),
+        ("2016-02-30..2016-03-01", "period: cannot read time '2016-02-30'"),
+        ("2016-06-28..", "period: cannot read time ''"),
+        (
+            "2016-06-28T10:00..2016-06-28T10:00:30",
+            "period '2016-06-28T10:00..2016-06-28T10:00:30' lasts 0.5 min, less than one step of 1 min (--step-minutes)",
+        ),
         ("2016-06-28T12:00..2016-06-28T10:00", "END must come after START"),
     ],
 )
@@ -71,9 +79,9 @@ def test_iso_8601_forms_and_offsets_are_read_as_written():
 @pytest.mark.parametrize(
     ("period", "step", "message"),
     [
-        ("paper-day", "1e9", "--step-minutes 1e+09 is longer than the period 'paper-day' (1440 min)"),
-        ("2016-06-28..2016-06-29", "1e9", "--step-minutes 1e+09 is longer than the period"),
-        ("year", "1e300", "--step-minutes 1e+300 is longer than the period 'year'"),
+        ("paper-day", "1e9", "period 'paper-day' lasts 1440 min, less than one step of 1e+09 min (--step-minutes)"),
+        ("2016-06-28..2016-06-29", "1e9", "period '2016-06-28..2016-06-29' lasts 1440 min, less than one step of 1e+09"),
+        ("year", "1e300", "period 'year' lasts 527040 min, less than one step of 1e+300 min"),
         ("paper-day", "0.5", "--step-minutes 0.5: the finest data (BSRN PV) are 1-minute values; the step must be ≥ 1 min"),
         ("paper-day", "1e-300", "the step must be ≥ 1 min"),
         ("2016-12-31T23:00..2017-01-01", "1", "its last step 2016-12-31T23:59:00+01:00 lies after the data's last"),
@@ -116,6 +124,29 @@ def test_an_empty_path_is_not_the_current_folder(capsys, tmp_path, monkeypatch, 
     code, err = _cli(capsys, argv)
     assert code == 2 and ("an empty path" in err or "contains a NUL byte" in err), err
     assert list(tmp_path.iterdir()) == []  # nothing written where the user stands
+
+
+@pytest.mark.parametrize(
+    ("argv", "message"),
+    [
+        (["pf", "paper33", "--load-scale", "1_0"], "argument --load-scale: not a number: '1_0'"),  # float() reads 10
+        (["pf", "paper33", "--load-scale", "١"], "argument --load-scale: not a number: '١'"),  # float() reads 1
+        (["snapshot", "paper33", "--strategy", "llma", "--k", "Infinity"], "argument --k: must be a finite number ≥ 0"),
+        (["run", "--price", "nan"], "argument --price: must be a finite number ≥ 0, got nan"),
+        (["run", "--currency", " "], "currency must be a printable, non-empty label (e.g. EUR), got ' '"),
+        (["fault", "paper33", "--fault-bus", "17", "--variants", "emf-pu=3"], "needs an EMF within [0.5, 1.5] p.u., got 3.0"),
+    ],
+)
+def test_numbers_and_labels_written_oddly_exit_2(capsys, tmp_path, no_run, argv, message):
+    code, err = _cli(capsys, [*argv, "--out", str(tmp_path / "out")] if argv[0] in ("run", "fault") else argv)
+    assert code == 2 and message in err.splitlines()[-1] and "Traceback" not in err, err  # argparse adds its usage
+
+
+def test_a_forecast_folder_that_is_a_file(tmp_path):
+    target = tmp_path / "forecast"
+    target.write_text("")
+    with pytest.raises(DataError, match=f"forecast folder {target} is not a folder"):
+        load_forecast(target, "pv", "lstm")
 
 
 def test_a_file_path_as_forecast_is_an_unknown_model_name(capsys, tmp_path, no_run):

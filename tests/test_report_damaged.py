@@ -9,6 +9,7 @@ import json
 import shutil
 from pathlib import Path
 
+import pandas as pd
 import pytest
 
 from opfbench.cli import main
@@ -31,6 +32,14 @@ def _manifest(run: Path, edit) -> None:
     data = json.loads(path.read_text())
     edit(data)
     path.write_text(json.dumps(data))
+
+
+def _steps(run: Path, edit) -> None:
+    edit(pd.read_parquet(run / "steps.parquet")).to_parquet(run / "steps.parquet", index=False)
+
+
+def _summary(run: Path, edit) -> None:
+    edit(pd.read_csv(run / "summary.csv")).to_csv(run / "summary.csv", index=False)
 
 
 def _truncate(path: Path) -> None:
@@ -108,6 +117,51 @@ DAMAGE = {
         lambda run: _manifest(run, lambda m: m.pop("schema")),
         "manifest.json: schema None is not one this opfbench reads",
     ),
+    "schema true": (lambda run: _manifest(run, lambda m: m.update(schema=True)), "manifest.json: schema True is not one"),
+    "ks as text": (
+        lambda run: _manifest(run, lambda m: m["config"].update(ks=["a"])),
+        "manifest.json: config.ks is ['a'], expected a list of numbers",
+    ),
+    "a case entry as text": (
+        lambda run: _manifest(run, lambda m: m.update(cases={"paper33": "big"})),
+        "manifest.json: cases.paper33 is 'big', expected an object",
+    ),
+    "DER list as text": (
+        lambda run: _manifest(run, lambda m: m["cases"]["paper33"].update(ders="many")),
+        "manifest.json: cases.paper33.ders is 'many', expected a list",
+    ),
+    "manifest nested too deeply": (
+        lambda run: (run / "manifest.json").write_text("[" * 100_000 + "]" * 100_000),
+        "manifest.json: not a run's JSON (nested too deeply to read)",
+    ),
+    "price NaN literal": (
+        lambda run: (run / "manifest.json").write_text(
+            (run / "manifest.json").read_text().replace('"price_per_kwh": 0.25', '"price_per_kwh": NaN')
+        ),
+        "manifest.json: config.price_per_kwh is nan, expected a finite number ≥ 0",
+    ),
+    "steps without a strategy": (
+        lambda run: _steps(run, lambda t: t.assign(strategy=t.strategy.where(t.index % 7 != 0, None))),
+        "steps.parquet: 123 row(s) have no strategy",
+    ),
+    "steps k as text": (lambda run: _steps(run, lambda t: t.assign(k=t.k.astype(str))), "steps.parquet: column 'k' is text"),
+    "steps time as numbers": (
+        lambda run: _steps(run, lambda t: t.assign(time=t.time.astype("int64"))),
+        "steps.parquet: column 'time' is number, expected time",
+    ),
+    "summary rows repeated": (
+        lambda run: _summary(run, lambda t: pd.concat([t, t])),
+        "summary.csv: configuration case=paper33, strategy=no-action, k=0.0, night_mode=connected, forecast=off has more",
+    ),
+    "summary without a case": (lambda run: _summary(run, lambda t: t.assign(case=None)), "summary.csv: 81 row(s) have no case"),
+    "summary infinite energy": (
+        lambda run: _summary(run, lambda t: t.assign(energy_kwh=float("inf"))),
+        "summary.csv: column 'energy_kwh' holds an infinite value",
+    ),
+    "summary negative count": (
+        lambda run: _summary(run, lambda t: t.assign(steps=-5)),
+        "summary.csv: column 'steps' holds -5, not a count of steps",
+    ),
 }
 
 
@@ -175,6 +229,20 @@ def test_report_out_must_be_a_file(capsys, tmp_path, run_dir):
     assert code == 2 and "cannot create the folder" in err, err
     assert main(["report", str(run_dir), "--out", str(tmp_path / "new" / "page.html")]) == 0
     assert (tmp_path / "new" / "page.html").stat().st_size > 0
+
+
+def test_files_without_rows_are_missing_inputs_not_errors(capsys, run_dir):
+    _steps(run_dir, lambda t: t.iloc[:0])
+    _summary(run_dir, lambda t: t.iloc[:0])
+    assert main(["report", str(run_dir)]) == 0, capsys.readouterr().err
+    html = (run_dir / "report.html").read_text()
+    assert html.count(f"opfbench run --out {run_dir}") >= 2  # the sections say which command writes them
+
+
+def test_report_out_in_a_folder_nothing_can_be_written_to(capsys, run_dir):
+    code = main(["report", str(run_dir), "--out", "/proc/opfbench-report.html"])  # root passes os.access here
+    err = capsys.readouterr().err
+    assert code == 2 and "--out /proc/opfbench-report.html: cannot write in /proc" in err, err
 
 
 def test_run_refuses_a_damaged_report_input_before_its_work(capsys, tmp_path, monkeypatch):

@@ -101,6 +101,8 @@ def _shipped(name: str) -> Network:
 
 def load_case(name_or_path: str) -> Network:
     """A shipped case by name, or a MATPOWER `.m` file by path."""
+    if not isinstance(name_or_path, (str, Path)):
+        raise InputError(f"a case is a shipped case's name or a MATPOWER .m file's path, got {name_or_path!r}")
     if name_or_path in _BUILDERS:
         return _shipped(name_or_path)
     path = Path(name_or_path)

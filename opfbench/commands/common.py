@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import math
+import re
 from pathlib import Path
 
 from opfbench.jsonio import print_json
@@ -11,12 +12,17 @@ from opfbench.jsonio import print_json
 __all__ = ["add_operating_point", "fraction", "path", "print_json"]
 
 
+NUMBER = re.compile(r"^\s*[+-]?(?:\d+\.?\d*|\.\d+)(?:[eE][+-]?\d+)?\s*$", re.ASCII)
+"""A decimal number as written on a command line (Python's float() also reads 1_0, ١ and nan)."""
+
+
 def fraction(text: str) -> float:
-    """argparse type: a finite, non-negative number."""
-    try:
-        value = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"not a number: {text!r}") from None
+    """argparse type: a finite, non-negative decimal number."""
+    if not NUMBER.match(text):
+        if text.strip().lower().lstrip("+-") in ("nan", "inf", "infinity"):
+            raise argparse.ArgumentTypeError(f"must be a finite number ≥ 0, got {text}")
+        raise argparse.ArgumentTypeError(f"not a number: {text!r}")
+    value = float(text)
     if not math.isfinite(value) or value < 0:
         raise argparse.ArgumentTypeError(f"must be a finite number ≥ 0, got {text}")
     return value

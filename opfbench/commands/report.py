@@ -6,6 +6,7 @@ from __future__ import annotations
 import argparse
 import os
 import sys
+import tempfile
 from pathlib import Path
 
 from opfbench.commands.common import fraction, path
@@ -70,6 +71,11 @@ def check_report_file(out: Path) -> Path:
         folder.mkdir(parents=True, exist_ok=True)
     except OSError as exc:
         raise InputError(f"--out {out}: cannot create the folder {folder} ({exc.strerror})") from None
-    if not os.access(folder, os.W_OK | os.X_OK) or (out.exists() and not os.access(out, os.W_OK)):
+    try:  # what the atomic write will do: a temporary file in the folder (os.access trusts root, not /proc)
+        with tempfile.NamedTemporaryFile(dir=folder, prefix=f".{out.name}.", suffix=".probe"):
+            pass
+    except OSError as exc:
+        raise InputError(f"--out {out}: cannot write in {folder} ({exc.strerror})") from None
+    if out.exists() and not os.access(out, os.W_OK):
         raise InputError(f"--out {out} is not writable")
     return out

@@ -149,8 +149,11 @@ class ModelParams:
             raise InputError(f"motor inertia H must be > 0 s, got {m.h_s}")
         if not s.impedance_pu > 0:
             raise InputError(f"source impedance must be > 0 p.u., got {s.impedance_pu}")
-        if s.emf == "given" and (s.emf_pu is None or not s.emf_pu > 0):
-            raise InputError("EMF mode 'given' needs a positive EMF in p.u. (--emf)")
+        from opfbench.network import V_SETPOINT_PU  # here: the CLI reads this module to build its parser
+
+        lo, hi = V_SETPOINT_PU  # the EMF node is the simulated network's slack
+        if s.emf == "given" and (s.emf_pu is None or not lo <= s.emf_pu <= hi):
+            raise InputError(f"EMF mode 'given' (emf-pu=X) needs an EMF within [{lo:g}, {hi:g}] p.u., got {s.emf_pu}")
         if s.emf not in ("reset", "held", "given"):
             raise InputError(f"unknown EMF mode {s.emf!r}; choose reset, held or given")
         if m.torque not in ("quadratic", "constant"):

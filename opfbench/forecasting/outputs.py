@@ -84,6 +84,8 @@ def load_forecast(directory: str | Path, dataset: str, model: str) -> pd.Series:
     not UTF-8 is a `DataError` naming file, column and line — never clipped, never skipped.
     """
     path = forecast_path(directory, dataset, "csv")
+    if Path(directory).exists() and not Path(directory).is_dir():
+        raise DataError(f"forecast folder {directory} is not a folder; give the --out folder of `opfbench forecast`")
     if not path.is_file():
         raise DataError(f"no forecast file {path}; run `opfbench forecast --dataset {dataset} --out {directory}`")
     rating = _rating_kw(forecast_path(directory, dataset, "json"), dataset)

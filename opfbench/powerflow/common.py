@@ -56,8 +56,9 @@ class PowerFlowResult:
         yff, yft, ytf, ytt = self.net.branch_admittances
         vf, vt = self.v[..., self.net.f], self.v[..., self.net.t]
         base = self.net.base_mva
-        sf = vf * np.conj(yff * vf + yft * vt) * base
-        st = vt * np.conj(ytf * vf + ytt * vt) * base
+        with np.errstate(all="ignore"):  # a diverged snapshot's iterate may overflow; it carries no figure
+            sf = vf * np.conj(yff * vf + yft * vt) * base
+            st = vt * np.conj(ytf * vf + ytt * vt) * base
         return sf, st
 
     @property
@@ -74,7 +75,8 @@ class PowerFlowResult:
     def losses_kw(self) -> np.ndarray:
         """Total series + charging active losses over all branches (kW)."""
         sf, st = self._flows
-        return (sf + st).real.sum(axis=-1) * 1e3
+        with np.errstate(all="ignore"):
+            return (sf + st).real.sum(axis=-1) * 1e3
 
     @property
     def slack_s_mva(self) -> np.ndarray:

@@ -14,6 +14,7 @@ import math
 from dataclasses import dataclass, field
 from pathlib import Path
 
+import numpy as np
 import pandas as pd
 import pyarrow as pa
 import pyarrow.parquet as pq
@@ -109,8 +110,26 @@ SUMMARY_NUMBERS = (
 pf_converged_steps and pf_diverged_steps when present."""
 FORECAST_METRICS = ("mse_scaled", "mape_pct", "mae_kw", "rmse_kw", "skill", "fit_s")
 """The metrics of a forecast JSON the report shows."""
+SUMMARY_COUNTS = (
+    "steps",
+    "not_ok_steps",
+    "voltage_violation_steps",
+    "excursion_steps",
+    "pf_converged_steps",
+    "pf_diverged_steps",
+)
+"""Columns of summary.csv that count steps: whole numbers ≥ 0."""
 SUMMARY_OPTIONAL_NUMBERS = ("pf_converged_steps", "pf_diverged_steps")
-_JSON_KINDS = {"a list": (list,), "an object": (dict,), "text": (str,), "a number": (int, float), "a whole number": (int,)}
+_JSON_KINDS = {
+    "a list": (list,),
+    "a list of text": (list,),
+    "a list of numbers": (list,),
+    "an object": (dict,),
+    "text": (str,),
+    "a number": (int, float),
+    "a whole number": (int,),
+}
+_ITEMS = {"a list of text": (str,), "a list of numbers": (int, float)}
 MANIFEST_FIELDS = {
     "command": "a list",
     "config": "an object",
@@ -121,11 +140,11 @@ MANIFEST_FIELDS = {
     "cases": "an object",
     "tasks": "a list",
     "timings": "an object",
-    "config.cases": "a list",
-    "config.strategies": "a list",
-    "config.ks": "a list",
-    "config.night_modes": "a list",
-    "config.forecast": "a list",
+    "config.cases": "a list of text",
+    "config.strategies": "a list of text",
+    "config.ks": "a list of numbers",
+    "config.night_modes": "a list of text",
+    "config.forecast": "a list of text",
     "config.night": "text",
     "config.period": "text",
     "config.step_minutes": "a number",
@@ -139,6 +158,18 @@ MANIFEST_FIELDS = {
     "timings.worker_peak_rss_mb": "a number",
 }
 """The manifest fields the report reads and their JSON types (null allowed; a field may be absent)."""
+
+
+CASE_FIELDS = {"buses": "a whole number", "ders": "a list", "vmin_pu": "a number", "vmax_pu": "a number"}
+"""The fields of a manifest's cases.<name> the report reads, and their JSON types."""
+
+
+def _is_kind(value: object, expected: str) -> bool:
+    """`value` is of the JSON kind `expected` (a key of `_JSON_KINDS`; true/false is no number)."""
+    if isinstance(value, bool) or not isinstance(value, _JSON_KINDS[expected]):
+        return False
+    items = _ITEMS.get(expected)
+    return items is None or all(isinstance(v, items) and not isinstance(v, bool) for v in value)  # type: ignore[attr-defined]
 
 
 def _damaged(path: Path, problem: str, command: str) -> InputError:
@@ -157,6 +188,8 @@ def _json(path: Path, command: str) -> dict | None:
         raise _damaged(path, f"not a UTF-8 text file (byte {exc.start})", command) from None
     except ValueError as exc:
         raise _damaged(path, f"not valid JSON ({exc})", command) from None
+    except RecursionError:
+        raise _damaged(path, "not a run's JSON (nested too deeply to read)", command) from None
     if not isinstance(data, dict):
         raise _damaged(path, f"holds a JSON {type(data).__name__}, not an object", command)
     return data
@@ -177,8 +210,17 @@ def _manifest(path: Path, command: str) -> dict | None:
         for parent in parents:
             node = node.get(parent) if isinstance(node, dict) else None
         value = node.get(name) if isinstance(node, dict) else None
-        if value is not None and (isinstance(value, bool) or not isinstance(value, _JSON_KINDS[expected])):
+        if value is not None and not _is_kind(value, expected):
             raise _damaged(path, f"{key} is {value!r}, expected {expected}", command)
+    for case, info in (m.get("cases") or {}).items():
+        fields = ((f"cases.{case}", info, "an object"),)
+        if isinstance(info, dict):
+            fields += tuple((f"cases.{case}.{k}", info.get(k), kind) for k, kind in CASE_FIELDS.items())
+            ders = info.get("ders") if isinstance(info.get("ders"), list) else []
+            fields += tuple((f"cases.{case}.ders[{i}]", d, "an object") for i, d in enumerate(ders))
+        for key, value, expected in fields:
+            if value is not None and not _is_kind(value, expected):
+                raise _damaged(path, f"{key} is {value!r}, expected {expected}", command)
     price = (m.get("config") or {}).get("price_per_kwh")
     if price is not None and not (math.isfinite(price) and price >= 0):
         raise _damaged(path, f"config.price_per_kwh is {price!r}, expected a finite number ≥ 0", command)
@@ -212,15 +254,23 @@ def reference_setting(summary: pd.DataFrame) -> tuple[str, float] | None:
 
 
 def _filtered(
-    path: Path, kinds: dict[str, str], filters: list | None, command: str, every_column: bool = False
+    path: Path,
+    kinds: dict[str, str],
+    filters: list | None,
+    command: str,
+    every_column: bool = False,
+    keys: tuple[str, ...] = tuple(_KEYS),
 ) -> pd.DataFrame | None:
     """The rows of a run table matching `filters` (parquet filters: a year's table need not
     fit in memory) with the columns of `kinds` (every column with `every_column`), text as
-    arrow strings; None when the file is absent or no row matches. InputError when it is
-    not a readable parquet file or lacks a column of `kinds` or has it of another kind."""
+    arrow strings; None when the file is absent, holds no row or no row matches.
+    InputError when it is not a readable parquet file, lacks a column of `kinds` or has it
+    of another kind, or a row read has no value in one of the `keys` columns."""
     if not path.is_file():
         return None
     try:
+        if pq.ParquetFile(path).metadata.num_rows == 0:
+            return None
         schema = pq.read_schema(path)
         for name, kind in kinds.items():
             found = _kind(schema.field(name).type) if name in schema.names else None
@@ -233,6 +283,9 @@ def _filtered(
         table = pq.read_table(path, columns=wanted, filters=filters, read_dictionary=text)
     except (OSError, pa.ArrowException) as exc:
         raise _damaged(path, f"not a readable parquet file ({exc})", command) from None
+    for key in keys:
+        if table.column(key).null_count:
+            raise _damaged(path, f"{table.column(key).null_count} row(s) have no {key}", command)
     table = table.cast(
         pa.schema([pa.field(f.name, pa.string()) if f.name in text else f for f in table.schema], metadata=table.schema.metadata)
     )
@@ -253,7 +306,7 @@ def _steps(path: Path, summary: pd.DataFrame | None, command: str) -> pd.DataFra
     reference setting's (plots) — with only the columns it uses."""
     reference = _reference_filter(summary)
     filters = None if reference is None else [[("strategy", "in", list(FORMULATIONS))], reference]
-    return _filtered(path, STEP_KINDS, filters, command)
+    return _filtered(path, STEP_KINDS, filters, command, keys=(*_KEYS, "time"))
 
 
 def _summary(path: Path, command: str) -> pd.DataFrame | None:
@@ -273,11 +326,26 @@ def _summary(path: Path, command: str) -> pd.DataFrame | None:
     missing = [c for c in (*_KEYS, *SUMMARY_NUMBERS) if c not in summary.columns]
     if missing:
         raise _damaged(path, f"no column {', '.join(missing)}", command)
+    if summary.empty:
+        return None
     for name in ("k", *SUMMARY_NUMBERS, *(c for c in SUMMARY_OPTIONAL_NUMBERS if c in summary.columns)):
-        if not pd.api.types.is_numeric_dtype(summary[name]) or pd.api.types.is_bool_dtype(summary[name]):
-            bad = next((v for v in summary[name] if not _is_number(v)), summary[name].iloc[0])
+        column = summary[name]
+        if not pd.api.types.is_numeric_dtype(column) or pd.api.types.is_bool_dtype(column):
+            bad = next((v for v in column if not _is_number(v)), column.iloc[0])
             raise _damaged(path, f"column {name!r} holds {bad!r}, not a number", command)
-    return summary if len(summary) else None
+        if np.isinf(column).any():
+            raise _damaged(path, f"column {name!r} holds an infinite value", command)
+        if name in SUMMARY_COUNTS and not ((column >= 0) & (column == np.round(column))).all():
+            bad = column[~((column >= 0) & (column == np.round(column)))].iloc[0]
+            raise _damaged(path, f"column {name!r} holds {bad:g}, not a count of steps", command)
+    for key in _KEYS:
+        if summary[key].isna().any():
+            raise _damaged(path, f"{int(summary[key].isna().sum())} row(s) have no {key}", command)
+    repeated = summary.duplicated(list(_KEYS))
+    if repeated.any():
+        row = summary[repeated].iloc[0]
+        raise _damaged(path, "configuration " + ", ".join(f"{k}={row[k]}" for k in _KEYS) + " has more than one row", command)
+    return summary
 
 
 def _is_number(value: object) -> bool:
@@ -321,7 +389,9 @@ def load_inputs(
     inp.summary = _summary(run / "summary.csv", command)
     inp.steps = _steps(run / "steps.parquet", inp.summary, command)
     # plotted: the reference rows
-    inp.der_q = _filtered(run / "der_q.parquet", DER_Q_KINDS, _reference_filter(inp.summary), command, every_column=True)
+    inp.der_q = _filtered(
+        run / "der_q.parquet", DER_Q_KINDS, _reference_filter(inp.summary), command, True, (*_KEYS, "time", "bus")
+    )
     for name, frame in (("manifest.json", inp.manifest), ("steps.parquet", inp.steps), ("summary.csv", inp.summary)):
         if frame is None:
             inp.missing[name] = command
@@ -345,13 +415,15 @@ def _load_sources(
 
     if fault_dir is not None:
         inp.fault_dir = Path(fault_dir)
-        inp.fault = _filtered(inp.fault_dir / "fault.parquet", FAULT_KINDS, None, FAULT_COMMAND, every_column=True)
+        fault_keys = (*_FAULT_KEYS, "bus")
+        inp.fault = _filtered(inp.fault_dir / "fault.parquet", FAULT_KINDS, None, FAULT_COMMAND, True, fault_keys)
         inp.traces = _filtered(
             inp.fault_dir / "traces.parquet",
             TRACE_KINDS,
             [("bus", "==", TRACE_BUS), ("forecast", "==", "off")],  # plotted: one bus, forecast off
             FAULT_COMMAND,
-            every_column=True,
+            True,
+            fault_keys,
         )
         inp.fault_manifest = _json(inp.fault_dir / "manifest.json", FAULT_COMMAND)
     if inp.fault is None:

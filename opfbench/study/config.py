@@ -103,6 +103,8 @@ class StudyConfig:
                     f"name ({', '.join(MODEL_NAMES)}), whose forecasts are read from the forecast folder "
                     f"({self.forecast_dir})"
                 )
+        if not (isinstance(self.currency, str) and self.currency.strip() and self.currency.isprintable()):
+            raise InputError(f"currency must be a printable, non-empty label (e.g. EUR), got {self.currency!r}")
         if self.chunk not in CHUNKS:
             raise InputError(f"unknown chunk {self.chunk!r}; choose from {', '.join(CHUNKS)}")
         check_night(self.night)

@@ -85,6 +85,12 @@ def _parse_time(text: str) -> pd.Timestamp:
             f"period: cannot read time {text!r}: give an ISO 8601 date or date-time, e.g. 2016-06-28 or "
             "2016-06-28T10:00 (local time) or 2016-06-28T10:00+02:00"
         ) from None
+    first_step, last_step = _data_span()
+    if not first_step.year <= parsed.year <= last_step.year + 1:  # before localizing: a zone's rules of year 1 are not 2016's
+        raise InputError(
+            f"period: {text} lies outside the data, which cover {first_step.isoformat()} .. "
+            f"{(last_step + pd.Timedelta(minutes=15)).isoformat()}"
+        )
     ts = pd.Timestamp(parsed)
     if ts.tzinfo is not None:
         return ts.tz_convert(PAPER_DAY_TZ)
@@ -120,7 +126,7 @@ def _steps(label: str, start: pd.Timestamp, end: pd.Timestamp, step_minutes: flo
         )
     if step is None or step > end - start:
         length = (end - start) / pd.Timedelta(minutes=1)
-        raise InputError(f"--step-minutes {step_minutes:g} is longer than the period {label!r} ({length:g} min)")
+        raise InputError(f"period {label!r} lasts {length:g} min, less than one step of {step_minutes:g} min (--step-minutes)")
     return pd.date_range(start, end, freq=step, inclusive="left"), step / pd.Timedelta(hours=1)
 
 
@@ -131,7 +137,8 @@ def _window(period: str, step_minutes: float | None) -> tuple[pd.DatetimeIndex, 
         return *_steps(period, start, start + pd.DateOffset(days=1), step_minutes or 1), "bsrn"
     first_step, last_step = _data_span()
     if period == "year":  # up to SimBench's last quarter hour (no extrapolation at finer steps)
-        return *_steps(period, first_step, last_step + pd.Timedelta(minutes=1), step_minutes or 15), "simbench"
+        index, step_h = _steps(period, first_step, last_step + pd.Timedelta(minutes=15), step_minutes or 15)
+        return index[index <= last_step], step_h, "simbench"
     first, sep, last = period.partition("..")
     if not sep:
         raise InputError(f"period must be 'paper-day', 'year' or 'START..END', got {period!r}")
