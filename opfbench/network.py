@@ -457,7 +457,7 @@ def _der_tuple(network: str, ders: object) -> tuple[DER, ...]:
     """`ders` as a tuple of DER units whose bus is an index (an integer) and whose ratings
     are real numbers; NetworkError naming the unit otherwise."""
     try:
-        units = tuple(ders)  # type: ignore[arg-type]
+        units: tuple[object, ...] = tuple(ders)  # type: ignore[arg-type]
     except TypeError:
         raise NetworkError(f"{network}: ders must be a sequence of DER units, got {ders!r}") from None
     for i, d in enumerate(units):
@@ -468,7 +468,7 @@ def _der_tuple(network: str, ders: object) -> tuple[DER, ...]:
         for label, value in (("rating_mw", d.rating_mw), ("s_mva", d.s_mva)):
             if value is not None and (isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, float, np.number))):
                 raise NetworkError(f"{network}: ders[{i}] has {label} {value!r}; it must be a real number")
-    return units
+    return tuple(d for d in units if isinstance(d, DER))  # every one is
 
 
 def _number(network: str, name: str, value: object) -> float:

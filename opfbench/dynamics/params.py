@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import asdict, dataclass, field, replace
-from typing import Literal
+from typing import Literal, cast
 
 from opfbench.errors import InputError
 
@@ -178,7 +178,7 @@ def _apply(p: ModelParams, key: str, value: str, spec: str) -> ModelParams:
     if key == "emf":
         if value not in ("reset", "held"):
             raise InputError(f"variant {spec!r}: emf must be reset or held (a value: emf-pu=X)")
-        return replace(p, source=replace(p.source, emf=value))
+        return replace(p, source=replace(p.source, emf=cast(EmfMode, value)))
     if key == "emf-pu":
         return replace(p, source=replace(p.source, emf="given", emf_pu=_number(value, spec)))
     if key == "source":
@@ -188,9 +188,9 @@ def _apply(p: ModelParams, key: str, value: str, spec: str) -> ModelParams:
     if key == "inertia":
         return replace(p, motors=replace(p.motors, h_s=_number(value, spec)))
     if key == "torque":
-        return replace(p, motors=replace(p.motors, torque=value))
+        return replace(p, motors=replace(p.motors, torque=cast(TorqueLaw, value)))  # checked by `check`
     if key == "active":
-        return replace(p, inverters=replace(p.inverters, active=value))
+        return replace(p, inverters=replace(p.inverters, active=cast(ActivePowerMode, value)))  # checked by `check`
     raise InputError(f"variant {spec!r}: unknown key {key!r}; use emf, emf-pu, source, motors, inertia, torque, active")
 
 

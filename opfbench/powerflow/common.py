@@ -36,12 +36,13 @@ def uses_sparse(net: Network) -> bool:
 
 @dataclass(frozen=True, eq=False)
 class PowerFlowResult:
-    """Solution of one snapshot (arrays shaped (n_bus,)) or of a batch ((S, n_bus))."""
+    """Solution of one snapshot (arrays shaped (n_bus,), converged and iterations numpy
+    scalars) or of a batch ((S, n_bus), (S,))."""
 
     net: Network
     v: np.ndarray
-    converged: np.ndarray
-    iterations: np.ndarray
+    converged: np.ndarray | np.bool_
+    iterations: np.ndarray | np.integer
 
     @property
     def vm(self) -> np.ndarray:
@@ -120,7 +121,7 @@ def bus_injections(
     base = fixed - scale[..., None] * load
     lead = np.broadcast_shapes(base.shape[:-1], der_s.shape[:-1])
     out = np.broadcast_to(base, lead + (net.n_bus,)).copy()
-    np.add.at(out, (..., net.der_bus), np.broadcast_to(der_s, lead + der_s.shape[-1:]))
+    np.add.at(out, (..., net.der_bus), np.broadcast_to(der_s, lead + der_s.shape[-1:]))  # type: ignore[arg-type]
     return out
 
 

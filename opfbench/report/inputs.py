@@ -169,7 +169,7 @@ def _is_kind(value: object, expected: str) -> bool:
     if isinstance(value, bool) or not isinstance(value, _JSON_KINDS[expected]):
         return False
     items = _ITEMS.get(expected)
-    return items is None or all(isinstance(v, items) and not isinstance(v, bool) for v in value)  # type: ignore[attr-defined]
+    return items is None or (isinstance(value, list) and all(isinstance(v, items) and not isinstance(v, bool) for v in value))
 
 
 def _damaged(path: Path, problem: str, command: str) -> InputError:
@@ -213,11 +213,11 @@ def _manifest(path: Path, command: str) -> dict | None:
         if value is not None and not _is_kind(value, expected):
             raise _damaged(path, f"{key} is {value!r}, expected {expected}", command)
     for case, info in (m.get("cases") or {}).items():
-        fields = ((f"cases.{case}", info, "an object"),)
+        fields: list[tuple[str, object, str]] = [(f"cases.{case}", info, "an object")]
         if isinstance(info, dict):
-            fields += tuple((f"cases.{case}.{k}", info.get(k), kind) for k, kind in CASE_FIELDS.items())
-            ders = info.get("ders") if isinstance(info.get("ders"), list) else []
-            fields += tuple((f"cases.{case}.ders[{i}]", d, "an object") for i, d in enumerate(ders))
+            fields += [(f"cases.{case}.{k}", info.get(k), kind) for k, kind in CASE_FIELDS.items()]
+            ders = info["ders"] if isinstance(info.get("ders"), list) else []
+            fields += [(f"cases.{case}.ders[{i}]", d, "an object") for i, d in enumerate(ders)]
         for key, value, expected in fields:
             if value is not None and not _is_kind(value, expected):
                 raise _damaged(path, f"{key} is {value!r}, expected {expected}", command)
