@@ -225,7 +225,7 @@ def _apply_conversions(case: MatpowerCase, statements: list[tuple[int, str]]) ->
                     f"{case.path}, line {lineno}: Vbase from mpc.bus row 1 BASE_KV = {case.bus[0, 9]:g} kV; "
                     "the ohm → p.u. conversion needs a positive base voltage"
                 )
-            env["Vbase"] = case.bus[0, 9] * 1e3
+            env["Vbase"] = float(case.bus[0, 9]) * 1e3  # a Python float: 1e308 kV overflows to inf quietly, refused below
         elif s == _SBASE:
             env["Sbase"] = case.base_mva * 1e6
         elif s == _OHM_TO_PU:
@@ -233,7 +233,7 @@ def _apply_conversions(case: MatpowerCase, statements: list[tuple[int, str]]) ->
                 raise CaseFormatError(f"{case.path}, line {lineno}: ohm→p.u. conversion before Vbase/Sbase are defined")
             ohms = case.branch[:, 2:4].copy()
             with np.errstate(all="ignore"):
-                z_base = env["Vbase"] ** 2 / env["Sbase"]
+                z_base = np.float64(env["Vbase"]) ** 2 / env["Sbase"]  # numpy: overflow gives inf, refused below
                 case.branch[:, 2:4] /= z_base
             lost = ~np.isfinite(case.branch[:, 2:4]) | ((case.branch[:, 2:4] == 0) & (ohms != 0))
             if not (np.isfinite(z_base) and z_base > 0) or lost.any():

@@ -99,6 +99,7 @@ BAD_VALUES = {
         with_entry(TINY_CASE, "bus", 1, 10, "1e308"),
         "line 26: the ohm → p.u. conversion over- or underflows (base impedance inf ohm from BASE_KV 1e+308 kV",
     ),
+    "base kV 1e200 (its square overflows)": (with_entry(TINY_CASE, "bus", 1, 10, "1e200"), "conversion over- or underflows"),
     "baseMVA 1e-308": (TINY_CASE.replace("mpc.baseMVA = 10;", "mpc.baseMVA = 1e-308;"), "conversion over- or underflows"),
     "baseMVA 1e9 in a p.u. case": (
         TINY_CASE.replace("mpc.baseMVA = 10;", "mpc.baseMVA = 1e9;").split("[PQ, PV")[0],
