@@ -124,3 +124,21 @@ def test_an_infeasible_step_carries_no_bound_above_its_losses(paper33):
     assert res.extra["relaxation_bound_kw"][0] > res.losses_kw[0]  # the relaxation's value, kept as a diagnostic
     ok = run_strategy("acopf", Scenario.snapshot(paper33, 0.1, 1.0), 0.0)  # the slack may export: feasible
     assert ok.status[0] == "ok" and ok.lower_bound_kw[0] <= ok.losses_kw[0] * (1 + 1e-6)
+
+
+def test_checkpoints_without_the_counts_are_refused_not_summed(tmp_path, capsys):
+    """Partial sums of an older version (no pf_converged_steps) would be summed with this
+    version's meaning: the run stops with one message instead of a KeyError."""
+    from opfbench.study.tables import KEYS, PARTIAL_COLUMNS
+
+    out = _run(tmp_path, _heavy_case(tmp_path / "heavy6.m", 6), "2016-06-28T10:00..2016-06-28T10:30", capsys)
+    for path in (out / "tasks").glob("*.summary.parquet"):
+        partial = pd.read_parquet(path)
+        assert [c for c in partial.columns if c not in KEYS] == list(PARTIAL_COLUMNS)
+        partial.drop(columns=["pf_converged_steps", "measured_hours"]).to_parquet(path, index=False)
+    argv = ["run", "--case", str(tmp_path / "heavy6.m"), "--strategies", "no-action", "--k", "0", "--night-modes"]
+    argv += ["connected", "--forecast", "off", "--period", "2016-06-28T10:00..2016-06-28T10:30", "--step-minutes", "10"]
+    assert main([*argv, "--workers", "1", "--quiet", "--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert "partial sums lack pf_converged_steps, measured_hours (written by another opfbench version)" in err, err
+    assert not (out / ".lock").exists()
