@@ -7,16 +7,25 @@ import math
 
 from opfbench.jsonio import print_json
 
-__all__ = ["add_operating_point", "fraction", "print_json"]
+__all__ = ["add_operating_point", "fraction", "number", "print_json"]
 
 
-def fraction(text: str) -> float:
-    """argparse type: a finite, non-negative number."""
+def number(text: str) -> float:
+    """argparse type: a finite number (range checks that need the input's name come before
+    the work, in the command)."""
     try:
         value = float(text)
     except ValueError:
         raise argparse.ArgumentTypeError(f"not a number: {text!r}") from None
-    if not math.isfinite(value) or value < 0:
+    if not math.isfinite(value):
+        raise argparse.ArgumentTypeError(f"must be finite, got {text}")
+    return value
+
+
+def fraction(text: str) -> float:
+    """argparse type: a finite number ≥ 0 (a share of rating, a multiplier, a reserve k)."""
+    value = number(text)
+    if value < 0:
         raise argparse.ArgumentTypeError(f"must be a finite number ≥ 0, got {text}")
     return value
 

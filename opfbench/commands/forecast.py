@@ -52,10 +52,11 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from opfbench.folders import check_out_dir
     from opfbench.forecasting.datasets import forecast_dataset
     from opfbench.forecasting.experiment import run_comparison
     from opfbench.forecasting.models import settings_for
-    from opfbench.forecasting.outputs import check_out_dir, write_outputs
+    from opfbench.forecasting.outputs import write_outputs
 
     models = tuple(m.strip() for m in args.models.split(",") if m.strip())
     if not models:

@@ -6,6 +6,7 @@ import argparse
 
 from opfbench.commands.common import add_operating_point, fraction, print_json
 from opfbench.errors import InputError
+from opfbench.formulations.options import ACOPF_SOLVERS, FALLBACKS
 from opfbench.registry import STRATEGIES, STRATEGY_NAMES, get_strategy, run_strategy
 
 
@@ -28,13 +29,13 @@ def register(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument(
         "--fallback",
-        choices=("chain", "paper"),
+        choices=FALLBACKS,
         default=None,
         help="AC OPF failure policy: chain (default) or paper (fall back to no action)",
     )
     p.add_argument(
         "--acopf-solver",
-        choices=("auto", "ipopt"),
+        choices=ACOPF_SOLVERS,
         default=None,
         help="AC OPF: auto (default: SOCP-certified fast path, IPOPT for the rest) or ipopt (always)",
     )

@@ -18,6 +18,7 @@ import pandas as pd
 
 from opfbench.data.cleaning import check_time_index
 from opfbench.errors import DataError, InputError
+from opfbench.folders import check_out_dir
 from opfbench.forecasting.experiment import ComparisonResult
 from opfbench.jsonio import write_atomic, write_json
 
@@ -26,22 +27,6 @@ _TIME_FORMAT = "%Y-%m-%dT%H:%M:%S%z"
 
 def forecast_path(directory: str | Path, dataset: str, suffix: str = "csv") -> Path:
     return Path(directory) / f"forecast_{dataset}.{suffix}"
-
-
-def check_out_dir(directory: str | Path) -> Path:
-    """`directory` usable for `write_outputs` (created if missing): raise `InputError`
-    naming it when it is a file or cannot be written — checked before any computation."""
-    out = Path(directory)
-    if out.exists() and not out.is_dir():
-        raise InputError(f"--out {out}: exists and is not a folder")
-    try:
-        out.mkdir(parents=True, exist_ok=True)
-        probe = out / ".opfbench-write-test"
-        probe.write_bytes(b"")
-        probe.unlink()
-    except OSError as exc:
-        raise InputError(f"--out {out}: cannot write there ({exc.strerror})") from None
-    return out
 
 
 def run_metadata(result: ComparisonResult) -> dict[str, object]:

@@ -47,10 +47,6 @@ class PowerFlowResult:
     def vm(self) -> np.ndarray:
         return np.abs(self.v)
 
-    @property
-    def va_deg(self) -> np.ndarray:
-        return np.rad2deg(np.angle(self.v))
-
     @cached_property
     def _flows(self) -> tuple[np.ndarray, np.ndarray]:
         yff, yft, ytf, ytt = self.net.branch_admittances

@@ -9,7 +9,7 @@ from opfbench.report import plots, tables
 from opfbench.report.claims import claims
 from opfbench.report.inputs import Inputs
 from opfbench.report.page import Block, Section, table
-from opfbench.report.price import DEFAULT_CURRENCY, DEFAULT_PRICE_PER_KWH, DEFAULT_PRICE_SOURCE
+from opfbench.study.price import DEFAULT_CURRENCY, DEFAULT_PRICE_PER_KWH, DEFAULT_PRICE_SOURCE
 
 if TYPE_CHECKING:
     import pandas as pd

@@ -12,8 +12,8 @@ import pandas as pd
 
 from opfbench.registry import FORMULATIONS, LOCAL_RULES, STRATEGIES
 from opfbench.report import paper
+from opfbench.result import STATUSES
 
-STATUSES = ("ok", "fallback-cold", "fallback-socp", "fallback-no-action", "infeasible", "solver-failed", "pf-diverged")
 CONFIG = ["case", "strategy", "k", "night_mode", "forecast"]
 REFERENCE_NIGHT = "connected"
 """The night mode of the tables that fix one (the paper's main setting)."""

@@ -30,6 +30,7 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 
 from opfbench.errors import InputError
+from opfbench.folders import check_out_dir
 from opfbench.jsonio import write_atomic, write_json
 from opfbench.study.config import DETAIL_TABLES, LABEL_FIELDS, StudyConfig
 from opfbench.study.periods import Period
@@ -45,19 +46,6 @@ def finished_tasks(out: Path) -> int:
     """How many finished tasks the run folder `out` holds (their main files)."""
     side = tuple(f".{name}.parquet" for name in SIDE_FILES)
     return sum(not f.name.endswith(side) for f in (out / "tasks").glob("*.parquet"))
-
-
-def check_out_dir(out: Path) -> Path:
-    """Refuse an --out that is a file or cannot be created or written, before any work."""
-    if out.exists() and not out.is_dir():
-        raise InputError(f"--out {out} exists and is not a folder")
-    try:
-        out.mkdir(parents=True, exist_ok=True)
-    except OSError as exc:
-        raise InputError(f"--out {out}: cannot create the folder ({exc.strerror})") from None
-    if not os.access(out, os.W_OK | os.X_OK):
-        raise InputError(f"--out {out} is not writable")
-    return out
 
 
 def _alive(pid: int) -> bool:

@@ -1,10 +1,10 @@
 """Tasks: the grid split into independent pieces of work.
 
 A task is (case, forecast, k, chunk of steps) and runs every requested strategy and
-night mode of that group, the strategies of one night mode on ONE Scenario object (so
-`acopf`, `acopf-paper` and `socp` share SOCP solves). The night modes differ only in the
-night hours, so their daytime snapshots are the same problems: one task solves each once
-(`socp.socp_solves` reuses a solve of identical data in the same process); and where two
+night mode of that group. `acopf`, `acopf-paper` and `socp` share SOCP solves, and the
+night modes — which differ only in the night hours, so their daytime snapshots are the
+same problems — solve each once: the formulations' solve cache is keyed on the data
+(`formulations.relaxation`), whatever Scenario objects carry it; and where two
 night modes give the very same scenario (no PV output in the night hours of the chunk), the
 second takes the first's results (`Scenario.same_data`) with its wall time 0. Its input
 carries its slice of the period's profiles, so it runs the same in this process, in a
