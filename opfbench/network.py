@@ -89,7 +89,7 @@ class Network:
 
     def __post_init__(self) -> None:
         for name in _BUS_ARRAYS + _BRANCH_ARRAYS + _GEN_ARRAYS:
-            arr = np.array(getattr(self, name), dtype=_DTYPES.get(name, float))
+            arr: np.ndarray = np.array(getattr(self, name), dtype=_DTYPES.get(name, float))
             arr.setflags(write=False)
             object.__setattr__(self, name, arr)
         self._check_arrays()
@@ -230,9 +230,9 @@ class Network:
         """
         n = self.n_bus
         adjacency: list[list[tuple[int, int]]] = [[] for _ in range(n)]
-        for k in np.flatnonzero(self.status):
-            adjacency[self.f[k]].append((self.t[k], k))
-            adjacency[self.t[k]].append((self.f[k], k))
+        for branch in np.flatnonzero(self.status).tolist():
+            adjacency[self.f[branch]].append((int(self.t[branch]), branch))
+            adjacency[self.t[branch]].append((int(self.f[branch]), branch))
         parent = np.full(n, -1)
         parent_branch = np.full(n, -1)
         seen = np.zeros(n, dtype=bool)

@@ -98,7 +98,7 @@ class Scenario:
             if value is not None and not 0 <= value <= 1:
                 raise InputError(f"{label} is a fraction of rating and must lie in [0, 1], got {value}")
         rating = net.der_rating_mw
-        forecast = None if forecast_der_scale is None else [forecast_der_scale * rating]
+        forecast = None if forecast_der_scale is None else np.array([forecast_der_scale * rating])
         return cls(net, np.array([load_scale]), np.array([der_scale * rating]), forecast)
 
     @property

@@ -14,7 +14,7 @@
 
 from __future__ import annotations
 
-from functools import lru_cache
+from functools import lru_cache, partial
 from importlib import resources
 from pathlib import Path
 
@@ -23,7 +23,7 @@ import numpy as np
 from opfbench.cases.feeder import SHIPPED_COPIES, replicated_feeder
 from opfbench.errors import InputError
 from opfbench.matpower import load_case_file
-from opfbench.network import DER, Network
+from opfbench.network import DER, DerKind, Network
 
 PAPER_PV_BUSES = (10, 16, 19, 29)
 PAPER_DFIG_BUS = 27
@@ -68,7 +68,7 @@ def place_ders(net: Network, name: str) -> Network:
             k += 1
         picks.append(int(ranked[k]))
     rating = 0.8075 * float(net.load_p_mw.sum()) / 5
-    kinds = ("PV", "PV", "PV", "DFIG", "PV")
+    kinds: tuple[DerKind, ...] = ("PV", "PV", "PV", "DFIG", "PV")
     ders = tuple(DER(b, kind, rating) for b, kind in zip(picks, kinds, strict=True))
     return _paper_limits(net.with_changes(name=name, ders=ders))
 
@@ -89,7 +89,7 @@ _BUILDERS = {
     "case69-der": lambda: place_ders(load_case_file(_matpower_file("case69")), "case69-der"),
     "case141-der": lambda: place_ders(load_case_file(_matpower_file("case141")), "case141-der"),
 }
-_BUILDERS |= {name: (lambda c=c, name=name: feeder(c, name)) for name, c in SHIPPED_COPIES.items()}
+_BUILDERS |= {name: partial(feeder, copies, name) for name, copies in SHIPPED_COPIES.items()}
 
 CASE_NAMES = tuple(_BUILDERS)
 

@@ -76,7 +76,13 @@ def run(args: argparse.Namespace) -> int:
     dataset = forecast_dataset(args.dataset).lag_weather(1 if args.weather == "previous" else 0)
     result = run_comparison(dataset, models, settings, args.seed, progress=lambda msg: print(msg, file=sys.stderr))
     if args.out:
-        for path in write_outputs(result, args.out):
+        from opfbench.forecasting.outputs import forecast_path
+        from opfbench.jsonio import write_atomic
+        from opfbench.report.forecast_page import forecast_page  # matplotlib only when a page is drawn
+
+        written = write_outputs(result, args.out)
+        written.append(write_atomic(forecast_path(args.out, result.dataset, "html"), forecast_page(result)))
+        for path in written:
             print(f"wrote {path}", file=sys.stderr)
     if args.json:
         print_json(result.metrics_table())
@@ -87,7 +93,7 @@ def run(args: argparse.Namespace) -> int:
 
 def format_table(result: "ComparisonResult") -> str:
     """Plain-text metrics table with the paper's Table I values."""
-    from opfbench.forecasting.report import PAPER_TABLE
+    from opfbench.report.paper import FORECAST_TABLE as PAPER_TABLE
 
     header = (
         f"{'model':<18}"

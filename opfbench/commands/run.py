@@ -185,6 +185,7 @@ def finish_run(result: StudyRun, args: argparse.Namespace) -> int:
     forecast, fault, year = report_sources(forecast_dir if holds_forecasts(forecast_dir) else None, args.fault_dir, args.year_dir)
     report = write_report(result.out, forecast, fault, year_dir=year)
     summary = result.summary
+    assert summary is not None, "run_study returns the summary of a finished run"
     if args.json:
         print_json(summary.to_dict(orient="records"))
         return 0

@@ -21,7 +21,7 @@ import numpy as np
 import pandas as pd
 
 from opfbench.capability import PAPER_KS, check_reserve
-from opfbench.dynamics.model import build_model, prefault_flow
+from opfbench.dynamics.model import DynamicModel, build_model, prefault_flow
 from opfbench.dynamics.params import FORECASTS, FaultParams, ModelParams
 from opfbench.dynamics.simulate import DIVERGED, NOT_RECOVERED, RECOVERED, Simulation, check_fault, simulate
 from opfbench.errors import InputError
@@ -196,7 +196,8 @@ def run_study(config: StudyConfig, point: OperatingPoint, progress=None) -> tupl
                     raise InputError(f"strategy {name} at k = {k:g} gave status {res.status[0]} on this operating point")
                 setpoints[name, k, fc] = res.q_mvar[0]
     sc_off = Scenario(net, point.scenario.load_scale, point.scenario.der_p_mw)
-    jobs, keys = [], []
+    jobs: list[tuple[DynamicModel, list[FaultParams]]] = []
+    keys = []
     for label, params in variants.items():
         emf = params.source.emf_pu if params.source.emf == "given" else None
         if params.source.emf == "held":

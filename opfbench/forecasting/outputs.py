@@ -44,9 +44,8 @@ def run_metadata(result: ComparisonResult) -> dict[str, object]:
 
 
 def write_outputs(result: ComparisonResult, directory: str | Path) -> list[Path]:
-    """Write the CSV, JSON and HTML files of `result` into `directory` (created), each atomically."""
-    from opfbench.forecasting.report import forecast_page  # matplotlib only when a page is drawn
-
+    """Write the forecasts (CSV) and the run's metadata and metrics (JSON) of `result` into
+    `directory` (created), each atomically."""
     out = check_out_dir(directory)
     csv = write_atomic(
         forecast_path(out, result.dataset, "csv"), result.forecasts.to_csv(index_label="timestamp", date_format=_TIME_FORMAT)
@@ -54,8 +53,7 @@ def write_outputs(result: ComparisonResult, directory: str | Path) -> list[Path]
     meta = write_json(
         forecast_path(out, result.dataset, "json"), {"run": run_metadata(result), "metrics": result.metrics_table()}
     )
-    html = write_atomic(forecast_path(out, result.dataset, "html"), forecast_page(result))
-    return [csv, meta, html]
+    return [csv, meta]
 
 
 def load_forecast(directory: str | Path, dataset: str, model: str) -> pd.Series:

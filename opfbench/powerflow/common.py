@@ -40,8 +40,8 @@ class PowerFlowResult:
 
     net: Network
     v: np.ndarray
-    converged: np.ndarray
-    iterations: np.ndarray
+    converged: np.ndarray  # bool, (S,) or 0-d for one snapshot
+    iterations: np.ndarray  # int64, likewise
 
     @property
     def vm(self) -> np.ndarray:
@@ -114,7 +114,7 @@ def bus_injections(
     base = fixed - scale[..., None] * load
     lead = np.broadcast_shapes(base.shape[:-1], der_s.shape[:-1])
     out = np.broadcast_to(base, lead + (net.n_bus,)).copy()
-    np.add.at(out, (..., net.der_bus), np.broadcast_to(der_s, lead + der_s.shape[-1:]))
+    np.add.at(out.T, net.der_bus, np.broadcast_to(der_s, lead + der_s.shape[-1:]).T)  # bus axis first
     return out
 
 

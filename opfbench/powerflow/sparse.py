@@ -6,6 +6,8 @@ solver's Z-bus never formed — Y[keep, keep] is factorized once and Z·rhs is
 
 from __future__ import annotations
 
+from typing import Literal
+
 import numpy as np
 import scipy.sparse as sp
 from scipy.sparse.linalg import splu
@@ -103,7 +105,7 @@ class SparseZbus:
         self.lu = factorize(y[keep][:, keep])
         self.y_keep = y[keep]  # CSR rows keep, for the mismatch check
 
-    order = "F"  # column-major: SuperLU's solve reads and writes Fortran arrays
+    order: Literal["C", "F"] = "F"  # column-major: SuperLU's solve reads and writes Fortran arrays
 
     def apply(self, rhs: np.ndarray, out: np.ndarray) -> None:
         """out ← Y[keep, keep]⁻¹·rhs for rhs (m, S)."""

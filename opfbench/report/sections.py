@@ -3,7 +3,7 @@ input: the section says which command produces it."""
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Callable
 
 from opfbench.report import plots, tables
 from opfbench.report.claims import claims
@@ -355,19 +355,26 @@ def paper_claims(inputs: Inputs) -> Section:
     return sec.add(Block("claims", claims=claims(inputs)))
 
 
-PRICED = {metadata, losses, year}
-"""Builders that also take the energy price (currency per kWh, currency, source)."""
-SECTIONS = (
-    ("claims", "The paper's claims", paper_claims),
+Price = tuple[float, str, str]  # energy price per kWh, currency, source
+Builder = Callable[[Inputs, Price], Section]
+
+
+def _unpriced(build: Callable[[Inputs], Section]) -> Builder:
+    """A builder that does not use the price, called like those that do."""
+    return lambda inputs, _price: build(inputs)
+
+
+SECTIONS: tuple[tuple[str, str, Builder], ...] = (
+    ("claims", "The paper's claims", _unpriced(paper_claims)),
     ("metadata", "Run metadata", metadata),
     ("losses", "Losses and savings", losses),
-    ("convergence", "Convergence of the formulations", convergence),
+    ("convergence", "Convergence of the formulations", _unpriced(convergence)),
     ("year", "A year (2016 at 15 min)", year),
-    ("night", "Night hours", night),
-    ("gap", "Optimality gap", gap),
-    ("voltage", "Voltage compliance", voltage),
-    ("forecasting", "Forecasting", forecasting),
-    ("fault", "Fault ride-through", fault),
+    ("night", "Night hours", _unpriced(night)),
+    ("gap", "Optimality gap", _unpriced(gap)),
+    ("voltage", "Voltage compliance", _unpriced(voltage)),
+    ("forecasting", "Forecasting", _unpriced(forecasting)),
+    ("fault", "Fault ride-through", _unpriced(fault)),
 )
 """(id, title, builder) in page order."""
 FAILED = "This section could not be built from its input files"
@@ -379,7 +386,7 @@ def all_sections(inputs: Inputs, price: tuple[float, str, str]) -> list[Section]
     out = []
     for sid, title, build in SECTIONS:
         try:
-            out.append(build(inputs, price) if build in PRICED else build(inputs))
+            out.append(build(inputs, price))
         except (KeyError, ValueError, IndexError, TypeError) as exc:
             out.append(Section(sid, title, blocks=[Block("error", text=f"{FAILED}: {type(exc).__name__}: {exc}")]))
     return out

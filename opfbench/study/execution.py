@@ -61,7 +61,8 @@ class _SigintWatcher:
 
     def __exit__(self, *exc) -> None:
         self.armed = False
-        signal.pthread_kill(self.thread.ident, signal.SIGINT)  # wakes the watcher, which ends
+        if self.thread.ident is not None:  # started in __enter__
+            signal.pthread_kill(self.thread.ident, signal.SIGINT)  # wakes the watcher, which ends
         self.thread.join(5)
         signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})
 

@@ -26,7 +26,7 @@ import numpy as np
 import pandas as pd
 
 from opfbench.data import PAPER_DAY, assemble_profiles, load_pv_minute, night_mask, night_mask_window
-from opfbench.data.profiles import PAPER_DAY_TZ
+from opfbench.data.profiles import PAPER_DAY_TZ, PvSource
 from opfbench.errors import InputError
 
 YEAR = "2016"
@@ -75,7 +75,7 @@ def _parse_time(text: str) -> pd.Timestamp:
     return ts.tz_localize(PAPER_DAY_TZ) if ts.tzinfo is None else ts.tz_convert(PAPER_DAY_TZ)
 
 
-def _window(period: str, step_minutes: float | None) -> tuple[pd.DatetimeIndex, str]:
+def _window(period: str, step_minutes: float | None) -> tuple[pd.DatetimeIndex, PvSource]:
     if period == "paper-day":
         return pd.date_range(PAPER_DAY, periods=1440, freq="1min", tz=PAPER_DAY_TZ), "bsrn"
     if period == "year":  # up to SimBench's last quarter hour (no extrapolation at finer steps)

@@ -25,7 +25,7 @@ def model_pv_forecast_pu(
     anywhere else a missing forecast is an error. `pv_now` has one value per step of
     `index` plus, when the period goes on, the next step's."""
     from opfbench.data import load_pv_minute
-    from opfbench.forecasting import load_forecast
+    from opfbench.forecasting.outputs import load_forecast
 
     series = load_forecast(forecast_dir, "pv", model) / load_pv_minute().attrs["rating_kw"]
     n = len(index)

@@ -62,7 +62,7 @@ def _versions() -> dict:
     import importlib.metadata as md
     import sys
 
-    out = {"python": sys.version.split()[0]}
+    out: dict[str, str | None] = {"python": sys.version.split()[0]}
     for name in ("numpy", "scipy", "pandas", "casadi", "cvxpy", "clarabel", "dask"):
         try:
             out[name] = md.version(name)

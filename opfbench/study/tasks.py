@@ -27,7 +27,7 @@ from opfbench.scenario import Scenario
 from opfbench.study.config import StudyConfig
 from opfbench.study.periods import Period
 from opfbench.study.scenarios import chunk_scenario
-from opfbench.study.tables import DETAIL_COLUMNS, STEP_COLUMNS, detail_rows, partial_summary, stack, step_rows
+from opfbench.study.tables import DETAIL_COLUMNS, STEP_COLUMNS, Columns, detail_rows, partial_summary, stack, step_rows
 
 
 @dataclass(frozen=True)
@@ -128,7 +128,8 @@ def run_task(inp: TaskInput) -> TaskOutput:
     with threadpool_limits(1):
         step = pd.Timedelta(hours=inp.step_h)
         time, night = inp.profiles.index[: inp.n_steps], inp.night[: inp.n_steps]
-        steps, detail = [], {name: [] for name in inp.detail}
+        steps: list[Columns] = []
+        detail: dict[str, list[Columns]] = {name: [] for name in inp.detail}
         ran: list[tuple[Scenario, dict[str, StrategyResult]]] = []
         for mode in t.night_modes:
             scenario = chunk_scenario(t.case, mode, t.forecast, inp.profiles, inp.night, inp.n_steps, step, inp.forecast_dir)

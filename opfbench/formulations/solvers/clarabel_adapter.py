@@ -143,24 +143,12 @@ class ConeSolve:
 
 
 class _Clarabel:
-    """One persistent Clarabel solver on rows `rows` of A·x + s = b (cones in row order).
-    For a screened program, `kept`: the bound rows it keeps as equalities; `checked`: the
-    dropped bounds its answers must check (all but those whose opposite is kept: their
-    slack is the box's width)."""
+    """One persistent Clarabel solver on rows `rows` of A·x + s = b (cones in row order)."""
 
     def __init__(
-        self,
-        a: sp.csc_matrix,
-        c: np.ndarray,
-        rows: np.ndarray,
-        cones: list,
-        b: np.ndarray,
-        settings: clarabel.DefaultSettings,
-        kept: np.ndarray | None = None,
-        checked: np.ndarray | None = None,
+        self, a: sp.csc_matrix, c: np.ndarray, rows: np.ndarray, cones: list, b: np.ndarray, settings: clarabel.DefaultSettings
     ):
         self.rows, self._a, self._c, self._cones, self._settings = rows, a[rows], c, cones, settings
-        self.kept, self.checked = kept, checked
         self.solver = self._fresh(b[rows])
         if not self.solver.is_data_update_allowed():
             raise ValueError("Clarabel does not allow data updates for this problem (presolve or chordal decomposition)")
@@ -184,6 +172,16 @@ class _Clarabel:
             statuses.append(conic_status(solution))
             iterations += solution.iterations
         return solution, statuses, iterations
+
+
+class _Screened(_Clarabel):
+    """A screened program: `kept` marks the bound rows it keeps as equalities; `checked` the
+    dropped bounds its answers must check (all but those whose opposite is kept: their
+    slack is the box's width)."""
+
+    def __init__(self, program: "ParametricConeProgram", rows: np.ndarray, cones: list, kept: np.ndarray, checked: np.ndarray):
+        super().__init__(program._a, program._c, rows, cones, program._b0, program._settings)
+        self.kept, self.checked = kept, checked
 
 
 def _vector(values: list[float]) -> np.ndarray:
@@ -214,7 +212,7 @@ class _BoundState:
     def slack(self, x: np.ndarray) -> np.ndarray:
         return self.rhs - self.p._bound_coef * x[self.p._bound_col]
 
-    def check(self, program: _Clarabel, x: np.ndarray, z: Sequence[float]) -> tuple[bool, tuple]:
+    def check(self, program: _Screened, x: np.ndarray, z: Sequence[float]) -> tuple[bool, tuple]:
         """(does the screened `program`'s solution (x, z) answer the full program, the
         corrected guess)."""
         kept = program.kept
@@ -275,7 +273,7 @@ class ParametricConeProgram:
         self._settings, self._dims = settings, data["dims"]
         self._screening(self._dims)
         self.full = _Clarabel(self._a, self._c, np.arange(self._b0.size), _cones(data["dims"]), self._b0, settings)
-        self._screens: OrderedDict[tuple, _Clarabel] = OrderedDict()
+        self._screens: OrderedDict[tuple, _Screened] = OrderedDict()
         self._guess: tuple | None = None
 
     def _screening(self, dims) -> None:
@@ -314,7 +312,7 @@ class ParametricConeProgram:
             raise ValueError(f"θ has {thetas.shape[1]} entries, the data variables {sum(self._sizes)}")
         return self._b0 + (self._b_theta @ thetas.T).T
 
-    def _screen(self, active: tuple) -> _Clarabel:
+    def _screen(self, active: tuple) -> _Screened:
         """The screened program with the bounds `active` (indices into the bound rows) as
         equalities and the other bounds dropped, built once (least recently used dropped);
         its `kept` marks the bounds in `active`."""
@@ -326,9 +324,7 @@ class ParametricConeProgram:
             kept = np.zeros(self._bounds.size, dtype=bool)
             kept[list(active)] = True
             checked = ~kept & ~((self._opposite >= 0) & kept[self._opposite])
-            program = self._screens[active] = _Clarabel(
-                self._a, self._c, rows, cones + self._soc_cones, self._b0, self._settings, kept, checked
-            )
+            program = self._screens[active] = _Screened(self, rows, cones + self._soc_cones, kept, checked)
             while len(self._screens) > MAX_SCREENS:
                 self._screens.popitem(last=False)
         self._screens.move_to_end(active)
