@@ -11,7 +11,7 @@ from opfbench.cases import load_case
 from opfbench.errors import InputError, NetworkError
 from opfbench.formulations import relaxation as relaxation_module
 from opfbench.formulations.acopf import run_acopf
-from opfbench.formulations.cache import PER_THREAD, per_thread
+from opfbench.formulations.cache import EXACT_KEY_BYTES, PER_THREAD, SolveCache, per_thread
 from opfbench.formulations.models.polar_ac import ac_opf
 from opfbench.formulations.models.soc import SocpRelaxation, data_vector
 from opfbench.formulations.policy import CERTIFY_RTOL
@@ -204,3 +204,19 @@ def test_an_infeasible_relaxation_settles_the_step_without_ipopt():
     assert np.all(fast.extra["iterations"][1:] == 0) and np.all(fast.q_mvar[1:] == 0)
     ipopt = run_acopf(Scenario(net, scenario.load_scale, scenario.der_p_mw), 1.0, solver="ipopt")
     assert list(ipopt.status) == list(fast.status) and np.all(ipopt.extra["iterations"][1:] > 0)
+
+
+def test_the_solve_cache_is_keyed_on_the_data_and_bounded(paper33):
+    """Short data vectors are their own keys (exact), long ones a 16-byte digest; equal data
+    give equal keys whatever array holds them; the least recently used entries go first."""
+    short, long = np.arange(6.0).reshape(2, 3), np.ones((1, EXACT_KEY_BYTES // 8 + 1))
+    keys = SolveCache.keys(paper33, "o", short)
+    assert [k[2] for k in keys] == [row.tobytes() for row in short]
+    assert SolveCache.keys(paper33, "o", short.copy()) == keys and SolveCache.keys(paper33, "p", short) != keys
+    assert len(SolveCache.keys(paper33, "o", long)[0][2]) == 16
+    cache: SolveCache[str] = SolveCache(limit_bytes=2 * (SolveCache.KEY_BYTES + 24 + 1), size=len)
+    a, b, c = SolveCache.keys(paper33, "o", np.arange(9.0).reshape(3, 3))
+    cache.put_many([(a, "A"), (b, "B")])
+    assert cache.get_many([a, c]) == ["A", None]  # a is now the most recent
+    cache.put_many([(c, "C")])  # over the limit: b, the least recently used, goes
+    assert cache.get_many([a, b, c]) == ["A", None, "C"]

@@ -1,6 +1,6 @@
 """`opfbench forecast`: compare one-step-ahead PV / wind forecasters (paper §II, Table I).
 
-Full run (documented budget ≤ ~30 min per dataset on 2 CPU cores):
+Full run (tens of minutes per dataset; the README gives today's figures):
     opfbench forecast --dataset pv --out reports/forecast
     opfbench forecast --dataset wind --out reports/forecast
 """

@@ -98,6 +98,3 @@ class SolveCache(Generic[T]):
         with self._lock:
             self._entries.clear()
             self.used = 0
-
-    def __len__(self) -> int:
-        return len(self._entries)

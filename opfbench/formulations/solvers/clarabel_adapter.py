@@ -163,7 +163,7 @@ class _Clarabel:
         infeasible — seen as InsufficientProgress where a solver set up afresh on the same
         data succeeds), a fresh solver is built on this b, kept, and tried once more."""
         b = b[self.rows]
-        self.solver.update(b=b.tolist())  # a list: Clarabel's numpy conversion costs 3× more
+        self.solver.update(b=b.tolist())  # a list: Clarabel's conversion of a numpy array is slower
         solution = self.solver.solve()
         statuses, iterations = [conic_status(solution)], solution.iterations
         if statuses[0] not in ANSWERED:
@@ -185,7 +185,7 @@ class _Screened(_Clarabel):
 
 
 def _vector(values: list[float]) -> np.ndarray:
-    """Clarabel's solution list as an array (np.fromiter: 3× faster than np.asarray here)."""
+    """Clarabel's solution list as an array (np.fromiter: faster than np.asarray here)."""
     return np.fromiter(values, np.float64, len(values))
 
 
