@@ -12,7 +12,7 @@ from pathlib import Path
 import numpy as np
 
 from opfbench.capability import PAPER_KS
-from opfbench.commands.common import fraction, number
+from opfbench.commands.common import fraction, number, share
 from opfbench.dynamics.params import FORECASTS, SENSITIVITY_VARIANTS, FaultParams, ModelParams
 from opfbench.errors import InputError
 from opfbench.jsonio import print_json
@@ -35,7 +35,7 @@ def register(sub: argparse._SubParsersAction) -> None:
         help="setpoints without (off) and with the oracle forecast (Algorithm 3)",
     )
     p.add_argument("--load-scale", type=fraction, default=1.0, help="multiplier on the nominal loads (default 1)")
-    p.add_argument("--der-scale", type=fraction, default=0.8, help="DER output as a fraction of rating (default 0.8)")
+    p.add_argument("--der-scale", type=share, default=0.8, help="DER output as a fraction of rating (default 0.8)")
     p.add_argument("--time", default=None, help="HH:MM: the paper day's minute as operating point instead")
     p.add_argument("--motor-share", type=number, default=0.5, help="share of each load's P in motors, 0..1")
     p.add_argument("--motor-inertia", type=number, default=0.2, help="motor H, s (default 0.2)")

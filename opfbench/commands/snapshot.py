@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import argparse
 
-from opfbench.commands.common import add_operating_point, fraction, print_json
+from opfbench.commands.common import add_operating_point, fraction, print_json, share
 from opfbench.errors import InputError
 from opfbench.formulations.options import ACOPF_SOLVERS, FALLBACKS
 from opfbench.registry import STRATEGIES, STRATEGY_NAMES, get_strategy, run_strategy
@@ -18,7 +18,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     add_operating_point(p)
     p.add_argument(
         "--forecast-der-scale",
-        type=fraction,
+        type=share,
         default=None,
         help="forecast DER output as a fraction of rating: turns on Algorithm 3 (local rules)",
     )

@@ -12,7 +12,7 @@ import argparse
 from typing import TYPE_CHECKING, Sequence
 
 from opfbench.capability import PAPER_KS
-from opfbench.commands.common import fraction, print_json
+from opfbench.commands.common import fraction, print_json, share
 from opfbench.registry import LOCAL_RULES, STRATEGIES, run_strategy
 
 if TYPE_CHECKING:
@@ -25,7 +25,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("table", help="the local rules' loss table on one operating point, k × rule, ± forecast")
     p.add_argument("case", nargs="?", default="paper33", help="shipped case name or MATPOWER .m path (default paper33)")
     p.add_argument("--load-scale", type=fraction, default=1.0, help="multiplier on every nominal load (default 1.0)")
-    p.add_argument("--der-scale", type=fraction, default=0.8, help="P^C as a fraction of rating, 0..1 (default 0.8)")
+    p.add_argument("--der-scale", type=share, default=0.8, help="P^C as a fraction of rating, 0..1 (default 0.8)")
     p.add_argument(
         "--forecast-factor", type=fraction, default=FORECAST_FACTOR, help="P^F = min(factor · P^C, rating) (default 1.2)"
     )
