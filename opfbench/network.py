@@ -343,9 +343,9 @@ class Network:
         """
         n = self.n_bus
         adjacency: list[list[tuple[int, int]]] = [[] for _ in range(n)]
-        for b in np.flatnonzero(self.status):
-            adjacency[self.f[b]].append((int(self.t[b]), int(b)))
-            adjacency[self.t[b]].append((int(self.f[b]), int(b)))
+        for branch in np.flatnonzero(self.status).tolist():
+            adjacency[self.f[branch]].append((int(self.t[branch]), branch))
+            adjacency[self.t[branch]].append((int(self.f[branch]), branch))
         parent = np.full(n, -1)
         parent_branch = np.full(n, -1)
         seen = np.zeros(n, dtype=bool)

@@ -18,11 +18,15 @@ from opfbench.powerflow import PowerFlowResult, solve_pf_batch
 if TYPE_CHECKING:
     from opfbench.scenario import Scenario
 
-# Status values. Local rules: "ok" or "pf-diverged". Formulations add their own
-# (e.g. "infeasible", "solver-failed", "fallback-cold", "fallback-socp", "fallback-no-action").
-OK = "ok"
-PF_DIVERGED = "pf-diverged"
-INFEASIBLE = "infeasible"
+# ----- status vocabulary (StrategyResult.status), the one list every table and report uses --
+OK = "ok"  # the strategy's own point, AC-evaluated (formulations: an optimum)
+FALLBACK_COLD = "fallback-cold"  # warm IPOPT failed, cold IPOPT from a flat start solved it
+FALLBACK_SOCP = "fallback-socp"  # IPOPT failed; the SOCP's setpoints, AC-evaluated, are feasible
+FALLBACK_NO_ACTION = "fallback-no-action"  # nothing better found; Q = 0 is AC-feasible
+INFEASIBLE = "infeasible"  # the OPF has no feasible point (shown by a solver); Q = 0 reported
+SOLVER_FAILED = "solver-failed"  # solver failed, no feasible fallback, infeasibility not shown
+PF_DIVERGED = "pf-diverged"  # the AC power flow at the setpoints did not converge: no figures
+STATUSES = (OK, FALLBACK_COLD, FALLBACK_SOCP, FALLBACK_NO_ACTION, INFEASIBLE, SOLVER_FAILED, PF_DIVERGED)
 
 
 @dataclass(eq=False)

@@ -493,14 +493,10 @@ def test_forecast_unknown_model_before_loading(capsys, no_computation):
     assert code == 2 and "unknown model(s) prophet" in err
 
 
-# ----- the loss-table module -------------------------------------------------------------------
-def test_strategies_table_unknown_case_exit_2():
-    proc = subprocess.run(
-        [sys.executable, "-m", "opfbench.strategies.table", "--case", "nope"], capture_output=True, text=True, timeout=120
-    )
-    assert proc.returncode == 2 and proc.stdout == ""
-    assert proc.stderr.startswith("python -m opfbench.strategies.table: error: unknown case 'nope'")
-    assert proc.stderr.count("\n") == 1
+# ----- the loss table -----------------------------------------------------------------------
+def test_table_unknown_case_exit_2(capsys):
+    code, err = _cli(capsys, ["table", "nope"])
+    assert code == 2 and err.startswith("opfbench table: error: unknown case 'nope'") and err.count("\n") == 1
 
 
 # ----- lazy imports -----------------------------------------------------------------------------

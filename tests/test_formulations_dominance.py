@@ -10,10 +10,10 @@ import pytest
 from opfbench.cases import load_case
 from opfbench.errors import InputError
 from opfbench.formulations.acopf import run_acopf
-from opfbench.formulations.dominance import opf_dominance
 from opfbench.registry import run_strategy
 from opfbench.result import StrategyResult
 from opfbench.scenario import Scenario
+from tests.support.dominance import opf_dominance
 
 
 def no_action(scenario: Scenario) -> StrategyResult:

@@ -1,4 +1,4 @@
-"""Bound screening of the conic programs (`conic.ParametricConeProgram`): a screened answer
+"""Bound screening of the conic programs (`clarabel_adapter.ParametricConeProgram`): a screened answer
 is the full program's optimum, wrong guesses are refused, and the answer does not depend
 on them."""
 
@@ -9,8 +9,9 @@ import pytest
 
 from opfbench.bench.profiles import paper_day_scenario
 from opfbench.cases import load_case
+from opfbench.formulations.models.soc import data_vector
 from opfbench.formulations.problem import snapshot_data
-from opfbench.formulations.socp import build_socp, data_vector
+from opfbench.formulations.relaxation import build_socp
 from opfbench.scenario import Scenario
 
 

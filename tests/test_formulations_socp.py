@@ -7,10 +7,14 @@ import numpy as np
 import pytest
 
 from opfbench.cases import load_case
-from opfbench.errors import InputError, NetworkError
+from opfbench.errors import NetworkError
 from opfbench.formulations.acopf import run_acopf
+from opfbench.formulations.models.distflow import DistFlowSocp
+from opfbench.formulations.models.jabr import JabrSocp
+from opfbench.formulations.models.soc import data_vector
 from opfbench.formulations.problem import snapshot_data
-from opfbench.formulations.socp import DistFlowSocp, JabrSocp, build_socp, data_vector, run_socp
+from opfbench.formulations.relaxation import build_socp
+from opfbench.formulations.socp import run_socp
 from opfbench.scenario import Scenario
 
 BOUND_SLACK = 1e-6  # relative: solver tolerances of both sides
@@ -64,12 +68,12 @@ def test_jabr_and_distflow_agree_on_a_radial_feeder():
     net = load_case("paper33")
     data = snapshot_data(Scenario.snapshot(net, 0.9, 0.6), 0.2)
     args = (data.s_fixed[0], data.q_limit[0])
-    dist, jabr = build_socp(net, model="distflow").solve(*args), build_socp(net, model="jabr").solve(*args)
+    dist, jabr = DistFlowSocp(net).solve(*args), JabrSocp(net).solve(*args)
     assert jabr.lower_bound_kw == pytest.approx(dist.lower_bound_kw, rel=1e-6)
     np.testing.assert_allclose(jabr.q_pu, dist.q_pu, atol=1e-6)
 
 
-@pytest.mark.parametrize("model", ["distflow", "jabr"])
+@pytest.mark.parametrize("model", [DistFlowSocp, JabrSocp])
 def test_direct_clarabel_path_matches_cvxpy_solve(model):
     """The data-as-offset path (the full program) equals cvxpy's own solve with the data
     variables pinned; the screened answer has the same optimum: its bound within 5e-7
@@ -78,7 +82,7 @@ def test_direct_clarabel_path_matches_cvxpy_solve(model):
     the optimum, so 1e-8 in the objective leaves Q loose (measured up to 1.0e-6 for the
     full program, 5.6e-6 for the screened Jabr answer, against cvxpy's defaults)."""
     net = load_case("paper33")
-    relax = build_socp(net, model=model)
+    relax = model(net)
     program = relax.program
     for scale in (0.5, 1.2):
         data = snapshot_data(Scenario.snapshot(net, scale, 0.7), 0.0)
@@ -112,8 +116,7 @@ def test_distflow_refuses_what_it_does_not_model():
     JabrSocp(tapped)  # the bus-injection model handles taps
     with pytest.raises(NetworkError, match="radial"):
         DistFlowSocp(load_case("paper33-meshed"))
-    with pytest.raises(InputError, match="unknown SOCP model"):
-        build_socp(net, model="sdp")
+    assert type(build_socp(net)) is DistFlowSocp and type(build_socp(load_case("paper33-meshed"))) is JabrSocp
 
 
 def test_line_charging_is_modelled_exactly():

@@ -7,6 +7,7 @@ from opfbench.cases import CASE_NAMES, load_case
 from opfbench.errors import CaseFormatError, InputError
 from opfbench.matpower import load_case_file, read_matpower
 from tests.support.matpower_texts import TINY_CASE
+from tests.support.shipped_cases import SHIPPED
 
 
 def _write(tmp_path, text, name="broken.m"):
@@ -22,22 +23,6 @@ def test_good_file_applies_ohm_and_kw_conversions(tmp_path):
     assert case.bus[1, 2] == pytest.approx(0.1) and case.bus[1, 3] == pytest.approx(0.06)
     net = load_case_file(tmp_path / "tiny.m")
     assert list(net.bus_ids) == [1, 2, 3] and net.slack == 0
-
-
-# name: buses, branches (in service), DER units, total load MW / MVAr (case33bw: Baran & Wu's
-# 3.715 MW / 2.3 MVAr; case69: MATPOWER's 3802.19 kW / 2694.60 kVAr, its rows summed at 1e-4),
-# meshed; the DER cases share their base case's loads.
-SHIPPED = {
-    "case33bw": (33, 37, 32, 0, 3.715, 2.3, False),
-    "case69": (69, 68, 68, 0, 3.8021, 2.6947, False),
-    "case141": (141, 140, 140, 0, 11.944625, 7.402614, False),
-    "paper33": (33, 37, 32, 5, 3.715, 2.3, False),
-    "paper33-meshed": (33, 37, 37, 5, 3.715, 2.3, True),
-    "case69-der": (69, 68, 68, 5, 3.8021, 2.6947, False),
-    "case141-der": (141, 140, 140, 5, 11.944625, 7.402614, False),
-    "feeder1k": (990, 989, 989, 150, 3.715, 2.3, False),
-    "feeder10k": (9999, 9998, 9998, 1515, 3.715, 2.3, False),
-}
 
 
 def test_every_shipped_case_is_pinned():

@@ -90,7 +90,7 @@ _BUILDERS: dict[str, Callable[[], Network]] = {
     "case69-der": lambda: place_ders(load_case_file(_matpower_file("case69")), "case69-der"),
     "case141-der": lambda: place_ders(load_case_file(_matpower_file("case141")), "case141-der"),
 }
-_BUILDERS |= {name: partial(feeder, c, name) for name, c in SHIPPED_COPIES.items()}
+_BUILDERS |= {name: partial(feeder, copies, name) for name, copies in SHIPPED_COPIES.items()}
 
 CASE_NAMES = tuple(_BUILDERS)
 

@@ -1,6 +1,6 @@
 """`opfbench forecast`: compare one-step-ahead PV / wind forecasters (paper §II, Table I).
 
-Full run (documented budget ≤ ~30 min per dataset on 2 CPU cores):
+Full run (tens of minutes per dataset; the README gives today's figures):
     opfbench forecast --dataset pv --out reports/forecast
     opfbench forecast --dataset wind --out reports/forecast
 """
@@ -53,10 +53,11 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from opfbench.folders import check_out_dir
     from opfbench.forecasting.datasets import forecast_dataset
     from opfbench.forecasting.experiment import run_comparison
     from opfbench.forecasting.models import settings_for
-    from opfbench.forecasting.outputs import check_out_dir, write_outputs
+    from opfbench.forecasting.outputs import write_outputs
 
     models = tuple(m.strip() for m in args.models.split(",") if m.strip())
     if not models:
@@ -76,8 +77,14 @@ def run(args: argparse.Namespace) -> int:
     dataset = forecast_dataset(args.dataset).lag_weather(1 if args.weather == "previous" else 0)
     result = run_comparison(dataset, models, settings, args.seed, progress=lambda msg: print(msg, file=sys.stderr))
     if args.out is not None:
-        for written in write_outputs(result, args.out):
-            print(f"wrote {written}", file=sys.stderr)
+        from opfbench.forecasting.outputs import forecast_path
+        from opfbench.jsonio import write_atomic
+        from opfbench.report.forecast_page import forecast_page  # matplotlib only when a page is drawn
+
+        written = write_outputs(result, args.out)
+        written.append(write_atomic(forecast_path(args.out, result.dataset, "html"), forecast_page(result)))
+        for one in written:
+            print(f"wrote {one}", file=sys.stderr)
     if args.json:
         print_json(result.metrics_table())
     else:
@@ -87,7 +94,7 @@ def run(args: argparse.Namespace) -> int:
 
 def format_table(result: "ComparisonResult") -> str:
     """Plain-text metrics table with the paper's Table I values."""
-    from opfbench.forecasting.report import PAPER_TABLE
+    from opfbench.report.paper import FORECAST_TABLE as PAPER_TABLE
 
     header = (
         f"{'model':<18}"

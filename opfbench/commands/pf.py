@@ -5,7 +5,6 @@ from __future__ import annotations
 import argparse
 
 from opfbench.commands.common import add_operating_point, print_json
-from opfbench.errors import InputError
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -19,8 +18,6 @@ def run(args: argparse.Namespace) -> int:
     from opfbench.cases import load_case
     from opfbench.powerflow import bus_injections, solve_pf
 
-    if args.der_scale > 1:
-        raise InputError(f"--der-scale is a fraction of rating and must be ≤ 1, got {args.der_scale}")
     net = load_case(args.case)
     res = solve_pf(net, bus_injections(net, args.der_scale * net.der_rating_mw, 0.0, args.load_scale))
     out = {

@@ -10,11 +10,13 @@ import sys
 from pathlib import Path
 from typing import TYPE_CHECKING
 
+from opfbench.capability import PAPER_KS
 from opfbench.commands.common import fraction, path
+from opfbench.formulations.options import ACOPF_SOLVERS
 from opfbench.jsonio import print_json
 from opfbench.registry import STRATEGY_NAMES
-from opfbench.report.price import DEFAULT_CURRENCY, DEFAULT_PRICE_PER_KWH, DEFAULT_PRICE_SOURCE
-from opfbench.study.config import ACOPF_SOLVERS, CHUNKS, DEFAULT_KS, DEFAULT_NIGHT, NIGHT_MODES, StudyConfig
+from opfbench.study.config import CHUNKS, DEFAULT_NIGHT, NIGHT_MODES, StudyConfig
+from opfbench.study.price import DEFAULT_CURRENCY, DEFAULT_PRICE_PER_KWH, DEFAULT_PRICE_SOURCE
 
 if TYPE_CHECKING:
     from opfbench.study.runner import StudyRun
@@ -48,7 +50,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--strategies", nargs="+", default=list(STRATEGY_NAMES), choices=STRATEGY_NAMES, help="default: every registered strategy"
     )
-    p.add_argument("--k", nargs="+", type=fraction, default=list(DEFAULT_KS), help="reserve coefficients in [0, 1]")
+    p.add_argument("--k", nargs="+", type=fraction, default=list(PAPER_KS), help="reserve coefficients in [0, 1]")
     p.add_argument("--night-modes", nargs="+", default=list(NIGHT_MODES), choices=NIGHT_MODES)
     p.add_argument(
         "--night",
@@ -181,8 +183,7 @@ def finish_run(result: StudyRun, args: argparse.Namespace) -> int:
     forecast, fault, year = report_sources(forecast_dir if holds_forecasts(forecast_dir) else None, args.fault_dir, args.year_dir)
     report = write_report(result.out, forecast, fault, year_dir=year)
     summary = result.summary
-    if summary is None:  # run_study returns a summary unless interrupted, and then raises
-        raise RuntimeError(f"the run in {result.out} ended without a summary")
+    assert summary is not None, "run_study returns the summary of a finished run"
     if args.json:
         print_json(summary.to_dict(orient="records"))
         return 0

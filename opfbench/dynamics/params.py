@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import asdict, dataclass, field, replace
-from typing import Literal, cast
+from typing import Literal, TypeVar
 
 from opfbench.errors import InputError
 
@@ -27,6 +27,7 @@ EmfMode = Literal["reset", "held", "given"]
 TorqueLaw = Literal["quadratic", "constant"]
 ActivePowerMode = Literal["constant-power", "ramp"]
 InverterControl = Literal["grid-code", "constant-current"]
+C = TypeVar("C", bound=str)
 NOMINAL_HZ = 50.0
 RECOVERY_PU = 0.9  # the recovery threshold |V| ≥ 0.9 p.u.
 
@@ -174,11 +175,18 @@ def _number(value: str, spec: str) -> float:
     return out
 
 
+def _choice(value: str, allowed: tuple[C, ...], message: str) -> C:
+    """`value` as the one of `allowed` it equals; InputError(`message`) if none."""
+    for option in allowed:
+        if option == value:
+            return option
+    raise InputError(message)
+
+
 def _apply(p: ModelParams, key: str, value: str, spec: str) -> ModelParams:
     if key == "emf":
-        if value not in ("reset", "held"):
-            raise InputError(f"variant {spec!r}: emf must be reset or held (a value: emf-pu=X)")
-        return replace(p, source=replace(p.source, emf=cast(EmfMode, value)))
+        emf: EmfMode = _choice(value, ("reset", "held"), f"variant {spec!r}: emf must be reset or held (a value: emf-pu=X)")
+        return replace(p, source=replace(p.source, emf=emf))
     if key == "emf-pu":
         return replace(p, source=replace(p.source, emf="given", emf_pu=_number(value, spec)))
     if key == "source":
@@ -188,9 +196,13 @@ def _apply(p: ModelParams, key: str, value: str, spec: str) -> ModelParams:
     if key == "inertia":
         return replace(p, motors=replace(p.motors, h_s=_number(value, spec)))
     if key == "torque":
-        return replace(p, motors=replace(p.motors, torque=cast(TorqueLaw, value)))  # checked by `check`
+        law: TorqueLaw = _choice(value, ("quadratic", "constant"), f"unknown torque law {value!r}; choose quadratic or constant")
+        return replace(p, motors=replace(p.motors, torque=law))
     if key == "active":
-        return replace(p, inverters=replace(p.inverters, active=cast(ActivePowerMode, value)))  # checked by `check`
+        mode: ActivePowerMode = _choice(
+            value, ("constant-power", "ramp"), f"unknown active-power mode {value!r}; choose constant-power or ramp"
+        )
+        return replace(p, inverters=replace(p.inverters, active=mode))
     raise InputError(f"variant {spec!r}: unknown key {key!r}; use emf, emf-pu, source, motors, inertia, torque, active")
 
 

@@ -20,7 +20,8 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from opfbench.dynamics.model import build_model, prefault_flow
+from opfbench.capability import PAPER_KS, check_reserve
+from opfbench.dynamics.model import DynamicModel, build_model, prefault_flow
 from opfbench.dynamics.params import FORECASTS, FaultParams, ModelParams
 from opfbench.dynamics.simulate import DIVERGED, NOT_RECOVERED, RECOVERED, Simulation, check_fault, simulate
 from opfbench.errors import InputError
@@ -75,7 +76,7 @@ class StudyConfig:
     case: str
     fault_buses: tuple[int, ...]
     strategies: tuple[str, ...] = ("no-action", "llma", "lfma", "acopf")
-    ks: tuple[float, ...] = (0.0, 0.2, 0.4, 0.6, 0.8)
+    ks: tuple[float, ...] = PAPER_KS
     forecasts: tuple[str, ...] = ("off",)
     variants: tuple[str, ...] = ("reference",)
     params: ModelParams = field(default_factory=ModelParams)
@@ -91,8 +92,7 @@ class StudyConfig:
         for name in self.strategies:
             get_strategy(name)
         for k in self.ks:
-            if not 0.0 <= k <= 1.0:
-                raise InputError(f"reserve coefficient k must lie in [0, 1], got {k}")
+            check_reserve(k)
         for fc in self.forecasts:
             if fc not in FORECASTS:
                 raise InputError(f"unknown forecast {fc!r}; choose from {', '.join(FORECASTS)}")
@@ -196,7 +196,8 @@ def run_study(config: StudyConfig, point: OperatingPoint, progress=None) -> tupl
                     raise InputError(f"strategy {name} at k = {k:g} gave status {res.status[0]} on this operating point")
                 setpoints[name, k, fc] = res.q_mvar[0]
     sc_off = Scenario(net, point.scenario.load_scale, point.scenario.der_p_mw)
-    jobs, keys = [], []
+    jobs: list[tuple[DynamicModel, list[FaultParams]]] = []
+    keys = []
     for label, params in variants.items():
         emf = params.source.emf_pu if params.source.emf == "given" else None
         if params.source.emf == "held":

@@ -18,6 +18,7 @@ import pandas as pd
 
 from opfbench.data.cleaning import check_time_index
 from opfbench.errors import DataError, InputError
+from opfbench.folders import check_out_dir
 from opfbench.forecasting.experiment import ComparisonResult
 from opfbench.jsonio import write_atomic, write_json
 
@@ -26,22 +27,6 @@ _TIME_FORMAT = "%Y-%m-%dT%H:%M:%S%z"
 
 def forecast_path(directory: str | Path, dataset: str, suffix: str = "csv") -> Path:
     return Path(directory) / f"forecast_{dataset}.{suffix}"
-
-
-def check_out_dir(directory: str | Path) -> Path:
-    """`directory` usable for `write_outputs` (created if missing): raise `InputError`
-    naming it when it is a file or cannot be written — checked before any computation."""
-    out = Path(directory)
-    if out.exists() and not out.is_dir():
-        raise InputError(f"--out {out}: exists and is not a folder")
-    try:
-        out.mkdir(parents=True, exist_ok=True)
-        probe = out / ".opfbench-write-test"
-        probe.write_bytes(b"")
-        probe.unlink()
-    except OSError as exc:
-        raise InputError(f"--out {out}: cannot write there ({exc.strerror})") from None
-    return out
 
 
 def run_metadata(result: ComparisonResult) -> dict[str, object]:
@@ -59,9 +44,8 @@ def run_metadata(result: ComparisonResult) -> dict[str, object]:
 
 
 def write_outputs(result: ComparisonResult, directory: str | Path) -> list[Path]:
-    """Write the CSV, JSON and HTML files of `result` into `directory` (created), each atomically."""
-    from opfbench.forecasting.report import forecast_page  # matplotlib only when a page is drawn
-
+    """Write the forecasts (CSV) and the run's metadata and metrics (JSON) of `result` into
+    `directory` (created), each atomically."""
     out = check_out_dir(directory)
     csv = write_atomic(
         forecast_path(out, result.dataset, "csv"), result.forecasts.to_csv(index_label="timestamp", date_format=_TIME_FORMAT)
@@ -69,8 +53,7 @@ def write_outputs(result: ComparisonResult, directory: str | Path) -> list[Path]
     meta = write_json(
         forecast_path(out, result.dataset, "json"), {"run": run_metadata(result), "metrics": result.metrics_table()}
     )
-    html = write_atomic(forecast_path(out, result.dataset, "html"), forecast_page(result))
-    return [csv, meta, html]
+    return [csv, meta]
 
 
 def load_forecast(directory: str | Path, dataset: str, model: str) -> pd.Series:

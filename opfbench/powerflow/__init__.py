@@ -107,7 +107,7 @@ def solve_pf(
             if not np.all(np.isfinite(f)):
                 break
             converged = bool(np.max(np.abs(f)) < tol)
-    return PowerFlowResult(net, v, np.bool_(converged), np.int64(it))
+    return PowerFlowResult(net, v, np.asarray(converged), np.asarray(it, dtype=np.int64))
 
 
 @dataclass(frozen=True, eq=False)

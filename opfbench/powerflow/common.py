@@ -22,10 +22,9 @@ MISMATCH_CHECK = 1e-8  # p.u.; a batched snapshot whose mismatch exceeds this go
 MAX_NR_ITER = 30
 MAX_SWEEP_ITER = 200
 # Feeders with at least this many buses use the sparse solvers (scipy.sparse, SuperLU);
-# smaller ones the dense ones. Measured (2-core machine, 96 snapshots): on paper33 the
-# dense kernels are ~2× faster (single NR 0.5 vs 1.0 ms, batch 1–2 vs 1.3–2.4 ms); on
-# case141 the sparse ones win (NR ~2 vs ≥ 40 ms, batch 13 vs 18 ms); in between they are
-# within noise. The dense Z-bus also costs 16·n² bytes (1.6 GB at 10 000 buses).
+# smaller ones the dense ones: on paper33 the dense kernels are the faster, on case141 the
+# sparse ones, in between they are close (`python -m opfbench.bench pf` times both). The
+# dense Z-bus also costs 16·n² bytes (1.6 GB at 10 000 buses).
 SPARSE_MIN_BUSES = 100
 
 
@@ -41,16 +40,12 @@ class PowerFlowResult:
 
     net: Network
     v: np.ndarray
-    converged: np.ndarray | np.bool_
-    iterations: np.ndarray | np.integer
+    converged: np.ndarray  # bool, (S,) or 0-d for one snapshot
+    iterations: np.ndarray  # int64, likewise
 
     @property
     def vm(self) -> np.ndarray:
         return np.abs(self.v)
-
-    @property
-    def va_deg(self) -> np.ndarray:
-        return np.rad2deg(np.angle(self.v))
 
     @cached_property
     def _flows(self) -> tuple[np.ndarray, np.ndarray]:
@@ -121,7 +116,7 @@ def bus_injections(
     base = fixed - scale[..., None] * load
     lead = np.broadcast_shapes(base.shape[:-1], der_s.shape[:-1])
     out = np.broadcast_to(base, lead + (net.n_bus,)).copy()
-    np.add.at(out, (..., net.der_bus), np.broadcast_to(der_s, lead + der_s.shape[-1:]))  # type: ignore[arg-type]
+    np.add.at(out.T, net.der_bus, np.broadcast_to(der_s, lead + der_s.shape[-1:]).T)  # bus axis first
     return out
 
 

@@ -17,8 +17,8 @@ from opfbench.powerflow.common import bus_types
 
 # The Jacobian and Y have a symmetric sparsity pattern: SuperLU's symmetric mode (minimum
 # degree on A + Aᵀ, diagonal pivots preferred unless 100× smaller than the column's
-# largest entry) factorizes them with little fill-in; 1.5–3× faster than the default
-# COLAMD with unrestricted partial pivoting on the 10 000-bus feeder.
+# largest entry) factorizes them with little fill-in, faster than the default COLAMD with
+# unrestricted partial pivoting on the 10 000-bus feeder (`python -m opfbench.bench pf --large`).
 _SPLU_OPTIONS = {"permc_spec": "MMD_AT_PLUS_A", "diag_pivot_thresh": 0.01, "options": {"SymmetricMode": True}}
 
 

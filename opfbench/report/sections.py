@@ -9,7 +9,7 @@ from opfbench.report import plots, tables
 from opfbench.report.claims import claims
 from opfbench.report.inputs import Inputs
 from opfbench.report.page import Block, Section, table
-from opfbench.report.price import DEFAULT_CURRENCY, DEFAULT_PRICE_PER_KWH, DEFAULT_PRICE_SOURCE
+from opfbench.study.price import DEFAULT_CURRENCY, DEFAULT_PRICE_PER_KWH, DEFAULT_PRICE_SOURCE
 
 if TYPE_CHECKING:
     import pandas as pd
@@ -373,19 +373,26 @@ def paper_claims(inputs: Inputs) -> Section:
     return sec.add(Block("claims", claims=claims(inputs)))
 
 
-PRICED: set[Callable[..., Section]] = {metadata, losses, year}
-"""Builders that also take the energy price (currency per kWh, currency, source)."""
-SECTIONS: tuple[tuple[str, str, Callable[..., Section]], ...] = (
-    ("claims", "The paper's claims", paper_claims),
+Price = tuple[float, str, str]  # energy price per kWh, currency, source
+Builder = Callable[[Inputs, Price], Section]
+
+
+def _unpriced(build: Callable[[Inputs], Section]) -> Builder:
+    """A builder that does not use the price, called like those that do."""
+    return lambda inputs, _price: build(inputs)
+
+
+SECTIONS: tuple[tuple[str, str, Builder], ...] = (
+    ("claims", "The paper's claims", _unpriced(paper_claims)),
     ("metadata", "Run metadata", metadata),
     ("losses", "Losses and savings", losses),
-    ("convergence", "Convergence of the formulations", convergence),
+    ("convergence", "Convergence of the formulations", _unpriced(convergence)),
     ("year", "A year (2016 at 15 min)", year),
-    ("night", "Night hours", night),
-    ("gap", "Optimality gap", gap),
-    ("voltage", "Voltage compliance", voltage),
-    ("forecasting", "Forecasting", forecasting),
-    ("fault", "Fault ride-through", fault),
+    ("night", "Night hours", _unpriced(night)),
+    ("gap", "Optimality gap", _unpriced(gap)),
+    ("voltage", "Voltage compliance", _unpriced(voltage)),
+    ("forecasting", "Forecasting", _unpriced(forecasting)),
+    ("fault", "Fault ride-through", _unpriced(fault)),
 )
 """(id, title, builder) in page order."""
 FAILED = "This section could not be built from its input files"
@@ -397,7 +404,7 @@ def all_sections(inputs: Inputs, price: tuple[float, str, str]) -> list[Section]
     out = []
     for sid, title, build in SECTIONS:
         try:
-            out.append(build(inputs, price) if build in PRICED else build(inputs))
+            out.append(build(inputs, price))
         except (KeyError, ValueError, IndexError, TypeError) as exc:
             out.append(Section(sid, title, blocks=[Block("error", text=f"{FAILED}: {type(exc).__name__}: {exc}")]))
     return out

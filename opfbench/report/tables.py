@@ -7,15 +7,13 @@ E/E_no-action) with E_no-action the same case/k/night mode, forecast off (summar
 
 from __future__ import annotations
 
-from typing import Any
-
 import numpy as np
 import pandas as pd
 
 from opfbench.registry import FORMULATIONS, LOCAL_RULES, STRATEGIES
 from opfbench.report import paper
+from opfbench.result import STATUSES
 
-STATUSES = ("ok", "fallback-cold", "fallback-socp", "fallback-no-action", "infeasible", "solver-failed", "pf-diverged")
 CONFIG = ["case", "strategy", "k", "night_mode", "forecast"]
 REFERENCE_NIGHT = "connected"
 """The night mode of the tables that fix one (the paper's main setting)."""
@@ -170,15 +168,20 @@ def night_vs_paper(summary: pd.DataFrame, k: float = 0.0) -> pd.DataFrame:
     ours = summary[(summary["forecast"] == "off") & np.isclose(summary["k"], k)]
     for case in sorted(ours["case"].unique()):
         for strategy in paper.NIGHT_TABLE["connected"]:
-            row: dict[str, Any] = {"case": case, "strategy": strategy}
-            for mode in ("connected", "disconnected"):
-                row[f"paper {mode} kWh"] = paper.NIGHT_TABLE[mode][strategy][1]
+            theirs = {mode: float(paper.NIGHT_TABLE[mode][strategy][1]) for mode in ("connected", "disconnected")}
+            mine = {}
             for mode in ("connected", "disconnected", "connected-q"):
                 hit = ours[(ours["case"] == case) & (ours["strategy"] == strategy) & (ours["night_mode"] == mode)]
-                row[f"ours {mode} kWh"] = float(hit["energy_kwh"].iloc[0]) if len(hit) else np.nan
-            row["paper reduction %"] = 100 * (1 - row["paper connected kWh"] / row["paper disconnected kWh"])
-            row["ours reduction %"] = 100 * (1 - row["ours connected kWh"] / row["ours disconnected kWh"])
-            rows.append(row)
+                mine[mode] = float(hit["energy_kwh"].iloc[0]) if len(hit) else np.nan
+            rows.append(
+                {"case": case, "strategy": strategy}
+                | {f"paper {mode} kWh": e for mode, e in theirs.items()}
+                | {f"ours {mode} kWh": e for mode, e in mine.items()}
+                | {
+                    "paper reduction %": 100 * (1 - theirs["connected"] / theirs["disconnected"]),
+                    "ours reduction %": 100 * (1 - mine["connected"] / mine["disconnected"]),
+                }
+            )
     return pd.DataFrame(rows)
 
 

@@ -23,19 +23,17 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 from datetime import datetime
-from typing import Literal
 
 import numpy as np
 import pandas as pd
 
 from opfbench.data import PAPER_DAY, assemble_profiles, load_pv_minute, night_mask, night_mask_window
-from opfbench.data.profiles import PAPER_DAY_TZ
+from opfbench.data.profiles import PAPER_DAY_TZ, PvSource
 from opfbench.errors import InputError
 
 YEAR = "2016"
 _CHUNK_FREQ = {"day": "D", "week": "W", "month": "M"}
 CHUNK_6H = "6h"
-PvSource = Literal["simbench", "bsrn"]
 MIN_STEP_MINUTES = 1.0  # the finest data: BSRN's 1-minute PV
 MAX_STEP_MINUTES = 1e7  # beyond any period of the data (a year is 527 040 min); larger overflows a Timedelta
 

@@ -5,8 +5,6 @@ built from per-task partial sums so that a year never has to sit in memory at on
 
 from __future__ import annotations
 
-from typing import Any
-
 import numpy as np
 import pandas as pd
 
@@ -51,7 +49,7 @@ def _certified_by(res: StrategyResult) -> np.ndarray:
     return np.full(res.n_snapshots, "", dtype=object)
 
 
-Columns = dict[str, Any]  # column name → array of the part's rows, or one value for all of them
+Columns = dict[str, np.ndarray | str | float | int | bool]  # name → the part's rows, or one value for all
 
 
 def step_rows(
@@ -102,7 +100,7 @@ def detail_rows(
     setpoints (bus id, kind, q_mvar), "bus_v" per-bus |V| (p.u.)."""
     net = res.net
     n = res.n_snapshots
-    label = {"case": case, "strategy": res.strategy, "k": float(res.k), "night_mode": night_mode, "forecast": forecast}
+    label: Columns = {"case": case, "strategy": res.strategy, "k": float(res.k), "night_mode": night_mode, "forecast": forecast}
 
     def der_q() -> Columns:
         n_der = len(net.ders)
@@ -130,7 +128,7 @@ def stack(parts: list[Columns], columns: list[str], tz) -> pd.DataFrame:
     value, or a few, repeated on every row: many times faster to build and to hand
     between processes; the files hold plain text, `store._arrow`); "time" (UTC ns) gets
     the zone `tz`."""
-    rows = [max(len(v) for v in part.values() if np.ndim(v)) for part in parts]
+    rows = [max(np.shape(v)[0] for v in part.values() if np.ndim(v)) for part in parts]
     data = {}
     for name in columns:
         values = [part[name] for part in parts]
@@ -139,7 +137,8 @@ def stack(parts: list[Columns], columns: list[str], tz) -> pd.DataFrame:
             codes = np.repeat(np.array([categories.index(v) for v in values], dtype=np.int32), rows)
             data[name] = pd.Categorical.from_codes(codes, categories)
         elif name == "time":
-            data[name] = pd.DatetimeIndex(np.concatenate(values).view("datetime64[ns]")).tz_localize("UTC").tz_convert(tz)
+            times = np.concatenate([np.asarray(v) for v in values])
+            data[name] = pd.DatetimeIndex(times.view("datetime64[ns]")).tz_localize("UTC").tz_convert(tz)
         else:
             arrays = [np.full(r, v) if np.ndim(v) == 0 else np.asarray(v) for v, r in zip(values, rows, strict=True)]
             column = np.concatenate(arrays) if arrays else np.zeros(0)
