@@ -14,11 +14,13 @@ injected (over-excited). Limits are symmetric: Qmin = −Qmax.
   standstill), so |P| enters the power-factor limit.
 - "Q at night" (night mode connected-q, beyond the paper): the solar units' S-limit
   √(S̄² − P²) alone, no power-factor limit.
-- Reserve coefficient k ∈ [0, 1]: only (1 − k)·Qmax may be used for loss minimization.
+- Reserve coefficient k ∈ [0, 1] (`check_reserve`): only (1 − k)·Qmax may be used for loss
+  minimization; the paper sweeps `PAPER_KS`.
 """
 
 from __future__ import annotations
 
+import math
 from typing import Sequence
 
 import numpy as np
@@ -53,12 +55,19 @@ def _check_p(p_mw: np.ndarray, rating_mw: np.ndarray, floor_mw: np.ndarray | Non
         )
 
 
-def check_reserve(k: float | np.ndarray) -> np.ndarray:
-    """Validate the reserve coefficient(s) k ∈ [0, 1]."""
-    k_arr = np.asarray(k, dtype=float)
-    if not np.all(np.isfinite(k_arr)) or np.any((k_arr < 0) | (k_arr > 1)):
+#: The reserve coefficients the paper sweeps, the default k list of every study.
+PAPER_KS = (0.0, 0.2, 0.4, 0.6, 0.8)
+
+
+def check_reserve(k: float) -> float:
+    """One reserve coefficient k ∈ [0, 1], as a float; InputError otherwise (an array, NaN,
+    or a number outside the range)."""
+    if np.ndim(k) != 0:
+        raise InputError(f"reserve coefficient k must be one number, got shape {np.shape(k)}")
+    value = float(k)
+    if not (math.isfinite(value) and 0.0 <= value <= 1.0):
         raise InputError(f"reserve coefficient k must lie in [0, 1], got {k}")
-    return k_arr
+    return value
 
 
 def pv_qmax(p_mw: np.ndarray, rating_mw: np.ndarray, s_mva: np.ndarray | None = None) -> np.ndarray:
@@ -127,8 +136,3 @@ def qmax(
             day = inverter_qmax(pc, rc, sc)
             out[..., cols] = np.where(nc, inverter_qmax(pc, rc, sc, night=True), day) if nc.any() else day
     return out
-
-
-def usable_qmax(kinds: Sequence[str], p_mw: np.ndarray, rating_mw: np.ndarray, k: float, pv_night_q: bool = False) -> np.ndarray:
-    """(1 − k)·Qmax: the part of the capability that loss minimization may use (MVAr)."""
-    return (1.0 - check_reserve(k)) * qmax(kinds, p_mw, rating_mw, night_q=pv_night_q)

@@ -18,7 +18,7 @@ range. `DER.energy` is its primary energy: the night modes act on the solar unit
 from __future__ import annotations
 
 from collections import deque
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field, fields, replace
 from functools import cached_property
 from typing import Literal
 
@@ -31,12 +31,26 @@ DerKind = Literal["PV", "DFIG", "inverter"]
 DER_KINDS: tuple[str, ...] = ("PV", "DFIG", "inverter")
 DerEnergy = Literal["solar", "wind", "biomass", "hydro", "other"]
 DER_ENERGIES: tuple[str, ...] = ("solar", "wind", "biomass", "hydro", "other")
-_KIND_ENERGY = {"PV": "solar", "DFIG": "wind", "inverter": "other"}
+_KIND_ENERGY = {"PV": "solar", "DFIG": "wind", "inverter": "solar"}
 
 _BUS_ARRAYS = ("bus_ids", "bus_type", "base_kv", "load_p_mw", "load_q_mvar", "gs_mw", "bs_mvar", "vmin", "vmax")
 _BRANCH_ARRAYS = ("f", "t", "r", "x", "b", "g", "tap", "shift", "status")
 _GEN_ARRAYS = ("gen_bus", "gen_p_mw", "gen_q_mvar", "gen_vset")
 _DTYPES = {"bus_ids": int, "bus_type": int, "f": int, "t": int, "status": bool, "gen_bus": int, "load_bus": int}
+BUS_TYPES = {1: "PQ", 2: "PV", 3: "slack"}  # MATPOWER's codes; its 4 (isolated) is not a bus of the network
+V_SETPOINT_PU = (0.5, 1.5)
+"""Voltage magnitudes a slack or a voltage-controlled generator may be held at (p.u.);
+outside, the value is a typo (a sign, kV for p.u.), never a distribution feeder."""
+V_LIMIT_MAX_PU = 2.0
+"""The largest voltage limit (p.u.) accepted; vmin lies in [0, vmax], vmax in
+[V_SETPOINT_PU[0], V_LIMIT_MAX_PU] (a band below 0.5 p.u. is no feeder's)."""
+BASE_MVA_RANGE = (1e-3, 1e6)
+"""Power bases (MVA) accepted: 1 kVA to 1 TVA; beyond, per-unit arithmetic over- or underflows."""
+
+
+def _frozen(arr: np.ndarray) -> np.ndarray:
+    arr.setflags(write=False)
+    return arr
 
 
 @dataclass(frozen=True)
@@ -44,7 +58,7 @@ class DER:
     """A DER unit: `bus` is the internal bus index, `rating_mw` its rated active power P̄
     (MW), `s_mva` its nameplate apparent power S̄ (MVA; None = P̄, as for the paper's PV
     and DFIG units), `energy` its primary energy (None = the kind's: PV solar, DFIG wind,
-    inverter other)."""
+    inverter solar)."""
 
     bus: int
     kind: DerKind
@@ -79,9 +93,14 @@ class Network:
     injections.
 
     The network is immutable: the constructor copies every array and makes the copies
-    read-only, so a shared (cached) network cannot be changed by one caller for all
-    others. It checks array lengths, finite values, non-negative branch resistance and
-    vmin ≤ vmax per bus, and that every bus is connected to the slack.
+    read-only, and every array it derives (Y-bus — the sparse matrix's data, indices and
+    indptr too —, branch admittances, the BFS tree) is read-only as well, so a shared
+    (cached) network cannot be changed by one caller for all others. It checks array
+    lengths, finite values, base_mva within BASE_MVA_RANGE, unique bus numbers, bus
+    types (one slack, of type 3, at `slack`), non-negative branch resistance, in-service
+    branches joining two buses through a non-zero impedance, positive taps, phase shifts
+    within ±360°, finite branch admittances, voltage limits, base kV and setpoints
+    (`_check_voltages`), and that every bus is connected to the slack.
     """
 
     name: str
@@ -115,15 +134,23 @@ class Network:
 
     def __post_init__(self) -> None:
         if np.size(self.g) == 0:
-            object.__setattr__(self, "g", np.zeros(len(self.f)))
+            object.__setattr__(self, "g", np.zeros(np.size(self.f)))
         if np.size(self.load_bus) == 0:
             nominal = (np.asarray(self.load_p_mw) != 0) | (np.asarray(self.load_q_mvar) != 0)
             object.__setattr__(self, "load_bus", np.flatnonzero(nominal))
         for name in _BUS_ARRAYS + _BRANCH_ARRAYS + _GEN_ARRAYS + ("load_bus",):
-            arr = np.array(getattr(self, name), dtype=_DTYPES.get(name, float))
-            arr.setflags(write=False)
-            object.__setattr__(self, name, arr)
+            object.__setattr__(self, name, _frozen(_array(self.name, name, getattr(self, name))))
+        for name in ("base_mva", "v_slack"):
+            object.__setattr__(self, name, _number(self.name, name, getattr(self, name)))
+        if not isinstance(self.name, str):
+            raise NetworkError(f"a network's name must be text, got {self.name!r}")
+        if isinstance(self.slack, bool) or not isinstance(self.slack, (int, np.integer)):
+            raise NetworkError(f"{self.name}: slack must be a bus index (an integer), got {self.slack!r}")
+        object.__setattr__(self, "slack", int(self.slack))
+        object.__setattr__(self, "ders", _der_tuple(self.name, self.ders))
         self._check_arrays()
+        self._check_buses()
+        self._check_voltages()
         self._check_connected()
 
     def _check_arrays(self) -> None:
@@ -136,8 +163,10 @@ class Network:
                     raise NetworkError(
                         f"{self.name}: {name} has a non-finite value at position {int(np.argmin(np.isfinite(arr)))}"
                     )
-        if not (np.isfinite(self.base_mva) and self.base_mva > 0):
-            raise NetworkError(f"{self.name}: base_mva must be a finite positive number, got {self.base_mva}")
+        if not BASE_MVA_RANGE[0] <= self.base_mva <= BASE_MVA_RANGE[1]:
+            raise NetworkError(
+                f"{self.name}: base_mva {self.base_mva:g} MVA outside [{BASE_MVA_RANGE[0]:g}, {BASE_MVA_RANGE[1]:g}] MVA"
+            )
         if self.load_bus.ndim != 1:
             raise NetworkError(f"{self.name}: load_bus must be 1-D, got shape {self.load_bus.shape}")
         for name in ("f", "t", "gen_bus", "load_bus"):
@@ -146,6 +175,7 @@ class Network:
                 raise NetworkError(f"{self.name}: {name} refers to a bus index outside 0..{self.n_bus - 1}")
         if not 0 <= self.slack < self.n_bus:
             raise NetworkError(f"{self.name}: slack index {self.slack} outside 0..{self.n_bus - 1}")
+        self._check_branches()
         neg_r = np.flatnonzero(self.r < 0)
         if neg_r.size:
             k = neg_r[0]
@@ -153,10 +183,6 @@ class Network:
                 f"{self.name}: branch {k + 1} ({self.bus_ids[self.f[k]]}-{self.bus_ids[self.t[k]]}) has negative "
                 f"resistance r = {self.r[k]:.6g} p.u.; negative r makes negative losses and is refused"
             )
-        crossed = np.flatnonzero(self.vmin > self.vmax)
-        if crossed.size:
-            i = crossed[0]
-            raise NetworkError(f"{self.name}: bus {self.bus_ids[i]} has Vmin {self.vmin[i]:g} > Vmax {self.vmax[i]:g} p.u.")
         for d in self.ders:
             if d.kind not in DER_KINDS:
                 raise NetworkError(f"{self.name}: unknown DER kind {d.kind!r}; expected one of {', '.join(DER_KINDS)}")
@@ -172,6 +198,79 @@ class Network:
                     f"its rated P {d.rating_mw} MW"
                 )
 
+    def _check_branches(self) -> None:
+        """In-service branches join two buses through a non-zero impedance; taps > 0, phase
+        shifts within ±360°, and the π-model admittances they give finite."""
+
+        def refuse(k: int, problem: str) -> None:
+            raise NetworkError(f"{self.name}: branch {k + 1} ({self.bus_ids[self.f[k]]}-{self.bus_ids[self.t[k]]}) {problem}")
+
+        on = self.status
+        for rows, problem in (
+            (on & (self.f == self.t), "connects a bus to itself"),
+            (on & (self.r == 0) & (self.x == 0), "is in service with zero impedance (r = x = 0)"),
+            (self.tap <= 0, "has tap ratio {tap:g}; it must be > 0 (1 = no transformer)"),
+            (np.abs(self.shift) > 360, "has phase shift {shift:g}°; it must lie within ±360°"),
+        ):
+            bad = np.flatnonzero(rows)
+            if bad.size:
+                refuse(int(bad[0]), problem.format(tap=self.tap[bad[0]], shift=self.shift[bad[0]]))
+        with np.errstate(all="ignore"):
+            finite = np.logical_and.reduce([np.isfinite(y) for y in self.branch_admittances])
+        if not finite.all():
+            k = int(np.flatnonzero(~finite)[0])
+            refuse(k, f"has an admittance that is not a finite number (r {self.r[k]:g}, x {self.x[k]:g}, tap {self.tap[k]:g})")
+
+    def _check_buses(self) -> None:
+        """Unique bus numbers; bus types 1/2/3 with exactly one slack (type 3), at `slack`."""
+        ids, first = np.unique(self.bus_ids, return_index=True)
+        if ids.size < self.n_bus:
+            dup = self.bus_ids[np.setdiff1d(np.arange(self.n_bus), first)[0]]
+            raise NetworkError(f"{self.name}: bus number {dup} is used by more than one bus")
+        unknown = np.flatnonzero(~np.isin(self.bus_type, list(BUS_TYPES)))
+        if unknown.size:
+            i = unknown[0]
+            raise NetworkError(
+                f"{self.name}: bus {self.bus_ids[i]} has type {self.bus_type[i]}; expected "
+                + ", ".join(f"{code} ({kind})" for code, kind in BUS_TYPES.items())
+            )
+        slacks = np.flatnonzero(self.bus_type == 3)
+        if slacks.tolist() != [self.slack]:
+            marked = ", ".join(str(b) for b in self.bus_ids[slacks]) or "none"
+            raise NetworkError(
+                f"{self.name}: slack is bus {self.bus_ids[self.slack]} (index {self.slack}) but bus_type marks "
+                f"{marked} as the slack (type 3); exactly the slack bus must have type 3"
+            )
+
+    def _check_voltages(self) -> None:
+        """0 ≤ vmin ≤ vmax per bus, vmax within [V_SETPOINT_PU[0], V_LIMIT_MAX_PU]; the
+        slack's and PV generators' setpoints within V_SETPOINT_PU; base kV ≥ 0."""
+        lo, hi = V_SETPOINT_PU
+        bad = np.flatnonzero((self.vmin < 0) | (self.vmin > self.vmax) | (self.vmax > V_LIMIT_MAX_PU) | (self.vmax < lo))
+        if bad.size:
+            i = bad[0]
+            raise NetworkError(
+                f"{self.name}: bus {self.bus_ids[i]} has voltage limits Vmin {self.vmin[i]:g}, Vmax {self.vmax[i]:g} p.u.; "
+                f"they must satisfy 0 ≤ Vmin ≤ Vmax and {lo:g} ≤ Vmax ≤ {V_LIMIT_MAX_PU:g}"
+                + (f" ({bad.size} such buses)" if bad.size > 1 else "")
+            )
+        negative_kv = np.flatnonzero(self.base_kv < 0)
+        if negative_kv.size:
+            i = negative_kv[0]
+            raise NetworkError(f"{self.name}: bus {self.bus_ids[i]} has base voltage {self.base_kv[i]:g} kV; it must be ≥ 0")
+        if not lo <= self.v_slack <= hi:
+            raise NetworkError(
+                f"{self.name}: slack voltage {self.v_slack:g} p.u. (bus {self.bus_ids[self.slack]}) outside [{lo:g}, {hi:g}] p.u."
+            )
+        held = np.isin(self.gen_bus, self.pv_buses)
+        bad = np.flatnonzero(held & ~((self.gen_vset >= lo) & (self.gen_vset <= hi)))
+        if bad.size:
+            g = bad[0]
+            raise NetworkError(
+                f"{self.name}: generator at PV bus {self.bus_ids[self.gen_bus[g]]} holds |V| = {self.gen_vset[g]:g} p.u., "
+                f"outside [{lo:g}, {hi:g}] p.u."
+            )
+
     # ----- sizes and lookups -------------------------------------------------------
     @property
     def n_bus(self) -> int:
@@ -182,7 +281,9 @@ class Network:
         return len(self.f)
 
     def index_of(self, bus_id: int) -> int:
-        """Internal index of the bus with external number `bus_id`."""
+        """Internal index of the bus with external number `bus_id` (an integer)."""
+        if isinstance(bus_id, (bool, np.bool_)) or not isinstance(bus_id, (int, np.integer)):
+            raise NetworkError(f"{self.name}: a bus number is an integer, got {bus_id!r}")
         hits = np.flatnonzero(self.bus_ids == bus_id)
         if hits.size == 0:
             raise NetworkError(f"{self.name}: no bus numbered {bus_id}")
@@ -226,12 +327,14 @@ class Network:
         return np.flatnonzero(self.bus_type == 2)
 
     def with_changes(self, **changes) -> "Network":
-        """A copy with some fields replaced (the network itself is immutable). A new branch
-        count without `g` keeps a conductance-free network conductance-free (and refuses to
-        guess a nonzero one); replacing the loads without `load_bus` re-derives the load
-        elements of a network that had the default ones."""
-        n_new = len(changes.get("f", self.f))
-        if "g" not in changes and n_new != self.n_branch:
+        """A copy with some fields replaced (the network itself is immutable), checked
+        like a new network. A new branch count without `g` keeps a conductance-free network
+        conductance-free (and refuses to guess a nonzero one); replacing the loads without
+        `load_bus` re-derives the load elements of a network that had the default ones."""
+        unknown = sorted(set(changes) - {f.name for f in fields(self)})
+        if unknown:
+            raise NetworkError(f"{self.name}: a network has no field {', '.join(unknown)}")
+        if "g" not in changes and np.size(changes.get("f", self.f)) != self.n_branch:
             if self.g.any():
                 raise NetworkError(f"{self.name}: the branches change but g (branch shunt conductance) is not given")
             changes["g"] = np.zeros(0)
@@ -243,9 +346,9 @@ class Network:
 
     # ----- electrical matrices -----------------------------------------------------
     @cached_property
-    def ybus_sparse(self) -> sp.csr_matrix:
-        """Sparse (CSR) complex bus admittance matrix (p.u.), MATPOWER's makeYbus
-        conventions; every diagonal entry is stored, even when zero."""
+    def _ybus_csr(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The Y-bus's CSR arrays (data, indices, indptr), read-only: canonical (sorted
+        indices, duplicates summed), every diagonal entry stored."""
         yff, yft, ytf, ytt = self.branch_admittances
         n = self.n_bus
         diag = np.arange(n)
@@ -254,15 +357,23 @@ class Network:
         vals = np.concatenate([yff, yft, ytf, ytt, (self.gs_mw + 1j * self.bs_mvar) / self.base_mva])
         y = sp.csr_matrix((vals, (rows, cols)), shape=(n, n))  # duplicates are summed
         y.sort_indices()
+        return _frozen(y.data), _frozen(y.indices), _frozen(y.indptr)
+
+    @property
+    def ybus_sparse(self) -> sp.csr_matrix:
+        """Sparse (CSR) complex bus admittance matrix (p.u.), MATPOWER's makeYbus
+        conventions; every diagonal entry is stored, even when zero. Each call returns a
+        new matrix over the network's read-only arrays: a value cannot be written, and a
+        change of structure (a new entry) stays in the caller's matrix."""
+        y = sp.csr_matrix(self._ybus_csr, shape=(self.n_bus, self.n_bus), copy=False)
+        y.has_canonical_format = True
         return y
 
     @cached_property
     def ybus(self) -> np.ndarray:
         """Dense complex bus admittance matrix (p.u.), read-only; n_bus² entries, so only
         for small feeders — large ones use `ybus_sparse`."""
-        y = self.ybus_sparse.toarray()
-        y.setflags(write=False)
-        return y
+        return _frozen(self.ybus_sparse.toarray())
 
     @cached_property
     def branch_admittances(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
@@ -275,7 +386,7 @@ class Network:
         yff = ytt / (tap * np.conj(tap))
         yft = -ys / np.conj(tap)
         ytf = -ys / tap
-        return yff, yft, ytf, ytt
+        return _frozen(yff), _frozen(yft), _frozen(ytf), _frozen(ytt)
 
     # ----- topology ----------------------------------------------------------------
     @cached_property
@@ -292,14 +403,14 @@ class Network:
         """
         n = self.n_bus
         adjacency: list[list[tuple[int, int]]] = [[] for _ in range(n)]
-        for k in np.flatnonzero(self.status):
-            adjacency[self.f[k]].append((self.t[k], k))
-            adjacency[self.t[k]].append((self.f[k], k))
+        for branch in np.flatnonzero(self.status).tolist():
+            adjacency[self.f[branch]].append((int(self.t[branch]), branch))
+            adjacency[self.t[branch]].append((int(self.f[branch]), branch))
         parent = np.full(n, -1)
         parent_branch = np.full(n, -1)
         seen = np.zeros(n, dtype=bool)
         seen[self.slack] = True
-        order = []
+        order: list[int] = []
         queue = deque([self.slack])
         while queue:
             i = queue.popleft()
@@ -310,7 +421,7 @@ class Network:
                     parent[j] = i
                     parent_branch[j] = k
                     queue.append(j)
-        return np.array(order), parent, parent_branch
+        return _frozen(np.array(order)), _frozen(parent), _frozen(parent_branch)
 
     def _check_connected(self) -> None:
         order = self._bfs[0]
@@ -377,3 +488,55 @@ class Network:
             "load_mvar": float(self.load_q_mvar.sum()),
             "base_mva": self.base_mva,
         }
+
+
+def _array(network: str, name: str, value: object) -> np.ndarray:
+    """`value` as a copy of the field's dtype; NetworkError naming the field for what is
+    not numeric (text, complex, None, ragged rows) or an integer field given fractions."""
+    kind = _DTYPES.get(name, float)
+    try:
+        raw = np.array(value)
+    except ValueError:
+        raise NetworkError(f"{network}: {name} is not a regular array (rows of different lengths)") from None
+    if raw.dtype.kind not in "biuf":
+        raise NetworkError(f"{network}: {name} must be real numbers, got {raw.dtype} values")
+    if kind is bool:
+        if raw.size and not np.all(np.isin(raw, (0, 1))):
+            raise NetworkError(f"{network}: {name} must be true/false (1/0)")
+        return raw.astype(bool)
+    if kind is int and raw.dtype.kind == "f":
+        whole = np.isfinite(raw) & (raw == np.round(raw)) & (np.abs(raw) < 2.0**53)
+        if not np.all(whole):
+            bad = raw.reshape(-1)[np.flatnonzero(~whole.reshape(-1))[0]]
+            raise NetworkError(f"{network}: {name} must be whole numbers, got {bad:g}")
+    if kind is int and raw.dtype.kind == "u" and raw.size and raw.max() > np.iinfo(np.int64).max:
+        raise NetworkError(f"{network}: {name} value {raw.max()} does not fit a 64-bit integer")
+    return raw.astype(kind)
+
+
+def _der_tuple(network: str, ders: object) -> tuple[DER, ...]:
+    """`ders` as a tuple of DER units whose bus is an index (an integer) and whose ratings
+    are real numbers; NetworkError naming the unit otherwise."""
+    try:
+        units: tuple[object, ...] = tuple(ders)  # type: ignore[arg-type]
+    except TypeError:
+        raise NetworkError(f"{network}: ders must be a sequence of DER units, got {ders!r}") from None
+    for i, d in enumerate(units):
+        if not isinstance(d, DER):
+            raise NetworkError(f"{network}: ders[{i}] is {d!r}, not a DER unit")
+        if isinstance(d.bus, (bool, np.bool_)) or not isinstance(d.bus, (int, np.integer)):
+            raise NetworkError(f"{network}: ders[{i}] has bus {d.bus!r}; a DER's bus is an internal bus index (an integer)")
+        for label, value in (("rating_mw", d.rating_mw), ("s_mva", d.s_mva)):
+            if value is not None and (isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, float, np.number))):
+                raise NetworkError(f"{network}: ders[{i}] has {label} {value!r}; it must be a real number")
+    return tuple(d for d in units if isinstance(d, DER))  # every one is
+
+
+def _number(network: str, name: str, value: object) -> float:
+    """`value` as a finite float; NetworkError naming the field otherwise."""
+    if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, float, np.integer, np.floating)):
+        raise NetworkError(f"{network}: {name} must be a real number, got {value!r}")
+    number = float(value)
+    if not np.isfinite(number):
+        raise NetworkError(f"{network}: {name} must be finite, got {number}")
+    return number

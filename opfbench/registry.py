@@ -17,6 +17,8 @@ import importlib
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Callable, Literal
 
+import numpy as np
+
 from opfbench.errors import InputError
 
 if TYPE_CHECKING:
@@ -47,11 +49,29 @@ class StrategySpec:
         return getattr(importlib.import_module(module), func)
 
     def run(self, scenario: Scenario, k: float, **options) -> StrategyResult:
-        """Run on every snapshot of `scenario`; the result carries this entry's name."""
+        """Run on every snapshot of `scenario`; the result carries this entry's name.
+        InputError for a scenario that is not a `Scenario`, a k that is not one real
+        number (text, true/false), an unknown option or one not of its default's type."""
+        from opfbench.scenario import Scenario
+
+        if not isinstance(scenario, Scenario):
+            raise InputError(
+                f"strategy {self.name!r} runs on a Scenario (e.g. Scenario.snapshot(net)), got {type(scenario).__name__}"
+            )
+        if isinstance(k, (bool, np.bool_)) or not isinstance(k, (int, float, np.number, np.ndarray)):
+            raise InputError(f"reserve coefficient k must be a number in [0, 1], got {k!r}")
         unknown = sorted(set(options) - set(self.options))
         if unknown:
             allowed = ", ".join(self.options) or "none"
             raise InputError(f"strategy {self.name!r} takes no option {', '.join(unknown)} (options: {allowed})")
+        for key, value in options.items():  # of the default's type: 'false' is not False
+            default = self.options[key]
+            kind = (bool, np.bool_) if isinstance(default, bool) else type(default)
+            if not isinstance(value, kind):
+                raise InputError(
+                    f"strategy {self.name!r}: option {key} must be a {type(default).__name__} like its default "
+                    f"{default!r}, got {value!r}"
+                )
         result = self.runner(scenario, k, **(self.options | options | self.fixed))
         return result if result.strategy == self.name else dataclasses.replace(result, strategy=self.name)
 

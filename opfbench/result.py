@@ -18,11 +18,15 @@ from opfbench.powerflow import PowerFlowResult, solve_pf_batch
 if TYPE_CHECKING:
     from opfbench.scenario import Scenario
 
-# Status values. Local rules: "ok" or "pf-diverged". Formulations add their own
-# (e.g. "infeasible", "solver-failed", "fallback-cold", "fallback-socp", "fallback-no-action").
-OK = "ok"
-PF_DIVERGED = "pf-diverged"
-INFEASIBLE = "infeasible"
+# ----- status vocabulary (StrategyResult.status), the one list every table and report uses --
+OK = "ok"  # the strategy's own point, AC-evaluated (formulations: an optimum)
+FALLBACK_COLD = "fallback-cold"  # warm IPOPT failed, cold IPOPT from a flat start solved it
+FALLBACK_SOCP = "fallback-socp"  # IPOPT failed; the SOCP's setpoints, AC-evaluated, are feasible
+FALLBACK_NO_ACTION = "fallback-no-action"  # nothing better found; Q = 0 is AC-feasible
+INFEASIBLE = "infeasible"  # the OPF has no feasible point (shown by a solver); Q = 0 reported
+SOLVER_FAILED = "solver-failed"  # solver failed, no feasible fallback, infeasibility not shown
+PF_DIVERGED = "pf-diverged"  # the AC power flow at the setpoints did not converge: no figures
+STATUSES = (OK, FALLBACK_COLD, FALLBACK_SOCP, FALLBACK_NO_ACTION, INFEASIBLE, SOLVER_FAILED, PF_DIVERGED)
 
 
 @dataclass(eq=False)
@@ -30,12 +34,16 @@ class StrategyResult:
     """Outcome of one strategy over S snapshots.
 
     q_mvar (S, n_der) setpoints; losses_kw (S,) from the AC power flow at those setpoints
-    (NaN where it did not converge); vm (S, n_bus) |V| p.u.; status (S,) strings;
+    and vm (S, n_bus) its |V| p.u. — both NaN where the flow did not converge (status
+    "pf-diverged": a diverged iterate is no operating point, so it gives no figure);
+    status (S,) strings;
     power_flows (S,) power flows used per snapshot; wall_ms total wall time for the batch;
     excursion_mvar (S,) the largest amount by which any setpoint exceeds its DER's physical
     capability at the current P (Algorithm 3 without `safe` can do that); lower_bound_kw
-    (S,) a certified lower bound on achievable losses where the strategy provides one
-    (NaN otherwise); extra: per-strategy diagnostics (arrays of length S or scalars).
+    (S,) a certified lower bound on the losses of any point meeting the strategy's limits,
+    given where the strategy provides one and its own point meets them (so losses_kw ≥
+    lower_bound_kw up to solver tolerance), NaN otherwise; extra: per-strategy
+    diagnostics (arrays of length S or scalars).
     """
 
     strategy: str
@@ -67,7 +75,8 @@ class StrategyResult:
         """Evaluate setpoints q_mvar (S, n_der) with the batched AC power flow (unless `pf`
         already holds that evaluation) and build the record. `power_flows` counts the
         flows the strategy itself used; the evaluation adds one per snapshot when run here.
-        Snapshots whose flow did not converge get status "pf-diverged" and NaN losses."""
+        Snapshots whose flow did not converge get status "pf-diverged", NaN losses and NaN
+        voltages."""
         q = np.atleast_2d(np.asarray(q_mvar, dtype=float))
         flows = np.broadcast_to(np.asarray(power_flows, dtype=np.int64), (q.shape[0],)).copy()
         if pf is None:
@@ -77,9 +86,10 @@ class StrategyResult:
         st = np.full(q.shape[0], OK, dtype=object) if status is None else np.asarray(status, dtype=object).copy()
         st[~conv] = PF_DIVERGED
         losses = np.where(conv, np.atleast_1d(pf.losses_kw), np.nan)
+        vm = np.where(conv[:, None], np.atleast_2d(pf.vm), np.nan)
         physical = scenario.qmax_mvar()
         excursion = np.maximum(np.abs(q) - physical, 0.0).max(axis=1, initial=0.0)
-        return cls(strategy, float(k), scenario.net, q, losses, np.atleast_2d(pf.vm), st, flows, float(wall_ms), excursion, **kw)
+        return cls(strategy, float(k), scenario.net, q, losses, vm, st, flows, float(wall_ms), excursion, **kw)
 
     @property
     def n_snapshots(self) -> int:
@@ -94,7 +104,8 @@ class StrategyResult:
         return self.vm.max(axis=1)
 
     def voltage_violation(self) -> np.ndarray:
-        """(S,) largest violation of the case's voltage limits (p.u., 0 when compliant)."""
+        """(S,) largest violation of the case's voltage limits (p.u., 0 when compliant, NaN
+        where the flow did not converge)."""
         low = np.maximum(self.net.vmin - self.vm, 0.0)
         high = np.maximum(self.vm - self.net.vmax, 0.0)
         return np.maximum(low, high).max(axis=1)
@@ -103,15 +114,14 @@ class StrategyResult:
         """The JSON contract of one snapshot (keys stable; units MVAr, kW, p.u., ms); a
         value that is not finite (no converged flow, no bound) is null."""
         bus_ids = self.net.bus_ids[self.net.der_bus]
-        ok = bool(np.isfinite(self.losses_kw[i]))
         out = {
             "strategy": self.strategy,
             "k": float(self.k),
             "status": str(self.status[i]),
             "losses_kw": self.losses_kw[i],
             "q_mvar": {str(int(b)): q for b, q in zip(bus_ids, self.q_mvar[i], strict=True)},
-            "vmin": self.vmin[i] if ok else None,
-            "vmax": self.vmax[i] if ok else None,
+            "vmin": self.vmin[i],
+            "vmax": self.vmax[i],
             "power_flows": int(self.power_flows[i]),
             "excursion_mvar": self.excursion_mvar[i],
             "wall_ms": float(self.wall_ms),

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from functools import cached_property
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -20,6 +21,11 @@ from opfbench.capability import qmax
 from opfbench.errors import InputError
 from opfbench.network import Network
 from opfbench.powerflow import bus_injections
+
+if TYPE_CHECKING:
+    import pandas as pd
+
+    from opfbench.io.case import Case
 
 
 @dataclass(frozen=True, eq=False)
@@ -46,6 +52,10 @@ class Scenario:
     load_q_mvar: np.ndarray | None = None
 
     def __post_init__(self) -> None:
+        if not isinstance(self.net, Network):
+            raise InputError(
+                f"scenario: net must be a Network (e.g. opfbench.io.load_network('paper33')), got {type(self.net).__name__}"
+            )
         n_der = len(self.net.ders)
         if self.load_scale is None:
             n_snap = self._check_loads()
@@ -56,6 +66,8 @@ class Scenario:
             if ls.ndim > 1:
                 raise InputError(f"scenario: load_scale must be a number or a 1-D array (S,), got shape {ls.shape}")
             ls = np.atleast_1d(ls)
+            if ls.size == 0:
+                raise InputError("scenario: no snapshot (load_scale is empty)")
             _check_finite("load_scale", ls)
             if np.any(ls < 0):
                 raise InputError(f"scenario: load_scale must be ≥ 0, got {ls.min()} at index {int(np.argmin(ls))}")
@@ -71,7 +83,10 @@ class Scenario:
             self._check_range("der_p_forecast_mw", pf)
             object.__setattr__(self, "der_p_forecast_mw", _frozen(pf))
         if self.pv_night_q is not None:
-            mask = np.array(self.pv_night_q, dtype=bool)
+            raw = np.array(self.pv_night_q)
+            if raw.dtype != bool and not (raw.dtype.kind in "iu" and np.isin(raw, (0, 1)).all()):
+                raise InputError(f"scenario: pv_night_q must be true/false per snapshot, got {raw.dtype} values")
+            mask = raw.astype(bool)
             if mask.shape != (n_snap,):
                 raise InputError(f"scenario: pv_night_q must have shape (S,) = ({n_snap},), got {mask.shape}")
             object.__setattr__(self, "pv_night_q", _frozen(mask))
@@ -90,6 +105,8 @@ class Scenario:
                 )
             _check_finite(label, arr)
             arrays[label] = arr
+        if arrays["load_p_mw"].shape[0] == 0:
+            raise InputError("scenario: no snapshot (load_p_mw is empty)")
         if arrays["load_p_mw"].shape != arrays["load_q_mvar"].shape:
             raise InputError(
                 f"scenario: load_p_mw {arrays['load_p_mw'].shape} and load_q_mvar {arrays['load_q_mvar'].shape} differ in shape"
@@ -148,7 +165,7 @@ class Scenario:
             if value is not None and not 0 <= value <= 1:
                 raise InputError(f"{label} is a fraction of rating and must lie in [0, 1], got {value}")
         rating = net.der_rating_mw
-        forecast = None if forecast_der_scale is None else [forecast_der_scale * rating]
+        forecast = None if forecast_der_scale is None else np.array([forecast_der_scale * rating])
         return cls(net, np.array([load_scale]), np.array([der_scale * rating]), forecast)
 
     @classmethod
@@ -162,6 +179,20 @@ class Scenario:
     ) -> "Scenario":
         """Snapshots of every load's own P and Q (S, n_load) and every DER's P (S, n_der)."""
         return cls(net, None, der_p_mw, der_p_forecast_mw, load_p_mw=load_p_mw, load_q_mvar=load_q_mvar)
+
+    @classmethod
+    def of_case(cls, case: Case, times: pd.DatetimeIndex | None = None) -> "Scenario":
+        """A case's stored operating point as one snapshot (`times` None: per-load P and Q,
+        DER P as stored), or its own series at the tz-aware instants `times`."""
+        if times is None:
+            if case.stored is None:
+                raise InputError(f"{case.spec}: the case stores no per-element operating point")
+            p, q, der_p, _ = case.stored
+            return cls.from_series(case.network, p[None, :], q[None, :], der_p[None, :])
+        if case.series is None:
+            raise InputError(f"{case.spec}: the case has no time series of its own")
+        load_p, load_q, der_p = case.series.rows(times)
+        return cls.from_series(case.network, load_p, load_q, der_p)
 
     @property
     def n_snapshots(self) -> int:
@@ -283,10 +314,9 @@ def _real_array(label: str, value: object) -> np.ndarray:
         raise InputError(f"scenario: {label} is not a regular array (rows of different lengths)") from None
     if np.iscomplexobj(arr):
         raise InputError(f"scenario: {label} must be real, got complex values")
-    try:
-        return np.array(arr, dtype=float)
-    except (TypeError, ValueError):
-        raise InputError(f"scenario: {label} must be numeric, got {arr.dtype} values") from None
+    if arr.dtype.kind not in "iuf":  # text ('1' would convert), true/false, objects
+        raise InputError(f"scenario: {label} must be numeric, got {arr.dtype} values")
+    return np.array(arr, dtype=float)
 
 
 def _der_array(label: str, value: object, n_snap: int, n_der: int) -> np.ndarray:

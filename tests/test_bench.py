@@ -6,7 +6,6 @@ import builtins
 
 import numpy as np
 import pytest
-from test_powerflow import CASE4_PV
 
 import opfbench.bench.local as bench_local
 import opfbench.bench.opf as bench_opf
@@ -17,6 +16,7 @@ from opfbench.errors import NetworkError
 from opfbench.io import load_network
 from opfbench.io.matpower import load_case_file
 from opfbench.powerflow import bus_injections, solve_pf
+from tests.support.matpower_texts import CASE4_PV
 
 PF_KEYS = {
     "case",

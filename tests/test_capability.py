@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from opfbench.capability import dfig_qmax, pv_qmax, pv_qmax_night, qmax, usable_qmax
+from opfbench.capability import PAPER_KS, check_reserve, dfig_qmax, pv_qmax, pv_qmax_night, qmax
 from opfbench.errors import InputError
 
 
@@ -35,13 +35,17 @@ def test_dfig_at_rated_power_gives_half_and_paper_fault_trace():
     assert dfig_qmax(np.array(0.6), np.array(0.6)) == pytest.approx(0.3)
 
 
-def test_reserve_scales_and_mixes_kinds():
-    kinds = ("PV", "DFIG")
-    p = np.array([[0.48, 0.48]])
-    full = qmax(kinds, p, np.array([0.6, 0.6]))
-    assert full == pytest.approx(np.array([[0.36, 0.4]]))
-    for k in (0.0, 0.2, 0.4, 0.6, 0.8, 1.0):
-        assert usable_qmax(kinds, p, np.array([0.6, 0.6]), k) == pytest.approx((1 - k) * full)
+def test_kinds_mix_in_one_call():
+    full = qmax(("PV", "DFIG"), np.array([[0.48, 0.48]]), np.array([0.6, 0.6]))
+    assert full.tolist() == [[pytest.approx(0.36), pytest.approx(0.4)]]
+
+
+def test_reserve_is_one_number_in_the_unit_interval():
+    assert PAPER_KS == (0.0, 0.2, 0.4, 0.6, 0.8)
+    for k in (*PAPER_KS, 1.0, np.float32(0.5), 1):
+        assert check_reserve(k) == float(k) and type(check_reserve(k)) is float
+    with pytest.raises(InputError, match="k must be one number, got shape \\(2,\\)"):
+        check_reserve(np.array([0.1, 0.2]))
 
 
 def test_night_variant_is_s_limited_only():
@@ -52,7 +56,7 @@ def test_night_variant_is_s_limited_only():
 @pytest.mark.parametrize("k", [-0.1, 1.01, float("nan")])
 def test_k_out_of_range(k):
     with pytest.raises(InputError, match=r"k must lie in \[0, 1\]"):
-        usable_qmax(("PV",), np.array([0.3]), np.array([0.6]), k)
+        check_reserve(k)
 
 
 @pytest.mark.parametrize("p", [-0.01, 0.61, float("nan")])

@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 
 from opfbench.cli import main
+from tests.support.shipped_cases import SHIPPED
 
 PF_KEYS = {"case", "converged", "iterations", "losses_kw", "vmin", "vmin_bus", "vmax", "vmax_bus"}
 
@@ -26,7 +27,7 @@ def test_pf_der_scale_applies_to_every_der(capsys):
     output) are pandapower's Newton–Raphson losses on the same network: the independent
     source is computed here, not copied."""
     from opfbench.io import load_network
-    from tests.pandapower_oracle import pandapower_pf
+    from tests.support.pandapower_oracle import pandapower_pf
 
     net = load_network("paper33")
     _, full = _json(capsys, ["pf", "paper33", "--der-scale", "0.8", "--json"])
@@ -67,10 +68,12 @@ def test_bad_arguments_exit_2(capsys, argv, message):
 
 def test_cases_lists_shipped_cases(capsys):
     code, rows = _json(capsys, ["cases", "--json"])
-    by_name = {r["case"]: r for r in rows}
-    assert code == 0
-    assert by_name["paper33"]["ders"] == 5 and by_name["paper33"]["buses"] == 33
-    assert by_name["paper33-meshed"]["meshed"] and by_name["case69"]["buses"] == 69
+    assert code == 0 and [r["case"] for r in rows] == list(SHIPPED)
+    for r in rows:
+        n_bus, n_branch, in_service, n_der, load_p, load_q, meshed = SHIPPED[r["case"]]
+        assert (r["buses"], r["branches"] + r["branches_open"], r["branches"], r["ders"]) == (n_bus, n_branch, in_service, n_der)
+        assert r["load_mw"] == pytest.approx(load_p, abs=1e-6) and r["load_mvar"] == pytest.approx(load_q, abs=1e-6)
+        assert r["meshed"] == meshed
 
 
 @pytest.mark.parametrize("strategy", ["no-action", "llma", "lfma", "acopf", "socp"])

@@ -1,7 +1,7 @@
 """Independent engine: ANDES (Motor3, REGCA1 with fixed commands) on the same network.
 Fast: its power flow with the seeded motors lands on our pre-fault state. Slow: on a
 mild fault where ANDES converges unmodified, recovery times within 2 ms of ours at every
-bus (about 20 s of ANDES time-domain simulation)."""
+bus."""
 
 import numpy as np
 import pytest

@@ -4,8 +4,11 @@ never a traceback, never a silently wrong result. One test per class of input.""
 from __future__ import annotations
 
 import json
+import re
 import subprocess
 import sys
+from importlib import resources
+from pathlib import Path
 
 import numpy as np
 import pandas as pd
@@ -16,24 +19,30 @@ from opfbench.errors import DataError, InputError
 from opfbench.forecasting.outputs import load_forecast
 from opfbench.io import load_network
 from opfbench.scenario import Scenario
-from tests.test_matpower import GOOD
+from tests.support.matpower_texts import TINY_CASE, with_entry
 
 # ----- case files ------------------------------------------------------------------------
 _BUS1 = "\t1\t3\t0\t0\t0\t0\t1\t1\t0\t12.66"
 _PF_LINES = "pf = {};\nmpc.bus(:, QD) = mpc.bus(:, PD) * sin(acos(pf));\n"
 BAD_CASES = {
-    "fractional bus id": (GOOD.replace("\t3\t1\t90", "\t2.9\t1\t90"), "mpc.bus row 3, column 1 (BUS_I): 2.9 is not an integer"),
-    "fractional branch end": (GOOD.replace("\t2\t3\t0.4930", "\t2\t3.5\t0.4930"), "mpc.branch row 2, column 2 (T_BUS): 3.5"),
-    "negative resistance": (GOOD.replace("0.4930", "-0.4930"), "mpc.branch row 2 (2-3): negative resistance BR_R = -0.493"),
+    "fractional bus id": (
+        TINY_CASE.replace("\t3\t1\t90", "\t2.9\t1\t90"),
+        "mpc.bus row 3, column 1 (BUS_I): 2.9 is not an integer",
+    ),
+    "fractional branch end": (TINY_CASE.replace("\t2\t3\t0.4930", "\t2\t3.5\t0.4930"), "mpc.branch row 2, column 2 (T_BUS): 3.5"),
+    "negative resistance": (TINY_CASE.replace("0.4930", "-0.4930"), "mpc.branch row 2 (2-3): negative resistance BR_R = -0.493"),
     "infinite baseMVA": (
-        GOOD.replace("mpc.baseMVA = 10;", "mpc.baseMVA = Inf;"),
+        TINY_CASE.replace("mpc.baseMVA = 10;", "mpc.baseMVA = Inf;"),
         "mpc.baseMVA must be a finite positive number, got inf",
     ),
-    "baseKV 0 with ohm conversion": (GOOD.replace(_BUS1, _BUS1[:-5] + "0"), "line 24: Vbase from mpc.bus row 1 BASE_KV = 0 kV"),
-    "power factor 2": (GOOD + _PF_LINES.format(2), "line 28: power factor pf = 2 must lie in (0, 1]"),
-    "power factor 0": (GOOD + _PF_LINES.format(0), "line 28: power factor pf = 0 must lie in (0, 1]"),
+    "baseKV 0 with ohm conversion": (
+        TINY_CASE.replace(_BUS1, _BUS1[:-5] + "0"),
+        "line 24: Vbase from mpc.bus row 1 BASE_KV = 0 kV",
+    ),
+    "power factor 2": (TINY_CASE + _PF_LINES.format(2), "line 28: power factor pf = 2 must lie in (0, 1]"),
+    "power factor 0": (TINY_CASE + _PF_LINES.format(0), "line 28: power factor pf = 0 must lie in (0, 1]"),
     "Vmin above Vmax": (
-        GOOD.replace("12.66\t1\t1.1\t0.9;\n\t3", "12.66\t1\t0.9\t1.1;\n\t3"),
+        TINY_CASE.replace("12.66\t1\t1.1\t0.9;\n\t3", "12.66\t1\t0.9\t1.1;\n\t3"),
         "mpc.bus row 2 (bus 2): VMIN 1.1 > VMAX 0.9",
     ),
 }
@@ -43,6 +52,124 @@ def _cli(capsys: pytest.CaptureFixture, argv: list[str]) -> tuple[int, str]:
     code = main(argv)
     err = capsys.readouterr().err
     return code, err
+
+
+_CASE33 = (Path(str(resources.files("opfbench.cases") / "matpower" / "case33bw.m"))).read_text()
+# (file text, what the message must say) — each refused by pf and by the local rules alike
+BAD_VALUES = {
+    "duplicated bus 7": (with_entry(_CASE33, "bus", 8, 1, "7"), "mpc.bus row 8 lists bus 7 again (first at row 7)"),
+    "bus number 2^63": (
+        with_entry(_CASE33, "bus", 2, 1, "9223372036854775808"),
+        "mpc.bus row 2, column 1 (BUS_I): bus number 9.22337e+18 outside 1..9007199254740991",
+    ),
+    "bus number 0": (with_entry(TINY_CASE, "bus", 3, 1, "0"), "mpc.bus row 3, column 1 (BUS_I): bus number 0 outside"),
+    "wired-in isolated bus": (
+        with_entry(_CASE33, "bus", 7, 2, "4"),
+        "mpc.bus row 7: bus 7 has type 4 (isolated) but in-service mpc.branch row(s) 6, 7 connect it",
+    ),
+    "huge bus type": (with_entry(TINY_CASE, "bus", 2, 2, "1e300"), "mpc.bus row 2: unknown bus type 1e+300"),
+    "generator QMAX < QMIN": (with_entry(TINY_CASE, "gen", 1, 4, "-20"), "mpc.gen row 1 (bus 1): QMAX -20 < QMIN -10"),
+    "generator PMAX < PMIN": (with_entry(TINY_CASE, "gen", 1, 10, "20"), "mpc.gen row 1 (bus 1): PMAX 10 < PMIN 20"),
+    "slack voltage -1": (with_entry(TINY_CASE, "gen", 1, 6, "-1"), "slack voltage -1 p.u. (bus 1) outside [0.5, 1.5] p.u."),
+    "slack voltage 12.66 (kV for p.u.)": (with_entry(TINY_CASE, "gen", 1, 6, "12.66"), "slack voltage 12.66 p.u."),
+    "voltage limits -5 / 50": (
+        with_entry(with_entry(TINY_CASE, "bus", 2, 13, "-5"), "bus", 2, 12, "50"),
+        "bus 2 has voltage limits Vmin -5, Vmax 50 p.u.; they must satisfy 0 ≤ Vmin ≤ Vmax and 0.5 ≤ Vmax ≤ 2",
+    ),
+    "zero-impedance branch": (
+        with_entry(with_entry(TINY_CASE, "branch", 2, 3, "0"), "branch", 2, 4, "0"),
+        "branch 2 (2-3) is in service with zero impedance (r = x = 0)",
+    ),
+    "branch from a bus to itself": (with_entry(TINY_CASE, "branch", 2, 2, "2"), "branch 2 (2-2) connects a bus to itself"),
+    "phase shift 1e308°": (with_entry(TINY_CASE, "branch", 2, 10, "1e308"), "branch 2 (2-3) has phase shift 1e+308°"),
+    "tap 1e-300": (with_entry(TINY_CASE, "branch", 2, 9, "1e-300"), "branch 2 (2-3) has an admittance that is not a finite"),
+    "branch status 2": (with_entry(TINY_CASE, "branch", 2, 11, "2"), "mpc.branch row 2, column 11 (BR_STATUS): 2; a status is 1"),
+    "branch status 0.5": (with_entry(TINY_CASE, "branch", 2, 11, "0.5"), "(BR_STATUS): 0.5; a status is 1 (in service) or 0"),
+    "generator status -1": (with_entry(TINY_CASE, "gen", 1, 8, "-1"), "mpc.gen row 1, column 8 (GEN_STATUS): -1"),
+    "two slack generators, two voltages": (
+        TINY_CASE.replace("mpc.gen = [\n", "mpc.gen = [\n\t1\t0\t0\t10\t-10\t1.05\t100\t1\t10" + "\t0" * 12 + ";\n"),
+        "mpc.gen rows 1 and 2 (bus 1) hold different voltages VG 1.05 and 1 p.u.",
+    ),
+    "voltage limits [0, 0]": (
+        with_entry(with_entry(TINY_CASE, "bus", 2, 12, "0"), "bus", 2, 13, "0"),
+        "bus 2 has voltage limits Vmin 0, Vmax 0 p.u.; they must satisfy 0 ≤ Vmin ≤ Vmax and 0.5 ≤ Vmax ≤ 2",
+    ),
+    "negative base kV": (with_entry(TINY_CASE, "bus", 2, 10, "-12.66"), "bus 2 has base voltage -12.66 kV; it must be ≥ 0"),
+    "base kV 1e308 in the ohm conversion": (
+        with_entry(TINY_CASE, "bus", 1, 10, "1e308"),
+        "line 26: the ohm → p.u. conversion over- or underflows (base impedance inf ohm from BASE_KV 1e+308 kV",
+    ),
+    "base kV 1e200 (its square overflows)": (with_entry(TINY_CASE, "bus", 1, 10, "1e200"), "conversion over- or underflows"),
+    "baseMVA 1e-308": (TINY_CASE.replace("mpc.baseMVA = 10;", "mpc.baseMVA = 1e-308;"), "conversion over- or underflows"),
+    "baseMVA 1e9 in a p.u. case": (
+        TINY_CASE.replace("mpc.baseMVA = 10;", "mpc.baseMVA = 1e9;").split("[PQ, PV")[0],
+        "base_mva 1e+09 MVA outside [0.001, 1e+06] MVA",
+    ),
+    "Python-only number 1_00": (with_entry(TINY_CASE, "bus", 2, 3, "1_00"), "column 3: non-numeric entry '1_00'"),
+    "Arabic-Indic digits": (with_entry(TINY_CASE, "bus", 2, 3, "١٠٠"), "column 3: non-numeric entry '١٠٠'"),
+    "a matrix defined twice": (
+        TINY_CASE.replace(
+            "mpc.gencost = [", "mpc.bus = [\n\t9\t1\t0\t0\t0\t0\t1\t1\t0\t12.66\t1\t1.1\t0.9;\n];\nmpc.gencost = ["
+        ),
+        "line 16: mpc.bus is defined a second time (first at line 4)",
+    ),
+}
+
+
+@pytest.mark.parametrize("label", BAD_VALUES)
+@pytest.mark.parametrize("command", [["pf"], ["snapshot", "--strategy", "llma"]])
+def test_case_values_outside_their_domain_exit_2_naming_them(capsys, tmp_path, label, command):
+    text, message = BAD_VALUES[label]
+    path = tmp_path / "case.m"
+    path.write_text(text)
+    code, err = _cli(capsys, [command[0], str(path), *command[1:]])
+    assert code == 2 and err.count("\n") == 1 and "Traceback" not in err, err
+    assert err.startswith(f"opfbench {command[0]}: error: {path}") and message in err, err
+
+
+def test_a_byte_order_mark_and_windows_line_ends_read_as_the_plain_file(tmp_path):
+    from opfbench.io.matpower import load_case_file
+
+    plain, marked = tmp_path / "plain.m", tmp_path / "marked.m"
+    plain.write_text(TINY_CASE)
+    marked.write_bytes(("\ufeff" + TINY_CASE.replace("\n", "\r\n")).encode("utf-8"))
+    a, b = load_case_file(plain), load_case_file(marked)
+    assert np.array_equal(a.ybus.view(float), b.ybus.view(float)) and np.array_equal(a.load_p_mw, b.load_p_mw)
+
+
+def test_a_diverging_flow_prints_no_floating_point_warnings(tmp_path):
+    path = tmp_path / "huge.m"
+    path.write_text(with_entry(TINY_CASE, "bus", 2, 5, "1e300"))  # Gs 1e300 MW
+    proc = subprocess.run([sys.executable, "-m", "opfbench", "pf", str(path), "--json"], capture_output=True, text=True)
+    assert proc.returncode == 1 and proc.stderr == "" and json.loads(proc.stdout)["losses_kw"] is None
+
+
+def test_an_isolated_bus_is_refused_not_turned_into_a_load_bus(tmp_path):
+    from opfbench.errors import CaseFormatError
+    from opfbench.io.matpower import load_case_file
+
+    text = with_entry(with_entry(TINY_CASE, "bus", 3, 2, "4"), "branch", 2, 11, "0")  # bus 3 type 4, its branch out
+    path = tmp_path / "isolated.m"
+    path.write_text(text)
+    with pytest.raises(CaseFormatError, match="mpc.bus row 3: bus 3 has type 4 .isolated.; remove the bus"):
+        load_case_file(path)
+
+
+def test_strategy_options_are_type_checked(net):
+    from opfbench.registry import run_strategy
+
+    scenario = Scenario.snapshot(net)
+    for name, options, message in (
+        ("acopf", {"slack_export": "false"}, "option slack_export must be a bool like its default True, got 'false'"),
+        ("acopf", {"slack_export": 0}, "option slack_export must be a bool like its default True, got 0"),
+        ("socp", {"slack_export": None}, "option slack_export must be a bool"),
+        ("llma", {"safe": "yes"}, "option safe must be a bool like its default False, got 'yes'"),
+        ("acopf", {"fallback": 1}, "option fallback must be a str like its default 'chain', got 1"),
+    ):
+        with pytest.raises(InputError, match=message):
+            run_strategy(name, scenario, 0.0, **options)
+    exporting = run_strategy("acopf", scenario, 0.0, slack_export=np.bool_(False))
+    assert exporting.extra["slack_export"] is False
 
 
 @pytest.mark.parametrize("label", BAD_CASES)
@@ -58,7 +185,10 @@ def test_malformed_case_file_exit_2_naming_file_and_row(capsys, tmp_path, label)
 @pytest.mark.parametrize(
     ("data", "message"),
     [
-        (GOOD.replace("%% in Volts", "%% in Volts \xe9").encode("latin-1"), "not a text MATPOWER file (byte 763 is not UTF-8)"),
+        (
+            TINY_CASE.replace("%% in Volts", "%% in Volts \xe9").encode("latin-1"),
+            "not a text MATPOWER file (byte 763 is not UTF-8)",
+        ),
         (b"\x00\x01\x02mpc" * 10, "not a text MATPOWER file (contains NUL bytes)"),
         (bytes(range(256)), "is not UTF-8"),
     ],
@@ -91,6 +221,112 @@ def test_cached_network_arrays_are_read_only():
     assert load_network("paper33").load_p_mw.sum() == pytest.approx(3.715)
 
 
+def _nominal_losses_kw(net) -> float:
+    from opfbench.powerflow import bus_injections, solve_pf
+
+    return float(solve_pf(net, bus_injections(net, 0.8 * net.der_rating_mw, 0.0, 1.0)).losses_kw)
+
+
+@pytest.mark.filterwarnings("ignore::scipy.sparse.SparseEfficiencyWarning")  # the refused new entry
+@pytest.mark.parametrize("case", ["paper33", "case141-der"])  # the dense and the sparse solvers
+def test_derived_solver_data_is_read_only_and_never_shared_writable(case):
+    net = load_network(case)
+    before = _nominal_losses_kw(net)
+    y = net.ybus_sparse
+    writes = {
+        "Y-bus data": lambda: y.data.__setitem__(0, 0),
+        "Y-bus indices": lambda: y.indices.__setitem__(0, 1),
+        "Y-bus indptr": lambda: y.indptr.__setitem__(1, 0),
+        "Y-bus entry": lambda: y.__setitem__((0, 0), 5.0),
+        "Y-bus new entry": lambda: y.__setitem__((0, net.n_bus - 1), 100.0),
+        "Y-bus scaled in place": lambda: y.__imul__(2.0),
+        "dense Y-bus": lambda: net.ybus.__setitem__((0, 0), 0),
+        "branch admittance": lambda: net.branch_admittances[0].__setitem__(0, 0),
+        "BFS parent": lambda: net.parent.__setitem__(3, 0),
+        "BFS order": lambda: net.bfs_order.__setitem__(0, 2),
+        "BFS parent branch": lambda: net.parent_branch.__setitem__(3, 0),
+    }
+    refused = []
+    for label, write in writes.items():
+        with pytest.raises(ValueError, match="read-only"):
+            write()
+        refused.append(label)
+    assert refused == list(writes)
+    assert net.ybus_sparse is not net.ybus_sparse  # each caller gets its own matrix object over the frozen arrays
+    assert _nominal_losses_kw(load_network(case)) == before > 0
+
+
+def test_with_changes_refuses_an_inconsistent_network():
+    from opfbench.errors import NetworkError
+
+    net = load_network("paper33")
+    n = net.n_bus
+    at = np.arange(n)
+    bad = {
+        "slack moved without its type": ({"slack": 5}, "slack is bus 6 (index 5) but bus_type marks 1 as the slack"),
+        "two slack buses": ({"bus_type": np.where(at == 5, 3, net.bus_type)}, "marks 1, 6 as the slack"),
+        "no slack type": ({"bus_type": np.ones(n, dtype=int)}, "marks none as the slack"),
+        "type 4": ({"bus_type": np.where(at == 5, 4, net.bus_type)}, "bus 6 has type 4; expected 1 (PQ), 2 (PV), 3 (slack)"),
+        "slack index as text": ({"slack": "0"}, "slack must be a bus index (an integer), got '0'"),
+        "slack voltage -1": ({"v_slack": -1.0}, "slack voltage -1 p.u. (bus 1) outside [0.5, 1.5]"),
+        "slack voltage NaN": ({"v_slack": float("nan")}, "v_slack must be finite, got nan"),
+        "slack voltage as text": ({"v_slack": "1.0"}, "v_slack must be a real number, got '1.0'"),
+        "limits -5 / 50": (
+            {"vmin": np.where(at == 4, -5.0, net.vmin), "vmax": np.where(at == 4, 50.0, net.vmax)},
+            "bus 5 has voltage limits Vmin -5, Vmax 50 p.u.; they must satisfy 0 ≤ Vmin ≤ Vmax and 0.5 ≤ Vmax ≤ 2",
+        ),
+        "duplicated bus number": ({"bus_ids": np.where(at == 7, 7, net.bus_ids)}, "bus number 7 is used by more than one bus"),
+        "fractional bus number": ({"bus_ids": net.bus_ids + 0.5}, "bus_ids must be whole numbers, got 1.5"),
+        "bus numbers as text": ({"bus_ids": net.bus_ids.astype(str)}, "bus_ids must be real numbers, got <U"),
+        "zero impedance": (
+            {"r": np.where(np.arange(net.n_branch) == 3, 0, net.r), "x": np.where(np.arange(net.n_branch) == 3, 0, net.x)},
+            "branch 4 (4-5) is in service with zero impedance (r = x = 0)",
+        ),
+        "tap 0": ({"tap": np.where(np.arange(net.n_branch) == 3, 0.0, net.tap)}, "branch 4 (4-5) has tap ratio 0"),
+        "complex resistance": ({"r": net.r + 1j}, "r must be real numbers, got complex128"),
+    }
+    for changes, message in bad.values():
+        with pytest.raises(NetworkError, match=re.escape(message)):
+            net.with_changes(**changes)
+    moved = net.with_changes(slack=5, bus_type=np.where(at == 5, 3, np.where(at == 0, 1, net.bus_type)))
+    assert moved.slack == 5 and moved.bfs_order[0] == 5  # a consistent move is fine
+
+
+def test_wrong_types_through_the_python_api_name_what_is_wrong():
+    from opfbench.errors import NetworkError
+    from opfbench.network import DER
+    from opfbench.registry import run_strategy
+
+    net = load_network("paper33")
+    scenario = Scenario.snapshot(net)
+    refused = [
+        (NetworkError, lambda: net.with_changes(name=None), "a network's name must be text, got None"),
+        (NetworkError, lambda: net.with_changes(ders=("PV",)), "ders[0] is 'PV', not a DER unit"),
+        (NetworkError, lambda: net.with_changes(ders=(DER(3.5, "PV", 0.5),)), "ders[0] has bus 3.5; a DER's bus is an"),
+        (NetworkError, lambda: net.with_changes(ders=(DER(True, "PV", 0.5),)), "ders[0] has bus True"),
+        (NetworkError, lambda: net.with_changes(ders=(DER(3, "PV", "0.5"),)), "ders[0] has rating_mw '0.5'; it must be a"),
+        (NetworkError, lambda: net.with_changes(colour="red"), "paper33: a network has no field colour"),
+        (NetworkError, lambda: net.index_of("5"), "paper33: a bus number is an integer, got '5'"),
+        (InputError, lambda: load_network(None), "a case is a shipped case's name or a MATPOWER .m file's path, got None"),
+        (InputError, lambda: Scenario("paper33", np.ones(1), np.zeros((1, 5))), "scenario: net must be a Network"),
+        (InputError, lambda: Scenario(net, "1", np.zeros((1, 5))), "scenario: load_scale must be numeric, got <U1"),
+        (InputError, lambda: Scenario(net, True, np.zeros((1, 5))), "scenario: load_scale must be numeric, got bool"),
+        (InputError, lambda: Scenario(net, np.zeros(0), np.zeros((0, 5))), "scenario: no snapshot (load_scale is empty)"),
+        (InputError, lambda: Scenario(net, np.ones(1), np.zeros((1, 5)), pv_night_q=np.array(["no"])), "pv_night_q must be"),
+        (InputError, lambda: Scenario(net, np.ones(1), np.zeros((1, 5)), pv_night_q=[2]), "pv_night_q must be true/false"),
+        (InputError, lambda: run_strategy("llma", scenario, "0"), "reserve coefficient k must be a number in [0, 1], got '0'"),
+        (InputError, lambda: run_strategy("llma", scenario, True), "reserve coefficient k must be a number in [0, 1], got True"),
+        (InputError, lambda: run_strategy("llma", net, 0.0), "strategy 'llma' runs on a Scenario (e.g. Scenario.snapshot"),
+        (InputError, lambda: run_strategy("acopf", None, 0.0), "strategy 'acopf' runs on a Scenario (e.g. Scenario.snapshot"),
+    ]
+    for error, call, message in refused:
+        with pytest.raises(error, match=re.escape(message)):
+            call()
+    listed = net.with_changes(ders=list(net.ders))
+    assert isinstance(listed.ders, tuple)  # a list handed in cannot change the network afterwards
+    assert run_strategy("llma", scenario, np.float64(0.2)).losses_kw[0] == run_strategy("llma", scenario, 0.2).losses_kw[0]
+
+
 def test_network_copies_the_callers_arrays():
     net = load_network("case33bw")
     load = np.array(net.load_p_mw)
@@ -105,7 +341,7 @@ def test_network_refuses_negative_r_and_crossed_limits():
     net = load_network("case33bw")
     with pytest.raises(NetworkError, match=r"branch 3 \(3-4\) has negative resistance"):
         net.with_changes(r=np.where(np.arange(net.n_branch) == 2, -0.01, net.r))
-    with pytest.raises(NetworkError, match="bus 7 has Vmin 1.05 > Vmax 1"):
+    with pytest.raises(NetworkError, match="bus 7 has voltage limits Vmin 1.05, Vmax 1 p.u."):
         net.with_changes(vmin=np.where(np.arange(net.n_bus) == 6, 1.05, net.vmin), vmax=np.ones(net.n_bus))
     with pytest.raises(NetworkError, match=r"load_p_mw has shape \(32,\), expected \(33,\)"):
         net.with_changes(load_p_mw=net.load_p_mw[:-1])
@@ -257,14 +493,10 @@ def test_forecast_unknown_model_before_loading(capsys, no_computation):
     assert code == 2 and "unknown model(s) prophet" in err
 
 
-# ----- the loss-table module -------------------------------------------------------------------
-def test_strategies_table_unknown_case_exit_2():
-    proc = subprocess.run(
-        [sys.executable, "-m", "opfbench.strategies.table", "--case", "nope"], capture_output=True, text=True, timeout=120
-    )
-    assert proc.returncode == 2 and proc.stdout == ""
-    assert proc.stderr.startswith("python -m opfbench.strategies.table: error: unknown case 'nope'")
-    assert proc.stderr.count("\n") == 1
+# ----- the loss table -----------------------------------------------------------------------
+def test_table_unknown_case_exit_2(capsys):
+    code, err = _cli(capsys, ["table", "nope"])
+    assert code == 2 and err.startswith("opfbench table: error: unknown case 'nope'") and err.count("\n") == 1
 
 
 # ----- lazy imports -----------------------------------------------------------------------------

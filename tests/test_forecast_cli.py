@@ -19,7 +19,7 @@ from opfbench.forecasting.datasets import pv_dataset, wind_dataset
 from opfbench.forecasting.experiment import run_comparison
 from opfbench.forecasting.models import MODEL_NAMES, settings_for
 from opfbench.forecasting.outputs import load_forecast
-from tests.forecast_synthetic import synthetic_pv_minute, synthetic_wind_hourly
+from tests.support.forecast_synthetic import synthetic_pv_minute, synthetic_wind_hourly
 
 TIMINGS = ("fit_s", "predict_s")
 

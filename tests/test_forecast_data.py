@@ -10,7 +10,7 @@ from opfbench.errors import DataError, InputError
 from opfbench.forecasting.datasets import TARGET, ForecastDataset, forecast_dataset, pv_dataset, wind_dataset
 from opfbench.forecasting.metrics import evaluate
 from opfbench.forecasting.scaling import MinMaxScaler
-from tests.forecast_synthetic import synthetic_pv_minute, synthetic_wind_hourly
+from tests.support.forecast_synthetic import synthetic_pv_minute, synthetic_wind_hourly
 
 
 def test_pv_adapter_selects_the_paper_inputs():

@@ -20,7 +20,7 @@ from opfbench.forecasting.models import MODEL_NAMES, build_model, settings_for
 from opfbench.forecasting.networks import NetConfig
 from opfbench.forecasting.neural import NeuralForecaster, TrainConfig
 from opfbench.forecasting.persistence import Persistence
-from tests.forecast_synthetic import synthetic_pv_minute, synthetic_wind_hourly
+from tests.support.forecast_synthetic import synthetic_pv_minute, synthetic_wind_hourly
 
 TINY = replace(
     settings_for("pv", quick=True), epochs=1, windows_per_epoch=256, arima_orders=((1, 0, 0), (1, 1, 1)), arima_fit_samples=600

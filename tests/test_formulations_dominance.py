@@ -9,11 +9,11 @@ import pytest
 
 from opfbench.errors import InputError
 from opfbench.formulations.acopf import run_acopf
-from opfbench.formulations.dominance import opf_dominance
 from opfbench.io import load_network
 from opfbench.registry import run_strategy
 from opfbench.result import StrategyResult
 from opfbench.scenario import Scenario
+from tests.support.dominance import opf_dominance
 
 
 def no_action(scenario: Scenario) -> StrategyResult:

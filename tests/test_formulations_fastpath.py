@@ -7,12 +7,16 @@ import threading
 import numpy as np
 import pytest
 
-from opfbench.capability import usable_qmax
 from opfbench.errors import InputError, NetworkError
-from opfbench.formulations import socp as socp_module
-from opfbench.formulations.acopf import CERTIFY_RTOL, ac_opf, run_acopf
-from opfbench.formulations.cache import PER_THREAD, per_thread
-from opfbench.formulations.socp import build_socp, relaxation, run_socp
+from opfbench.formulations import relaxation as relaxation_module
+from opfbench.formulations.acopf import run_acopf
+from opfbench.formulations.cache import EXACT_KEY_BYTES, PER_THREAD, SolveCache, per_thread
+from opfbench.formulations.models.polar_ac import ac_opf
+from opfbench.formulations.models.soc import SocpRelaxation, data_vector
+from opfbench.formulations.policy import CERTIFY_RTOL
+from opfbench.formulations.problem import snapshot_data
+from opfbench.formulations.relaxation import build_socp, relaxation, socp_solves
+from opfbench.formulations.socp import run_socp
 from opfbench.io import load_network
 from opfbench.registry import run_strategy
 from opfbench.scenario import Scenario
@@ -67,21 +71,21 @@ def test_reported_objective_never_below_the_bound():
     tol = 5e-8 * np.abs(res.lower_bound_kw)
     assert np.all(res.extra["objective_kw"] >= res.lower_bound_kw - tol)
     assert np.all(res.losses_kw >= res.lower_bound_kw - tol)
-    usable = usable_qmax(scenario.net.der_kinds, scenario.der_p_mw, scenario.net.der_rating_mw, 0.3)
+    usable = (1 - 0.3) * scenario.qmax_mvar()
     assert np.all(np.abs(res.q_mvar) <= usable)
 
 
 def _count_solves(monkeypatch) -> list:
-    """Count Clarabel solves, with an empty memo of solves by data."""
+    """Count Clarabel solves, with an empty solve cache."""
     calls = []
-    real = socp_module.SocpRelaxation.solve_data
+    real = SocpRelaxation.solve_data
 
     def counting(self, thetas):
         calls.extend([1] * len(np.atleast_2d(thetas)))
         return real(self, thetas)
 
-    monkeypatch.setattr(socp_module.SocpRelaxation, "solve_data", counting)
-    socp_module.forget_solves()
+    monkeypatch.setattr(SocpRelaxation, "solve_data", counting)
+    relaxation_module.forget_solves()
     return calls
 
 
@@ -103,8 +107,8 @@ def test_a_solve_depends_on_its_data_alone():
     """What makes sharing solves by data exact: the same data solved after different
     histories on different solver objects gives the same digits."""
     scenario = random_snapshots("paper33", 12, seed=3)
-    data = socp_module.snapshot_data(scenario, 0.3)
-    thetas = socp_module.data_vector(data.s_fixed, data.q_limit)
+    data = snapshot_data(scenario, 0.3)
+    thetas = data_vector(data.s_fixed, data.q_limit)
     a, b = build_socp(scenario.net), build_socp(scenario.net)
     forward = a.solve_data(thetas)  # in order, in one call
     backward = [b.solve_data(t)[0] for t in thetas[::-1]][::-1]  # one by one, in reverse
@@ -122,14 +126,14 @@ def test_paper_slack_rule_reuses_the_unrestricted_optimum_only_where_the_slack_i
     n = 16
     scenario = Scenario(net, rng.uniform(0.1, 1.0, n), rng.uniform(0.5, 1.0, (n, len(net.ders))) * net.der_rating_mw)
     calls = _count_solves(monkeypatch)
-    free = socp_module.socp_solves(scenario, 0.0, slack_export=True)
+    free = socp_solves(scenario, 0.0, slack_export=True)
     exporting = np.array([s.optimal and s.slack_p_pu < 0 for s in free])
     assert 0 < exporting.sum() < n
-    ruled = socp_module.socp_solves(scenario, 0.0, slack_export=False)
+    ruled = socp_solves(scenario, 0.0, slack_export=False)
     assert len(calls) == n + exporting.sum()
     assert all((r is f) != e for r, f, e in zip(ruled, free, exporting, strict=True))
     direct = build_socp(net, slack_export=False)
-    data = socp_module.snapshot_data(scenario, 0.0)
+    data = snapshot_data(scenario, 0.0)
     for i, r in enumerate(ruled):
         ref = direct.solve(data.s_fixed[i], data.q_limit[i])
         assert r.outcome == ref.outcome
@@ -200,3 +204,19 @@ def test_an_infeasible_relaxation_settles_the_step_without_ipopt():
     assert np.all(fast.extra["iterations"][1:] == 0) and np.all(fast.q_mvar[1:] == 0)
     ipopt = run_acopf(Scenario(net, scenario.load_scale, scenario.der_p_mw), 1.0, solver="ipopt")
     assert list(ipopt.status) == list(fast.status) and np.all(ipopt.extra["iterations"][1:] > 0)
+
+
+def test_the_solve_cache_is_keyed_on_the_data_and_bounded(paper33):
+    """Short data vectors are their own keys (exact), long ones a 16-byte digest; equal data
+    give equal keys whatever array holds them; the least recently used entries go first."""
+    short, long = np.arange(6.0).reshape(2, 3), np.ones((1, EXACT_KEY_BYTES // 8 + 1))
+    keys = SolveCache.keys(paper33, "o", short)
+    assert [k[2] for k in keys] == [row.tobytes() for row in short]
+    assert SolveCache.keys(paper33, "o", short.copy()) == keys and SolveCache.keys(paper33, "p", short) != keys
+    assert len(SolveCache.keys(paper33, "o", long)[0][2]) == 16
+    cache: SolveCache[str] = SolveCache(limit_bytes=2 * (SolveCache.KEY_BYTES + 24 + 1), size=len)
+    a, b, c = SolveCache.keys(paper33, "o", np.arange(9.0).reshape(3, 3))
+    cache.put_many([(a, "A"), (b, "B")])
+    assert cache.get_many([a, c]) == ["A", None]  # a is now the most recent
+    cache.put_many([(c, "C")])  # over the limit: b, the least recently used, goes
+    assert cache.get_many([a, b, c]) == ["A", None, "C"]

@@ -14,8 +14,9 @@ import casadi as ca
 import numpy as np
 import pytest
 
-from opfbench.formulations.acopf import build_acopf, run_acopf
-from opfbench.formulations.socp import build_socp
+from opfbench.formulations.acopf import run_acopf
+from opfbench.formulations.models.polar_ac import build_acopf
+from opfbench.formulations.relaxation import build_socp
 from opfbench.io import load_network
 from opfbench.network import DER, Network
 from opfbench.scenario import Scenario
@@ -74,7 +75,7 @@ def test_models_are_sparse():
     """The NLP's constraint Jacobian and the SOCP's conic matrix have O(n) nonzeros, and
     the SOCP's offset map one entry per data value (no dense n×n anywhere)."""
     net = replicated_feeder(20)
-    nlp = build_acopf(net)._nlp
+    nlp = build_acopf(net).ipopt.nlp
     assert ca.jacobian(nlp["g"], nlp["x"]).nnz() < 16 * net.n_bus  # dense: 4·n²
     program = build_socp(net).program
     assert program._a.nnz < 25 * net.n_bus

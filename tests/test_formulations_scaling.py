@@ -1,4 +1,4 @@
-"""The DistFlow cone's per-branch scaling (`socp.branch_scale`): the same relaxation,
+"""The DistFlow cone's per-branch scaling (`distflow.branch_scale`): the same relaxation,
 solved to its optimum on the large replicated feeders where the unscaled cone stalls."""
 
 from __future__ import annotations
@@ -7,10 +7,12 @@ import numpy as np
 import pytest
 
 from opfbench.bench.pf_large import day96
-from opfbench.formulations import socp
-from opfbench.formulations.acopf import CERTIFY_RTOL, run_acopf
+from opfbench.formulations.acopf import run_acopf
+from opfbench.formulations.models import distflow
+from opfbench.formulations.models.distflow import branch_scale
+from opfbench.formulations.policy import CERTIFY_RTOL
 from opfbench.formulations.problem import snapshot_data
-from opfbench.formulations.socp import branch_scale, build_socp
+from opfbench.formulations.relaxation import build_socp
 from opfbench.io import load_network
 from opfbench.scenario import Scenario
 
@@ -35,7 +37,7 @@ def test_scaling_leaves_the_relaxation_unchanged(case, monkeypatch):
     scenario = Scenario(net, rng.uniform(0.4, 1.2, 6), rng.uniform(0.0, 1.0, (6, len(net.ders))) * net.der_rating_mw)
     data = snapshot_data(scenario, 0.2)
     scaled = build_socp(net)
-    monkeypatch.setattr(socp, "branch_scale", lambda n: np.ones(n.n_bus))
+    monkeypatch.setattr(distflow, "branch_scale", lambda n: np.ones(n.n_bus))
     textbook = build_socp(net)
     for i in range(scenario.n_snapshots):
         a, b = (r.solve(data.s_fixed[i], data.q_limit[i]) for r in (scaled, textbook))

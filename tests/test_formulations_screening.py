@@ -1,4 +1,4 @@
-"""Bound screening of the conic programs (`conic.ParametricConeProgram`): a screened answer
+"""Bound screening of the conic programs (`clarabel_adapter.ParametricConeProgram`): a screened answer
 is the full program's optimum, wrong guesses are refused, and the answer does not depend
 on them."""
 
@@ -8,8 +8,9 @@ import numpy as np
 import pytest
 
 from opfbench.bench.profiles import paper_day_scenario
+from opfbench.formulations.models.soc import data_vector
 from opfbench.formulations.problem import snapshot_data
-from opfbench.formulations.socp import build_socp, data_vector
+from opfbench.formulations.relaxation import build_socp
 from opfbench.io import load_network
 from opfbench.scenario import Scenario
 

@@ -6,10 +6,14 @@ import cvxpy as cp
 import numpy as np
 import pytest
 
-from opfbench.errors import InputError, NetworkError
+from opfbench.errors import NetworkError
 from opfbench.formulations.acopf import run_acopf
+from opfbench.formulations.models.distflow import DistFlowSocp
+from opfbench.formulations.models.jabr import JabrSocp
+from opfbench.formulations.models.soc import data_vector
 from opfbench.formulations.problem import snapshot_data
-from opfbench.formulations.socp import DistFlowSocp, build_socp, data_vector, run_socp
+from opfbench.formulations.relaxation import build_socp
+from opfbench.formulations.socp import run_socp
 from opfbench.io import load_network
 from opfbench.scenario import Scenario
 
@@ -64,12 +68,12 @@ def test_jabr_and_distflow_agree_on_a_radial_feeder():
     net = load_network("paper33")
     data = snapshot_data(Scenario.snapshot(net, 0.9, 0.6), 0.2)
     args = (data.s_fixed[0], data.q_limit[0])
-    dist, jabr = build_socp(net, model="distflow").solve(*args), build_socp(net, model="jabr").solve(*args)
+    dist, jabr = DistFlowSocp(net).solve(*args), JabrSocp(net).solve(*args)
     assert jabr.lower_bound_kw == pytest.approx(dist.lower_bound_kw, rel=1e-6)
     np.testing.assert_allclose(jabr.q_pu, dist.q_pu, atol=1e-6)
 
 
-@pytest.mark.parametrize("model", ["distflow", "jabr"])
+@pytest.mark.parametrize("model", [DistFlowSocp, JabrSocp])
 def test_direct_clarabel_path_matches_cvxpy_solve(model):
     """The data-as-offset path (the full program) equals cvxpy's own solve with the data
     variables pinned; the screened answer has the same optimum: its bound within 5e-7
@@ -78,7 +82,7 @@ def test_direct_clarabel_path_matches_cvxpy_solve(model):
     the optimum, so 1e-8 in the objective leaves Q loose (measured up to 1.0e-6 for the
     full program, 5.6e-6 for the screened Jabr answer, against cvxpy's defaults)."""
     net = load_network("paper33")
-    relax = build_socp(net, model=model)
+    relax = model(net)
     program = relax.program
     for scale in (0.5, 1.2):
         data = snapshot_data(Scenario.snapshot(net, scale, 0.7), 0.0)
@@ -106,8 +110,8 @@ def test_infeasible_voltage_band_is_certified():
 
 def test_distflow_models_transformers_exactly():
     """Taps at a branch's parent or child end, a phase shift and a shunt conductance (a
-    transformer's iron losses) on a radial feeder: DistFlow's bound equals Jabr's and the
-    AC losses of its setpoints, and the AC OPF's losses."""
+    transformer's iron losses) on a radial feeder: DistFlow's bound equals Jabr's, the AC
+    losses of its setpoints and the AC OPF's losses."""
     net = load_network("paper33")
     k = np.arange(net.n_branch)
     flip = k == 10  # its tap at the child end
@@ -119,17 +123,19 @@ def test_distflow_models_transformers_exactly():
         g=np.where(k == 0, 0.002, 0.0),
     )
     scenario = Scenario.snapshot(tapped, 1.0, 0.8)
-    dist, jabr = run_socp(scenario, 0.0, model="distflow"), run_socp(scenario, 0.0, model="jabr")
-    assert dist.extra["model"][0] == "distflow" and run_socp(scenario, 0.0).extra["model"][0] == "distflow"
-    assert dist.lower_bound_kw[0] == pytest.approx(jabr.lower_bound_kw[0], rel=1e-6)
-    assert dist.losses_kw[0] == pytest.approx(dist.lower_bound_kw[0], rel=1e-6)
-    assert run_acopf(scenario, 0.0).losses_kw[0] == pytest.approx(dist.lower_bound_kw[0], rel=1e-6)
-    plain = run_socp(Scenario.snapshot(net, 1.0, 0.8), 0.0, model="distflow").lower_bound_kw[0]
-    assert abs(plain - dist.lower_bound_kw[0]) > 1.0  # the transformers change the problem
+    data = snapshot_data(scenario, 0.0)
+    args = (data.s_fixed[0], data.q_limit[0])
+    dist, jabr = DistFlowSocp(tapped).solve(*args), JabrSocp(tapped).solve(*args)
+    assert type(build_socp(tapped)) is DistFlowSocp and dist.optimal and jabr.optimal
+    assert dist.lower_bound_kw == pytest.approx(jabr.lower_bound_kw, rel=1e-6)
+    socp = run_socp(scenario, 0.0)
+    assert socp.losses_kw[0] == pytest.approx(dist.lower_bound_kw, rel=1e-6)
+    assert run_acopf(scenario, 0.0).losses_kw[0] == pytest.approx(dist.lower_bound_kw, rel=1e-6)
+    plain = snapshot_data(Scenario.snapshot(net, 1.0, 0.8), 0.0)
+    assert abs(DistFlowSocp(net).solve(plain.s_fixed[0], plain.q_limit[0]).lower_bound_kw - dist.lower_bound_kw) > 1.0
     with pytest.raises(NetworkError, match="radial"):
         DistFlowSocp(load_network("paper33-meshed"))
-    with pytest.raises(InputError, match="unknown SOCP model"):
-        build_socp(net, model="sdp")
+    assert type(build_socp(net)) is DistFlowSocp and type(build_socp(load_network("paper33-meshed"))) is JabrSocp
 
 
 def test_line_charging_is_modelled_exactly():

@@ -1,12 +1,10 @@
 """The paper day's headline loss energies, pinned: every registered strategy at k = 0, PV
 connected at night, no forecast, on paper33 over the 1440 one-minute steps of
-`opfbench.data.paper_day()`. Measured 2026-11-23; the tolerance (0.5 %) lets solver
-round-off through and fails a 1 % regression.
-
-Cost: the local rules take well under a second; the AC OPF ≈ 12 s CPU per day and the
-SOCP ≈ 4 s (measured on the shared 2-core machine). `acopf-paper` (the same AC OPF with
-the paper's slack rule and fallback) gives the same energy on this day and costs another
-12 s, so it runs with the slow studies.
+`opfbench.data.paper_day()`, pinned from a run of 2026-11-23; the tolerance (0.5 %) lets
+solver round-off through and fails a 1 % regression. `acopf-paper` (the same AC OPF with
+the paper's slack rule and fallback) gives the same energy on this day; it runs with the
+slow studies. What the day costs is the benchmarks' business (`python -m opfbench.bench
+opf`, README).
 """
 
 from __future__ import annotations

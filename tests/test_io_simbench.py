@@ -15,8 +15,9 @@ from opfbench.errors import InputError
 from opfbench.io import load_case
 from opfbench.io.simbench import SUITE, check_code
 from opfbench.powerflow import solve_pf
+from opfbench.scenario import Scenario
 from opfbench.study.periods import local_time
-from tests.simbench_oracle import STEPS, runpp_at
+from tests.support.simbench_oracle import STEPS, runpp_at
 
 FAST = ("1-LV-rural1--0-sw", "1-MV-urban--0-sw")
 V_TOL, LOSS_TOL_KW = 1e-6, 1e-3
@@ -26,12 +27,12 @@ def _ours(code: str, step: str | None):
     case = load_case(f"simbench:{code}")
     net = case.network
     if step is None:
-        scenario, q = case.stored_scenario(), case.stored[3]
+        scenario, q = Scenario.of_case(case), case.stored[3]
     else:
         day, clock = STEPS[step].split(" ")
         d, m, y = day.split(".")
         when = local_time(f"{y}-{m}-{d}T{clock}")
-        scenario, q = case.scenario_at(pd.DatetimeIndex([when])), np.zeros(len(net.ders))
+        scenario, q = Scenario.of_case(case, pd.DatetimeIndex([when])), np.zeros(len(net.ders))
     res = solve_pf(net, scenario.injections(q[None, :])[0])
     assert res.converged
     return net, res
@@ -109,7 +110,7 @@ def test_negative_wind_profile_values_are_kept():
     der_p = series.der_pu[:, series.der_col] * series.der_base_mw
     assert der_p.min() < 0
     s, d = np.unravel_index(np.argmin(der_p), der_p.shape)
-    sc = case.scenario_at(series.index[s : s + 1])
+    sc = Scenario.of_case(case, series.index[s : s + 1])
     assert sc.der_p_mw[0, d] == der_p[s, d] < 0
     assert case.network.ders[d].primary_energy == "wind"
     assert (sc.qmax_mvar()[0, d] >= 0) and np.isfinite(sc.qmax_mvar()).all()
@@ -122,7 +123,7 @@ def test_negative_load_q_is_kept():
     load_q = series.load_q_pu[:, series.load_q_col] * series.load_q_base_mvar
     assert load_q.min() < 0
     row = int(np.argmin(load_q.min(axis=1)))
-    assert case.scenario_at(series.index[row : row + 1]).load_q_mvar.min() == load_q[row].min()
+    assert Scenario.of_case(case, series.index[row : row + 1]).load_q_mvar.min() == load_q[row].min()
 
 
 def test_cached_per_process():

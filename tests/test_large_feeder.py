@@ -45,7 +45,7 @@ def test_feeder1k_losses_and_voltages_stay_those_of_case33bw():
 
 
 def test_feeder1k_agrees_with_pandapower():
-    from pandapower_oracle import pandapower_pf
+    from tests.support.pandapower_oracle import pandapower_pf
 
     net = load_network("feeder1k")
     rng = np.random.default_rng(2)

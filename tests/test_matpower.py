@@ -7,35 +7,8 @@ from opfbench.cases import CASE_NAMES
 from opfbench.errors import CaseFormatError, InputError
 from opfbench.io import load_network
 from opfbench.io.matpower import load_case_file, read_matpower
-
-GOOD = """function mpc = tiny
-mpc.version = '2';
-mpc.baseMVA = 10;
-mpc.bus = [
-\t1\t3\t0\t0\t0\t0\t1\t1\t0\t12.66\t1\t1\t1;
-\t2\t1\t100\t60\t0\t0\t1\t1\t0\t12.66\t1\t1.1\t0.9;
-\t3\t1\t90\t40\t0\t0\t1\t1\t0\t12.66\t1\t1.1\t0.9;
-];
-mpc.gen = [
-\t1\t0\t0\t10\t-10\t1\t100\t1\t10\t0\t0\t0\t0\t0\t0\t0\t0\t0\t0\t0\t0;
-];
-mpc.branch = [
-\t1\t2\t0.0922\t0.0470\t0\t0\t0\t0\t0\t0\t1\t-360\t360;
-\t2\t3\t0.4930\t0.2511\t0\t0\t0\t0\t0\t0\t1\t-360\t360;
-];
-mpc.gencost = [
-\t2\t0\t0\t3\t0\t20\t0;
-];
-[PQ, PV, REF, NONE, BUS_I, BUS_TYPE, PD, QD, GS, BS, BUS_AREA, VM, ...
-    VA, BASE_KV, ZONE, VMAX, VMIN, LAM_P, LAM_Q, MU_VMAX, MU_VMIN] = idx_bus;
-[F_BUS, T_BUS, BR_R, BR_X, BR_B, RATE_A, RATE_B, RATE_C, ...
-    TAP, SHIFT, BR_STATUS, PF, QF, PT, QT, MU_SF, MU_ST, ...
-    ANGMIN, ANGMAX, MU_ANGMIN, MU_ANGMAX] = idx_brch;
-Vbase = mpc.bus(1, BASE_KV) * 1e3;      %% in Volts
-Sbase = mpc.baseMVA * 1e6;              %% in VA
-mpc.branch(:, [BR_R BR_X]) = mpc.branch(:, [BR_R BR_X]) / (Vbase^2 / Sbase);
-mpc.bus(:, [PD, QD]) = mpc.bus(:, [PD, QD]) / 1e3;
-"""
+from tests.support.matpower_texts import TINY_CASE
+from tests.support.shipped_cases import SHIPPED
 
 
 def _write(tmp_path, text, name="broken.m"):
@@ -45,7 +18,7 @@ def _write(tmp_path, text, name="broken.m"):
 
 
 def test_good_file_applies_ohm_and_kw_conversions(tmp_path):
-    case = read_matpower(_write(tmp_path, GOOD, "tiny.m"))
+    case = read_matpower(_write(tmp_path, TINY_CASE, "tiny.m"))
     zbase = 12.66**2 / 10
     assert case.branch[0, 2] == pytest.approx(0.0922 / zbase)
     assert case.bus[1, 2] == pytest.approx(0.1) and case.bus[1, 3] == pytest.approx(0.06)
@@ -53,10 +26,17 @@ def test_good_file_applies_ohm_and_kw_conversions(tmp_path):
     assert list(net.bus_ids) == [1, 2, 3] and net.slack == 0
 
 
+def test_every_shipped_case_is_pinned():
+    assert set(SHIPPED) == set(CASE_NAMES)
+
+
 @pytest.mark.parametrize("name", CASE_NAMES)
 def test_shipped_cases_load(name):
+    n_bus, n_branch, in_service, n_der, load_p, load_q, meshed = SHIPPED[name]
     net = load_network(name)
-    assert net.n_bus >= 33 and not np.isnan(net.r).any()
+    assert (net.n_bus, net.f.size, int(net.status.sum()), len(net.ders)) == (n_bus, n_branch, in_service, n_der)
+    assert net.load_p_mw.sum() == pytest.approx(load_p, abs=1e-6) and net.load_q_mvar.sum() == pytest.approx(load_q, abs=1e-6)
+    assert net.meshed == meshed and np.isfinite(net.r).all() and np.isfinite(net.x).all()
 
 
 def test_case141_power_factor_conversion():
@@ -109,14 +89,14 @@ def test_case141_power_factor_conversion():
     ],
 )
 def test_malformed_case_names_the_problem(tmp_path, mutate, message):
-    path = _write(tmp_path, mutate(GOOD))
+    path = _write(tmp_path, mutate(TINY_CASE))
     with pytest.raises(CaseFormatError, match=message) as info:
         load_case_file(path)
     assert str(path) in str(info.value)
 
 
 def test_too_few_columns(tmp_path):
-    text = GOOD.replace("\t0\t0\t0\t0\t0\t0\t1\t-360\t360;", ";")  # branch rows keep fbus tbus r x
+    text = TINY_CASE.replace("\t0\t0\t0\t0\t0\t0\t1\t-360\t360;", ";")  # branch rows keep fbus tbus r x
     with pytest.raises(CaseFormatError, match=r"mpc\.branch has 4 columns, MATPOWER v2 needs at least 11"):
         load_case_file(_write(tmp_path, text))
 

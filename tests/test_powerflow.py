@@ -6,6 +6,7 @@ import pytest
 from opfbench.errors import InputError
 from opfbench.io import load_network
 from opfbench.powerflow import bus_injections, solve_pf, solve_pf_batch
+from tests.support.matpower_texts import CASE4_PV
 
 
 def _pf(name, der_mw=0.0, load_scale=1.0):
@@ -69,7 +70,7 @@ def _random_points(name, n, seed):
 
 @pytest.mark.parametrize("name", ["paper33", "case69-der"])
 def test_agrees_with_pandapower(name):
-    from pandapower_oracle import pandapower_pf
+    from tests.support.pandapower_oracle import pandapower_pf
 
     points = list(_random_points(name, 20, seed=7))
     for net, ls, p, q in points:
@@ -109,9 +110,8 @@ def test_batched_warm_start_converges_to_the_same_point_in_fewer_iterations():
 
 def test_case_with_pv_bus_and_tap_matches_pandapower(tmp_path):
     """A meshed-free 4-bus case with a voltage-controlled bus and an off-nominal tap."""
-    from pandapower_oracle import pandapower_pf
-
     from opfbench.io.matpower import load_case_file
+    from tests.support.pandapower_oracle import pandapower_pf
 
     path = tmp_path / "case4pv.m"
     path.write_text(CASE4_PV)
@@ -123,24 +123,3 @@ def test_case_with_pv_bus_and_tap_matches_pandapower(tmp_path):
     assert abs(ours.losses_kw - losses) < 1e-3
     assert ours.vm[net.index_of(400)] == pytest.approx(1.05)
     assert solve_pf_batch(net, np.array([bus_injections(net)] * 2)).converged.all()
-
-
-CASE4_PV = """function mpc = case4pv
-mpc.version = '2';
-mpc.baseMVA = 1;
-mpc.bus = [
-\t1\t3\t0\t0\t0\t0\t1\t1\t0\t12.5\t1\t1.1\t0.9;
-\t2\t1\t0.4\t0.2\t0\t0\t1\t1\t0\t12.5\t1\t1.1\t0.9;
-\t3\t1\t0.4\t0.2\t0\t0\t1\t1\t0\t12.5\t1\t1.1\t0.9;
-\t400\t2\t0.4\t0.2\t0\t0\t1\t1\t0\t12.5\t1\t1.1\t0.9;
-];
-mpc.gen = [
-\t1\t0\t0\t10\t-10\t1.0\t100\t1\t10\t0;
-\t400\t0.2\t0\t10\t-10\t1.05\t100\t1\t10\t0;
-];
-mpc.branch = [
-\t2\t3\t0.003\t0.006\t0\t0\t0\t0\t0\t0\t1;
-\t1\t2\t0.003\t0.006\t0\t0\t0\t0\t0\t0\t1;
-\t400\t1\t0.003\t0.006\t0\t0\t0\t0\t1.025\t0\t1;
-];
-"""

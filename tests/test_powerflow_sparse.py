@@ -3,11 +3,11 @@ the same batched solutions on every shipped small case, PV buses and taps includ
 
 import numpy as np
 import pytest
-from test_powerflow import CASE4_PV
 
 from opfbench.io import load_network
 from opfbench.io.matpower import load_case_file
 from opfbench.powerflow import SPARSE_MIN_BUSES, bus_injections, solve_pf, solve_pf_batch, uses_sparse
+from tests.support.matpower_texts import CASE4_PV
 
 
 def _injections(net, n, seed):

@@ -7,10 +7,10 @@ from __future__ import annotations
 import os
 
 import pytest
-from report_fixtures import write_fault, write_run
 
 from opfbench.report import write_report
 from opfbench.report.browser import check_page, find_chromium
+from tests.support.report_folders import write_fault, write_run
 
 SECTIONS = ["claims", "metadata", "losses", "convergence", "night", "gap", "voltage", "forecasting", "fault"]
 

@@ -6,12 +6,12 @@ from __future__ import annotations
 import dataclasses
 
 import pytest
-from report_fixtures import write_fault, write_run
 
 from opfbench.cli import main
 from opfbench.report import build_html, write_report
 from opfbench.report.claims import FAILS, HOLDS, NA, claims
 from opfbench.report.inputs import load_inputs
+from tests.support.report_folders import write_fault, write_run
 
 SECTIONS = ("claims", "metadata", "losses", "convergence", "year", "night", "gap", "voltage", "forecasting", "fault")
 EVIL = "<img src=x onerror=alert(1)>.m"

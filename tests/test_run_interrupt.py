@@ -6,14 +6,13 @@ import signal
 import subprocess
 import sys
 import time
-from pathlib import Path
 
 import pytest
 
 from opfbench.study import StudyConfig, run_study
 from opfbench.study.store import finished_tasks
+from tests.support.processes import ROOT
 
-ROOT = Path(__file__).resolve().parents[1]
 PERIOD = "2016-06-28T10:00..2016-06-28T11:00"
 KS = ("0", "0.2", "0.4", "0.6", "0.8")
 # only the `run` subcommand (the full CLI also imports the forecasting models)

@@ -8,7 +8,7 @@ import time
 
 import pandas as pd
 
-from opfbench.formulations import socp
+from opfbench.formulations import relaxation
 from opfbench.study import StudyConfig, run_study
 from opfbench.study.store import finished_tasks
 
@@ -27,7 +27,7 @@ KEYS = ["case", "strategy", "k", "night_mode", "forecast", "time"]
 
 
 def _child(out):
-    socp.forget_solves()  # a fresh process would not have the parent's solves
+    relaxation.forget_solves()  # a fresh process would not have the parent's solves
     run_study(CONFIG, out, quiet=True)
 
 

@@ -70,7 +70,7 @@ def test_text_output_shows_lfma_diagnostics(capsys: pytest.CaptureFixture) -> No
         (["--strategy", "no-action", "--k", "2"], "reserve coefficient k must lie in [0, 1]"),
         (["--strategy", "lfma", "--k", "-0.1"], "--k"),
         (["--strategy", "lfma", "--k", "nan"], "--k"),
-        (["--strategy", "lfma", "--der-scale", "1.5"], "der_scale"),
+        (["--strategy", "lfma", "--der-scale", "1.5"], "argument --der-scale: must lie in [0, 1], got 1.5"),
         (["--strategy", "llma", "--fallback", "chain"], "--fallback"),
         (["--strategy", "teleport"], "invalid choice"),
     ],

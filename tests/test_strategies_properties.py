@@ -6,14 +6,14 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from hypothesis import HealthCheck, given, settings
+from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from opfbench.capability import qmax
 from opfbench.io import load_network
 from opfbench.scenario import Scenario
 from opfbench.strategies.local import lfma, lfma_trace, llma, no_action
-from tests.strategies_feeders import radial_feeder
+from tests.support.feeders import radial_feeder
 
 SNAPSHOTS = 4
 EPS = 1e-12  # MVAr: round-off allowance of the bound checks
@@ -76,7 +76,7 @@ def check_rules(scenario: Scenario, k: float, safe: bool) -> None:
             assert np.all(res.excursion_mvar == 0.0)
 
 
-@settings(max_examples=100, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@settings(max_examples=100, deadline=None)
 @given(scenario=random_scenarios(), k=st.floats(0, 1), safe=st.booleans())
 def test_rules_on_random_radial_feeders(scenario: Scenario, k: float, safe: bool) -> None:
     check_rules(scenario, k, safe)

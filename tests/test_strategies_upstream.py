@@ -14,7 +14,7 @@ from opfbench.network import Network
 from opfbench.powerflow import PowerFlowResult
 from opfbench.scenario import Scenario
 from opfbench.strategies.local import lfma, lfma_trace, upstream_disagreements
-from tests.strategies_feeders import radial_feeder
+from tests.support.feeders import radial_feeder
 
 
 def operating_points(case: str, n: int, seed: int) -> Scenario:

@@ -9,8 +9,10 @@ import numpy as np
 import pandas as pd
 import pytest
 
+from opfbench.capability import PAPER_KS
 from opfbench.cli import main
 from opfbench.errors import DataError, InputError
+from opfbench.registry import STRATEGY_NAMES, get_strategy
 from opfbench.study import StudyConfig
 from opfbench.study.periods import resolve_period
 from opfbench.study.runner import prepare, run_study
@@ -26,9 +28,36 @@ def day_run(tmp_path_factory):
     return run_study(config, tmp_path_factory.mktemp("day"), quiet=True)
 
 
+CONFIG_KEYS = ["case", "strategy", "k", "night_mode", "forecast"]
+TIMING = ["wall_ms", "solver_ms"]
+
+
+def _repeated_configurations(table: pd.DataFrame) -> set[tuple[tuple, tuple]]:
+    """Pairs of configurations whose rows (every column but the keys and the timings) are
+    identical."""
+    values = [c for c in table.columns if c not in CONFIG_KEYS + TIMING]
+    groups = {key: part[values].reset_index(drop=True) for key, part in table.groupby(CONFIG_KEYS, sort=True)}
+    by_hash: dict[int, list[tuple]] = {}
+    for key, part in groups.items():
+        by_hash.setdefault(int(pd.util.hash_pandas_object(part, index=False).sum()), []).append(key)
+    return {(a, b) for keys in by_hash.values() for i, a in enumerate(keys) for b in keys[i + 1 :] if groups[a].equals(groups[b])}
+
+
+def _no_action_repeats(table: pd.DataFrame) -> set[tuple[tuple, tuple]]:
+    """The repeats a grid must have: no action is Q = 0, so neither k nor the "Q at night"
+    capability can change it — its rows at every k, connected and connected-q alike, are
+    one configuration's (they stay in the grid as each k's and night mode's baseline)."""
+    keys = sorted(table[table.strategy == "no-action"].groupby(CONFIG_KEYS).groups)
+    same = lambda key: (key[0], key[4], "connected" if key[3] == "connected-q" else key[3])  # noqa: E731
+    return {(a, b) for i, a in enumerate(keys) for b in keys[i + 1 :] if same(a) == same(b)}
+
+
 def test_table_is_tidy_and_complete(day_run):
     table = pd.read_parquet(day_run.out / "steps.parquet")
-    assert len(table) == 3 * 2 * 2 * 2 * 1440  # strategies × k × night modes × forecast × steps
+    # forecast off: 3 rules; oracle: the 2 that read a forecast (no action would repeat its off rows)
+    assert len(table) == (3 + 2) * 2 * 2 * 1440  # strategies × k × night modes × steps
+    assert set(table[table.forecast == "oracle"].strategy) == {"llma", "lfma"}
+    assert _repeated_configurations(table) == _no_action_repeats(table)  # nothing under a forecast repeats
     assert (table.status == "ok").all()
     assert table.groupby(["case", "strategy", "k", "night_mode", "forecast"]).size().eq(1440).all()
     assert table.step_h.eq(1 / 60).all() and table.time.dt.tz is not None
@@ -276,6 +305,39 @@ def test_whole_default_grid(tmp_path):
     table = pd.read_parquet(run.out / "steps.parquet")
     assert (table.status == "ok").all()
     _check_day(table[table.forecast == "off"])
+    assert table.groupby(CONFIG_KEYS).ngroups == 6 * 5 * 3 + 2 * 5 * 3  # forecast off; oracle: LLMA, LFMA
+    # Nothing under a forecast repeats. What does is by definition or by the day's data: no
+    # action at every k and Q capability (10 · 9 / 2 + 5 · 4 / 2 pairs), and the paper's OPF
+    # setup, which equals the AC OPF on this day (the slack never exports and the fast path
+    # certifies every step, so neither the slack rule nor the paper's failure rule acts).
+    paper_setup = {
+        (("paper33", "acopf", k, mode, "off"), ("paper33", "acopf-paper", k, mode, "off"))
+        for k in PAPER_KS
+        for mode in ("connected", "connected-q", "disconnected")
+    }
+    assert _repeated_configurations(table) == _no_action_repeats(table) | paper_setup
+    assert len(_no_action_repeats(table)) == 55
+
+
+def test_the_repeat_check_finds_a_repeated_configuration(day_run):
+    """What the grid ran before the registry's rule: no action under the oracle forecast too."""
+    table = pd.read_parquet(day_run.out / "steps.parquet")
+    again = table[(table.strategy == "no-action") & (table.forecast == "off")].assign(forecast="oracle")
+    extra = _repeated_configurations(pd.concat([table, again])) - _no_action_repeats(table)
+    twins = {(key, (*key[:4], "oracle")) for key in table[table.strategy == "no-action"].groupby(CONFIG_KEYS).groups}
+    assert twins <= extra and len(twins) == 4
+
+
+def test_the_default_grid_runs_a_forecast_only_where_a_strategy_reads_it():
+    """Planned without running: `opfbench run`'s default grid has 120 configurations (90 with
+    forecast off, 30 with the oracle), the oracle's tasks run only the rules the registry
+    says read a forecast."""
+    _, _, tasks = prepare(StudyConfig())
+    readers = {name for name in STRATEGY_NAMES if get_strategy(name).uses_forecast}
+    assert {t.strategies for t in tasks if t.forecast == "oracle"} == {tuple(s for s in STRATEGY_NAMES if s in readers)}
+    assert {t.strategies for t in tasks if t.forecast == "off"} == {STRATEGY_NAMES}
+    configurations = {(t.case, s, t.k, m, t.forecast) for t in tasks for s in t.strategies for m in t.night_modes}
+    assert len(configurations) == 120 and len(tasks) == 2 * 5 * 4
 
 
 def test_acopf_solver_ipopt_runs_ipopt_on_every_step(tmp_path):

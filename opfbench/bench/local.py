@@ -6,6 +6,8 @@ rule run as one batch, and LFMA run snapshot by snapshot on a sample for compari
 
 from __future__ import annotations
 
+from functools import partial
+
 import numpy as np
 
 from opfbench.bench.profiles import paper_day_scenario
@@ -22,7 +24,7 @@ def bench_local(scenario: Scenario, k: float = 0.4, repeats: int = 3, loop_sampl
     n = scenario.n_snapshots
     out: dict = {"case": scenario.net.name, "snapshots": n, "k": k, "repeats": repeats, "rules": {}}
     for name in LOCAL_RULES:
-        ms, res = best_ms(lambda name=name: run_strategy(name, scenario, k), repeats)
+        ms, res = best_ms(partial(run_strategy, name, scenario, k), repeats)
         out["rules"][name] = {
             "wall_ms": ms,
             "ms_per_snapshot": ms / n,

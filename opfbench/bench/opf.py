@@ -15,8 +15,8 @@ the registered strategies as the study runs them, everything included (SOCP solv
 the fast path's batched power flow, IPOPT where needed, the AC evaluation):
 
 - `acopf_step_ms`: median over repeats of the `acopf` strategy's wall time / snapshots,
-  each repeat on a fresh Scenario object with the memo of solves by data emptied (so no
-  shared SOCP solves), solver objects already built (their one-off build is
+  each repeat on a fresh Scenario object with the solve cache emptied (so no shared SOCP
+  solves), solver objects already built (their one-off build is
   `acopf_build_s`);
 - `socp_step_ms`: the same for `socp` on a fresh scenario (its own Clarabel solves);
   `socp_shared_step_ms` / `acopf_paper_shared_step_ms`: `socp` / `acopf-paper` right
@@ -46,9 +46,9 @@ import pandas as pd
 
 from opfbench.bench.pandapower_opf import PandapowerOpf
 from opfbench.bench.profiles import paper_day_scenario
-from opfbench.formulations.acopf import build_acopf
+from opfbench.formulations.models.polar_ac import build_acopf
 from opfbench.formulations.problem import snapshot_data
-from opfbench.formulations.socp import build_socp, forget_solves
+from opfbench.formulations.relaxation import build_socp, forget_solves
 from opfbench.io import load_case, load_network
 from opfbench.network import Network
 from opfbench.powerflow import solve_pf_batch
@@ -216,7 +216,7 @@ def bench_mv(code: str = MV_CASE, k: float = 0.0, repeats: int = 3, peer_every: 
 
     case = load_case(f"simbench:{code}")
     index = pd.date_range(PAPER_DAY, periods=96, freq="15min", tz=PAPER_DAY_TZ)
-    day = case.scenario_at(index)
+    day = Scenario.of_case(case, index)
     n = day.n_snapshots
 
     def fresh() -> Scenario:

@@ -16,15 +16,16 @@ Cases are loaded by spec through `opfbench.io.load_case` (shipped names, files, 
 
 from __future__ import annotations
 
-from functools import lru_cache
+from functools import lru_cache, partial
 from importlib import resources
 from pathlib import Path
+from typing import Callable
 
 import numpy as np
 
 from opfbench.cases.feeder import SHIPPED_COPIES, replicated_feeder
 from opfbench.io.matpower import load_case_file
-from opfbench.network import DER, Network
+from opfbench.network import DER, DerKind, Network
 
 PAPER_PV_BUSES = (10, 16, 19, 29)
 PAPER_DFIG_BUS = 27
@@ -69,7 +70,7 @@ def place_ders(net: Network, name: str) -> Network:
             k += 1
         picks.append(int(ranked[k]))
     rating = 0.8075 * float(net.load_p_mw.sum()) / 5
-    kinds = ("PV", "PV", "PV", "DFIG", "PV")
+    kinds: tuple[DerKind, ...] = ("PV", "PV", "PV", "DFIG", "PV")
     ders = tuple(DER(b, kind, rating) for b, kind in zip(picks, kinds, strict=True))
     return _paper_limits(net.with_changes(name=name, ders=ders))
 
@@ -81,7 +82,7 @@ def feeder(copies: int, name: str | None = None) -> Network:
     return replicated_feeder(base, place_ders(base, "case33bw-der"), copies, name or f"feeder-{copies}x")
 
 
-_BUILDERS = {
+_BUILDERS: dict[str, Callable[[], Network]] = {
     "case33bw": lambda: load_case_file(_matpower_file("case33bw"), "case33bw"),
     "case69": lambda: load_case_file(_matpower_file("case69"), "case69"),
     "case141": lambda: load_case_file(_matpower_file("case141"), "case141"),
@@ -90,7 +91,7 @@ _BUILDERS = {
     "case69-der": lambda: place_ders(load_case_file(_matpower_file("case69")), "case69-der"),
     "case141-der": lambda: place_ders(load_case_file(_matpower_file("case141")), "case141-der"),
 }
-_BUILDERS |= {name: (lambda c=c, name=name: feeder(c, name)) for name, c in SHIPPED_COPIES.items()}
+_BUILDERS |= {name: partial(feeder, copies, name) for name, copies in SHIPPED_COPIES.items()}
 
 CASE_NAMES = tuple(_BUILDERS)
 

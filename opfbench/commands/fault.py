@@ -5,14 +5,13 @@ model variant). See `opfbench.dynamics`."""
 from __future__ import annotations
 
 import argparse
-import math
 import sys
 from dataclasses import replace
-from pathlib import Path
 
 import numpy as np
 
-from opfbench.commands.common import CASE_HELP, add_case_options, case_spec, fraction
+from opfbench.capability import PAPER_KS
+from opfbench.commands.common import CASE_HELP, add_case_options, case_spec, fraction, number, path, share
 from opfbench.dynamics.params import FORECASTS, SENSITIVITY_VARIANTS, FaultParams, ModelParams
 from opfbench.errors import InputError
 from opfbench.io.case import Case
@@ -20,26 +19,15 @@ from opfbench.jsonio import print_json
 from opfbench.registry import STRATEGY_NAMES
 
 
-def _number(text: str) -> float:
-    """argparse type: any finite number (range checks happen before the work, with names)."""
-    try:
-        value = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"not a number: {text!r}") from None
-    if not math.isfinite(value):
-        raise argparse.ArgumentTypeError(f"must be finite, got {text}")
-    return value
-
-
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("fault", help="fault ride-through study: recovery times per bus × strategy × k")
     p.add_argument("case", help=CASE_HELP)
     add_case_options(p)
     p.add_argument("--fault-bus", nargs="+", required=True, help="bus number(s) to fault, or 'all'")
-    p.add_argument("--fault-impedance", type=_number, default=0.02, help="fault reactance, p.u. (default 0.02)")
-    p.add_argument("--duration-ms", type=_number, default=150.0, help="fault duration, ms (default 150)")
+    p.add_argument("--fault-impedance", type=number, default=0.02, help="fault reactance, p.u. (default 0.02)")
+    p.add_argument("--duration-ms", type=number, default=150.0, help="fault duration, ms (default 150)")
     p.add_argument("--strategies", nargs="+", choices=STRATEGY_NAMES, default=["no-action", "llma", "lfma", "acopf"])
-    p.add_argument("--k", nargs="+", type=fraction, default=[0.0, 0.2, 0.4, 0.6, 0.8], help="reserve coefficients")
+    p.add_argument("--k", nargs="+", type=fraction, default=list(PAPER_KS), help="reserve coefficients")
     p.add_argument(
         "--forecast",
         nargs="+",
@@ -48,26 +36,26 @@ def register(sub: argparse._SubParsersAction) -> None:
         help="setpoints without (off) and with the oracle forecast (Algorithm 3)",
     )
     p.add_argument("--load-scale", type=fraction, default=1.0, help="multiplier on the nominal loads (default 1)")
-    p.add_argument("--der-scale", type=fraction, default=0.8, help="DER output as a fraction of rating (default 0.8)")
+    p.add_argument("--der-scale", type=share, default=0.8, help="DER output as a fraction of rating (default 0.8)")
     p.add_argument(
         "--time",
         default=None,
         help="HH:MM: the paper day's minute as operating point instead; on a case with its own profiles "
         "(simbench:CODE) a local date and time, e.g. 2016-11-08T12:00",
     )
-    p.add_argument("--motor-share", type=_number, default=0.5, help="share of each load's P in motors, 0..1")
-    p.add_argument("--motor-inertia", type=_number, default=0.2, help="motor H, s (default 0.2)")
+    p.add_argument("--motor-share", type=number, default=0.5, help="share of each load's P in motors, 0..1")
+    p.add_argument("--motor-inertia", type=number, default=0.2, help="motor H, s (default 0.2)")
     p.add_argument("--torque", choices=("quadratic", "constant"), default="quadratic", help="motor load torque law")
     p.add_argument(
         "--source-impedance",
-        type=_number,
+        type=number,
         default=None,
         help="upstream source reactance, p.u. (default 0.2; a case with its upstream grid's short-circuit data — "
         "pandapower's ext_grid s_sc_max_mva/rx_max, SimBench's CIGRE values — takes R and X from it)",
     )
     p.add_argument(
         "--emf",
-        type=_number,
+        type=number,
         default=None,
         help="source EMF |E| in p.u. (default: re-set so the slack sits at its scheduled voltage)",
     )
@@ -86,10 +74,10 @@ def register(sub: argparse._SubParsersAction) -> None:
         "torque=constant, active=ramp, emf-pu=E) or 'reference'",
     )
     p.add_argument("--sensitivity", action="store_true", help="run the sensitivity variants: " + " ".join(SENSITIVITY_VARIANTS))
-    p.add_argument("--t-end", type=_number, default=3.0, help="simulated time, s (default 3)")
-    p.add_argument("--step-ms", type=_number, default=1.0, help="fixed step, ms (default 1)")
+    p.add_argument("--t-end", type=number, default=3.0, help="simulated time, s (default 3)")
+    p.add_argument("--step-ms", type=number, default=1.0, help="fixed step, ms (default 1)")
     p.add_argument("--workers", type=int, default=1, help="processes (default 1)")
-    p.add_argument("--out", type=Path, default=None, help="write fault.parquet, traces.parquet, manifest.json here")
+    p.add_argument("--out", type=path, default=None, help="write fault.parquet, traces.parquet, manifest.json here")
     p.add_argument("--json", action="store_true", help="print a list, one record per simulation")
     p.set_defaults(func=run)
 

@@ -1,6 +1,6 @@
 """`opfbench forecast`: compare one-step-ahead PV / wind forecasters (paper §II, Table I).
 
-Full run (documented budget ≤ ~30 min per dataset on 2 CPU cores):
+Full run (tens of minutes per dataset; the README gives today's figures):
     opfbench forecast --dataset pv --out reports/forecast
     opfbench forecast --dataset wind --out reports/forecast
 """
@@ -12,6 +12,7 @@ import sys
 from dataclasses import replace
 from typing import TYPE_CHECKING
 
+from opfbench.commands.common import path
 from opfbench.errors import InputError
 from opfbench.forecasting.names import FORECAST_DATASETS, MODEL_NAMES
 from opfbench.jsonio import print_json
@@ -38,7 +39,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         help=f"comma-separated subset of {','.join(MODEL_NAMES)} (persistence always runs: it is the skill reference)",
     )
     parser.add_argument("--quick", action="store_true", help="smoke run: a few days of data, 2 short epochs")
-    parser.add_argument("--out", metavar="DIR", help="write forecast_<dataset>.csv/.json/.html into DIR")
+    parser.add_argument("--out", metavar="DIR", type=path, help="write forecast_<dataset>.csv/.json/.html into DIR")
     parser.add_argument("--seed", type=int, default=0, help=f"random seed in [0, {SEED_MAX}] (default 0)")
     parser.add_argument(
         "--weather",
@@ -52,10 +53,11 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from opfbench.folders import check_out_dir
     from opfbench.forecasting.datasets import forecast_dataset
     from opfbench.forecasting.experiment import run_comparison
     from opfbench.forecasting.models import settings_for
-    from opfbench.forecasting.outputs import check_out_dir, write_outputs
+    from opfbench.forecasting.outputs import write_outputs
 
     models = tuple(m.strip() for m in args.models.split(",") if m.strip())
     if not models:
@@ -70,13 +72,19 @@ def run(args: argparse.Namespace) -> int:
         if args.threads < 1:
             raise InputError(f"--threads must be >= 1, got {args.threads}")
         settings = replace(settings, threads=args.threads)
-    if args.out:  # before the computation, not after it
+    if args.out is not None:  # before the computation, not after it
         check_out_dir(args.out)
     dataset = forecast_dataset(args.dataset).lag_weather(1 if args.weather == "previous" else 0)
     result = run_comparison(dataset, models, settings, args.seed, progress=lambda msg: print(msg, file=sys.stderr))
-    if args.out:
-        for path in write_outputs(result, args.out):
-            print(f"wrote {path}", file=sys.stderr)
+    if args.out is not None:
+        from opfbench.forecasting.outputs import forecast_path
+        from opfbench.jsonio import write_atomic
+        from opfbench.report.forecast_page import forecast_page  # matplotlib only when a page is drawn
+
+        written = write_outputs(result, args.out)
+        written.append(write_atomic(forecast_path(args.out, result.dataset, "html"), forecast_page(result)))
+        for one in written:
+            print(f"wrote {one}", file=sys.stderr)
     if args.json:
         print_json(result.metrics_table())
     else:
@@ -86,7 +94,7 @@ def run(args: argparse.Namespace) -> int:
 
 def format_table(result: "ComparisonResult") -> str:
     """Plain-text metrics table with the paper's Table I values."""
-    from opfbench.forecasting.report import PAPER_TABLE
+    from opfbench.report.paper import FORECAST_TABLE as PAPER_TABLE
 
     header = (
         f"{'model':<18}"

@@ -10,7 +10,7 @@ import argparse
 
 import numpy as np
 
-from opfbench.commands.common import CASE_HELP, add_case_options, case_spec, fraction, print_json
+from opfbench.commands.common import CASE_HELP, add_case_options, case_spec, fraction, print_json, share
 from opfbench.errors import InputError
 
 DEFAULT_LOAD_SCALE, DEFAULT_DER_SCALE = 1.0, 0.8
@@ -28,7 +28,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument(
         "--der-scale",
-        type=fraction,
+        type=share,
         default=None,
         help=f"DER active power as a fraction of rating, 0..1 (default {DEFAULT_DER_SCALE}; a stored net: its stored output)",
     )
@@ -49,8 +49,6 @@ def run(args: argparse.Namespace) -> int:
     from opfbench.scenario import Scenario
     from opfbench.study.periods import local_time
 
-    if args.der_scale is not None and args.der_scale > 1:
-        raise InputError(f"--der-scale is a fraction of rating and must be ≤ 1, got {args.der_scale}")
     scaled = args.load_scale is not None or args.der_scale is not None
     if args.time is not None and scaled:
         raise InputError("--time takes loads and DER output from the case's profiles: drop --load-scale/--der-scale")
@@ -61,10 +59,10 @@ def run(args: argparse.Namespace) -> int:
     if args.time is not None:
         if case.series is None:
             raise InputError(f"--time needs a case with its own time series (simbench:CODE); {args.case!r} has none")
-        when = local_time(args.time)
-        scenario, point = case.scenario_at(pd.DatetimeIndex([when])), "profile"
+        when = local_time(args.time, "--time")
+        scenario, point = Scenario.of_case(case, pd.DatetimeIndex([when])), "profile"
     elif case.stored is not None and not scaled:
-        scenario, point = case.stored_scenario(), "stored"
+        scenario, point = Scenario.of_case(case), "stored"
         der_q = case.stored[3]
     else:
         load_scale = DEFAULT_LOAD_SCALE if args.load_scale is None else args.load_scale

@@ -10,12 +10,13 @@ import sys
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from opfbench.commands.common import add_case_options, case_spec, fraction
-from opfbench.errors import InputError
+from opfbench.capability import PAPER_KS
+from opfbench.commands.common import add_case_options, case_spec, fraction, path
+from opfbench.formulations.options import ACOPF_SOLVERS
 from opfbench.jsonio import print_json
 from opfbench.registry import STRATEGY_NAMES
-from opfbench.report.price import DEFAULT_CURRENCY, DEFAULT_PRICE_PER_KWH, DEFAULT_PRICE_SOURCE
-from opfbench.study.config import ACOPF_SOLVERS, CHUNKS, DEFAULT_KS, DEFAULT_NIGHT, NIGHT_MODES, StudyConfig
+from opfbench.study.config import CHUNKS, DEFAULT_NIGHT, NIGHT_MODES, StudyConfig
+from opfbench.study.price import DEFAULT_CURRENCY, DEFAULT_PRICE_PER_KWH, DEFAULT_PRICE_SOURCE
 
 if TYPE_CHECKING:
     from opfbench.study.runner import StudyRun
@@ -70,7 +71,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--strategies", nargs="+", default=list(STRATEGY_NAMES), choices=STRATEGY_NAMES, help="default: every registered strategy"
     )
-    p.add_argument("--k", nargs="+", type=fraction, default=list(DEFAULT_KS), help="reserve coefficients in [0, 1]")
+    p.add_argument("--k", nargs="+", type=fraction, default=list(PAPER_KS), help="reserve coefficients in [0, 1]")
     p.add_argument("--night-modes", nargs="+", default=list(NIGHT_MODES), choices=NIGHT_MODES)
     p.add_argument(
         "--night",
@@ -84,7 +85,9 @@ def register(sub: argparse._SubParsersAction) -> None:
         help="forecast sources: off, oracle (next step's actual) and/or a model name whose PV "
         "forecasts `opfbench forecast --dataset pv --out DIR` wrote (default: off oracle)",
     )
-    p.add_argument("--forecast-dir", default="reports/forecast", help="where model forecasts are (default reports/forecast)")
+    p.add_argument(
+        "--forecast-dir", type=path, default="reports/forecast", help="where model forecasts are (default reports/forecast)"
+    )
     p.add_argument(
         "--acopf-solver",
         choices=ACOPF_SOLVERS,
@@ -94,14 +97,14 @@ def register(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument(
         "--fault-dir",
-        type=Path,
+        type=path,
         default=None,
         help="a fault study's folder (`opfbench fault ... --out DIR`) for the report's fault section "
         "(default reports/fault, when it holds one)",
     )
     p.add_argument(
         "--year-dir",
-        type=Path,
+        type=path,
         default=None,
         help="a year run's folder (`opfbench run --period year --out DIR`) for the report's year section "
         "(default reports/year when it holds one, else the committed docs/year summary)",
@@ -140,7 +143,7 @@ def register(sub: argparse._SubParsersAction) -> None:
         help=f"price of lost energy per kWh for the report (default {DEFAULT_PRICE_PER_KWH} {DEFAULT_CURRENCY}, Eurostat 2023-H2 non-household)",
     )
     p.add_argument("--currency", default=DEFAULT_CURRENCY)
-    p.add_argument("--out", type=Path, default=Path("reports/run"), help="run folder (default reports/run)")
+    p.add_argument("--out", type=path, default=Path("reports/run"), help="run folder (default reports/run)")
     p.add_argument("--fresh", action="store_true", help="discard a previous run of another configuration in --out")
     p.add_argument("--quiet", action="store_true", help="no progress output")
     p.add_argument("--json", action="store_true", help="print the summary as JSON")
@@ -149,16 +152,13 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 def run(args: argparse.Namespace) -> int:
     source = DEFAULT_PRICE_SOURCE if args.price == DEFAULT_PRICE_PER_KWH else "--price"
-    from opfbench.report.sources import check_year_dir, holds_fault_study
+    from opfbench.report.inputs import checked_sources
+    from opfbench.report.sources import holds_forecasts
     from opfbench.study.runner import run_study
     from opfbench.study.store import finished_tasks
 
-    if args.fault_dir is not None and not holds_fault_study(args.fault_dir):
-        raise InputError(
-            f"--fault-dir {args.fault_dir} holds no fault study (fault.parquet); "
-            f"write one with `opfbench fault CASE --out {args.fault_dir}`"
-        )
-    check_year_dir(args.year_dir)
+    forecast_dir = Path(args.forecast_dir)  # the report's forecast section only when it holds a forecast run
+    checked_sources(forecast_dir if holds_forecasts(forecast_dir) else None, args.fault_dir, args.year_dir)  # before any work
     config = StudyConfig.build(
         cases=[case_spec(c, args) for c in suite_cases(args.suite) or args.case or ["paper33"]],
         strategies=args.strategies,
@@ -171,7 +171,7 @@ def run(args: argparse.Namespace) -> int:
         chunk=args.chunk,
         detail=args.detail,
         acopf_solver=args.acopf_solver,
-        forecast_dir=args.forecast_dir,
+        forecast_dir=str(args.forecast_dir),
         price_per_kwh=args.price,
         currency=args.currency,
         price_source=source,
@@ -204,6 +204,7 @@ def finish_run(result: StudyRun, args: argparse.Namespace) -> int:
     forecast, fault, year = report_sources(forecast_dir if holds_forecasts(forecast_dir) else None, args.fault_dir, args.year_dir)
     report = write_report(result.out, forecast, fault, year_dir=year)
     summary = result.summary
+    assert summary is not None, "run_study returns the summary of a finished run"
     if args.json:
         print_json(summary.to_dict(orient="records"))
         return 0

@@ -4,8 +4,9 @@ from __future__ import annotations
 
 import argparse
 
-from opfbench.commands.common import CASE_HELP, add_case_options, add_operating_point, case_spec, fraction, print_json
+from opfbench.commands.common import CASE_HELP, add_case_options, add_operating_point, case_spec, fraction, print_json, share
 from opfbench.errors import InputError
+from opfbench.formulations.options import ACOPF_SOLVERS, FALLBACKS
 from opfbench.registry import STRATEGIES, STRATEGY_NAMES, get_strategy, run_strategy
 
 
@@ -18,7 +19,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     add_operating_point(p)
     p.add_argument(
         "--forecast-der-scale",
-        type=fraction,
+        type=share,
         default=None,
         help="forecast DER output as a fraction of rating: turns on Algorithm 3 (local rules)",
     )
@@ -29,13 +30,13 @@ def register(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument(
         "--fallback",
-        choices=("chain", "paper"),
+        choices=FALLBACKS,
         default=None,
         help="AC OPF failure policy: chain (default) or paper (fall back to no action)",
     )
     p.add_argument(
         "--acopf-solver",
-        choices=("auto", "ipopt"),
+        choices=ACOPF_SOLVERS,
         default=None,
         help="AC OPF: auto (default: SOCP-certified fast path, IPOPT for the rest) or ipopt (always)",
     )

@@ -37,6 +37,8 @@ LOAD_PROFILE_COLUMNS = {"mv_semiurb": "mv_semiurb_p_pu", "h0a": "h0a_p_pu", "g0a
 #: Weather columns of the PV data carried into `paper_day`.
 PAPER_DAY_WEATHER = ("ghi_wm2", "dni_wm2", "dhi_wm2", "temp_air_c", "relative_humidity_pct", "pressure_hpa")
 
+PvSource = Literal["simbench", "bsrn"]  # the PV profile: SimBench PV3 or the BSRN plant
+
 
 def interpolate_to(series: pd.Series, index: pd.DatetimeIndex) -> np.ndarray:
     """Values of ``series`` (tz-aware index) at the instants of ``index`` by linear
@@ -60,7 +62,7 @@ def _check_window(index: pd.DatetimeIndex) -> None:
 
 
 def assemble_profiles(
-    index: pd.DatetimeIndex, load_profile: str = "mv_semiurb", pv_source: Literal["simbench", "bsrn"] = "simbench"
+    index: pd.DatetimeIndex, load_profile: str = "mv_semiurb", pv_source: PvSource = "simbench"
 ) -> pd.DataFrame:
     """Per-unit multipliers ``load``, ``pv``, ``wind`` on ``index`` (see the module
     docstring for the mapping rule). ``load_profile`` is a key of

@@ -4,7 +4,8 @@ profiles of the year 2016.
 The files are ``;``-separated with a ``time`` column ``dd.mm.yyyy HH:MM`` on the German
 local clock *with* daylight saving: 27 March jumps from 01:45 to 03:00 and 30 October
 repeats 02:00–02:45. Timestamps are therefore localised to Europe/Berlin (the repeated
-hour resolved by order), giving a strictly increasing 15-min index of 35 136 rows.
+hour resolved by order), giving a strictly increasing 15-min index of 35 136 rows
+(`opfbench.io.simbench.simbench_time_index`, which reads the grids' own profiles too).
 """
 
 from __future__ import annotations
@@ -13,12 +14,9 @@ import io
 
 import pandas as pd
 
-from opfbench.data.cleaning import check_time_index
 from opfbench.data.textsource import Source, read_source
 from opfbench.errors import DataError
-
-SIMBENCH_TZ = "Europe/Berlin"
-SIMBENCH_STEP = pd.Timedelta("15min")
+from opfbench.io.simbench import simbench_time_index
 
 #: Kept generation profiles: output column -> SimBench column (p.u. of installed power).
 GENERATION_PROFILES = {"pv_pu": "PV3", "wind_pu": "WP4"}
@@ -31,19 +29,6 @@ LOAD_PROFILES = {
     "mv_semiurb_p_pu": "mv_semiurb_pload",
     "mv_semiurb_q_pu": "mv_semiurb_qload",
 }
-
-
-def simbench_time_index(time: pd.Series, name: str) -> pd.DatetimeIndex:
-    """SimBench's ``time`` column (``dd.mm.yyyy HH:MM``, German local clock with daylight
-    saving) as a strictly increasing tz-aware (Europe/Berlin) 15-min index: the skipped
-    hour is absent in the data, the repeated one is resolved by order."""
-    try:
-        local = pd.DatetimeIndex(pd.to_datetime(time, format="%d.%m.%Y %H:%M"))
-        index = local.tz_localize(SIMBENCH_TZ, ambiguous="infer", nonexistent="raise")
-    except (ValueError, TypeError) as exc:  # pytz/zoneinfo errors subclass ValueError
-        raise DataError(f"{name}: column 'time' cannot be read as Europe/Berlin local time ({exc})") from exc
-    check_time_index(index, name, SIMBENCH_STEP)
-    return index
 
 
 def parse_simbench_profiles(source: Source, columns: dict[str, str]) -> pd.DataFrame:

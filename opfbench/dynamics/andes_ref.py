@@ -115,7 +115,7 @@ def andes_system(model: DynamicModel, fault: FaultParams):
     y_static[net.slack] -= 1.0 / model.params.source.z_pu
     y_static[model.mot_bus] -= model.mot_y
     s_static = np.conj(y_static) * np.abs(model.v0) ** 2 * base  # MVA consumed
-    for i in np.flatnonzero(np.abs(s_static) > 1e-12):
+    for i in np.flatnonzero(np.abs(s_static) > 1e-12).tolist():
         ss.add(
             "PQ",
             {

@@ -190,7 +190,7 @@ def build_model(
     np.add.at(gen, net.gen_bus, (net.gen_p_mw + 1j * net.gen_q_mvar) / base)
     i_const += np.conj(gen / v0)  # fixed generators: constant current at their pre-fault value
 
-    mot_bus, mot_y, mot_rows, e0, slips = [], [], [], [], []
+    mot_bus, mot_y, mot_rows, emfs, slips = [], [], [], [], []
     static = load.copy()
     for i in np.flatnonzero((load.real > 0) & (mp.share > 0)):
         p_m = mp.share * load.real[i]
@@ -201,7 +201,7 @@ def build_model(
         y[i, i] += yn
         mot_bus.append(i)
         mot_y.append(yn)
-        e0.append(st.emf)
+        emfs.append(st.emf)
         slips.append(st.slip)
         g = 1.0 / (mp.rs + 1j * mp.xp)
         mot_rows.append(
@@ -273,7 +273,7 @@ def build_model(
             f"{net.name}: the setpoint of the DER at bus {b} needs more than {ip.i_max} × its rated "
             "current before the fault: no steady pre-fault state"
         )
-    e0 = np.array(e0, dtype=complex)
+    e0 = np.array(emfs, dtype=complex)
     x0 = np.concatenate([e0.real, e0.imag, np.array(slips, float), vd, p0 / vd, q0 / vd, np.ones(len(vd))])
     return DynamicModel(
         net,

@@ -27,7 +27,7 @@ def _power_at_unit_voltage(p: MotorParams, s: float) -> float:
 
 def _airgap_torque_at_unit_voltage(p: MotorParams, s: float) -> float:
     i = 1.0 / impedance(p, s)
-    return float(_power_at_unit_voltage(p, s) - p.rs * abs(i) ** 2)
+    return float(_power_at_unit_voltage(p, s) - p.rs * np.abs(i) ** 2)
 
 
 @lru_cache(maxsize=32)

@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import asdict, dataclass, field, replace
-from typing import Literal
+from typing import Literal, TypeVar
 
 from opfbench.errors import InputError
 
@@ -27,6 +27,7 @@ EmfMode = Literal["reset", "held", "given"]
 TorqueLaw = Literal["quadratic", "constant"]
 ActivePowerMode = Literal["constant-power", "ramp"]
 InverterControl = Literal["grid-code", "constant-current"]
+C = TypeVar("C", bound=str)
 NOMINAL_HZ = 50.0
 RECOVERY_PU = 0.9  # the recovery threshold |V| ≥ 0.9 p.u.
 
@@ -158,8 +159,11 @@ class ModelParams:
             raise InputError(f"source impedance must be > 0 p.u., got {s.impedance_pu}")
         if not s.resistance_pu >= 0:
             raise InputError(f"source resistance must be ≥ 0 p.u., got {s.resistance_pu}")
-        if s.emf == "given" and (s.emf_pu is None or not s.emf_pu > 0):
-            raise InputError("EMF mode 'given' needs a positive EMF in p.u. (--emf)")
+        from opfbench.network import V_SETPOINT_PU  # here: the CLI reads this module to build its parser
+
+        lo, hi = V_SETPOINT_PU  # the EMF node is the simulated network's slack
+        if s.emf == "given" and (s.emf_pu is None or not lo <= s.emf_pu <= hi):
+            raise InputError(f"EMF mode 'given' (emf-pu=X) needs an EMF within [{lo:g}, {hi:g}] p.u., got {s.emf_pu}")
         if s.emf not in ("reset", "held", "given"):
             raise InputError(f"unknown EMF mode {s.emf!r}; choose reset, held or given")
         if m.torque not in ("quadratic", "constant"):
@@ -180,11 +184,18 @@ def _number(value: str, spec: str) -> float:
     return out
 
 
+def _choice(value: str, allowed: tuple[C, ...], message: str) -> C:
+    """`value` as the one of `allowed` it equals; InputError(`message`) if none."""
+    for option in allowed:
+        if option == value:
+            return option
+    raise InputError(message)
+
+
 def _apply(p: ModelParams, key: str, value: str, spec: str) -> ModelParams:
     if key == "emf":
-        if value not in ("reset", "held"):
-            raise InputError(f"variant {spec!r}: emf must be reset or held (a value: emf-pu=X)")
-        return replace(p, source=replace(p.source, emf=value))
+        emf: EmfMode = _choice(value, ("reset", "held"), f"variant {spec!r}: emf must be reset or held (a value: emf-pu=X)")
+        return replace(p, source=replace(p.source, emf=emf))
     if key == "emf-pu":
         return replace(p, source=replace(p.source, emf="given", emf_pu=_number(value, spec)))
     if key == "source":
@@ -194,9 +205,13 @@ def _apply(p: ModelParams, key: str, value: str, spec: str) -> ModelParams:
     if key == "inertia":
         return replace(p, motors=replace(p.motors, h_s=_number(value, spec)))
     if key == "torque":
-        return replace(p, motors=replace(p.motors, torque=value))
+        law: TorqueLaw = _choice(value, ("quadratic", "constant"), f"unknown torque law {value!r}; choose quadratic or constant")
+        return replace(p, motors=replace(p.motors, torque=law))
     if key == "active":
-        return replace(p, inverters=replace(p.inverters, active=value))
+        mode: ActivePowerMode = _choice(
+            value, ("constant-power", "ramp"), f"unknown active-power mode {value!r}; choose constant-power or ramp"
+        )
+        return replace(p, inverters=replace(p.inverters, active=mode))
     raise InputError(f"variant {spec!r}: unknown key {key!r}; use emf, emf-pu, source, motors, inertia, torque, active")
 
 

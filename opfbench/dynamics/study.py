@@ -20,7 +20,8 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from opfbench.dynamics.model import build_model, prefault_flow
+from opfbench.capability import PAPER_KS, check_reserve
+from opfbench.dynamics.model import DynamicModel, build_model, prefault_flow
 from opfbench.dynamics.params import FORECASTS, FaultParams, ModelParams
 from opfbench.dynamics.simulate import DIVERGED, NOT_RECOVERED, RECOVERED, Simulation, check_fault, simulate
 from opfbench.errors import InputError
@@ -52,14 +53,14 @@ def operating_point(
     if time is not None and case is not None and case.series is not None:
         from opfbench.study.periods import local_time
 
-        when = local_time(time)
+        when = local_time(time, "--time")
         series = case.series
         row = series.index.get_indexer([when])[0]
         if row < 0:
             raise InputError(
                 f"--time {time!r} is not a step of {case.spec}'s profiles ({series.index[0]} .. {series.index[-1]}, every {series.step})"
             )
-        now, ahead = (case.scenario_at(series.index[k : k + 1]) for k in (row, min(row + 1, len(series.index) - 1)))
+        now, ahead = (Scenario.of_case(case, series.index[k : k + 1]) for k in (row, min(row + 1, len(series.index) - 1)))
         sc = Scenario.from_series(net, now.load_p_mw, now.load_q_mvar, now.der_p_mw, ahead.der_p_mw)
         return OperatingPoint(sc, f"{case.spec} profiles at {when.isoformat()}")
     if time is None:
@@ -93,7 +94,7 @@ class StudyConfig:
     case: str
     fault_buses: tuple[int, ...]
     strategies: tuple[str, ...] = ("no-action", "llma", "lfma", "acopf")
-    ks: tuple[float, ...] = (0.0, 0.2, 0.4, 0.6, 0.8)
+    ks: tuple[float, ...] = PAPER_KS
     forecasts: tuple[str, ...] = ("off",)
     variants: tuple[str, ...] = ("reference",)
     params: ModelParams = field(default_factory=ModelParams)
@@ -109,8 +110,7 @@ class StudyConfig:
         for name in self.strategies:
             get_strategy(name)
         for k in self.ks:
-            if not 0.0 <= k <= 1.0:
-                raise InputError(f"reserve coefficient k must lie in [0, 1], got {k}")
+            check_reserve(k)
         for fc in self.forecasts:
             if fc not in FORECASTS:
                 raise InputError(f"unknown forecast {fc!r}; choose from {', '.join(FORECASTS)}")
@@ -214,7 +214,8 @@ def run_study(config: StudyConfig, point: OperatingPoint, progress=None) -> tupl
                     raise InputError(f"strategy {name} at k = {k:g} gave status {res.status[0]} on this operating point")
                 setpoints[name, k, fc] = res.q_mvar[0]
     sc_off = point.scenario.without_forecast()
-    jobs, keys = [], []
+    jobs: list[tuple[DynamicModel, list[FaultParams]]] = []
+    keys = []
     for label, params in variants.items():
         emf = params.source.emf_pu if params.source.emf == "given" else None
         if params.source.emf == "held":

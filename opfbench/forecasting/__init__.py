@@ -33,10 +33,6 @@ _EXPORTS = {
     "forecast_path": "outputs",
     "load_forecast": "outputs",
     "write_outputs": "outputs",
-    "PAPER_TABLE": "report",
-    "forecast_page": "report",
-    "forecast_section": "report",
-    "html_page": "report",
 }
 
 __all__ = sorted(_EXPORTS)

@@ -133,7 +133,7 @@ def _test_forecast(model: Forecaster, frame: pd.DataFrame, n_train: int, exog_co
 def _details(model: Forecaster) -> dict[str, object]:
     """What was fitted: ARIMA order and convergence; the networks' best epoch(s)."""
     if isinstance(model, Arima):
-        return {"arima_order": list(model.order), "arima_converged": model.converged}
+        return {"arima_order": list(model.order) if model.order is not None else None, "arima_converged": model.converged}
     if hasattr(model, "components"):  # Wavelet-CNN-LSTM: one network per component
         return {"best_epoch": [c.best_epoch for c in model.components]}
     if hasattr(model, "best_epoch"):

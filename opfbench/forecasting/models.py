@@ -1,6 +1,6 @@
 """Model registry and the run settings per dataset (full and `--quick`).
 
-Full-run budgets are chosen to fit in about 30 min per dataset on 2 CPU cores:
+Full-run budgets (how long they take: README, "Command line"):
 - PV (1-min, 43 200 rows): 30-min input window, 20 epochs of 16 384 windows drawn
   from the ~35 000 training windows; ARIMA fitted on the last 5 000 training minutes.
 - Wind (hourly, 8 760 rows): 24-h window, 40 epochs over all ~7 100 training
@@ -37,9 +37,8 @@ class RunSettings:
         mape_threshold: MAPE counts samples whose actual exceeds this share of the rating.
         wavelet, wavelet_level: DWT of the Wavelet-CNN-LSTM.
         threads: torch CPU threads. Results are reproducible for a fixed count. Default 1:
-            measured on the shared 2-core machine, a 3x150 LSTM trained at ~700
-            windows/s with 1 thread but ~60 windows/s with 2 whenever another process
-            was busy (thread oversubscription).
+            with 2 threads training slows down by an order of magnitude whenever another
+            process keeps the other core busy (thread oversubscription).
     """
 
     rows: int | None

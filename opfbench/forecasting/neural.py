@@ -126,7 +126,8 @@ class NeuralForecaster(Forecaster):
             raise InputError(f"{self.name}: no training windows left after the validation hold-out")
         optimizer = torch.optim.Adam(self._model.parameters(), lr=cfg.learning_rate)
         loss_fn = torch.nn.MSELoss()
-        best_state, best_score = None, float("inf")
+        best_state: dict[str, torch.Tensor] | None = None
+        best_score = float("inf")
         self.log = []
         for epoch in range(cfg.epochs):
             self._model.train()
@@ -150,6 +151,8 @@ class NeuralForecaster(Forecaster):
             if score < best_score:
                 best_score, self.best_epoch = score, epoch + 1
                 best_state = {k: v.detach().clone() for k, v in self._model.state_dict().items()}
+        if best_state is None:
+            raise InputError(f"{self.name}: training gave no finite validation loss in {cfg.epochs} epoch(s)")
         self._model.load_state_dict(best_state)
 
 

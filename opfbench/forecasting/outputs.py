@@ -18,6 +18,7 @@ import pandas as pd
 
 from opfbench.data.cleaning import check_time_index
 from opfbench.errors import DataError, InputError
+from opfbench.folders import check_out_dir
 from opfbench.forecasting.experiment import ComparisonResult
 from opfbench.jsonio import write_atomic, write_json
 
@@ -26,22 +27,6 @@ _TIME_FORMAT = "%Y-%m-%dT%H:%M:%S%z"
 
 def forecast_path(directory: str | Path, dataset: str, suffix: str = "csv") -> Path:
     return Path(directory) / f"forecast_{dataset}.{suffix}"
-
-
-def check_out_dir(directory: str | Path) -> Path:
-    """`directory` usable for `write_outputs` (created if missing): raise `InputError`
-    naming it when it is a file or cannot be written — checked before any computation."""
-    out = Path(directory)
-    if out.exists() and not out.is_dir():
-        raise InputError(f"--out {out}: exists and is not a folder")
-    try:
-        out.mkdir(parents=True, exist_ok=True)
-        probe = out / ".opfbench-write-test"
-        probe.write_bytes(b"")
-        probe.unlink()
-    except OSError as exc:
-        raise InputError(f"--out {out}: cannot write there ({exc.strerror})") from None
-    return out
 
 
 def run_metadata(result: ComparisonResult) -> dict[str, object]:
@@ -59,9 +44,8 @@ def run_metadata(result: ComparisonResult) -> dict[str, object]:
 
 
 def write_outputs(result: ComparisonResult, directory: str | Path) -> list[Path]:
-    """Write the CSV, JSON and HTML files of `result` into `directory` (created), each atomically."""
-    from opfbench.forecasting.report import forecast_page  # matplotlib only when a page is drawn
-
+    """Write the forecasts (CSV) and the run's metadata and metrics (JSON) of `result` into
+    `directory` (created), each atomically."""
     out = check_out_dir(directory)
     csv = write_atomic(
         forecast_path(out, result.dataset, "csv"), result.forecasts.to_csv(index_label="timestamp", date_format=_TIME_FORMAT)
@@ -69,20 +53,22 @@ def write_outputs(result: ComparisonResult, directory: str | Path) -> list[Path]
     meta = write_json(
         forecast_path(out, result.dataset, "json"), {"run": run_metadata(result), "metrics": result.metrics_table()}
     )
-    html = write_atomic(forecast_path(out, result.dataset, "html"), forecast_page(result))
-    return [csv, meta, html]
+    return [csv, meta]
 
 
 def load_forecast(directory: str | Path, dataset: str, model: str) -> pd.Series:
     """Test-part one-step forecasts (kW) of `model` written by `write_outputs`.
 
     `model` may also be "actual". The index is tz-aware (UTC). The values must be
-    finite and within [0, rating] of the plant (the rating the run's JSON beside the CSV
-    records, or without that file the rating of the embedded dataset's plant); a timestamp that is not ISO 8601 with an offset, a non-numeric or
-    out-of-range value, a file that is not UTF-8 is a `DataError` naming file, column
-    and line — never clipped, never skipped.
+    finite and within [0, rating] of the embedded dataset's plant — the plant the
+    benchmark scales them by; the run's JSON beside the CSV, when present, must record
+    that rating (a forecast of another plant is refused, not rescaled). A timestamp that
+    is not ISO 8601 with an offset, a non-numeric or out-of-range value, a file that is
+    not UTF-8 is a `DataError` naming file, column and line — never clipped, never skipped.
     """
     path = forecast_path(directory, dataset, "csv")
+    if Path(directory).exists() and not Path(directory).is_dir():
+        raise DataError(f"forecast folder {directory} is not a folder; give the --out folder of `opfbench forecast`")
     if not path.is_file():
         raise DataError(f"no forecast file {path}; run `opfbench forecast --dataset {dataset} --out {directory}`")
     rating = _rating_kw(forecast_path(directory, dataset, "json"), dataset)
@@ -110,16 +96,22 @@ def load_forecast(directory: str | Path, dataset: str, model: str) -> pd.Series:
 
 
 def _rating_kw(meta: Path, dataset: str) -> float:
-    if not meta.exists():
-        from opfbench.forecasting.datasets import forecast_dataset
+    """The rating (kW) of the embedded dataset's plant, after checking that the forecast
+    run's JSON `meta` (when present) records the same."""
+    from opfbench.forecasting.datasets import forecast_dataset
 
-        return forecast_dataset(dataset).rating_kw
+    rating = forecast_dataset(dataset).rating_kw
+    if not meta.exists():
+        return rating
     try:
-        rating = float(json.loads(meta.read_text(encoding="utf-8"))["run"]["rating_kw"])
-    except (OSError, ValueError, KeyError, TypeError) as exc:
-        raise DataError(f"{meta}: no readable run.rating_kw ({exc})") from None
-    if not (np.isfinite(rating) and rating > 0):
-        raise DataError(f"{meta}: run.rating_kw must be a positive number, got {rating}")
+        recorded = json.loads(meta.read_text(encoding="utf-8"))["run"]["rating_kw"]
+    except (OSError, UnicodeDecodeError, ValueError, KeyError, TypeError) as exc:
+        raise DataError(f"{meta}: no readable run.rating_kw ({type(exc).__name__}: {exc})") from None
+    if isinstance(recorded, bool) or not isinstance(recorded, (int, float)) or float(recorded) != rating:
+        raise DataError(
+            f"{meta}: run.rating_kw is {recorded!r}, but the {dataset} plant the benchmark uses is rated {rating:g} kW; "
+            f"these forecasts are of another plant — rerun `opfbench forecast --dataset {dataset} --out {meta.parent}`"
+        )
     return rating
 
 

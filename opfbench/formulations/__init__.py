@@ -1,15 +1,20 @@
-"""Centralized formulations of the DER reactive-power dispatch (paper §III; README "What is inside").
+"""Centralized formulations of the DER reactive-power dispatch (paper §III), split the way
+PowerModels keeps formulations, problems and solvers apart. Data flows down this list:
 
-- `problem`: the OPF problem written once — limits, slack rule, power-balance rows,
-  AC feasibility of a point, per-snapshot inputs, status vocabulary, π-model branches.
-  A new formulation supplies only its network model and objective (one file).
-- `acopf`: the exact AC OPF in polar form (CasADi + IPOPT) with a certified fast path
-  (SOCP setpoints that one batched AC power flow proves optimal skip IPOPT) and a
-  recorded failure policy.
-- `socp`: its second-order-cone relaxation (cvxpy + Clarabel) — DistFlow on radial
-  feeders, Jabr's bus-injection SOC on meshed ones — whose optimum is a lower bound on
-  the achievable losses; solved once per (scenario, k) for every caller.
-- `conic`: re-solving a compiled cvxpy problem with Clarabel for new data.
-- `cache`: per-thread solver objects, per-scenario shared solves.
-- `dominance`: the check that the AC OPF is never beaten by a feasible strategy.
+- `options`: the option vocabularies (AC OPF solver path, failure policy), light to import.
+- `problem`: the OPF problem written once — limits, slack rule, power-balance rows, AC
+  feasibility of a point, per-snapshot inputs, π-model branches.
+- `models/`: the network models of that problem, one module each — `distflow` (DistFlow
+  SOC, radial), `jabr` (bus-injection SOC, any feeder) on `soc` (what the relaxations
+  share), `polar_ac` (the exact AC OPF, an NLP). A new model is one file.
+- `solvers/`: the solver adapters — `clarabel_adapter` (settings, a compiled conic program
+  re-solved per snapshot with bound screening), `ipopt_adapter` (options, cold and warm
+  instances).
+- `cache`: per-thread solver objects and the solve cache keyed on the data.
+- `relaxation`: the relaxation of a network (model chosen by topology) and its solves on
+  every snapshot, shared by data.
+- `policy`: the certified fast path and the failure policies (chain, paper) that settle
+  each snapshot of the AC OPF.
+- `results`: answers → the one result record (`StrategyResult`), AC-evaluated.
+- `acopf`, `socp`: the strategies the registry runs (`run_acopf`, `run_socp`).
 """

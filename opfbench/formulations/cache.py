@@ -1,32 +1,35 @@
-"""Caches of the formulations, none of which hands one mutable object to two callers at once.
+"""The formulations' two caches, neither of which hands one mutable object to two callers
+at once, and neither of which depends on which Scenario object a caller holds.
 
 - `per_thread(net, key, build)`: a solver object (an IPOPT or Clarabel instance, which
   keeps per-solve state) built once per (network, key) *per thread*, so concurrent
   tasks never share one; sequential callers in one thread reuse it (building is the
   expensive part: CasADi derivatives, cvxpy canonicalization). The PER_THREAD most
   recently used objects are kept (they hold their network).
-- `per_scenario(scenario, key, compute)`: results computed once per (Scenario object,
-  key) — the SOCP solves that `acopf` (its bound, fast path and fallback) and `socp`
-  both need for the same scenario and k. Keyed weakly: an entry goes with its scenario
-  (results are immutable records that do not refer to it).
+- `SolveCache`: solves keyed on the data they solved — the network (an immutable object,
+  by identity), the options, and the snapshot's data vector θ — shared by every caller in
+  the process and thread-safe; the values are immutable records. Keys hold θ's bytes
+  themselves up to EXACT_KEY_BYTES (exact: equal keys are equal data) and a 128-bit BLAKE2
+  digest of them above (large feeders, where θ is long). The least recently used entries
+  beyond the byte limit (keys and values, estimated) are dropped.
 """
 
 from __future__ import annotations
 
+import hashlib
 import threading
-import weakref
 from collections import OrderedDict
-from typing import Callable, Hashable, TypeVar
+from typing import Callable, Generic, Hashable, Sequence, TypeVar
+
+import numpy as np
 
 from opfbench.network import Network
-from opfbench.scenario import Scenario
 
 T = TypeVar("T")
 PER_THREAD = 16  # solver objects kept per thread (least recently used dropped first)
+EXACT_KEY_BYTES = 4096  # θ up to this size is its own key (512 float64: feeders up to ~250 buses)
 
 _local = threading.local()
-_scenario_lock = threading.Lock()
-_per_scenario: "weakref.WeakKeyDictionary[Scenario, dict]" = weakref.WeakKeyDictionary()
 
 
 def per_thread(net: Network, key: Hashable, build: Callable[[], T]) -> T:
@@ -44,12 +47,54 @@ def per_thread(net: Network, key: Hashable, build: Callable[[], T]) -> T:
     return value
 
 
-def per_scenario(scenario: Scenario, key: Hashable, compute: Callable[[], T]) -> T:
-    """`compute()` once per (scenario object, key); later calls, from any thread, return it."""
-    with _scenario_lock:
-        entries = _per_scenario.setdefault(scenario, {})
-        if key in entries:
-            return entries[key]
-    value = compute()
-    with _scenario_lock:
-        return _per_scenario.setdefault(scenario, {}).setdefault(key, value)
+Key = tuple[Network, Hashable, bytes]
+
+
+class SolveCache(Generic[T]):
+    """Solves by their data (see the module docstring), at most `limit_bytes` as counted by
+    `KEY_BYTES` + len(θ key) + `size(value)` per entry."""
+
+    KEY_BYTES = 200  # an entry's key tuple and dict slot, without θ's bytes (estimate)
+
+    def __init__(self, limit_bytes: int, size: Callable[[T], int]):
+        self.limit, self.used = limit_bytes, 0
+        self._size = size
+        self._entries: OrderedDict[Key, T] = OrderedDict()
+        self._lock = threading.Lock()
+
+    @staticmethod
+    def keys(net: Network, options: Hashable, thetas: np.ndarray) -> list[Key]:
+        """One key per row of `thetas` (S, n_θ) float64."""
+        thetas = np.ascontiguousarray(thetas, dtype=np.float64)
+        if thetas.shape[-1] * 8 <= EXACT_KEY_BYTES:
+            return [(net, options, row.tobytes()) for row in thetas]
+        return [(net, options, hashlib.blake2b(row, digest_size=16).digest()) for row in thetas]
+
+    def _entry_bytes(self, key: Key, value: T) -> int:
+        return self.KEY_BYTES + len(key[2]) + self._size(value)
+
+    def get_many(self, keys: Sequence[Key]) -> list[T | None]:
+        """The cached value of each key (None where absent); hits become the most recent."""
+        with self._lock:
+            out = [self._entries.get(key) for key in keys]
+            for key, value in zip(keys, out, strict=True):
+                if value is not None:
+                    self._entries.move_to_end(key)
+            return out
+
+    def put_many(self, items: Sequence[tuple[Key, T]]) -> None:
+        """Store values (a key already present keeps its value), then drop the least
+        recently used entries beyond the limit (never the last one)."""
+        with self._lock:
+            for key, value in items:
+                if key not in self._entries:
+                    self._entries[key] = value
+                    self.used += self._entry_bytes(key, value)
+            while self.used > self.limit and len(self._entries) > 1:
+                key, value = self._entries.popitem(last=False)
+                self.used -= self._entry_bytes(key, value)
+
+    def clear(self) -> None:
+        with self._lock:
+            self._entries.clear()
+            self.used = 0

@@ -24,37 +24,23 @@ external grid injects, hence the slack rule), `OpfProblem.feasible` checks an AC
 power-flow solution against the same limits. A formulation supplies only its network
 model (how branch flows depend on its variables) and its objective expression.
 
-Also here: the per-snapshot inputs (`snapshot_data`), the status vocabulary, π-model
-branch coefficients, and the result assembly shared by the formulations.
+Also here: the per-snapshot inputs (`snapshot_data`) and the π-model branch coefficients.
+The status vocabulary is `opfbench.result`'s; the result assembly `formulations.results`.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any, Callable, Iterable
+from typing import Any, Callable
 
 import numpy as np
 import scipy.sparse as sp
 
-from opfbench.errors import InputError, NetworkError
+from opfbench.capability import check_reserve
+from opfbench.errors import NetworkError
 from opfbench.network import Network
-from opfbench.powerflow import PowerFlowResult, solve_pf_batch
-from opfbench.result import INFEASIBLE, OK, StrategyResult
+from opfbench.powerflow import PowerFlowResult
 from opfbench.scenario import Scenario
-from opfbench.strategies.limits import reserve
-
-# ----- status vocabulary (StrategyResult.status) -------------------------------------
-FALLBACK_COLD = "fallback-cold"  # warm IPOPT failed, cold IPOPT from a flat start solved it
-FALLBACK_SOCP = "fallback-socp"  # IPOPT failed; the SOCP's setpoints, AC-evaluated, are feasible
-FALLBACK_NO_ACTION = "fallback-no-action"  # nothing better found; Q = 0 is AC-feasible
-SOLVER_FAILED = "solver-failed"  # solver failed, no feasible fallback, infeasibility not shown
-STATUSES = (OK, FALLBACK_COLD, FALLBACK_SOCP, FALLBACK_NO_ACTION, INFEASIBLE, SOLVER_FAILED)
-
-# ----- which point a snapshot's setpoints come from (extra["fallback"]) ------------------
-FROM_SOLVER = "none"  # the formulation's own solution
-FROM_COLD = "cold"
-FROM_SOCP = "socp"
-FROM_NO_ACTION = "no-action"
 
 VOLTAGE_TOLERANCE = 1e-6  # p.u.: a point is within limits up to this
 SLACK_P_TOLERANCE = 1e-6  # MW: slack "does not export" up to this
@@ -241,19 +227,13 @@ class SnapshotData:
 def snapshot_data(scenario: Scenario, k: float) -> SnapshotData:
     """Per-unit inputs of `scenario` with reserve coefficient k (InputError unless one
     number in [0, 1])."""
-    k = reserve(k)
+    k = check_reserve(k)
     net = scenario.net
     check_supported(net)
     zero_q = np.zeros_like(scenario.der_p_mw)
     s_fixed = scenario.injections(zero_q) / net.base_mva
     q_limit = (1.0 - k) * scenario.qmax_mvar() / net.base_mva  # "Q at night" where the scenario says
     return SnapshotData(s_fixed, q_limit)
-
-
-def check_option(name: str, value: object, allowed: tuple) -> None:
-    """InputError naming the option unless `value` is one of `allowed`."""
-    if value not in allowed:
-        raise InputError(f"unknown {name} {value!r}; choose {', '.join(map(str, allowed))}")
 
 
 def bus_shunts(net: Network) -> tuple[np.ndarray, np.ndarray]:
@@ -280,59 +260,4 @@ def slack_p_mw(net: Network, pf: PowerFlowResult) -> np.ndarray:
     vm2 = np.abs(pf.v[..., net.slack]) ** 2
     return (
         pf.sf_mva.real[..., at_slack_f].sum(axis=-1) + pf.st_mva.real[..., at_slack_t].sum(axis=-1) + net.gs_mw[net.slack] * vm2
-    )
-
-
-def diagnostics(rows: Iterable[dict]) -> dict[str, np.ndarray]:
-    """Per-snapshot diagnostic dicts (same keys) → one array per key for `StrategyResult.extra`
-    (bool, int64, object for strings, float otherwise)."""
-    rows = list(rows)
-    out: dict[str, np.ndarray] = {}
-    for key in rows[0] if rows else ():
-        values = [r[key] for r in rows]
-        if all(isinstance(v, (bool, np.bool_)) for v in values):
-            out[key] = np.array(values, dtype=bool)
-        elif all(isinstance(v, (int, np.integer)) for v in values):
-            out[key] = np.array(values, dtype=np.int64)
-        elif all(isinstance(v, str) for v in values):
-            out[key] = np.array(values, dtype=object)
-        else:
-            out[key] = np.array(values, dtype=float)
-    return out
-
-
-def evaluated_result(
-    strategy: str,
-    k: float,
-    scenario: Scenario,
-    problem: OpfProblem,
-    data: SnapshotData,
-    q_pu: np.ndarray,
-    wall_ms: float,
-    status: np.ndarray,
-    lower_bound_kw: np.ndarray,
-    extra: dict[str, np.ndarray],
-    power_flows: np.ndarray | int = 0,
-    pf: PowerFlowResult | None = None,
-) -> StrategyResult:
-    """A formulation's result: setpoints `q_pu` (S, n_der) evaluated by the batched AC power
-    flow (or `pf`, that evaluation already done), with extra["ac_feasible"] (the point
-    meets every limit, `OpfProblem.feasible`) and the scalar extra["slack_export"]."""
-    net = scenario.net
-    q_mvar = np.asarray(q_pu, dtype=float).reshape(scenario.n_snapshots, len(net.ders)) * net.base_mva
-    if pf is None:
-        pf = solve_pf_batch(net, scenario.injections(q_mvar))
-    extra = extra | {"ac_feasible": problem.feasible(pf, data.s_fixed), "slack_export": problem.slack_export}
-    flows = np.asarray(power_flows, dtype=np.int64) + 1
-    return StrategyResult.from_setpoints(
-        strategy,
-        k,
-        scenario,
-        q_mvar,
-        wall_ms,
-        power_flows=flows,
-        pf=pf,
-        status=status,
-        lower_bound_kw=lower_bound_kw,
-        extra=extra,
     )

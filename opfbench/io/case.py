@@ -11,7 +11,6 @@ import pandas as pd
 
 from opfbench.errors import InputError
 from opfbench.network import Network
-from opfbench.scenario import Scenario
 
 
 @dataclass(frozen=True, eq=False)
@@ -92,17 +91,3 @@ class Case:
     @property
     def name(self) -> str:
         return self.network.name
-
-    def stored_scenario(self) -> Scenario:
-        """The stored operating point as a one-snapshot scenario (per-load P and Q, DER P)."""
-        if self.stored is None:
-            raise InputError(f"{self.spec}: the case stores no per-element operating point")
-        p, q, der_p, _ = self.stored
-        return Scenario.from_series(self.network, p[None, :], q[None, :], der_p[None, :])
-
-    def scenario_at(self, times: pd.DatetimeIndex) -> Scenario:
-        """The case's own series at `times` (tz-aware) as a scenario."""
-        if self.series is None:
-            raise InputError(f"{self.spec}: the case has no time series of its own")
-        p, q, der_p = self.series.rows(times)
-        return Scenario.from_series(self.network, p, q, der_p)

@@ -7,10 +7,16 @@ branch r/x, kW → MW for loads, kVA → MW/MVAr at a fixed power factor). Any o
 line is an error: a case file is data, and we do not guess what unknown code means.
 
 Refused with a `CaseFormatError` naming the file (and matrix, row, column or line): a file
-that is not UTF-8 text; a non-numeric or non-finite entry; a non-finite or non-positive
-baseMVA; a fractional bus number or bus type; a negative branch resistance (it would make
-negative losses and a meaningless loss bound); VMIN > VMAX at a bus; a power factor
-outside (0, 1]; the ohm → p.u. conversion with a zero or negative BASE_KV at bus row 1.
+that is not UTF-8 text (a leading byte-order mark is dropped); a matrix defined twice; an
+entry that is not a MATLAB number (Python's 1_0 or ١٠ are not) or not finite; a
+non-finite or non-positive baseMVA; an ohm → p.u. conversion that over- or underflows;
+a status other than 0 or 1; in-service generators at one bus holding different VG; a fractional bus number or bus type; a negative branch resistance (it would make
+negative losses and a meaningless loss bound); VMIN > VMAX at a bus; a bus number
+outside 1..2^53 − 1 or listed twice; a bus of type 4 (isolated); an in-service generator
+with QMAX < QMIN or PMAX < PMIN; a power factor outside (0, 1]; the ohm → p.u.
+conversion with a zero or negative BASE_KV at bus row 1. What the network itself
+checks (bus types, voltage limits and setpoints, zero impedance, islands) comes back
+as a `CaseFormatError` naming the file.
 
 DER from generators (`der=gens` in a case spec, `--der gens` on the command line): every
 in-service generator other than the slack's becomes a DER of the generic "inverter" kind
@@ -32,7 +38,9 @@ from opfbench.errors import CaseFormatError, NetworkError
 from opfbench.network import DER, Network
 
 BUS_COLS, GEN_COLS, BRANCH_COLS = 13, 10, 11  # minimum columns MATPOWER v2 requires
+MAX_BUS_NUMBER = 2**53 - 1  # the largest whole number a file's floating-point entry holds exactly
 _MATRICES = ("bus", "gen", "branch", "gencost")
+_NUMBER = re.compile(r"^[+-]?(?:(?:\d+\.?\d*|\.\d+)(?:[eE][+-]?\d+)?|Inf|inf|NaN|nan)$", re.ASCII)
 
 
 @dataclass
@@ -96,11 +104,13 @@ def read_matpower(path: str | Path) -> MatpowerCase:
         raise CaseFormatError(f"{path}: not a text MATPOWER file (byte {exc.start} is not UTF-8)") from None
     if "\x00" in text:
         raise CaseFormatError(f"{path}: not a text MATPOWER file (contains NUL bytes)")
+    text = text.removeprefix("\ufeff")  # a byte-order mark, as some editors write
     name = str(path)
     lines = [(i + 1, _strip_comment(raw)) for i, raw in enumerate(text.splitlines())]
     lines = [(i, s) for i, s in lines if s]
 
     matrices: dict[str, np.ndarray] = {}
+    opened: dict[str, int] = {}  # matrix -> line it is defined at
     base_mva: float | None = None
     trailing: list[tuple[int, str]] = []
     i = 0
@@ -111,6 +121,9 @@ def read_matpower(path: str | Path) -> MatpowerCase:
             key = m_start.group(1)
             if key not in _MATRICES:
                 raise CaseFormatError(f"{name}, line {lineno}: unsupported matrix mpc.{key}")
+            if key in opened:
+                raise CaseFormatError(f"{name}, line {lineno}: mpc.{key} is defined a second time (first at line {opened[key]})")
+            opened[key] = lineno
             body: list[tuple[int, str]] = []
             rest = m_start.group(2)
             i += 1
@@ -175,12 +188,11 @@ def _parse_matrix(name: str, key: str, body: list[tuple[int, str]]) -> np.ndarra
                 continue
             values = []
             for col, tok in enumerate(tokens, start=1):
-                try:
-                    values.append(float(tok))
-                except ValueError:
+                if not _NUMBER.match(tok):  # MATLAB's number syntax (Python's float() also reads 1_0 and ١٠)
                     raise CaseFormatError(
                         f"{name}: mpc.{key} row {len(rows) + 1} (line {lineno}), column {col}: non-numeric entry {tok!r}"
-                    ) from None
+                    )
+                values.append(float(tok))
             rows.append(values)
             row_lines.append(lineno)
     if not rows:
@@ -221,13 +233,22 @@ def _apply_conversions(case: MatpowerCase, statements: list[tuple[int, str]]) ->
                     f"{case.path}, line {lineno}: Vbase from mpc.bus row 1 BASE_KV = {case.bus[0, 9]:g} kV; "
                     "the ohm → p.u. conversion needs a positive base voltage"
                 )
-            env["Vbase"] = case.bus[0, 9] * 1e3
+            env["Vbase"] = float(case.bus[0, 9]) * 1e3  # a Python float: 1e308 kV overflows to inf quietly, refused below
         elif s == _SBASE:
             env["Sbase"] = case.base_mva * 1e6
         elif s == _OHM_TO_PU:
             if "Vbase" not in env or "Sbase" not in env:
                 raise CaseFormatError(f"{case.path}, line {lineno}: ohm→p.u. conversion before Vbase/Sbase are defined")
-            case.branch[:, 2:4] /= env["Vbase"] ** 2 / env["Sbase"]
+            ohms = case.branch[:, 2:4].copy()
+            with np.errstate(all="ignore"):
+                z_base = np.float64(env["Vbase"]) ** 2 / env["Sbase"]  # numpy: overflow gives inf, refused below
+                case.branch[:, 2:4] /= z_base
+            lost = ~np.isfinite(case.branch[:, 2:4]) | ((case.branch[:, 2:4] == 0) & (ohms != 0))
+            if not (np.isfinite(z_base) and z_base > 0) or lost.any():
+                raise CaseFormatError(
+                    f"{case.path}, line {lineno}: the ohm → p.u. conversion over- or underflows (base impedance "
+                    f"{z_base:g} ohm from BASE_KV {case.bus[0, 9]:g} kV and baseMVA {case.base_mva:g}): check those two"
+                )
         elif s == _KW_TO_MW:
             case.bus[:, 2:4] /= 1e3
         elif m := _PF_SET.match(s):
@@ -277,11 +298,20 @@ def _network(case: MatpowerCase, name: str | None = None, der_pf: float | None =
         raise CaseFormatError(
             f"{case.path}: mpc.bus row {i + 1} (bus {bus[i, 0]:.0f}): VMIN {bus[i, 12]:g} > VMAX {bus[i, 11]:g} p.u."
         )
-    ids = bus[:, 0].astype(int)
-    if len(set(ids)) != len(ids):
-        dup = ids[np.flatnonzero(np.bincount(np.unique(ids, return_inverse=True)[1]) > 1)[0]]
-        raise CaseFormatError(f"{case.path}: mpc.bus lists bus {dup} more than once")
-    pos = {b: k for k, b in enumerate(ids)}
+    bad_id = np.flatnonzero((bus[:, 0] < 1) | (bus[:, 0] > MAX_BUS_NUMBER))
+    if bad_id.size:
+        raise CaseFormatError(
+            f"{case.path}: mpc.bus row {bad_id[0] + 1}, column 1 (BUS_I): bus number {bus[bad_id[0], 0]:g} outside "
+            f"1..{MAX_BUS_NUMBER} (a positive whole number, exact in the file's floating-point numbers)"
+        )
+    ids = bus[:, 0].astype(np.int64)
+    unique, first = np.unique(ids, return_index=True)
+    if unique.size != ids.size:
+        row = np.setdiff1d(np.arange(ids.size), first)[0]
+        raise CaseFormatError(
+            f"{case.path}: mpc.bus row {row + 1} lists bus {ids[row]} again (first at row {np.flatnonzero(ids == ids[row])[0] + 1})"
+        )
+    pos = {int(b): k for k, b in enumerate(ids)}
 
     def lookup(matrix: str, row: int, col_name: str, bus_id: float) -> int:
         if int(bus_id) not in pos:
@@ -292,15 +322,28 @@ def _network(case: MatpowerCase, name: str | None = None, der_pf: float | None =
     t = np.array([lookup("branch", k, "to bus", v) for k, v in enumerate(branch[:, 1])], dtype=int)
     gbus = np.array([lookup("gen", k, "bus", v) for k, v in enumerate(gen[:, 0])], dtype=int)
 
-    btype = bus[:, 1].astype(int)
-    bad_type = np.flatnonzero(~np.isin(btype, (1, 2, 3, 4)))
+    bad_type = np.flatnonzero(~np.isin(bus[:, 1], (1, 2, 3, 4)))
     if bad_type.size:
-        raise CaseFormatError(f"{case.path}: mpc.bus row {bad_type[0] + 1}: unknown bus type {btype[bad_type[0]]}")
+        raise CaseFormatError(
+            f"{case.path}: mpc.bus row {bad_type[0] + 1}: unknown bus type {bus[bad_type[0], 1]:g} "
+            "(1 PQ, 2 PV, 3 reference, 4 isolated)"
+        )
+    btype = bus[:, 1].astype(int)
     slacks = np.flatnonzero(btype == 3)
     if slacks.size != 1:
         raise CaseFormatError(f"{case.path}: mpc.bus needs exactly one reference bus (type 3), found {slacks.size}")
     slack = int(slacks[0])
+    for matrix, arr, col, col_name in (("branch", branch, 10, "BR_STATUS"), ("gen", gen, 7, "GEN_STATUS")):
+        bad = np.flatnonzero(~np.isin(arr[:, col], (0, 1)))
+        if bad.size:
+            raise CaseFormatError(
+                f"{case.path}: mpc.{matrix} row {bad[0] + 1}, column {col + 1} ({col_name}): {arr[bad[0], col]:g}; "
+                "a status is 1 (in service) or 0 (out of service)"
+            )
+    _check_isolated(case, btype, f, t, branch[:, 10] > 0)
     gen_on = gen[:, 7] > 0
+    _check_gen_limits(case, gen, gen_on)
+    _check_gen_voltages(case, gen, gen_on, gbus)
     slack_gens = np.flatnonzero(gen_on & (gbus == slack))
     if slack_gens.size == 0:
         raise CaseFormatError(f"{case.path}: no in-service generator at the reference bus {ids[slack]}")
@@ -313,9 +356,6 @@ def _network(case: MatpowerCase, name: str | None = None, der_pf: float | None =
     btype[(btype == 2) & ~np.isin(np.arange(len(ids)), gbus[others])] = 1
     r, x = branch[:, 2], branch[:, 3]
     status = branch[:, 10] > 0
-    zero_z = np.flatnonzero(status & (r == 0) & (x == 0))
-    if zero_z.size:
-        raise CaseFormatError(f"{case.path}: mpc.branch row {zero_z[0] + 1}: zero impedance (r = x = 0)")
     tap = np.where(branch[:, 8] == 0, 1.0, branch[:, 8])
     try:
         net = Network(
@@ -351,6 +391,56 @@ def _network(case: MatpowerCase, name: str | None = None, der_pf: float | None =
     return net, der_p
 
 
+def _check_isolated(case: MatpowerCase, btype: np.ndarray, f: np.ndarray, t: np.ndarray, on: np.ndarray) -> None:
+    """MATPOWER's bus type 4 (isolated) is refused: wired in by an in-service branch it
+    contradicts itself; left alone it would be an island (MATPOWER drops such buses —
+    we do not guess which the file meant)."""
+    isolated = np.flatnonzero(btype == 4)
+    if not isolated.size:
+        return
+    i = isolated[0]
+    rows = np.flatnonzero(on & ((f == i) | (t == i))) + 1
+    bus_id = f"{case.bus[i, 0]:.0f}"
+    if rows.size:
+        raise CaseFormatError(
+            f"{case.path}: mpc.bus row {i + 1}: bus {bus_id} has type 4 (isolated) but in-service mpc.branch row(s) "
+            f"{', '.join(map(str, rows[:10]))} connect it; give it type 1 (PQ) or take those branches out of service"
+        )
+    raise CaseFormatError(
+        f"{case.path}: mpc.bus row {i + 1}: bus {bus_id} has type 4 (isolated); remove the bus (and its out-of-service "
+        "branches and generators) from the case: a study network has no isolated buses"
+    )
+
+
+def _check_gen_limits(case: MatpowerCase, gen: np.ndarray, on: np.ndarray) -> None:
+    """In-service generators need QMAX ≥ QMIN and PMAX ≥ PMIN."""
+    for hi, lo, label in ((3, 4, "Q"), (8, 9, "P")):
+        crossed = np.flatnonzero(on & (gen[:, hi] < gen[:, lo]))
+        if crossed.size:
+            g = crossed[0]
+            raise CaseFormatError(
+                f"{case.path}: mpc.gen row {g + 1} (bus {gen[g, 0]:.0f}): {label}MAX {gen[g, hi]:g} < {label}MIN {gen[g, lo]:g}"
+            )
+
+
+def _check_gen_voltages(case: MatpowerCase, gen: np.ndarray, on: np.ndarray, gbus: np.ndarray) -> None:
+    """In-service generators at the same bus hold one voltage (VG): two different ones
+    leave it to the reading program which wins (MATPOWER: the last)."""
+    first: dict[int, int] = {}
+    for g in np.flatnonzero(on):
+        k = first.setdefault(int(gbus[g]), int(g))
+        if gen[g, 5] != gen[k, 5]:
+            raise CaseFormatError(
+                f"{case.path}: mpc.gen rows {k + 1} and {g + 1} (bus {gen[g, 0]:.0f}) hold different voltages VG "
+                f"{gen[k, 5]:g} and {gen[g, 5]:g} p.u.; give them one"
+            )
+
+
+def load_case_file(path: str | Path, name: str | None = None) -> Network:
+    """Read a MATPOWER `.m` file straight into a `Network`."""
+    return to_network(read_matpower(path), name)
+
+
 def _gens_as_ders(case: MatpowerCase, gbus: np.ndarray, rows: np.ndarray, der_pf: float) -> tuple[tuple[DER, ...], np.ndarray]:
     """The generators `rows` as inverter DER (see the module docstring) and their PG."""
     if not 0 < der_pf <= 1:
@@ -366,11 +456,6 @@ def _gens_as_ders(case: MatpowerCase, gbus: np.ndarray, rows: np.ndarray, der_pf
         ders.append(DER(int(gbus[k]), "inverter", rating, rating / der_pf, "solar"))
         stored.append(min(max(pg, 0.0), rating))
     return tuple(ders), np.array(stored, dtype=float)
-
-
-def load_case_file(path: str | Path, name: str | None = None) -> Network:
-    """Read a MATPOWER `.m` file straight into a `Network`."""
-    return to_network(read_matpower(path), name)
 
 
 def read_case_file(path: str | Path, name: str | None = None, der_pf: float | None = None) -> tuple[Network, np.ndarray]:

@@ -36,12 +36,13 @@ from functools import lru_cache
 import numpy as np
 import pandas as pd
 
-from opfbench.data.simbench import simbench_time_index
 from opfbench.errors import DataError, InputError
 from opfbench.io.case import Case, CaseSeries
 from opfbench.io.pandapower import DEFAULT_DER_PF, from_pandapower
 
 PREFIX = "simbench:"
+SIMBENCH_TZ = "Europe/Berlin"
+SIMBENCH_STEP = pd.Timedelta("15min")
 ACCEPTED_LEVELS = ("LV", "MV", "MVLV")
 #: The field suite: every SimBench LV and MV grid of scenario 0, switch variant "sw".
 SUITE = (
@@ -56,6 +57,27 @@ SUITE = (
     "1-LV-semiurb5--0-sw",
     "1-LV-urban6--0-sw",
 )
+
+
+def simbench_time_index(time: pd.Series, name: str) -> pd.DatetimeIndex:
+    """SimBench's ``time`` column (``dd.mm.yyyy HH:MM``, German local clock with daylight
+    saving) as a strictly increasing tz-aware (Europe/Berlin) 15-min index: the skipped
+    hour is absent in the data, the repeated one is resolved by order; DataError naming
+    `name` otherwise."""
+    try:
+        local = pd.DatetimeIndex(pd.to_datetime(time, format="%d.%m.%Y %H:%M"))
+        index = local.tz_localize(SIMBENCH_TZ, ambiguous="infer", nonexistent="raise")
+    except (ValueError, TypeError) as exc:  # pytz/zoneinfo errors subclass ValueError
+        raise DataError(f"{name}: column 'time' cannot be read as Europe/Berlin local time ({exc})") from exc
+    if len(index) < 2:
+        raise DataError(f"{name}: column 'time' holds {len(index)} step(s)")
+    steps = np.diff(index.as_unit("ns").asi8)
+    bad = np.flatnonzero(steps != SIMBENCH_STEP.value)
+    if bad.size:
+        raise DataError(
+            f"{name}: column 'time' is not strictly increasing by {SIMBENCH_STEP} at row {bad[0] + 1} ({index[bad[0] + 1]})"
+        )
+    return index
 
 
 @lru_cache(maxsize=1)

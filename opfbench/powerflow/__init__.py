@@ -90,23 +90,24 @@ def solve_pf(
     v[net.slack] = net.v_slack * np.exp(1j * np.angle(v[net.slack]))
     s_sub = s[system.pvpq]
     n = len(system.pvpq)
-    f = system.mismatch(v, s_sub)
-    converged = bool(np.max(np.abs(f), initial=0.0) < tol)
     it = 0
-    while not converged and it < max_iter:
-        it += 1
-        dx = system.step(v, f)
-        if dx is None:
-            break
-        va, vm = np.angle(v), np.abs(v)
-        va[system.pvpq] += dx[:n]
-        vm[system.pq] += dx[n:]
-        v = vm * np.exp(1j * va)
+    with np.errstate(all="ignore"):  # a diverging iterate overflows; it is caught as non-finite below
         f = system.mismatch(v, s_sub)
-        if not np.all(np.isfinite(f)):
-            break
-        converged = bool(np.max(np.abs(f)) < tol)
-    return PowerFlowResult(net, v, np.bool_(converged), np.int64(it))
+        converged = bool(np.max(np.abs(f), initial=0.0) < tol)
+        while not converged and it < max_iter:
+            it += 1
+            dx = system.step(v, f)
+            if dx is None:
+                break
+            va, vm = np.angle(v), np.abs(v)
+            va[system.pvpq] += dx[:n]
+            vm[system.pq] += dx[n:]
+            v = vm * np.exp(1j * va)
+            f = system.mismatch(v, s_sub)
+            if not np.all(np.isfinite(f)):
+                break
+            converged = bool(np.max(np.abs(f)) < tol)
+    return PowerFlowResult(net, v, np.asarray(converged), np.asarray(it, dtype=np.int64))
 
 
 @dataclass(frozen=True, eq=False)

@@ -22,10 +22,9 @@ MISMATCH_CHECK = 1e-8  # p.u.; a batched snapshot whose mismatch exceeds this go
 MAX_NR_ITER = 30
 MAX_SWEEP_ITER = 200
 # Feeders with at least this many buses use the sparse solvers (scipy.sparse, SuperLU);
-# smaller ones the dense ones. Measured (2-core machine, 96 snapshots): on paper33 the
-# dense kernels are ~2× faster (single NR 0.5 vs 1.0 ms, batch 1–2 vs 1.3–2.4 ms); on
-# case141 the sparse ones win (NR ~2 vs ≥ 40 ms, batch 13 vs 18 ms); in between they are
-# within noise. The dense Z-bus also costs 16·n² bytes (1.6 GB at 10 000 buses).
+# smaller ones the dense ones: on paper33 the dense kernels are the faster, on case141 the
+# sparse ones, in between they are close (`python -m opfbench.bench pf` times both). The
+# dense Z-bus also costs 16·n² bytes (1.6 GB at 10 000 buses).
 SPARSE_MIN_BUSES = 100
 
 
@@ -36,28 +35,26 @@ def uses_sparse(net: Network) -> bool:
 
 @dataclass(frozen=True, eq=False)
 class PowerFlowResult:
-    """Solution of one snapshot (arrays shaped (n_bus,)) or of a batch ((S, n_bus))."""
+    """Solution of one snapshot (arrays shaped (n_bus,), converged and iterations numpy
+    scalars) or of a batch ((S, n_bus), (S,))."""
 
     net: Network
     v: np.ndarray
-    converged: np.ndarray
-    iterations: np.ndarray
+    converged: np.ndarray  # bool, (S,) or 0-d for one snapshot
+    iterations: np.ndarray  # int64, likewise
 
     @property
     def vm(self) -> np.ndarray:
         return np.abs(self.v)
-
-    @property
-    def va_deg(self) -> np.ndarray:
-        return np.rad2deg(np.angle(self.v))
 
     @cached_property
     def _flows(self) -> tuple[np.ndarray, np.ndarray]:
         yff, yft, ytf, ytt = self.net.branch_admittances
         vf, vt = self.v[..., self.net.f], self.v[..., self.net.t]
         base = self.net.base_mva
-        sf = vf * np.conj(yff * vf + yft * vt) * base
-        st = vt * np.conj(ytf * vf + ytt * vt) * base
+        with np.errstate(all="ignore"):  # a diverged snapshot's iterate may overflow; it carries no figure
+            sf = vf * np.conj(yff * vf + yft * vt) * base
+            st = vt * np.conj(ytf * vf + ytt * vt) * base
         return sf, st
 
     @property
@@ -74,7 +71,8 @@ class PowerFlowResult:
     def losses_kw(self) -> np.ndarray:
         """Total series + charging active losses over all branches (kW)."""
         sf, st = self._flows
-        return (sf + st).real.sum(axis=-1) * 1e3
+        with np.errstate(all="ignore"):
+            return (sf + st).real.sum(axis=-1) * 1e3
 
     @property
     def slack_s_mva(self) -> np.ndarray:
@@ -127,7 +125,7 @@ def bus_injections(
         base = fixed - bus_load
     lead = np.broadcast_shapes(base.shape[:-1], der_s.shape[:-1])
     out = np.broadcast_to(base, lead + (net.n_bus,)).copy()
-    np.add.at(out, (..., net.der_bus), np.broadcast_to(der_s, lead + der_s.shape[-1:]))
+    np.add.at(out.T, net.der_bus, np.broadcast_to(der_s, lead + der_s.shape[-1:]).T)  # bus axis first
     return out
 
 

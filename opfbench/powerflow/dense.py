@@ -4,6 +4,8 @@ explicit inverse of the reduced admittance matrix (one mat-mul per fixed-point s
 
 from __future__ import annotations
 
+from typing import Literal
+
 import numpy as np
 
 from opfbench.network import Network
@@ -58,7 +60,7 @@ class DenseZbus:
         self.z = np.linalg.inv(y[np.ix_(keep, keep)])
         self.y_keep_t = np.ascontiguousarray(y[keep].T)  # for the mismatch check
 
-    order = "C"  # row-major: the mat-mul writes into `out` directly
+    order: Literal["C", "F"] = "C"  # row-major: the mat-mul writes into `out` directly
 
     def apply(self, rhs: np.ndarray, out: np.ndarray) -> None:
         """out ← Z·rhs for rhs (m, S)."""

@@ -6,6 +6,8 @@ solver's Z-bus never formed — Y[keep, keep] is factorized once and Z·rhs is
 
 from __future__ import annotations
 
+from typing import Literal
+
 import numpy as np
 import scipy.sparse as sp
 from scipy.sparse.linalg import splu
@@ -15,8 +17,8 @@ from opfbench.powerflow.common import bus_types
 
 # The Jacobian and Y have a symmetric sparsity pattern: SuperLU's symmetric mode (minimum
 # degree on A + Aᵀ, diagonal pivots preferred unless 100× smaller than the column's
-# largest entry) factorizes them with little fill-in; 1.5–3× faster than the default
-# COLAMD with unrestricted partial pivoting on the 10 000-bus feeder.
+# largest entry) factorizes them with little fill-in, faster than the default COLAMD with
+# unrestricted partial pivoting on the 10 000-bus feeder (`python -m opfbench.bench pf --large`).
 _SPLU_OPTIONS = {"permc_spec": "MMD_AT_PLUS_A", "diag_pivot_thresh": 0.01, "options": {"SymmetricMode": True}}
 
 
@@ -103,7 +105,7 @@ class SparseZbus:
         self.lu = factorize(y[keep][:, keep])
         self.y_keep = y[keep]  # CSR rows keep, for the mismatch check
 
-    order = "F"  # column-major: SuperLU's solve reads and writes Fortran arrays
+    order: Literal["C", "F"] = "F"  # column-major: SuperLU's solve reads and writes Fortran arrays
 
     def apply(self, rhs: np.ndarray, out: np.ndarray) -> None:
         """out ← Y[keep, keep]⁻¹·rhs for rhs (m, S)."""

@@ -1,6 +1,6 @@
 """The benchmark's HTML report: `write_report(run_dir, ...)` reads a run folder (and a
 forecast and a fault folder when given) and writes one self-contained page. The heavy
-parts (pandas, Plotly, Jinja2) load on first use, so `opfbench.report.price` stays light."""
+parts (pandas, Plotly, Jinja2) load on first use, so importing the package stays light."""
 
 from __future__ import annotations
 

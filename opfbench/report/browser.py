@@ -24,18 +24,12 @@ from urllib.parse import urlsplit
 from opfbench.errors import InputError
 
 CANDIDATES = ("chromium", "chromium-browser", "google-chrome")
-BROWSER_HOSTS = (
-    "accounts.google.com",
-    "update.googleapis.com",
-    "clients2.google.com",
-    "clients2.googleusercontent.com",
-    "optimizationguide-pa.googleapis.com",
-    "safebrowsing.googleapis.com",
-    "content-autofill.googleapis.com",
-    "www.google.com",
-)
-"""Hosts headless Chromium contacts on its own (accounts, component updater, network time;
-Debian's Chromium 150 also opens www.google.com five times with an empty page), whatever page is open; their requests are not the page's (they still hit the refusing proxy)."""
+BROWSER_DOMAINS = ("google.com", "googleapis.com", "googleusercontent.com", "gvt1.com", "gstatic.com")
+"""Domains of the services headless Chromium contacts on its own whatever page is open
+(accounts, component updater, network time, variations; which hosts varies by version:
+Debian's Chromium 150 opens www.google.com and android.clients.google.com with an empty
+page). Their requests are not the page's (they still hit the refusing proxy); the page's
+own resources are checked from inside it (`PageCheck.resources`)."""
 VIRTUAL_TIME_MS = 20000
 _PROBE = """<script>
 window.__probe = {errors: []};
@@ -75,7 +69,11 @@ class PageCheck:
     @property
     def page_requests(self) -> list[str]:
         """Requests that reached the network and are not the browser's own service traffic."""
-        return [r for r in self.requests if _host(r) not in BROWSER_HOSTS]
+        return [r for r in self.requests if not _browser_service(_host(r))]
+
+
+def _browser_service(host: str) -> bool:
+    return any(host == d or host.endswith("." + d) for d in BROWSER_DOMAINS)
 
 
 def _host(request_line: str) -> str:

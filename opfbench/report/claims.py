@@ -46,6 +46,14 @@ def _energy(summary: pd.DataFrame, strategies: list[str]) -> pd.DataFrame:
     return sub.pivot_table(index=["case", "night_mode", "k"], columns="strategy", values="energy_kwh", aggfunc="first")
 
 
+def _complete(table: pd.DataFrame) -> tuple[pd.DataFrame, str]:
+    """The rows of `table` with every figure, and a note on the rows left out (a
+    configuration with a step whose power flow did not converge has no energy)."""
+    full = table.dropna()
+    left_out = len(table) - len(full)
+    return full, (f"; {left_out} configuration(s) left out: a step without a converged power flow" if left_out else "")
+
+
 def _where(index: tuple) -> str:
     case, mode, k = index
     return f"{case}, night {mode}, k={k:g}"
@@ -61,11 +69,14 @@ def ranking(inputs: Inputs) -> Claim:
     figure = f"LFMA {lf} < LLMA {ll} < no action {na} kWh (night connected)"
     if inputs.summary is None:
         return _missing(claim, figure, inputs, "summary.csv")
-    e = _energy(inputs.summary, ["no-action", "llma", "lfma"]).dropna()
+    e = _energy(inputs.summary, ["no-action", "llma", "lfma"])
     if e.empty or e.shape[1] < 3:
         return Claim(claim, figure, "—", NA, "the run has not all of no-action, llma and lfma")
+    e, left_out = _complete(e)
+    if e.empty:
+        return Claim(claim, figure, "—", NA, "no configuration has an energy for all three" + left_out)
     ok = (e["lfma"] < e["llma"] - TOL_KWH) & (e["llma"] < e["no-action"] - TOL_KWH)
-    ours = f"ordered in {int(ok.sum())} of {len(ok)} (case, night mode, k) configurations"
+    ours = f"ordered in {int(ok.sum())} of {len(ok)} (case, night mode, k) configurations{left_out}"
     if ok.all():
         return Claim(claim, figure, ours, HOLDS, "strict order in every configuration of the run")
     first = e.index[~ok][0]
@@ -147,8 +158,10 @@ def night_connected(inputs: Inputs) -> Claim:
     )
     if not {"connected", "disconnected"} <= set(e.columns):
         return Claim(claim, figure, "—", NA, "the run lacks the connected or the disconnected night mode")
-    cut = (100 * (1 - e["connected"] / e["disconnected"])).dropna()
-    ours = f"{cut.min():.1f}–{cut.max():.1f} % (LLMA, LFMA, AC OPF over k)"
+    cut, left_out = _complete(100 * (1 - e["connected"] / e["disconnected"]))
+    if cut.empty:
+        return Claim(claim, figure, "—", NA, "no configuration has an energy in both night modes" + left_out)
+    ours = f"{cut.min():.1f}–{cut.max():.1f} % (LLMA, LFMA, AC OPF over k){left_out}"
     if "connected-q" in e.columns:
         q = (100 * (1 - e["connected-q"] / e["disconnected"])).dropna()
         ours += f"; with Q at night (connected-q) {q.min():.1f}–{q.max():.1f} %"
@@ -169,11 +182,14 @@ def _beats(inputs: Inputs, opf: str, claim: str) -> Claim:
     e = _energy(inputs.summary, ["lfma", opf])
     if e.shape[1] < 2:
         return Claim(claim, figure, "—", NA, f"the run has not both lfma and {opf}")
-    e = e.dropna()
+    e, left_out = _complete(e)
+    if e.empty:
+        return Claim(claim, figure, "—", NA, f"no configuration has an energy for both lfma and {opf}" + left_out)
     wins = e["lfma"] < e[opf] - TOL_KWH
     diff = 100 * (e["lfma"] / e[opf] - 1)
     ours = (
-        f"LFMA lower in {int(wins.sum())} of {len(wins)} configurations (LFMA vs {opf}: {diff.min():+.1f} … {diff.max():+.1f} %)"
+        f"LFMA lower in {int(wins.sum())} of {len(wins)} configurations (LFMA vs {opf}: {diff.min():+.1f} … "
+        f"{diff.max():+.1f} %){left_out}"
     )
     if wins.all():
         return Claim(claim, figure, ours, HOLDS, f"LFMA uses less energy than {opf} in every configuration")
@@ -274,11 +290,19 @@ def voltage_band(inputs: Inputs) -> Claim:
     s = inputs.summary[inputs.summary["strategy"].isin(["llma", "lfma"])]
     if s.empty:
         return Claim(claim, figure, "—", NA, "the run has no llma/lfma configuration")
+    # voltages are over the steps with a converged power flow; a diverged step has none
+    measured = int(s["pf_converged_steps"].sum()) if "pf_converged_steps" in s else int(s["steps"].sum())
+    no_figure = int(s["steps"].sum()) - measured
+    if measured == 0:
+        return Claim(claim, figure, "—", NA, "no local-rule step has a converged power flow")
     vmin, vmax = s["vmin_pu"].min(), s["vmax_pu"].max()
-    ours = f"LLMA/LFMA voltages {vmin:.4f} … {vmax:.4f} p.u. over {int(s['steps'].sum())} steps"
-    if vmin >= lo - 1e-6 and vmax <= hi + 1e-6:
-        return Claim(claim, figure, ours, HOLDS, "every step of every local-rule configuration within the band")
-    return Claim(claim, figure, ours, FAILS, "some step leaves the band")
+    ours = f"LLMA/LFMA voltages {vmin:.4f} … {vmax:.4f} p.u. over {measured} steps"
+    if not (vmin >= lo - 1e-6 and vmax <= hi + 1e-6):
+        return Claim(claim, figure, ours, FAILS, "some step leaves the band")
+    if no_figure:
+        ours += f"; {no_figure} steps without a converged power flow"
+        return Claim(claim, figure, ours, NA, f"{no_figure} steps have no voltage figure (power flow did not converge)")
+    return Claim(claim, figure, ours, HOLDS, "every step of every local-rule configuration within the band")
 
 
 CLAIMS: tuple[Callable[[Inputs], Claim], ...] = (

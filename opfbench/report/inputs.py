@@ -1,20 +1,30 @@
 """Read the files a run, a forecast run and a fault study wrote (see the file contracts:
 run folder, forecast folder, fault folder). Every input is optional: a missing one is
-None plus the command that produces it, so its report section can say so."""
+None plus the command that produces it, so its report section can say so. A damaged
+one — not UTF-8, not JSON, not an object, a truncated or empty parquet file, a column
+missing or of the wrong kind, a manifest field of the wrong type or an unknown schema
+version — is an `InputError` naming the file and what is wrong, before anything is
+drawn."""
 
 from __future__ import annotations
 
+import io
 import json
+import math
 from dataclasses import dataclass, field
 from pathlib import Path
 
+import numpy as np
 import pandas as pd
 import pyarrow as pa
 import pyarrow.parquet as pq
 
 import opfbench
+from opfbench.errors import InputError
 from opfbench.registry import FORMULATIONS
+from opfbench.report.sources import check_given, report_sources
 from opfbench.report.tables import REFERENCE_NIGHT
+from opfbench.study.store import SCHEMA
 
 RUN_COMMAND = "opfbench run --out {dir}"
 DETAIL_COMMAND = "opfbench run --detail --out {dir} (default on for periods of ≤ 2 days)"
@@ -48,29 +58,190 @@ class Inputs:
     missing: dict[str, str] = field(default_factory=dict)  # input name -> how to produce it
 
 
-def _json(path: Path) -> dict | None:
-    return json.loads(path.read_text()) if path.is_file() else None
+TEXT, NUMBER, TIME, FLAG, NULL = "text", "number", "time", "true/false", "null"
+"""Kinds of column a report input must have (`_kind`)."""
+_KEYS = {"case": TEXT, "strategy": TEXT, "k": NUMBER, "night_mode": TEXT, "forecast": TEXT}
+STEP_KINDS = _KEYS | {
+    "time": TIME,
+    "status": TEXT,
+    "losses_kw": NUMBER,
+    "vmin_pu": NUMBER,
+    "vmax_pu": NUMBER,
+    "solver_ms": NUMBER,
+    "iterations": NUMBER,
+    "certified_by": TEXT,
+    "fallback": TEXT,
+    "solver_status": TEXT,
+}
+"""The columns of steps.parquet the report uses, and their kinds."""
+STEP_COLUMNS = tuple(STEP_KINDS)
+DER_Q_KINDS = _KEYS | {"time": TIME, "bus": NUMBER, "kind": TEXT, "q_mvar": NUMBER}
+_FAULT_KEYS = {"case": TEXT, "fault_bus": NUMBER, "strategy": TEXT, "k": NUMBER, "forecast": TEXT, "variant": TEXT}
+FAULT_KINDS = _FAULT_KEYS | {
+    "bus": NUMBER,
+    "recovery_ms": NUMBER,
+    "status": TEXT,
+    "vmin_pu": NUMBER,
+    "margin_pu": NUMBER,
+    "faulted": FLAG,
+}
+TRACE_KINDS = _FAULT_KEYS | {"bus": NUMBER, "t_s": NUMBER, "v_pu": NUMBER, "q_mvar": NUMBER}
+SUMMARY_NUMBERS = (
+    "steps",
+    "hours",
+    "avg_loss_kw",
+    "energy_kwh",
+    "no_action_kwh",
+    "savings_pct",
+    "not_ok_steps",
+    "voltage_violation_steps",
+    "vmin_pu",
+    "vmax_pu",
+    "max_excursion_mvar",
+    "excursion_steps",
+    "lower_bound_kwh",
+    "gap_kwh",
+    "gap_pct",
+    "wall_s",
+    "solver_s",
+    "certified_share",
+)
+"""The numeric columns of summary.csv the report uses besides its keys (`_KEYS`);
+pf_converged_steps and pf_diverged_steps when present."""
+FORECAST_METRICS = ("mse_scaled", "mape_pct", "mae_kw", "rmse_kw", "skill", "fit_s")
+"""The metrics of a forecast JSON the report shows."""
+SUMMARY_COUNTS = (
+    "steps",
+    "not_ok_steps",
+    "voltage_violation_steps",
+    "excursion_steps",
+    "pf_converged_steps",
+    "pf_diverged_steps",
+)
+"""Columns of summary.csv that count steps: whole numbers ≥ 0."""
+SUMMARY_OPTIONAL_NUMBERS = ("pf_converged_steps", "pf_diverged_steps")
+_JSON_KINDS = {
+    "a list": (list,),
+    "a list of text": (list,),
+    "a list of numbers": (list,),
+    "an object": (dict,),
+    "text": (str,),
+    "a number": (int, float),
+    "a whole number": (int,),
+}
+_ITEMS = {"a list of text": (str,), "a list of numbers": (int, float)}
+MANIFEST_FIELDS = {
+    "command": "a list",
+    "config": "an object",
+    "period": "an object",
+    "data_sources": "a list",
+    "versions": "an object",
+    "machine": "an object",
+    "cases": "an object",
+    "tasks": "a list",
+    "timings": "an object",
+    "config.cases": "a list of text",
+    "config.strategies": "a list of text",
+    "config.ks": "a list of numbers",
+    "config.night_modes": "a list of text",
+    "config.forecast": "a list of text",
+    "config.night": "text",
+    "config.period": "text",
+    "config.step_minutes": "a number",
+    "config.acopf_solver": "text",
+    "config.price_per_kwh": "a number",
+    "config.currency": "text",
+    "config.price_source": "text",
+    "timings.wall_s": "a number",
+    "timings.workers": "a whole number",
+    "timings.peak_rss_mb": "a number",
+    "timings.worker_peak_rss_mb": "a number",
+}
+"""The manifest fields the report reads and their JSON types (null allowed; a field may be absent)."""
+
+
+CASE_FIELDS = {"buses": "a whole number", "ders": "a list", "vmin_pu": "a number", "vmax_pu": "a number"}
+"""The fields of a manifest's cases.<name> the report reads, and their JSON types."""
+
+
+def _is_kind(value: object, expected: str) -> bool:
+    """`value` is of the JSON kind `expected` (a key of `_JSON_KINDS`; true/false is no number)."""
+    if isinstance(value, bool) or not isinstance(value, _JSON_KINDS[expected]):
+        return False
+    items = _ITEMS.get(expected)
+    return items is None or (isinstance(value, list) and all(isinstance(v, items) and not isinstance(v, bool) for v in value))
+
+
+def _damaged(path: Path, problem: str, command: str) -> InputError:
+    return InputError(f"{path}: {problem}; rebuild it with `{command}`")
+
+
+def _json(path: Path, command: str) -> dict | None:
+    """The JSON object in `path`, None when the file is absent."""
+    if not path.is_file():
+        return None
+    try:
+        data = json.loads(path.read_bytes().decode("utf-8"))
+    except OSError as exc:
+        raise InputError(f"{path}: cannot read it ({exc.strerror})") from None
+    except UnicodeDecodeError as exc:
+        raise _damaged(path, f"not a UTF-8 text file (byte {exc.start})", command) from None
+    except ValueError as exc:
+        raise _damaged(path, f"not valid JSON ({exc})", command) from None
+    except RecursionError:
+        raise _damaged(path, "not a run's JSON (nested too deeply to read)", command) from None
+    if not isinstance(data, dict):
+        raise _damaged(path, f"holds a JSON {type(data).__name__}, not an object", command)
+    return data
+
+
+def _manifest(path: Path, command: str) -> dict | None:
+    """A run manifest: a JSON object of a schema this version reads, whose fields the
+    report uses have their types (`MANIFEST_FIELDS`)."""
+    m = _json(path, command)
+    if m is None:
+        return None
+    schema = m.get("schema")
+    if isinstance(schema, bool) or not isinstance(schema, int) or not 1 <= schema <= SCHEMA:
+        raise _damaged(path, f"schema {schema!r} is not one this opfbench reads (1..{SCHEMA}; a newer one wrote it?)", command)
+    for key, expected in MANIFEST_FIELDS.items():
+        *parents, name = key.split(".")
+        node: object = m
+        for parent in parents:
+            node = node.get(parent) if isinstance(node, dict) else None
+        value = node.get(name) if isinstance(node, dict) else None
+        if value is not None and not _is_kind(value, expected):
+            raise _damaged(path, f"{key} is {value!r}, expected {expected}", command)
+    for case, info in (m.get("cases") or {}).items():
+        fields: list[tuple[str, object, str]] = [(f"cases.{case}", info, "an object")]
+        if isinstance(info, dict):
+            fields += [(f"cases.{case}.{k}", info.get(k), kind) for k, kind in CASE_FIELDS.items()]
+            ders = info["ders"] if isinstance(info.get("ders"), list) else []
+            fields += [(f"cases.{case}.ders[{i}]", d, "an object") for i, d in enumerate(ders)]
+        for key, value, expected in fields:
+            if value is not None and not _is_kind(value, expected):
+                raise _damaged(path, f"{key} is {value!r}, expected {expected}", command)
+    price = (m.get("config") or {}).get("price_per_kwh")
+    if price is not None and not (math.isfinite(price) and price >= 0):
+        raise _damaged(path, f"config.price_per_kwh is {price!r}, expected a finite number ≥ 0", command)
+    return m
+
+
+def _kind(t: pa.DataType) -> str:
+    if pa.types.is_dictionary(t):
+        t = t.value_type
+    if pa.types.is_string(t) or pa.types.is_large_string(t):
+        return TEXT
+    if pa.types.is_boolean(t):
+        return FLAG
+    if pa.types.is_integer(t) or pa.types.is_floating(t):
+        return NUMBER
+    if pa.types.is_null(t):
+        return NULL
+    return TIME if pa.types.is_timestamp(t) else str(t)
 
 
 TRACE_BUS = 27  # the fault traces plotted: at the paper's DFIG
-STEP_COLUMNS = (
-    "case",
-    "strategy",
-    "k",
-    "night_mode",
-    "forecast",
-    "time",
-    "status",
-    "losses_kw",
-    "vmin_pu",
-    "vmax_pu",
-    "solver_ms",
-    "iterations",
-    "certified_by",
-    "fallback",
-    "solver_status",
-)
-"""The columns of steps.parquet the report uses."""
 
 
 def reference_setting(summary: pd.DataFrame) -> tuple[str, float] | None:
@@ -82,18 +253,39 @@ def reference_setting(summary: pd.DataFrame) -> tuple[str, float] | None:
     return (mode, float(off["k"].min())) if len(off) else None
 
 
-def _filtered(path: Path, columns: tuple[str, ...] | None, filters: list | None) -> pd.DataFrame | None:
+def _filtered(
+    path: Path,
+    kinds: dict[str, str],
+    filters: list | None,
+    command: str,
+    every_column: bool = False,
+    keys: tuple[str, ...] = tuple(_KEYS),
+) -> pd.DataFrame | None:
     """The rows of a run table matching `filters` (parquet filters: a year's table need not
-    fit in memory) with only `columns` (those present; None: all), text as arrow strings;
-    None when the file is absent or no row matches."""
+    fit in memory) with the columns of `kinds` (every column with `every_column`), text as
+    arrow strings; None when the file is absent, holds no row or no row matches.
+    InputError when it is not a readable parquet file, lacks a column of `kinds` or has it
+    of another kind, or a row read has no value in one of the `keys` columns."""
     if not path.is_file():
         return None
-    schema = pq.read_schema(path)
-    wanted = [c for c in schema.names if columns is None or c in columns]
-    # text read dictionary-encoded (filtering a fault study's 1.2 M trace rows: 0.07 s
-    # instead of 0.2-0.4 s), decoded once filtered
-    text = [f.name for f in schema if f.name in wanted and pa.types.is_string(f.type)]
-    table = pq.read_table(path, columns=wanted, filters=filters, read_dictionary=text)
+    try:
+        if pq.ParquetFile(path).metadata.num_rows == 0:
+            return None
+        schema = pq.read_schema(path)
+        for name, kind in kinds.items():
+            found = _kind(schema.field(name).type) if name in schema.names else None
+            if found != kind and found != NULL:  # a column of nulls only (no row has a value) is any kind
+                raise _damaged(path, f"column {name!r} {'is ' + found if found else 'is missing'}, expected {kind}", command)
+        wanted = [c for c in schema.names if every_column or c in kinds]
+        # text read dictionary-encoded (filtering a fault study's million trace rows is several
+        # times faster on the codes), decoded once filtered
+        text = [f.name for f in schema if f.name in wanted and pa.types.is_string(f.type)]
+        table = pq.read_table(path, columns=wanted, filters=filters, read_dictionary=text)
+    except (OSError, pa.ArrowException) as exc:
+        raise _damaged(path, f"not a readable parquet file ({exc})", command) from None
+    for key in keys:
+        if table.column(key).null_count:
+            raise _damaged(path, f"{table.column(key).null_count} row(s) have no {key}", command)
     table = table.cast(
         pa.schema([pa.field(f.name, pa.string()) if f.name in text else f for f in table.schema], metadata=table.schema.metadata)
     )
@@ -109,19 +301,78 @@ def _reference_filter(summary: pd.DataFrame | None) -> list | None:
     return [("night_mode", "==", reference[0]), ("forecast", "==", "off"), ("k", "==", reference[1])]
 
 
-def _steps(path: Path, summary: pd.DataFrame | None) -> pd.DataFrame | None:
+def _steps(path: Path, summary: pd.DataFrame | None, command: str) -> pd.DataFrame | None:
     """The per-step rows the report uses — every formulation's (convergence tables) and the
     reference setting's (plots) — with only the columns it uses."""
     reference = _reference_filter(summary)
     filters = None if reference is None else [[("strategy", "in", list(FORMULATIONS))], reference]
-    return _filtered(path, STEP_COLUMNS, filters)
+    return _filtered(path, STEP_KINDS, filters, command, keys=(*_KEYS, "time"))
 
 
-def _summary(path: Path) -> pd.DataFrame | None:
+def _summary(path: Path, command: str) -> pd.DataFrame | None:
+    """summary.csv (None when absent or without rows); InputError unless UTF-8 CSV text
+    with the columns the report uses, numbers where numbers belong."""
     if not path.is_file():
         return None
-    summary = pd.read_csv(path, dtype={"case": str, "strategy": str, "night_mode": str, "forecast": str})
-    return summary if len(summary) else None
+    try:
+        text = path.read_bytes().decode("utf-8")
+        summary = pd.read_csv(io.StringIO(text), dtype={"case": str, "strategy": str, "night_mode": str, "forecast": str})
+    except OSError as exc:
+        raise InputError(f"{path}: cannot read it ({exc.strerror})") from None
+    except UnicodeDecodeError as exc:
+        raise _damaged(path, f"not a UTF-8 text file (byte {exc.start})", command) from None
+    except (ValueError, pd.errors.ParserError, pd.errors.EmptyDataError) as exc:
+        raise _damaged(path, f"not a readable CSV table ({exc})", command) from None
+    missing = [c for c in (*_KEYS, *SUMMARY_NUMBERS) if c not in summary.columns]
+    if missing:
+        raise _damaged(path, f"no column {', '.join(missing)}", command)
+    if summary.empty:
+        return None
+    for name in ("k", *SUMMARY_NUMBERS, *(c for c in SUMMARY_OPTIONAL_NUMBERS if c in summary.columns)):
+        column = summary[name]
+        if not pd.api.types.is_numeric_dtype(column) or pd.api.types.is_bool_dtype(column):
+            bad = next((v for v in column if not _is_number(v)), column.iloc[0])
+            raise _damaged(path, f"column {name!r} holds {bad!r}, not a number", command)
+        if np.isinf(column).any():
+            raise _damaged(path, f"column {name!r} holds an infinite value", command)
+        if name in SUMMARY_COUNTS and not ((column >= 0) & (column == np.round(column))).all():
+            bad = column[~((column >= 0) & (column == np.round(column)))].iloc[0]
+            raise _damaged(path, f"column {name!r} holds {bad:g}, not a count of steps", command)
+    for key in _KEYS:
+        if summary[key].isna().any():
+            raise _damaged(path, f"{int(summary[key].isna().sum())} row(s) have no {key}", command)
+    repeated = summary.duplicated(list(_KEYS))
+    if repeated.any():
+        row = summary[repeated].iloc[0]
+        raise _damaged(path, "configuration " + ", ".join(f"{k}={row[k]}" for k in _KEYS) + " has more than one row", command)
+    return summary
+
+
+def _is_number(value: object) -> bool:
+    try:
+        float(value)  # type: ignore[arg-type]
+    except (TypeError, ValueError):
+        return False
+    return True
+
+
+def _forecast_json(path: Path, command: str) -> dict | None:
+    """A forecast run's metrics JSON: an object whose "metrics" maps each model to an
+    object whose `FORECAST_METRICS` are numbers (or null)."""
+    data = _json(path, command)
+    if data is None:
+        return None
+    metrics = data.get("metrics")
+    if not isinstance(metrics, dict):
+        raise _damaged(path, f"metrics is {metrics!r}, expected an object of models", command)
+    for model, values in metrics.items():
+        if not isinstance(values, dict):
+            raise _damaged(path, f"metrics[{model!r}] is {values!r}, expected an object of numbers", command)
+        for key in FORECAST_METRICS:
+            value = values.get(key)
+            if value is not None and (isinstance(value, bool) or not isinstance(value, (int, float))):
+                raise _damaged(path, f"metrics[{model!r}][{key!r}] is {value!r}, expected a number", command)
+    return data
 
 
 def load_inputs(
@@ -130,22 +381,33 @@ def load_inputs(
     fault_dir: str | Path | None = None,
     year_dir: str | Path | None = None,
 ) -> Inputs:
-    """Read what exists; record how to produce what does not."""
+    """Read what exists; record how to produce what does not; InputError for what is damaged."""
     run = Path(run_dir)
     inp = Inputs(run_dir=run)
-    inp.manifest = _json(run / "manifest.json")
-    inp.summary = _summary(run / "summary.csv")
-    inp.steps = _steps(run / "steps.parquet", inp.summary)
-    inp.der_q = _filtered(run / "der_q.parquet", None, _reference_filter(inp.summary))  # plotted: the reference rows
+    command = RUN_COMMAND.format(dir=run)
+    inp.manifest = _manifest(run / "manifest.json", command)
+    inp.summary = _summary(run / "summary.csv", command)
+    inp.steps = _steps(run / "steps.parquet", inp.summary, command)
+    # plotted: the reference rows
+    inp.der_q = _filtered(
+        run / "der_q.parquet", DER_Q_KINDS, _reference_filter(inp.summary), command, True, (*_KEYS, "time", "bus")
+    )
     for name, frame in (("manifest.json", inp.manifest), ("steps.parquet", inp.steps), ("summary.csv", inp.summary)):
         if frame is None:
-            inp.missing[name] = RUN_COMMAND.format(dir=run)
+            inp.missing[name] = command
     if inp.der_q is None:  # the report plots the DER setpoints (the per-bus |V| table it does not read)
         inp.missing["der_q.parquet"] = DETAIL_COMMAND.format(dir=run)
+    _load_sources(inp, forecast_dir, fault_dir, year_dir)
+    return inp
 
+
+def _load_sources(
+    inp: Inputs, forecast_dir: str | Path | None, fault_dir: str | Path | None, year_dir: str | Path | None
+) -> None:
+    """The forecast, fault and year-run inputs into `inp`."""
     inp.forecast_dir = Path(forecast_dir) if forecast_dir is not None else DOCS_FORECAST
     for dataset in ("pv", "wind"):
-        data = _json(inp.forecast_dir / f"forecast_{dataset}.json")
+        data = _forecast_json(inp.forecast_dir / f"forecast_{dataset}.json", FORECAST_COMMAND)
         if data is not None:
             inp.forecast[dataset] = data
     if not inp.forecast:
@@ -153,21 +415,37 @@ def load_inputs(
 
     if fault_dir is not None:
         inp.fault_dir = Path(fault_dir)
-        inp.fault = _filtered(inp.fault_dir / "fault.parquet", None, None)
+        fault_keys = (*_FAULT_KEYS, "bus")
+        inp.fault = _filtered(inp.fault_dir / "fault.parquet", FAULT_KINDS, None, FAULT_COMMAND, True, fault_keys)
         inp.traces = _filtered(
             inp.fault_dir / "traces.parquet",
-            None,  # plotted: one bus, forecast off
-            [("bus", "==", TRACE_BUS), ("forecast", "==", "off")],
+            TRACE_KINDS,
+            [("bus", "==", TRACE_BUS), ("forecast", "==", "off")],  # plotted: one bus, forecast off
+            FAULT_COMMAND,
+            True,
+            fault_keys,
         )
-        inp.fault_manifest = _json(inp.fault_dir / "manifest.json")
+        inp.fault_manifest = _json(inp.fault_dir / "manifest.json", FAULT_COMMAND)
     if inp.fault is None:
         inp.missing["fault.parquet"] = FAULT_COMMAND
     if inp.traces is None:
         inp.missing["traces.parquet"] = FAULT_COMMAND
 
     inp.year_dir = Path(year_dir) if year_dir is not None else DOCS_YEAR
-    inp.year_summary = _summary(inp.year_dir / "summary.csv")
-    inp.year_manifest = _json(inp.year_dir / "manifest.json")
+    inp.year_summary = _summary(inp.year_dir / "summary.csv", YEAR_COMMAND)
+    inp.year_manifest = _manifest(inp.year_dir / "manifest.json", YEAR_COMMAND)
     if inp.year_summary is None or inp.year_manifest is None:
         inp.missing["year run"] = YEAR_COMMAND
-    return inp
+
+
+def checked_sources(
+    forecast_dir: Path | None, fault_dir: Path | None, year_dir: Path | None
+) -> tuple[Path | None, Path | None, Path | None]:
+    """The forecast, fault and year-run folders the report reads (`report_sources`), after
+    checking that each one given holds what it is for (`check_given`) and reading every
+    one's files (InputError naming a damaged one) — what `opfbench run` does before its
+    work and `opfbench report` before drawing."""
+    check_given(forecast_dir, fault_dir, year_dir)
+    sources = report_sources(forecast_dir, fault_dir, year_dir)
+    _load_sources(Inputs(run_dir=Path()), *sources)
+    return sources

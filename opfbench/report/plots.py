@@ -42,7 +42,7 @@ def script_json(text: str) -> str:
 @lru_cache(maxsize=1)
 def plot_template() -> str:
     """Plotly's "plotly_white" template as JSON, embedded once per page and given to every
-    figure there (the figures carry none: copying it into each cost ~25 ms a figure)."""
+    figure there (the figures carry none: copying it into each is slow)."""
     return script_json(json.dumps(pio.templates["plotly_white"].to_plotly_json()))
 
 
@@ -67,7 +67,7 @@ def plot_json(pid: str, title: str, fig: go.Figure, xtitle: str, ytitle: str, he
 def _decimate(frame: pd.DataFrame, value: str) -> pd.DataFrame:
     """Mean of `value` in at most MAX_POINTS equal bins of rows (rows sorted by time); the
     time as local wall-clock text, which is what plotly.js shows (it ignores zone offsets;
-    formatted once here rather than per element by Plotly: 50 ms a 1440-point trace)."""
+    formatted once here rather than per element by Plotly, which is slow on long traces)."""
     if len(frame) > MAX_POINTS:
         bins = np.arange(len(frame)) * MAX_POINTS // len(frame)
         frame = frame.groupby(bins).agg(time=("time", "first"), **{value: (value, "mean")})

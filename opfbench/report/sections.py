@@ -3,13 +3,13 @@ input: the section says which command produces it."""
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Callable
 
 from opfbench.report import plots, tables
 from opfbench.report.claims import claims, ranking_per_case
 from opfbench.report.inputs import Inputs
 from opfbench.report.page import Block, Section, table
-from opfbench.report.price import DEFAULT_CURRENCY, DEFAULT_PRICE_PER_KWH, DEFAULT_PRICE_SOURCE
+from opfbench.study.price import DEFAULT_CURRENCY, DEFAULT_PRICE_PER_KWH, DEFAULT_PRICE_SOURCE
 
 if TYPE_CHECKING:
     import pandas as pd
@@ -85,6 +85,22 @@ def metadata(inputs: Inputs, price: tuple[float, str, str]) -> Section:
     return sec
 
 
+def _diverged_note(summary: pd.DataFrame) -> list[Block]:
+    """A note naming the configurations with steps whose power flow did not converge."""
+    bad = tables.diverged(summary)
+    if bad.empty:
+        return []
+    return [
+        Block(
+            "note",
+            text=f"{len(bad)} configuration(s) have steps whose power flow did not converge (pf-diverged: "
+            f"{int(bad['pf_diverged_steps'].sum())} steps in all): such a step has no loss or voltage figure, so "
+            "their energy, savings and gap are not given (—), and their average loss and voltages are over the "
+            "steps that converged (pf_converged_steps).",
+        )
+    ]
+
+
 def _energy_tables(s: pd.DataFrame, price: tuple[float, str, str], over: str = "") -> list[Block]:
     """Energy per strategy × k for each night mode, then savings % and money saved per year
     vs no action with PV connected at night; `over` qualifies the period (e.g. " over the year")."""
@@ -122,6 +138,7 @@ def losses(inputs: Inputs, price: tuple[float, str, str]) -> Section:
     if inputs.summary is None:
         return sec.add(*_missing(inputs, "summary.csv"))
     s = inputs.summary
+    sec.blocks += _diverged_note(s)
     sec.blocks += _energy_tables(s, price)
     money = tables.losses(s, price[0])
     full = money.rename(columns={"money_per_day": f"{price[1]} per day", "money_per_year": f"{price[1]} per year"})
@@ -326,6 +343,7 @@ def voltage(inputs: Inputs) -> Section:
     limits = {name: (c.get("vmin_pu"), c.get("vmax_pu")) for name, c in ((inputs.manifest or {}).get("cases") or {}).items()}
     if limits:
         sec.add(Block("note", text="Limits: " + "; ".join(f"{n} [{lo}, {hi}] p.u." for n, (lo, hi) in limits.items())))
+    sec.blocks += _diverged_note(inputs.summary)
     sec.add(table(tables.voltage(inputs.summary)))
     exc = tables.excursions(inputs.summary)
     if exc.empty:
@@ -387,20 +405,27 @@ def paper_claims(inputs: Inputs) -> Section:
     return sec.add(Block("claims", claims=claims(inputs)))
 
 
-PRICED = {metadata, losses, year}
-"""Builders that also take the energy price (currency per kWh, currency, source)."""
-SECTIONS = (
-    ("claims", "The paper's claims", paper_claims),
+Price = tuple[float, str, str]  # energy price per kWh, currency, source
+Builder = Callable[[Inputs, Price], Section]
+
+
+def _unpriced(build: Callable[[Inputs], Section]) -> Builder:
+    """A builder that does not use the price, called like those that do."""
+    return lambda inputs, _price: build(inputs)
+
+
+SECTIONS: tuple[tuple[str, str, Builder], ...] = (
+    ("claims", "The paper's claims", _unpriced(paper_claims)),
     ("metadata", "Run metadata", metadata),
     ("losses", "Losses and savings", losses),
-    ("grids", "Per-grid leaderboard", grids),
-    ("convergence", "Convergence of the formulations", convergence),
+    ("grids", "Per-grid leaderboard", _unpriced(grids)),
+    ("convergence", "Convergence of the formulations", _unpriced(convergence)),
     ("year", "A year (2016 at 15 min)", year),
-    ("night", "Night hours", night),
-    ("gap", "Optimality gap", gap),
-    ("voltage", "Voltage compliance", voltage),
-    ("forecasting", "Forecasting", forecasting),
-    ("fault", "Fault ride-through", fault),
+    ("night", "Night hours", _unpriced(night)),
+    ("gap", "Optimality gap", _unpriced(gap)),
+    ("voltage", "Voltage compliance", _unpriced(voltage)),
+    ("forecasting", "Forecasting", _unpriced(forecasting)),
+    ("fault", "Fault ride-through", _unpriced(fault)),
 )
 """(id, title, builder) in page order."""
 FAILED = "This section could not be built from its input files"
@@ -412,7 +437,7 @@ def all_sections(inputs: Inputs, price: tuple[float, str, str]) -> list[Section]
     out = []
     for sid, title, build in SECTIONS:
         try:
-            out.append(build(inputs, price) if build in PRICED else build(inputs))
+            out.append(build(inputs, price))
         except (KeyError, ValueError, IndexError, TypeError) as exc:
             out.append(Section(sid, title, blocks=[Block("error", text=f"{FAILED}: {type(exc).__name__}: {exc}")]))
     return out

@@ -29,18 +29,31 @@ def holds_fault_study(folder: Path) -> bool:
 def holds_year_run(folder: Path) -> bool:
     """A finished `opfbench run --period year` folder: its manifest and summary."""
     try:
-        manifest = json.loads((folder / "manifest.json").read_text())
-    except (OSError, ValueError):
+        manifest = json.loads((folder / "manifest.json").read_bytes().decode("utf-8"))
+    except (OSError, ValueError):  # UnicodeDecodeError is a ValueError
         return False
-    return manifest.get("config", {}).get("period") == "year" and (folder / "summary.csv").is_file()
+    config = manifest.get("config") if isinstance(manifest, dict) else None
+    return isinstance(config, dict) and config.get("period") == "year" and (folder / "summary.csv").is_file()
 
 
-def check_year_dir(folder: Path | None) -> None:
-    """A `--year-dir` given on the command line must hold a finished year run."""
-    if folder is not None and not holds_year_run(folder):
+def check_given(forecast_dir: Path | None, fault_dir: Path | None, year_dir: Path | None) -> None:
+    """A folder given on the command line must hold what it is given for: a forecast
+    run's metrics, a fault study's table, a finished year run (manifest.json with period
+    'year' and summary.csv)."""
+    if forecast_dir is not None and not holds_forecasts(forecast_dir):
         raise InputError(
-            f"--year-dir {folder} holds no finished year run (manifest.json with period 'year' and "
-            f"summary.csv); write one with `opfbench run --period year --out {folder}`"
+            f"--forecast-dir {forecast_dir} holds no forecast run (forecast_pv.json or forecast_wind.json); write one "
+            f"with `opfbench forecast --dataset pv --out {forecast_dir}`"
+        )
+    if fault_dir is not None and not holds_fault_study(fault_dir):
+        raise InputError(
+            f"--fault-dir {fault_dir} holds no fault study (fault.parquet); write one with "
+            f"`opfbench fault CASE --out {fault_dir}`"
+        )
+    if year_dir is not None and not holds_year_run(year_dir):
+        raise InputError(
+            f"--year-dir {year_dir} holds no finished year run (manifest.json with period 'year' and "
+            f"summary.csv); write one with `opfbench run --period year --out {year_dir}`"
         )
 
 

@@ -12,12 +12,27 @@ import pandas as pd
 
 from opfbench.registry import FORMULATIONS, LOCAL_RULES, STRATEGIES
 from opfbench.report import paper
+from opfbench.result import STATUSES
 
-STATUSES = ("ok", "fallback-cold", "fallback-socp", "fallback-no-action", "infeasible", "solver-failed", "pf-diverged")
 CONFIG = ["case", "strategy", "k", "night_mode", "forecast"]
 REFERENCE_NIGHT = "connected"
 TOL_KWH = 1e-6  # energies closer than this count as equal
 """The night mode of the tables that fix one (the paper's main setting)."""
+FIGURE_STEPS = ("pf_converged_steps", "pf_diverged_steps")
+"""summary.csv's counts of steps with and without a converged power flow (a summary
+written before they existed has none: every step there had a figure or none was counted)."""
+
+
+def figure_steps(summary: pd.DataFrame) -> list[str]:
+    """The `FIGURE_STEPS` columns `summary` has."""
+    return [c for c in FIGURE_STEPS if c in summary.columns]
+
+
+def diverged(summary: pd.DataFrame) -> pd.DataFrame:
+    """The configurations with steps whose power flow did not converge (no loss or voltage figure)."""
+    if "pf_diverged_steps" not in summary.columns:
+        return summary.iloc[:0]
+    return summary[summary["pf_diverged_steps"] > 0]
 
 
 def order(frame: pd.DataFrame) -> pd.DataFrame:
@@ -32,11 +47,12 @@ def order(frame: pd.DataFrame) -> pd.DataFrame:
 
 
 def losses(summary: pd.DataFrame, price_per_kwh: float) -> pd.DataFrame:
-    """Per configuration: avg kW, kWh, savings % and money saved per day and per year
-    (the run's savings scaled to 24 h and to 365 days) at `price_per_kwh`."""
+    """Per configuration: avg kW (over the steps with a converged power flow, counted
+    beside it), kWh, savings % and money saved per day and per year (the run's savings
+    scaled to 24 h and to 365 days) at `price_per_kwh`."""
     days = summary["hours"] / 24.0
     saved_per_day = (summary["no_action_kwh"] - summary["energy_kwh"]) / days
-    out = summary[CONFIG + ["avg_loss_kw", "energy_kwh", "savings_pct"]].assign(
+    out = summary[CONFIG + ["avg_loss_kw", *figure_steps(summary), "energy_kwh", "savings_pct"]].assign(
         saved_kwh_per_day=saved_per_day,
         money_per_day=saved_per_day * price_per_kwh,
         money_per_year=saved_per_day * price_per_kwh * 365.0,
@@ -153,15 +169,20 @@ def night_vs_paper(summary: pd.DataFrame, k: float = 0.0) -> pd.DataFrame:
     ours = summary[(summary["forecast"] == "off") & np.isclose(summary["k"], k)]
     for case in sorted(ours["case"].unique()):
         for strategy in paper.NIGHT_TABLE["connected"]:
-            row: dict[str, object] = {"case": case, "strategy": strategy}
-            for mode in ("connected", "disconnected"):
-                row[f"paper {mode} kWh"] = paper.NIGHT_TABLE[mode][strategy][1]
+            theirs = {mode: float(paper.NIGHT_TABLE[mode][strategy][1]) for mode in ("connected", "disconnected")}
+            mine = {}
             for mode in ("connected", "disconnected", "connected-q"):
                 hit = ours[(ours["case"] == case) & (ours["strategy"] == strategy) & (ours["night_mode"] == mode)]
-                row[f"ours {mode} kWh"] = float(hit["energy_kwh"].iloc[0]) if len(hit) else np.nan
-            row["paper reduction %"] = 100 * (1 - row["paper connected kWh"] / row["paper disconnected kWh"])
-            row["ours reduction %"] = 100 * (1 - row["ours connected kWh"] / row["ours disconnected kWh"])
-            rows.append(row)
+                mine[mode] = float(hit["energy_kwh"].iloc[0]) if len(hit) else np.nan
+            rows.append(
+                {"case": case, "strategy": strategy}
+                | {f"paper {mode} kWh": e for mode, e in theirs.items()}
+                | {f"ours {mode} kWh": e for mode, e in mine.items()}
+                | {
+                    "paper reduction %": 100 * (1 - theirs["connected"] / theirs["disconnected"]),
+                    "ours reduction %": 100 * (1 - mine["connected"] / mine["disconnected"]),
+                }
+            )
     return pd.DataFrame(rows)
 
 
@@ -174,12 +195,14 @@ def gap(summary: pd.DataFrame) -> pd.DataFrame:
 
 def voltage(summary: pd.DataFrame) -> pd.DataFrame:
     """Per case × strategy (over every k, night mode and forecast): steps outside the case's
-    limits, lowest and highest voltage."""
+    limits, lowest and highest voltage — over the steps with a converged power flow,
+    counted beside them (a diverged step has no voltage figure)."""
     g = summary.groupby(["case", "strategy"])
     out = pd.DataFrame(
         {
             "configurations": g.size(),
             "steps": g["steps"].sum(),
+            **{c: g[c].sum() for c in figure_steps(summary)},
             "steps outside limits": g["voltage_violation_steps"].sum(),
             "vmin_pu": g["vmin_pu"].min(),
             "vmax_pu": g["vmax_pu"].max(),

@@ -4,7 +4,6 @@
   with Algorithm 3 (forecast-aware limits) when the scenario carries a forecast.
 - `limits`: the symmetric reactive bound each rule may use (reserve k, forecast, safe).
 - `meters`: what a DER sees locally — reactive flows on the lines at its own bus.
-- `table`: the loss table of the three rules on a case (`python -m opfbench.strategies.table`).
 
 Sign conventions: Q positive = injected by the DER into the grid; a bus's upstream
 inflow Q_up is positive when the bus imports reactive power from its upstream line;

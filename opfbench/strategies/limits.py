@@ -15,15 +15,7 @@ from __future__ import annotations
 import numpy as np
 
 from opfbench.capability import check_reserve
-from opfbench.errors import InputError
 from opfbench.scenario import Scenario
-
-
-def reserve(k: float) -> float:
-    """Validate one reserve coefficient k ∈ [0, 1] and return it as a float."""
-    if np.ndim(k) != 0:
-        raise InputError(f"reserve coefficient k must be one number, got shape {np.shape(k)}")
-    return float(check_reserve(k))
 
 
 def physical_limit(scenario: Scenario) -> np.ndarray:
@@ -37,7 +29,7 @@ def reactive_limit(scenario: Scenario, k: float, safe: bool = False) -> np.ndarr
     capability = now
     if scenario.der_p_forecast_mw is not None:
         capability = np.maximum(now, scenario.qmax_mvar(scenario.der_p_forecast_mw))
-    limit = (1.0 - reserve(k)) * capability
+    limit = (1.0 - check_reserve(k)) * capability
     return np.minimum(limit, now) if safe else limit
 
 

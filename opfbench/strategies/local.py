@@ -20,10 +20,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from opfbench.capability import check_reserve
 from opfbench.powerflow import PowerFlowResult, solve_pf_batch
 from opfbench.result import StrategyResult
 from opfbench.scenario import Scenario
-from opfbench.strategies.limits import clip, reactive_limit, reserve
+from opfbench.strategies.limits import clip, reactive_limit
 from opfbench.strategies.meters import LocalMeters
 from opfbench.timing import elapsed_ms, now
 
@@ -44,7 +45,7 @@ def _evaluate(name: str, k: float, scenario: Scenario, q_mvar: np.ndarray, t0: f
 def no_action(scenario: Scenario, k: float = 0.0) -> StrategyResult:
     """Every DER at Q = 0 MVAr (k is validated and recorded, and otherwise unused)."""
     t0 = now()
-    k = reserve(k)
+    k = check_reserve(k)
     q = np.zeros(scenario.der_p_mw.shape)
     return _evaluate("no-action", k, scenario, q, t0)
 
@@ -57,7 +58,7 @@ def llma_setpoints(scenario: Scenario, limit_mvar: np.ndarray) -> np.ndarray:
 def llma(scenario: Scenario, k: float = 0.0, safe: bool = False) -> StrategyResult:
     """LLMA (Algorithm 1) with the bound L of `reactive_limit` (reserve k, forecast, safe)."""
     t0 = now()
-    k = reserve(k)
+    k = check_reserve(k)
     q = llma_setpoints(scenario, reactive_limit(scenario, k, safe))
     return _evaluate("llma", k, scenario, q, t0)
 
@@ -174,7 +175,7 @@ def lfma(scenario: Scenario, k: float = 0.0, safe: bool = False) -> StrategyResu
     diverged at any step get status "pf-diverged" and NaN losses. extra: `diverged_step`
     (S,) and `upstream_disagreements` (S,) (see `upstream_disagreements`)."""
     t0 = now()
-    k = reserve(k)
+    k = check_reserve(k)
     trace = lfma_trace(scenario, k, safe)
     final = trace.flows[-1]
     completed = PowerFlowResult(final.net, final.v, trace.diverged_step == 0, final.iterations)

@@ -15,14 +15,17 @@ import json
 import re
 from dataclasses import asdict, dataclass, field, replace
 
+from opfbench.capability import PAPER_KS, check_reserve
 from opfbench.errors import InputError
-from opfbench.registry import FORMULATIONS, STRATEGY_NAMES
-from opfbench.report.price import DEFAULT_CURRENCY, DEFAULT_PRICE_PER_KWH, DEFAULT_PRICE_SOURCE
+from opfbench.forecasting.names import MODEL_NAMES
+from opfbench.formulations.options import ACOPF_SOLVERS, check_option
+from opfbench.registry import STRATEGY_NAMES, get_strategy
+from opfbench.study.price import DEFAULT_CURRENCY, DEFAULT_PRICE_PER_KWH, DEFAULT_PRICE_SOURCE
 
 NIGHT_MODES = ("connected", "disconnected", "connected-q")
-DEFAULT_KS = (0.0, 0.2, 0.4, 0.6, 0.8)
 DEFAULT_NIGHT = "20:00-05:00"
 CHUNKS = ("auto", "6h", "day", "week", "month")
+FORECAST_SOURCES = ("off", "oracle")  # besides a forecasting model's name (`opfbench.forecasting.names`)
 #: The optional long tables (`study.tables.detail_rows`), in the order they are written.
 DETAIL_TABLES = ("der_q", "bus_v")
 SHORT_PERIOD_H = 48.0  # periods up to two days: 6-hour chunks ("auto") and the per-DER Q table by default
@@ -48,16 +51,14 @@ def _unique(label: str, values: tuple, notes: list[str]) -> tuple:
     return out
 
 
-ACOPF_SOLVERS = ("auto", "ipopt")  # formulations.acopf.SOLVERS, kept light for the CLI
-
-
 @dataclass(frozen=True)
 class StudyConfig:
     """The grid and period of a run (see the module docstring; periods in
     `opfbench.study.periods`). `forecast` lists forecast sources for Algorithm 3: "off",
     "oracle" (P^F = the next step's actual output) or a forecasting model's name whose PV
     forecasts `opfbench forecast --dataset pv --out DIR` wrote to `forecast_dir`.
-    Formulations run only with forecast "off" (they always see the current P^C).
+    A forecast other than "off" runs only the strategies that read one (the registry's
+    `uses_forecast`: Algorithm 3's rules); the others would repeat their "off" rows.
     `chunk`: the length of one task's slice of the period (6h/day/week/month, local time;
     "auto": 6h for periods of up to two days, so the paper day's tasks spread over the
     workers, month otherwise), fixed by the config and never by the number of workers. `detail`: also write the long
@@ -68,7 +69,7 @@ class StudyConfig:
 
     cases: tuple[str, ...] = ("paper33",)
     strategies: tuple[str, ...] = STRATEGY_NAMES
-    ks: tuple[float, ...] = DEFAULT_KS
+    ks: tuple[float, ...] = PAPER_KS
     night_modes: tuple[str, ...] = NIGHT_MODES
     night: str = DEFAULT_NIGHT
     forecast: tuple[str, ...] = ("off", "oracle")
@@ -92,19 +93,27 @@ class StudyConfig:
             if mode not in NIGHT_MODES:
                 raise InputError(f"unknown night mode {mode!r}; choose from {', '.join(NIGHT_MODES)}")
         for k in self.ks:
-            if not 0.0 <= float(k) <= 1.0:
-                raise InputError(f"reserve coefficient k must lie in [0, 1], got {k}")
+            check_reserve(k)
+        for source in self.forecast:
+            if source not in FORECAST_SOURCES + MODEL_NAMES:
+                raise InputError(
+                    f"unknown forecast source {source!r}; choose {', '.join(FORECAST_SOURCES)} or a forecasting model's "
+                    f"name ({', '.join(MODEL_NAMES)}), whose forecasts are read from the forecast folder "
+                    f"({self.forecast_dir})"
+                )
+        if not (isinstance(self.currency, str) and self.currency.strip() and self.currency.isprintable()):
+            raise InputError(f"currency must be a printable, non-empty label (e.g. EUR), got {self.currency!r}")
         if self.chunk not in CHUNKS:
             raise InputError(f"unknown chunk {self.chunk!r}; choose from {', '.join(CHUNKS)}")
         check_night(self.night)
-        if self.acopf_solver not in ACOPF_SOLVERS:
-            raise InputError(f"unknown AC OPF solver {self.acopf_solver!r}; choose from {', '.join(ACOPF_SOLVERS)}")
+        check_option("AC OPF solver", self.acopf_solver, ACOPF_SOLVERS)
         if not (self.cases and self.strategies and self.ks and self.night_modes and self.forecast):
             raise InputError("nothing to run: give at least one case, strategy, k, night mode and forecast")
         if not any(self.strategies_for(source) for source in self.forecast):
+            readers = [s for s in STRATEGY_NAMES if get_strategy(s).uses_forecast]
             raise InputError(
-                f"nothing to run: the formulations ({', '.join(FORMULATIONS)}) run only with forecast "
-                f"'off', and the grid has no local rule for forecast {', '.join(self.forecast)}"
+                f"nothing to run: only the strategies that read a forecast ({', '.join(readers)}) run under "
+                f"forecast {', '.join(self.forecast)}, and the grid has none of them"
             )
 
     @classmethod
@@ -124,8 +133,9 @@ class StudyConfig:
         return cls(**fields, notes=tuple(notes))
 
     def strategies_for(self, forecast: str) -> tuple[str, ...]:
-        """The strategies a forecast source runs: all with "off", local rules otherwise."""
-        return tuple(s for s in self.strategies if forecast == "off" or s not in FORMULATIONS)
+        """The strategies a forecast source runs: all with "off"; under a forecast only those
+        the registry says read one (`uses_forecast`) — any other would repeat its "off" rows."""
+        return tuple(s for s in self.strategies if forecast == "off" or get_strategy(s).uses_forecast)
 
     def as_dict(self) -> dict:
         """The manifest's `config` (JSON-ready)."""

@@ -27,12 +27,11 @@ Save = Callable[[TaskOutput], None]
 STOPPED = 130  # exit code after Ctrl-C (128 + SIGINT)
 #: The local cluster's workers:
 #: - with glibc's default heap trimming: Dask's MALLOC_TRIM_THRESHOLD_=65536 (it returns
-#:   freed memory to the OS at once) made the tasks ~15-25 % slower than in this process
-#:   (12 paper-day tasks on one worker: 8.2-10.0 s with it, 7.6-7.7 s without, 7.8 s
-#:   in-process); the single-threaded BLAS settings are kept;
+#:   freed memory to the OS at once) made the tasks slower than in this process; the
+#:   single-threaded BLAS settings are kept;
 #: - without the statistical profiler (it samples the task thread's stack every 10 ms),
-#:   with slower event-loop ticks and system monitor (20 ms and 0.5 s by default): the
-#:   tasks' summed wall time on the paper day, 2 workers, fell from ~32 s to ~28.5 s.
+#:   with slower event-loop ticks and system monitor (20 ms and 0.5 s by default), which
+#:   otherwise take time from the tasks (`python -m opfbench.bench run` measures a run).
 LOCAL_CLUSTER_CONFIG = {
     "distributed.nanny.pre-spawn-environ": {"OMP_NUM_THREADS": 1, "MKL_NUM_THREADS": 1, "OPENBLAS_NUM_THREADS": 1},
     "distributed.worker.profile.enabled": False,
@@ -61,7 +60,8 @@ class _SigintWatcher:
 
     def __exit__(self, *exc) -> None:
         self.armed = False
-        signal.pthread_kill(self.thread.ident, signal.SIGINT)  # wakes the watcher, which ends
+        if self.thread.ident is not None:  # started in __enter__
+            signal.pthread_kill(self.thread.ident, signal.SIGINT)  # wakes the watcher, which ends
         self.thread.join(5)
         signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})
 
@@ -89,8 +89,8 @@ def _done() -> None:
 
 def run_dask(inputs: list[TaskInput], save: Save, workers: int, scheduler: str | None) -> Callable[[], None]:
     """Run `inputs` on Dask. Returns a function that waits until the local cluster (if one
-    was started) has shut down: it shuts down in the background after the last result
-    (~0.8 s), while the caller assembles the tables; on an error or Ctrl-C it is shut
+    was started) has shut down: it shuts down in the background after the last result,
+    while the caller assembles the tables; on an error or Ctrl-C it is shut
     down before this returns."""
     import dask
     from dask.distributed import Client, LocalCluster, as_completed

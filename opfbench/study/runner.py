@@ -45,7 +45,7 @@ def prepare(config: StudyConfig) -> tuple[StudyConfig, Period, list[Task]]:
     config = replace(config.with_period(period.step_h * 60, period.step_h * len(period.index)), notes=config.notes + cases.notes)
     models = [s for s in config.forecast if s not in ("off", "oracle") and config.strategies_for(s)]
     if models:  # a missing or incomplete forecast file is refused here, not in a worker
-        from opfbench.forecasting import load_forecast
+        from opfbench.forecasting.outputs import load_forecast
 
         for model in models:
             load_forecast(config.forecast_dir, "pv", model)

@@ -9,7 +9,7 @@ DER's P from its series at the chunk's instants (the worker loads the case by sp
 cached per process); the chunk's load/pv/wind profiles only give the instants then. Night
 modes act on its solar units as on the paper's PV. `check_cases` refuses, before any
 work, what such a case cannot run: a model's forecasts (they forecast the BSRN plant of
-the paper day, not the grid's own units) and a period outside its series.
+the paper day, not the grid's own units).
 """
 
 from __future__ import annotations
@@ -34,7 +34,7 @@ def model_pv_forecast_pu(
     anywhere else a missing forecast is an error. `pv_now` has one value per step of
     `index` plus, when the period goes on, the next step's."""
     from opfbench.data import load_pv_minute
-    from opfbench.forecasting import load_forecast
+    from opfbench.forecasting.outputs import load_forecast
 
     series = load_forecast(forecast_dir, "pv", model) / load_pv_minute().attrs["rating_kw"]
     n = len(index)
@@ -50,7 +50,7 @@ def model_pv_forecast_pu(
             f"daylight step(s) of the period, first {first}; the forecasts cover "
             f"{series.index[0]} .. {series.index[-1]}"
         )
-    return np.clip(np.where(missing, pv_now[:n], ahead), 0.0, 1.0)
+    return np.where(missing, pv_now[:n], ahead)  # in [0, 1]: `load_forecast` refuses values outside the rating
 
 
 def chunk_scenario(
@@ -140,21 +140,13 @@ def check_cases(cases: tuple[str, ...], forecasts: tuple[str, ...]) -> CaseCheck
 
 def study_period(cases: tuple[str, ...], forecasts: tuple[str, ...], period: str, night: str, step_minutes: float | None):
     """(Period, CaseCheck) of a study: the period at the cases' native step when they have
-    their own series, checked to lie inside those series; cases with and without their
-    own series together only where both give the same instants (e.g. the year, or with
-    --step-minutes)."""
+    their own series (SimBench's span is the period's data span, 2016); cases with and
+    without their own series together only where both give the same instants (e.g. the
+    year, or with --step-minutes)."""
     from opfbench.study.periods import period_index, resolve_period
 
     check = check_cases(cases, forecasts)
-    if step_minutes is not None and not step_minutes > 0:
-        raise InputError(f"step must be a positive number of minutes, got {step_minutes}")
     index = period_index(period, step_minutes, check.native_minutes)
-    for spec in cases:
-        series = load_case(spec).series
-        if series is not None and (index[0] < series.index[0] or index[-1] > series.index[-1]):
-            raise InputError(
-                f"period {index[0]} .. {index[-1]} leaves {spec}'s profiles ({series.index[0]} .. {series.index[-1]})"
-            )
     if check.mixed and not period_index(period, step_minutes).equals(index):
         raise InputError(
             f"period {period!r}: cases with their own profiles (simbench:…) run at their {check.native_minutes:g}-min steps, "

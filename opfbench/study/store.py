@@ -30,6 +30,7 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 
 from opfbench.errors import InputError
+from opfbench.folders import check_out_dir
 from opfbench.jsonio import write_atomic, write_json
 from opfbench.study.config import DETAIL_TABLES, LABEL_FIELDS, StudyConfig
 from opfbench.study.periods import Period
@@ -47,19 +48,6 @@ def finished_tasks(out: Path) -> int:
     return sum(not f.name.endswith(side) for f in (out / "tasks").glob("*.parquet"))
 
 
-def check_out_dir(out: Path) -> Path:
-    """Refuse an --out that is a file or cannot be created or written, before any work."""
-    if out.exists() and not out.is_dir():
-        raise InputError(f"--out {out} exists and is not a folder")
-    try:
-        out.mkdir(parents=True, exist_ok=True)
-    except OSError as exc:
-        raise InputError(f"--out {out}: cannot create the folder ({exc.strerror})") from None
-    if not os.access(out, os.W_OK | os.X_OK):
-        raise InputError(f"--out {out} is not writable")
-    return out
-
-
 def _alive(pid: int) -> bool:
     try:
         os.kill(pid, 0)
@@ -74,7 +62,7 @@ def _versions() -> dict:
     import importlib.metadata as md
     import sys
 
-    out = {"python": sys.version.split()[0]}
+    out: dict[str, str | None] = {"python": sys.version.split()[0]}
     for name in ("numpy", "scipy", "pandas", "casadi", "cvxpy", "clarabel", "dask"):
         try:
             out[name] = md.version(name)

@@ -8,6 +8,7 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 
+from opfbench.errors import InputError
 from opfbench.result import OK, StrategyResult
 from opfbench.study.config import DETAIL_TABLES
 
@@ -48,7 +49,7 @@ def _certified_by(res: StrategyResult) -> np.ndarray:
     return np.full(res.n_snapshots, "", dtype=object)
 
 
-Columns = dict[str, object]  # column name → array of the part's rows, or one value for all of them
+Columns = dict[str, np.ndarray | str | float | int | bool]  # name → the part's rows, or one value for all
 
 
 def step_rows(
@@ -99,7 +100,7 @@ def detail_rows(
     setpoints (bus id, kind, q_mvar), "bus_v" per-bus |V| (p.u.)."""
     net = res.net
     n = res.n_snapshots
-    label = {"case": case, "strategy": res.strategy, "k": float(res.k), "night_mode": night_mode, "forecast": forecast}
+    label: Columns = {"case": case, "strategy": res.strategy, "k": float(res.k), "night_mode": night_mode, "forecast": forecast}
 
     def der_q() -> Columns:
         n_der = len(net.ders)
@@ -127,7 +128,7 @@ def stack(parts: list[Columns], columns: list[str], tz) -> pd.DataFrame:
     value, or a few, repeated on every row: many times faster to build and to hand
     between processes; the files hold plain text, `store._arrow`); "time" (UTC ns) gets
     the zone `tz`."""
-    rows = [max(len(v) for v in part.values() if np.ndim(v)) for part in parts]
+    rows = [max(np.shape(v)[0] for v in part.values() if np.ndim(v)) for part in parts]
     data = {}
     for name in columns:
         values = [part[name] for part in parts]
@@ -136,7 +137,8 @@ def stack(parts: list[Columns], columns: list[str], tz) -> pd.DataFrame:
             codes = np.repeat(np.array([categories.index(v) for v in values], dtype=np.int32), rows)
             data[name] = pd.Categorical.from_codes(codes, categories)
         elif name == "time":
-            data[name] = pd.DatetimeIndex(np.concatenate(values).view("datetime64[ns]")).tz_localize("UTC").tz_convert(tz)
+            times = np.concatenate([np.asarray(v) for v in values])
+            data[name] = pd.DatetimeIndex(times.view("datetime64[ns]")).tz_localize("UTC").tz_convert(tz)
         else:
             arrays = [np.full(r, v) if np.ndim(v) == 0 else np.asarray(v) for v, r in zip(values, rows, strict=True)]
             column = np.concatenate(arrays) if arrays else np.zeros(0)
@@ -148,8 +150,11 @@ def stack(parts: list[Columns], columns: list[str], tz) -> pd.DataFrame:
 def partial_summary(steps: pd.DataFrame) -> pd.DataFrame:
     """Sums, counts and extremes per configuration of one task's rows (combined by
     `summarize`)."""
+    measured = steps.losses_kw.notna()  # a converged power flow: the step has a loss and voltage figure
     s = steps.assign(
         energy=steps.losses_kw * steps.step_h,
+        measured=measured.astype(np.int64),
+        measured_h=steps.step_h.where(measured, 0.0),
         lb_energy=steps.lower_bound_kw * steps.step_h,
         lb_missing=steps.lower_bound_kw.isna().astype(np.int64),
         not_ok=(steps.status != OK).astype(np.int64),
@@ -163,6 +168,8 @@ def partial_summary(steps: pd.DataFrame) -> pd.DataFrame:
         {
             "steps": g.size(),
             "hours": g.step_h.sum(),
+            "pf_converged_steps": g.measured.sum(),
+            "measured_hours": g.measured_h.sum(),
             "energy_kwh": g.energy.sum(),
             "not_ok_steps": g.not_ok.sum(),
             "voltage_violation_steps": g.vv.sum(),
@@ -180,17 +187,53 @@ def partial_summary(steps: pd.DataFrame) -> pd.DataFrame:
     ).reset_index()
 
 
+PARTIAL_COLUMNS = (
+    "steps",
+    "hours",
+    "pf_converged_steps",
+    "measured_hours",
+    "energy_kwh",
+    "not_ok_steps",
+    "voltage_violation_steps",
+    "vmin_pu",
+    "vmax_pu",
+    "max_excursion_mvar",
+    "excursion_steps",
+    "lower_bound_kwh",
+    "lb_missing",
+    "wall_s",
+    "solver_s",
+    "solver_known",
+    "certified",
+)
+"""The columns of a task's partial sums (`partial_summary`) besides KEYS: a checkpoint
+without one of them was written by another version."""
+
+
 def summarize(partials: list[pd.DataFrame], order: list[tuple]) -> pd.DataFrame:
     """The summary (one row per configuration, in `order` of KEYS tuples) from
-    `partial_summary` frames. no_action_kwh: no action's energy for the same case, k and
-    night mode with forecast off; lower_bound_kwh: the SOCP bound (slack may export) over
-    the same steps, from the socp rows (else the acopf rows), NaN unless every step has one."""
+    `partial_summary` frames. A step whose power flow did not converge (pf-diverged) has
+    no loss or voltage figure: pf_diverged_steps counts them, pf_converged_steps the
+    others — the steps avg_loss_kw, vmin_pu, vmax_pu and voltage_violation_steps are
+    over; energy_kwh (the period's) is NaN unless every step has a figure, and so are the
+    savings and gaps built on it. no_action_kwh: no action's energy for the same case, k
+    and night mode with forecast off; lower_bound_kwh: the SOCP bound (slack may export)
+    over the same steps, from the socp rows (else the acopf rows), NaN unless every step
+    has one."""
     p = pd.concat(partials, ignore_index=True)
+    missing = [c for c in PARTIAL_COLUMNS if c not in p.columns]
+    if missing:  # a checkpoint of an older opfbench: its rows do not mean what this version's do
+        raise InputError(
+            f"the run folder holds finished tasks whose partial sums lack {', '.join(missing)} (written by another "
+            "opfbench version); rerun with --fresh"
+        )
     g = p.groupby(KEYS, sort=False)
     sums = g[
         [
             "steps",
             "hours",
+            "pf_converged_steps",
+            "measured_hours",
             "energy_kwh",
             "not_ok_steps",
             "voltage_violation_steps",
@@ -205,7 +248,9 @@ def summarize(partials: list[pd.DataFrame], order: list[tuple]) -> pd.DataFrame:
     ].sum()
     out = sums.join(g.vmin_pu.min()).join(g.vmax_pu.max()).join(g.max_excursion_mvar.max())
     out = out.reindex(pd.MultiIndex.from_tuples(order, names=KEYS)).reset_index()
-    out["avg_loss_kw"] = out.energy_kwh / out.hours
+    out["pf_diverged_steps"] = out.steps - out.pf_converged_steps
+    out["avg_loss_kw"] = (out.energy_kwh / out.measured_hours).where(out.pf_converged_steps > 0)
+    out["energy_kwh"] = out.energy_kwh.where(out.pf_diverged_steps == 0)  # a period's energy needs every step's
     out["solver_s"] = out.solver_s.where(out.solver_known > 0)
     out["certified_share"] = out.certified / out.steps
     base = out[(out.strategy == "no-action") & (out.forecast == "off")].set_index(["case", "k", "night_mode"]).energy_kwh
@@ -238,6 +283,8 @@ def summarize(partials: list[pd.DataFrame], order: list[tuple]) -> pd.DataFrame:
         "wall_s",
         "solver_s",
         "certified_share",
+        "pf_converged_steps",
+        "pf_diverged_steps",
     ]
-    ints = ["steps", "not_ok_steps", "voltage_violation_steps", "excursion_steps"]
+    ints = ["steps", "not_ok_steps", "voltage_violation_steps", "excursion_steps", "pf_converged_steps", "pf_diverged_steps"]
     return out[KEYS + cols].astype({c: np.int64 for c in ints})

@@ -1,10 +1,10 @@
 """Tasks: the grid split into independent pieces of work.
 
 A task is (case, forecast, k, chunk of steps) and runs every requested strategy and
-night mode of that group, the strategies of one night mode on ONE Scenario object (so
-`acopf`, `acopf-paper` and `socp` share SOCP solves). The night modes differ only in the
-night hours, so their daytime snapshots are the same problems: one task solves each once
-(`socp.socp_solves` reuses a solve of identical data in the same process); and where two
+night mode of that group. `acopf`, `acopf-paper` and `socp` share SOCP solves, and the
+night modes — which differ only in the night hours, so their daytime snapshots are the
+same problems — solve each once: the formulations' solve cache is keyed on the data
+(`formulations.relaxation`), whatever Scenario objects carry it; and where two
 night modes give the very same scenario (no PV output in the night hours of the chunk), the
 second takes the first's results (`Scenario.same_data`) with its wall time 0. Its input
 carries its slice of the period's profiles, so it runs the same in this process, in a
@@ -27,7 +27,7 @@ from opfbench.scenario import Scenario
 from opfbench.study.config import StudyConfig
 from opfbench.study.periods import Period
 from opfbench.study.scenarios import chunk_scenario
-from opfbench.study.tables import DETAIL_COLUMNS, STEP_COLUMNS, detail_rows, partial_summary, stack, step_rows
+from opfbench.study.tables import DETAIL_COLUMNS, STEP_COLUMNS, Columns, detail_rows, partial_summary, stack, step_rows
 
 
 @dataclass(frozen=True)
@@ -128,7 +128,8 @@ def run_task(inp: TaskInput) -> TaskOutput:
     with threadpool_limits(1):
         step = pd.Timedelta(hours=inp.step_h)
         time, night = inp.profiles.index[: inp.n_steps], inp.night[: inp.n_steps]
-        steps, detail = [], {name: [] for name in inp.detail}
+        steps: list[Columns] = []
+        detail: dict[str, list[Columns]] = {name: [] for name in inp.detail}
         ran: list[tuple[Scenario, dict[str, StrategyResult]]] = []
         for mode in t.night_modes:
             scenario = chunk_scenario(t.case, mode, t.forecast, inp.profiles, inp.night, inp.n_steps, step, inp.forecast_dir)

@@ -1,4 +1,5 @@
-"""Re-solving a cvxpy conic problem with Clarabel for new data at low overhead.
+"""Clarabel for the relaxations: its settings, and re-solving a cvxpy conic problem for new
+data at low overhead, with bound screening.
 
 The OPF relaxations change only their data between snapshots — fixed injections and Q
 limits, vectors θ that enter the constraints linearly. They are written in cvxpy with
@@ -11,7 +12,10 @@ The data variables' columns are then moved into the offset: with x = [y; θ],
 so each solve only updates b(θ) = b₀ + B·θ (B = −A_θ, computed for many θ at once by
 `offsets`) of persistent Clarabel solvers.
 
-Variable values are read at the columns cvxpy assigned them. Compiling without cvxpy
+Variable values are read at the columns cvxpy assigned them. cvxpy has no public API for
+those columns: they are read from its compiled problem (`var_id_to_col`), which is why
+pyproject.toml pins the tested cvxpy range and `tests/test_formulations_clarabel.py`
+fails loudly if that internal moves (`variable_columns` raises naming it). Compiling without cvxpy
 parameters matters on large feeders: cvxpy's parametrized tensor has (variables + 1)·
 (parameters + 1) columns, which its SOC restructuring turns into gigabytes at 10 000
 buses; the parameter-free compile is linear in the problem size.
@@ -50,6 +54,43 @@ import scipy.sparse as sp
 SOLVED = frozenset({"Solved", "AlmostSolved"})  # AlmostSolved: met Clarabel's reduced tolerances
 INFEASIBLE = frozenset({"PrimalInfeasible", "AlmostPrimalInfeasible"})
 ANSWERED = SOLVED | INFEASIBLE
+
+
+TOLERANCE = 1e-8  # Clarabel gap and feasibility tolerances (the relaxations' objective in kW)
+MAX_ITER = 200
+
+
+def relaxation_settings() -> clarabel.DefaultSettings:
+    """Clarabel's settings for the OPF relaxations (small, sparse, re-solved per snapshot)."""
+    settings = clarabel.DefaultSettings()
+    settings.verbose = False
+    settings.max_iter = MAX_ITER
+    settings.tol_gap_abs = settings.tol_gap_rel = settings.tol_feas = TOLERANCE
+    # Iterative refinement roughly doubles the solve time on the paper day (paper33) for
+    # objectives within 2e-6 kW; one thread and QDLDL (deterministic, no thread pool on tiny
+    # KKT systems) are faster again (`python -m opfbench.bench opf` times the result).
+    settings.iterative_refinement_enable = False
+    settings.max_threads = 1
+    settings.direct_solve_method = "qdldl"
+    # Mean Clarabel iterations per answer on the paper day at k = 0 / 0.4 (screened, as
+    # solved), step fraction 0.99 (Clarabel's default) → 0.98: paper33 10.5 → 9.4 / 11.1 →
+    # 8.9, case69-der 9.9 → 9.5 / 10.1 → 9.7, case141-der 9.5 → 9.9 / 9.4 → 9.5, feeder1k
+    # (every 20th step) 11.1 → 9.9 / 10.7 → 10.1; 0.97: more again.
+    settings.max_step_fraction = 0.98
+    return settings
+
+
+def variable_columns(data: dict) -> dict[int, int]:
+    """cvxpy variable id → its first column in the compiled problem `data`
+    (`get_problem_data`); cvxpy's internal, see the module docstring."""
+    columns = getattr(data.get("param_prob"), "var_id_to_col", None)
+    if not isinstance(columns, dict):
+        raise RuntimeError(
+            f"cvxpy {cp.__version__} no longer exposes the compiled problem's variable columns "
+            "(param_prob.var_id_to_col), which the relaxations read; install the cvxpy range pinned "
+            "in opfbench's pyproject.toml"
+        )
+    return columns
 
 
 def conic_status(solution: clarabel.DefaultSolution) -> str:
@@ -102,24 +143,12 @@ class ConeSolve:
 
 
 class _Clarabel:
-    """One persistent Clarabel solver on rows `rows` of A·x + s = b (cones in row order).
-    For a screened program, `kept`: the bound rows it keeps as equalities; `checked`: the
-    dropped bounds its answers must check (all but those whose opposite is kept: their
-    slack is the box's width)."""
+    """One persistent Clarabel solver on rows `rows` of A·x + s = b (cones in row order)."""
 
     def __init__(
-        self,
-        a: sp.csc_matrix,
-        c: np.ndarray,
-        rows: np.ndarray,
-        cones: list,
-        b: np.ndarray,
-        settings: clarabel.DefaultSettings,
-        kept: np.ndarray | None = None,
-        checked: np.ndarray | None = None,
+        self, a: sp.csc_matrix, c: np.ndarray, rows: np.ndarray, cones: list, b: np.ndarray, settings: clarabel.DefaultSettings
     ):
         self.rows, self._a, self._c, self._cones, self._settings = rows, a[rows], c, cones, settings
-        self.kept, self.checked = kept, checked
         self.solver = self._fresh(b[rows])
         if not self.solver.is_data_update_allowed():
             raise ValueError("Clarabel does not allow data updates for this problem (presolve or chordal decomposition)")
@@ -134,7 +163,7 @@ class _Clarabel:
         infeasible — seen as InsufficientProgress where a solver set up afresh on the same
         data succeeds), a fresh solver is built on this b, kept, and tried once more."""
         b = b[self.rows]
-        self.solver.update(b=b.tolist())  # a list: Clarabel's numpy conversion costs 3× more
+        self.solver.update(b=b.tolist())  # a list: Clarabel's conversion of a numpy array is slower
         solution = self.solver.solve()
         statuses, iterations = [conic_status(solution)], solution.iterations
         if statuses[0] not in ANSWERED:
@@ -145,8 +174,18 @@ class _Clarabel:
         return solution, statuses, iterations
 
 
+class _Screened(_Clarabel):
+    """A screened program: `kept` marks the bound rows it keeps as equalities; `checked` the
+    dropped bounds its answers must check (all but those whose opposite is kept: their
+    slack is the box's width)."""
+
+    def __init__(self, program: "ParametricConeProgram", rows: np.ndarray, cones: list, kept: np.ndarray, checked: np.ndarray):
+        super().__init__(program._a, program._c, rows, cones, program._b0, program._settings)
+        self.kept, self.checked = kept, checked
+
+
 def _vector(values: list[float]) -> np.ndarray:
-    """Clarabel's solution list as an array (np.fromiter: 3× faster than np.asarray here)."""
+    """Clarabel's solution list as an array (np.fromiter: faster than np.asarray here)."""
     return np.fromiter(values, np.float64, len(values))
 
 
@@ -173,7 +212,7 @@ class _BoundState:
     def slack(self, x: np.ndarray) -> np.ndarray:
         return self.rhs - self.p._bound_coef * x[self.p._bound_col]
 
-    def check(self, program: _Clarabel, x: np.ndarray, z: Sequence[float]) -> tuple[bool, tuple]:
+    def check(self, program: _Screened, x: np.ndarray, z: Sequence[float]) -> tuple[bool, tuple]:
         """(does the screened `program`'s solution (x, z) answer the full program, the
         corrected guess)."""
         kept = program.kept
@@ -214,7 +253,7 @@ class ParametricConeProgram:
         data, _, _ = problem.get_problem_data(cp.CLARABEL)
         if data.get("lower_bounds") is not None or data.get("upper_bounds") is not None:
             raise ValueError("variable bounds attributes are not supported; write them as constraints")
-        var_col = data["param_prob"].var_id_to_col
+        var_col = variable_columns(data)
         a, c = data["A"].tocsc(), np.asarray(data["c"], dtype=float)
         data_cols = [
             np.arange(var_col[v.id], var_col[v.id] + v.size) if v.id in var_col else np.full(v.size, -1) for v in data_vars
@@ -237,7 +276,7 @@ class ParametricConeProgram:
         self._settings, self._dims = settings, data["dims"]
         self._screening(self._dims)
         self.full = _Clarabel(self._a, self._c, np.arange(self._b0.size), _cones(data["dims"]), self._b0, settings)
-        self._screens: OrderedDict[tuple, _Clarabel] = OrderedDict()
+        self._screens: OrderedDict[tuple, _Screened] = OrderedDict()
         self._guess: tuple | None = None
 
     def _screening(self, dims) -> None:
@@ -276,7 +315,7 @@ class ParametricConeProgram:
             raise ValueError(f"θ has {thetas.shape[1]} entries, the data variables {sum(self._sizes)}")
         return self._b0 + (self._b_theta @ thetas.T).T
 
-    def _screen(self, active: tuple) -> _Clarabel:
+    def _screen(self, active: tuple) -> _Screened:
         """The screened program with the bounds `active` (indices into the bound rows) as
         equalities and the other bounds dropped, built once (least recently used dropped);
         its `kept` marks the bounds in `active`."""
@@ -288,9 +327,7 @@ class ParametricConeProgram:
             kept = np.zeros(self._bounds.size, dtype=bool)
             kept[list(active)] = True
             checked = ~kept & ~((self._opposite >= 0) & kept[self._opposite])
-            program = self._screens[active] = _Clarabel(
-                self._a, self._c, rows, cones + self._soc_cones, self._b0, self._settings, kept, checked
-            )
+            program = self._screens[active] = _Screened(self, rows, cones + self._soc_cones, kept, checked)
             while len(self._screens) > MAX_SCREENS:
                 self._screens.popitem(last=False)
         self._screens.move_to_end(active)

@@ -1,5 +1,6 @@
-"""HTML report section of a forecast run: metrics beside paper Table I, one test day plot,
-on the page frame and stylesheet of every opfbench page (`opfbench.report.page`).
+"""The page of a forecast run (`opfbench forecast --out DIR` writes it beside the forecasts):
+metrics beside paper Table I, one test day plot, on the page frame and stylesheet of every
+opfbench page (`opfbench.report.page`).
 
 `forecast_section(result)` returns an HTML fragment; `forecast_page(result)` a
 self-contained page (inline CSS, the plot as a base64 PNG; no script, no external resources).

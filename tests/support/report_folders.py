@@ -9,6 +9,7 @@ import numpy as np
 import pandas as pd
 
 from opfbench.jsonio import write_json
+from opfbench.registry import get_strategy
 
 STRATEGIES = ("no-action", "llma", "lfma", "acopf", "acopf-paper", "socp")
 FORMULATIONS = ("acopf", "acopf-paper", "socp")
@@ -34,8 +35,8 @@ def steps_table(case: str = "paper33", steps: int = 144, step_min: float = 10.0)
     for mode in NIGHT_MODES:
         for k in KS:
             for name in STRATEGIES:
-                for forecast in ("off", "oracle") if name not in FORMULATIONS else ("off",):
-                    saved = SAVED[name] * (1 - k) * (1.15 if forecast == "oracle" and name != "no-action" else 1.0)
+                for forecast in ("off", "oracle") if get_strategy(name).uses_forecast else ("off",):  # as the runner
+                    saved = SAVED[name] * (1 - k) * (1.15 if forecast == "oracle" else 1.0)
                     at_night = {"connected": 0.6, "disconnected": 0.0, "connected-q": 1.2}[mode]
                     frac = np.where(night, saved * at_night, saved)
                     losses = base * (1 + (0.01 if mode == "disconnected" else 0.0)) * (1 - frac)

@@ -1,4 +1,4 @@
-"""Cross-check: the AC OPF is never beaten by a feasible point.
+"""Test oracle: the AC OPF is never beaten by a feasible point.
 
 On a snapshot where the OPF reached an optimum (status "ok" or "fallback-cold"), any other
 strategy's setpoints that meet every limit of the OPF (AC-evaluated, `problem.ac_feasible`)
@@ -15,9 +15,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from opfbench.errors import InputError
-from opfbench.formulations.problem import FALLBACK_COLD, ac_feasible, snapshot_data
+from opfbench.formulations.problem import ac_feasible, snapshot_data
 from opfbench.powerflow import solve_pf_batch
-from opfbench.result import OK, StrategyResult
+from opfbench.result import FALLBACK_COLD, OK, StrategyResult
 from opfbench.scenario import Scenario
 
 TOLERANCE_KW = 1e-3

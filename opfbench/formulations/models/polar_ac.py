@@ -1,0 +1,124 @@
+"""The exact AC OPF in polar form (CasADi NLP, solved by IPOPT).
+
+The problem is `problem.OpfProblem` (per unit on `net.base_mva`): minimize branch losses
+= P_slack + Σ P_fixed − Σ Gsh·|V|² (kW) over the DER Q, |V| and θ of every non-slack bus,
+subject to the AC power balance (π model, `problem.PiBranches`) and the slack rule of
+`OpfProblem.balance`, |V_slack| = v_slack, θ_slack = 0, vmin ≤ |V| ≤ vmax elsewhere and
+−(1 − k)·Qmax(P) ≤ Q ≤ (1 − k)·Qmax(P) with DER P fixed.
+
+`AcOpf` builds the NLP once per (network, slack_export) — fixed injections are NLP
+parameters, Q and |V| limits variable bounds — sparse throughout (vector expressions,
+sparse incidence; CasADi SX below MX_MIN_BUSES buses, MX from there on); IPOPT solves it
+cold or warm (`solvers.ipopt_adapter`).
+"""
+
+from __future__ import annotations
+
+from typing import TypeVar
+
+import casadi as ca
+import numpy as np
+import scipy.sparse as sp
+
+from opfbench.formulations.cache import per_thread
+from opfbench.formulations.problem import OpfProblem, incidence
+from opfbench.formulations.solvers.ipopt_adapter import IpoptNlp, IpoptSolve
+from opfbench.network import Network
+
+# From this many buses the NLP is written in CasADi MX (vector operations) instead of SX
+# (scalar graph): creating an IPOPT instance derives the Jacobian and Hessian on the graph,
+# an order of magnitude faster in MX on feeder1k and feeder10k, while on small cases SX
+# solves faster (`python -m opfbench.bench opf` times the paper33 solves).
+MX_MIN_BUSES = 500
+Sym = TypeVar("Sym", ca.SX, ca.MX)  # the CasADi symbol type of one NLP
+
+
+def _sparse_dm(m: sp.spmatrix) -> ca.DM:
+    """A scipy sparse matrix as a sparse CasADi DM (no dense n×n intermediate)."""
+    coo = sp.coo_matrix(m)
+    return ca.DM.triplet(coo.row.tolist(), coo.col.tolist(), ca.DM(coo.data), coo.shape[0], coo.shape[1])
+
+
+def _nlp(problem: OpfProblem, sym: type[Sym]) -> tuple[dict[str, Sym], list]:
+    """The NLP {x, p, f, g} of `problem` in CasADi symbols `sym` (SX or MX), and its
+    constraint rows (`OpfProblem.balance`)."""
+    net = problem.net
+    n, n_der, m = net.n_bus, len(net.ders), problem.others.size
+    theta_o, vm_o, q = sym.sym("theta", m), sym.sym("vm", m), sym.sym("q", n_der)
+    p_fixed, q_fixed = sym.sym("p_fixed", n), sym.sym("q_fixed", n)
+    place = _sparse_dm(incidence(problem.others, n))  # non-slack values onto all buses
+    at_slack = np.zeros(n)
+    at_slack[problem.slack] = problem.v_slack
+    theta = ca.mtimes(place, theta_o)
+    vm = ca.mtimes(place, vm_o) + ca.DM(at_slack)
+
+    br = problem.branches
+    f, t = br.f.tolist(), br.t.tolist()
+    vm_f, vm_t = vm[f], vm[t]
+    vv, angle = vm_f * vm_t, theta[f] - theta[t]
+    c, s = vv * ca.cos(angle), vv * ca.sin(angle)
+    v2 = vm**2
+    p_f, q_f, p_t, q_t = br.flows(vm_f**2, vm_t**2, c, s, lambda a, e: ca.DM(a) * e)
+    at_from, at_to = _sparse_dm(br.at_from), _sparse_dm(br.at_to)
+    mismatch_p = ca.mtimes(at_from, p_f) + ca.mtimes(at_to, p_t) + ca.DM(problem.gsh) * v2 - p_fixed
+    mismatch_q = (
+        ca.mtimes(at_from, q_f)
+        + ca.mtimes(at_to, q_t)
+        - ca.DM(problem.bsh) * v2
+        - q_fixed
+        - ca.mtimes(_sparse_dm(problem.der_at_bus), q)
+    )
+    rows = problem.balance(mismatch_p, mismatch_q, lambda e, i: e[i.tolist()])
+    losses = mismatch_p[problem.slack] + ca.sum1(p_fixed) - ca.dot(ca.DM(problem.gsh), v2)
+    nlp = {
+        "x": ca.vertcat(theta_o, vm_o, q),
+        "p": ca.vertcat(p_fixed, q_fixed),
+        "f": problem.kw_per_pu * losses,
+        "g": ca.vertcat(*(r.expr for r in rows)),
+    }
+    return nlp, rows
+
+
+class AcOpf:
+    """The polar AC OPF of one network, built once; `solve` per snapshot.
+
+    Decision vector x = [θ (non-slack buses, rad), |V| (non-slack, p.u.), Q_DER (p.u.)].
+    NLP parameters: fixed injections [P_fixed; Q_fixed] (2·n_bus, p.u.).
+    Constraints g: the rows of `OpfProblem.balance` (P and Q mismatch at the non-slack
+    buses = 0, then, with `slack_export=False`, the slack's P ≥ 0).
+    """
+
+    def __init__(self, net: Network, slack_export: bool = True):
+        self.problem = problem = OpfProblem.of(net, slack_export)
+        self.net, self.slack_export = net, slack_export
+        self.others = problem.others
+        m = self.others.size
+        nlp, rows = _nlp(problem, ca.MX) if net.n_bus >= MX_MIN_BUSES else _nlp(problem, ca.SX)
+        lbg, ubg = np.concatenate([r.lo for r in rows]), np.concatenate([r.hi for r in rows])
+        self.ipopt = IpoptNlp("acopf", nlp, lbg, ubg, setpoints=slice(2 * m, None))
+        inf = np.full(m, np.inf)
+        self._lbx_fixed = np.concatenate([-inf, problem.vm_min])
+        self._ubx_fixed = np.concatenate([inf, problem.vm_max])
+        self.flat_start = np.concatenate([np.zeros(m), np.ones(m), np.zeros(len(net.ders))])
+
+    def solve(self, s_fixed: np.ndarray, q_limit: np.ndarray, start: IpoptSolve | None = None) -> IpoptSolve:
+        """Solve one snapshot: fixed injections `s_fixed` (n_bus,) complex p.u., usable Q
+        limits `q_limit` (n_der,) p.u. With `start` (a previous solve) IPOPT is warm-started
+        from its primal and dual point; without, it starts cold from the flat start."""
+        return self.ipopt.solve(
+            np.concatenate([s_fixed.real, s_fixed.imag]),
+            np.concatenate([self._lbx_fixed, -q_limit]),
+            np.concatenate([self._ubx_fixed, q_limit]),
+            self.flat_start,
+            start,
+        )
+
+
+def build_acopf(net: Network, slack_export: bool = True) -> AcOpf:
+    """A new AC OPF of `net` (the caller's own: its IPOPT instances keep per-solve state)."""
+    return AcOpf(net, slack_export)
+
+
+def ac_opf(net: Network, slack_export: bool = True) -> AcOpf:
+    """The AC OPF of `net`, built once per network and option in this thread."""
+    return per_thread(net, ("acopf", bool(slack_export)), lambda: build_acopf(net, slack_export))

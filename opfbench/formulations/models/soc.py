@@ -1,0 +1,196 @@
+"""What every second-order-cone relaxation of the OPF problem shares (cvxpy + Clarabel).
+
+The OPF problem of `problem.OpfProblem` (as the AC OPF solves it), in v = |V|²: DER Q
+within ±(1 − k)·Qmax(P), v_slack², vmin² ≤ v ≤ vmax², the power balance and slack rule
+of `OpfProblem.balance`; objective = branch losses. A model (`distflow`, `jabr`) writes
+how the voltages couple the branch flows: its own variables, the bus mismatches and its
+cones (`SocpRelaxation._network_model`). Any AC-feasible point maps to a feasible point of
+such a relaxation with the same losses, so its optimum is a lower bound on the AC OPF's.
+
+The bound reported is min(primal, dual) objective of Clarabel's solution (kW). Clarabel's
+"AlmostSolved" (reduced tolerances met) counts as solved and is recorded as such in
+solver_status; a solve that stalls after an in-place data update is retried once on a
+fresh solver (`clarabel_adapter.ParametricConeProgram.solve`), recorded as e.g.
+"InsufficientProgress → Solved".
+
+`relaxation_gap` = max over branches of the model's cone residual at the optimum, in p.u.²
+(`_cone_residual`): 0 (in practice ≲ 1e-7, the solver's tolerance) means the relaxation is
+exact on every branch; the AC losses of the setpoints against the bound is the end-to-end
+measure.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Callable
+
+import cvxpy as cp
+import numpy as np
+
+from opfbench.formulations.problem import OpfProblem, Row
+from opfbench.formulations.solvers.clarabel_adapter import INFEASIBLE as CONIC_INFEASIBLE
+from opfbench.formulations.solvers.clarabel_adapter import ParametricConeProgram, relaxation_settings
+from opfbench.network import Network
+from opfbench.timing import elapsed_ms, now
+
+Reader = Callable[[cp.Variable], np.ndarray]  # a variable's values in stacked solutions, (S, size)
+
+
+@dataclass(frozen=True)
+class SocpSolve:
+    """One snapshot's relaxation solve. outcome: "optimal" | "infeasible" (certified by
+    Clarabel) | "failed"; solver_status: Clarabel's own status; solve_ms: wall time of
+    Clarabel's data updates and solves; iterations: the answering Clarabel solve's; solves:
+    every Clarabel solve the answer took (`clarabel_adapter.ConeSolve`); slack_p_pu: the
+    slack bus's active injection at the optimum (p.u., positive = import from the upstream
+    grid). Where not optimal, lower_bound_kw, relaxation_gap and slack_p_pu are NaN and
+    q_pu is None."""
+
+    outcome: str
+    solver_status: str
+    lower_bound_kw: float
+    q_pu: np.ndarray | None
+    relaxation_gap: float
+    solve_ms: float
+    iterations: int
+    solves: int
+    slack_p_pu: float = np.nan
+
+    @property
+    def optimal(self) -> bool:
+        return self.outcome == "optimal"
+
+    @property
+    def infeasible(self) -> bool:
+        return self.outcome == "infeasible"
+
+    def diagnostics(self) -> dict:
+        """What the solve contributes to a result's per-snapshot `extra`."""
+        return {
+            "solve_ms": self.solve_ms,
+            "iterations": int(self.iterations),
+            "solves": int(self.solves),
+            "solver_status": self.solver_status,
+            "relaxation_gap": self.relaxation_gap,
+        }
+
+
+def data_vector(s_fixed: np.ndarray, q_limit: np.ndarray) -> np.ndarray:
+    """A snapshot's data θ = [Re s_fixed, Im s_fixed, q_limit] (p.u.); `s_fixed`/`q_limit`
+    may be one snapshot or (S, ·) arrays."""
+    return np.concatenate([s_fixed.real, s_fixed.imag, q_limit], axis=-1)
+
+
+def _rows(row: Row) -> list[cp.Constraint]:
+    """A problem row lo ≤ expr ≤ hi as cvxpy constraints."""
+    if np.array_equal(row.lo, row.hi):
+        return [row.expr == row.lo]
+    return ([row.expr >= row.lo] if np.all(np.isfinite(row.lo)) else []) + (
+        [row.expr <= row.hi] if np.all(np.isfinite(row.hi)) else []
+    )
+
+
+def screens(net: Network) -> bool:
+    """Whether the relaxation of `net` uses bound screening (`solvers.clarabel_adapter`):
+    not on feeders with a DER at every other bus or more (SimBench's MV grids). There the
+    active set moves with almost every 15-min step and is often degenerate — measured on
+    1-MV-rural's paper day (102 DER, 101 buses): the last step's guess failed on 73 % of
+    the steps and the screened program at a step's own active set passed its check on
+    43 %, ~3 Clarabel solves per step (8.0 ms) against one full solve (2.2 ms)."""
+    return len(net.ders) < net.n_bus / 2
+
+
+class SocpRelaxation:
+    """The relaxation of one `OpfProblem`, built once; `solve` per snapshot.
+
+    Data (cvxpy variables that `ParametricConeProgram` holds fixed per solve): p_fixed,
+    q_fixed (n_bus,) fixed injections and q_limit (n_der,) usable Q limit, all p.u.
+    A model subclasses it with its `model` name, `_network_model` and `_cone_residual`.
+    """
+
+    model: str = ""
+
+    def __init__(self, net: Network, slack_export: bool = True):
+        self.problem = problem = OpfProblem.of(net, slack_export)
+        self.net = net
+        n = net.n_bus
+        self.p_fixed = cp.Variable(n, name="p_fixed")
+        self.q_fixed = cp.Variable(n, name="q_fixed")
+        self.q_limit = cp.Variable(len(net.ders), name="q_limit")
+        self.q = cp.Variable(len(net.ders), name="q_der")
+        self.v = cp.Variable(n, name="v")  # |V|² p.u.²
+        mismatch_p, mismatch_q, losses, constraints = self._network_model()
+        others = problem.others
+        for row in problem.balance(mismatch_p, mismatch_q, lambda e, i: e[i]):
+            constraints += _rows(row)
+        constraints += [
+            self.v[problem.slack] == problem.v_slack**2,
+            self.v[others] >= problem.vm_min**2,
+            self.v[others] <= problem.vm_max**2,
+            self.q <= self.q_limit,
+            self.q >= -self.q_limit,
+        ]
+        self.cvxpy_problem = cp.Problem(cp.Minimize(problem.kw_per_pu * losses), constraints)
+        data_vars = (self.p_fixed, self.q_fixed, self.q_limit)
+        self.program = ParametricConeProgram(self.cvxpy_problem, data_vars, relaxation_settings(), screening=screens(net))
+
+    def _network_model(self) -> tuple[cp.Expression, cp.Expression, cp.Expression, list[cp.Constraint]]:
+        """(mismatch_p, mismatch_q, branch losses, model constraints), p.u., per `problem`."""
+        raise NotImplementedError
+
+    def _cone_residual(self, value: Reader) -> np.ndarray:
+        """Largest cone residual (p.u.²) of each of stacked solutions; `value(var)` reads a
+        variable as (S, size)."""
+        raise NotImplementedError
+
+    def _der_q_at_buses(self) -> cp.Expression:
+        return self.problem.der_at_bus @ self.q
+
+    def solve(self, s_fixed: np.ndarray, q_limit: np.ndarray) -> SocpSolve:
+        """Solve one snapshot: fixed injections `s_fixed` (n_bus,) complex p.u., usable
+        Q limits `q_limit` (n_der,) p.u."""
+        return self.solve_data(data_vector(s_fixed, q_limit)[None])[0]
+
+    def solve_data(self, thetas: np.ndarray) -> list[SocpSolve]:
+        """Solve snapshots given as rows of data vectors (`data_vector`), one by one; the
+        offsets before and the solutions' read-out after are done for all at once."""
+        thetas = np.atleast_2d(thetas)
+        raw = []
+        for b in self.program.offsets(thetas):
+            start = now()
+            raw.append((self.program.solve(b), elapsed_ms(start)))  # Clarabel's own solve_time is not
+            # used: after an in-place update it reads above the wall time of update + solve.
+        solved = np.array([a.solved for a, _ in raw], dtype=bool)
+        n_x = self.program.n_x
+        final = [a for (a, _), ok in zip(raw, solved, strict=True) if ok]
+        x = np.array([a.x for a in final]).reshape(-1, n_x)
+        primal = np.array([a.primal for a in final])
+        dual = np.array([a.dual for a in final])
+        value = self.program.reader(x)
+        n, q_limit = self.net.n_bus, thetas[solved, 2 * self.net.n_bus :]
+        q_pu = np.clip(value(self.q), -q_limit, q_limit)  # within solver tolerance of the limits anyway
+        # Summed over all buses the mismatches are the branch losses plus the shunts' P minus
+        # the fixed injections; every non-slack mismatch is 0, so this is the slack's P.
+        slack_p = primal / self.problem.kw_per_pu + value(self.v) @ self.problem.gsh - thetas[solved, :n].sum(axis=1)
+        gap = self._cone_residual(value)
+        out, j = [], 0
+        for (a, solve_ms), ok in zip(raw, solved, strict=True):
+            if not ok:
+                outcome = "infeasible" if a.final_status in CONIC_INFEASIBLE else "failed"
+                out.append(SocpSolve(outcome, a.status, np.nan, None, np.nan, solve_ms, a.iterations, a.solves))
+                continue
+            out.append(
+                SocpSolve(
+                    "optimal",
+                    a.status,
+                    float(min(primal[j], dual[j])),
+                    q_pu[j],
+                    float(gap[j]),
+                    solve_ms,
+                    a.iterations,
+                    a.solves,
+                    float(slack_p[j]),
+                )
+            )
+            j += 1
+        return out

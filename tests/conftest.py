@@ -1,0 +1,27 @@
+"""Fixtures shared by the tests. Helper functions and data live in `tests/support/`
+(imported as `from tests.support.<module> import <name>`); no test imports another test
+module (`tests/test_test_layout.py` checks both)."""
+
+from __future__ import annotations
+
+from typing import Iterator
+
+import pytest
+
+from opfbench.io import load_network
+from opfbench.network import Network
+from tests.support.processes import dask_cluster as _dask_cluster
+
+
+@pytest.fixture(scope="session")
+def paper33() -> Network:
+    """The shipped `paper33` feeder (read-only: `Network` arrays cannot be written)."""
+    return load_network("paper33")
+
+
+@pytest.fixture
+def dask_cluster(tmp_path) -> Iterator[str]:
+    """The address of a real Dask cluster on localhost: a scheduler and two single-threaded
+    workers, each its own process (log in `tmp_path / "dask.log"`)."""
+    with _dask_cluster(tmp_path / "dask.log") as address:
+        yield address

@@ -1,0 +1,17 @@
+"""What each shipped case holds, counted once from its file and pinned (the reader, the CLI
+and the case builders are checked against it)."""
+
+# name: buses, branches (in service), DER units, total load MW / MVAr (case33bw: Baran & Wu's
+# 3.715 MW / 2.3 MVAr; case69: MATPOWER's 3802.19 kW / 2694.60 kVAr, its rows summed at 1e-4),
+# meshed; the DER cases share their base case's loads.
+SHIPPED = {
+    "case33bw": (33, 37, 32, 0, 3.715, 2.3, False),
+    "case69": (69, 68, 68, 0, 3.8021, 2.6947, False),
+    "case141": (141, 140, 140, 0, 11.944625, 7.402614, False),
+    "paper33": (33, 37, 32, 5, 3.715, 2.3, False),
+    "paper33-meshed": (33, 37, 37, 5, 3.715, 2.3, True),
+    "case69-der": (69, 68, 68, 5, 3.8021, 2.6947, False),
+    "case141-der": (141, 140, 140, 5, 11.944625, 7.402614, False),
+    "feeder1k": (990, 989, 989, 150, 3.715, 2.3, False),
+    "feeder10k": (9999, 9998, 9998, 1515, 3.715, 2.3, False),
+}
