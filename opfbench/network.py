@@ -135,9 +135,9 @@ class Network:
     def __post_init__(self) -> None:
         if np.size(self.g) == 0:
             object.__setattr__(self, "g", np.zeros(np.size(self.f)))
-        if np.size(self.load_bus) == 0:
+        if np.size(self.load_bus) == 0 and np.shape(self.load_p_mw) == np.shape(self.load_q_mvar):
             nominal = (np.asarray(self.load_p_mw) != 0) | (np.asarray(self.load_q_mvar) != 0)
-            object.__setattr__(self, "load_bus", np.flatnonzero(nominal))
+            object.__setattr__(self, "load_bus", np.flatnonzero(nominal))  # else the shape check names the field
         for name in _BUS_ARRAYS + _BRANCH_ARRAYS + _GEN_ARRAYS + ("load_bus",):
             object.__setattr__(self, name, _frozen(_array(self.name, name, getattr(self, name))))
         for name in ("base_mva", "v_slack"):

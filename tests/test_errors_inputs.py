@@ -307,7 +307,11 @@ def test_wrong_types_through_the_python_api_name_what_is_wrong():
         (NetworkError, lambda: net.with_changes(ders=(DER(3, "PV", "0.5"),)), "ders[0] has rating_mw '0.5'; it must be a"),
         (NetworkError, lambda: net.with_changes(colour="red"), "paper33: a network has no field colour"),
         (NetworkError, lambda: net.index_of("5"), "paper33: a bus number is an integer, got '5'"),
-        (InputError, lambda: load_network(None), "a case is a shipped case's name or a MATPOWER .m file's path, got None"),
+        (
+            InputError,
+            lambda: load_network(None),
+            "a case is a shipped case's name, a MATPOWER .m or pandapower .json file's path or simbench:CODE, got None",
+        ),
         (InputError, lambda: Scenario("paper33", np.ones(1), np.zeros((1, 5))), "scenario: net must be a Network"),
         (InputError, lambda: Scenario(net, "1", np.zeros((1, 5))), "scenario: load_scale must be numeric, got <U1"),
         (InputError, lambda: Scenario(net, True, np.zeros((1, 5))), "scenario: load_scale must be numeric, got bool"),

@@ -82,7 +82,7 @@ def test_night_modes_and_oracle_on_the_solar_units():
     [
         ({"forecast": ("off", "wavelet-cnn-lstm")}, "forecasts are of the BSRN Payerne PV plant"),
         ({"cases": ("paper33", SPEC)}, "give --step-minutes"),
-        ({"period": "2017-01-01T00:00..2017-01-02T00:00"}, "outside the data"),
+        ({"period": "2017-01-01T00:00..2017-01-02T00:00"}, "leaves the data"),
     ],
 )
 def test_refused_before_any_work(fields, message):

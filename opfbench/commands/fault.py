@@ -7,6 +7,7 @@ from __future__ import annotations
 import argparse
 import sys
 from dataclasses import replace
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -14,9 +15,11 @@ from opfbench.capability import PAPER_KS
 from opfbench.commands.common import CASE_HELP, add_case_options, case_spec, fraction, number, path, share
 from opfbench.dynamics.params import FORECASTS, SENSITIVITY_VARIANTS, FaultParams, ModelParams
 from opfbench.errors import InputError
-from opfbench.io.case import Case
 from opfbench.jsonio import print_json
 from opfbench.registry import STRATEGY_NAMES
+
+if TYPE_CHECKING:
+    from opfbench.io.case import Case
 
 
 def register(sub: argparse._SubParsersAction) -> None:

@@ -57,7 +57,9 @@ class CaseSpec:
 def parse_spec(text: str) -> CaseSpec:
     """The CaseSpec of `text`; InputError naming the option for a malformed one."""
     if not isinstance(text, str) or not text.strip():
-        raise InputError(f"case spec must be a non-empty string, got {text!r}")
+        raise InputError(
+            f"a case is a shipped case's name, a MATPOWER .m or pandapower .json file's path or simbench:CODE, got {text!r}"
+        )
     source, sep, query = text.strip().partition("?")
     der, der_pf = None, None
     for part in query.split("&") if sep else ():
