@@ -52,12 +52,20 @@ def test_converter_agrees_with_runpp(code, step):
 
 
 def _index(net, pnet, pp_bus: int) -> int:
-    """Our bus of pandapower bus `pp_bus` (itself, or the one its closed bus-bus switch fused it into)."""
-    if pp_bus in set(net.bus_ids.tolist()):
-        return net.index_of(pp_bus)
+    """Our bus of pandapower bus `pp_bus`: itself, or the one a chain of closed bus-bus
+    switches fused it into (found by walking the switches, not by the converter's map)."""
+    ours = set(net.bus_ids.tolist())
     sw = pnet.switch[(pnet.switch.et == "b") & pnet.switch.closed]
-    other = set(sw.element[sw.bus == pp_bus]) | set(sw.bus[sw.element == pp_bus])
-    return next(net.index_of(b) for b in other if b in set(net.bus_ids.tolist()))
+    seen, todo = {pp_bus}, [pp_bus]
+    while todo:
+        b = todo.pop()
+        if b in ours:
+            return net.index_of(b)
+        for other in set(sw.element[sw.bus == b]) | set(sw.bus[sw.element == b]):
+            if other not in seen:
+                seen.add(other)
+                todo.append(int(other))
+    raise AssertionError(f"pandapower bus {pp_bus} has no bus in the network")
 
 
 def test_taps_are_applied_as_simbench_intends():
