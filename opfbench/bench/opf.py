@@ -216,12 +216,14 @@ def bench_mv(code: str = MV_CASE, k: float = 0.0, repeats: int = 3, peer_every: 
 
     case = load_case(f"simbench:{code}")
     index = pd.date_range(PAPER_DAY, periods=96, freq="15min", tz=PAPER_DAY_TZ)
-    day = Scenario.of_case(case, index)
+    assert case.series is not None and case.load_index is not None and case.der_index is not None
+    load_p, load_q, der_p = case.series.rows(index)
+    day = Scenario.from_series(case.network, load_p, load_q, der_p)
     n = day.n_snapshots
 
     def fresh() -> Scenario:
         forget_solves()
-        return Scenario.from_series(day.net, day.load_p_mw, day.load_q_mvar, day.der_p_mw)
+        return Scenario.from_series(day.net, load_p, load_q, der_p)
 
     def step_ms(strategy: str):
         scenario = fresh()
@@ -238,13 +240,14 @@ def bench_mv(code: str = MV_CASE, k: float = 0.0, repeats: int = 3, peer_every: 
         ms, acopf = step_ms("acopf")
         acopf_ms.append(ms)
     rows = np.arange(0, n, peer_every)
-    out = {
+    socp_step, acopf_step = float(np.median(socp_ms)), float(np.median(acopf_ms))
+    out: dict[str, object] = {
         "mv_case": code,
         "mv_steps": n,
         "mv_buses": case.network.n_bus,
         "mv_ders": len(case.network.ders),
-        "mv_socp_step_ms": float(np.median(socp_ms)),
-        "mv_acopf_step_ms": float(np.median(acopf_ms)),
+        "mv_socp_step_ms": socp_step,
+        "mv_acopf_step_ms": acopf_step,
         "mv_socp_step_ms_runs": socp_ms,
         "mv_acopf_step_ms_runs": acopf_ms,
         "mv_build_s": build_s,
@@ -258,7 +261,7 @@ def bench_mv(code: str = MV_CASE, k: float = 0.0, repeats: int = 3, peer_every: 
     except ImportError:
         return out
     q_limit = (1.0 - k) * day.qmax_mvar()
-    peers = [peer.solve(day.load_p_mw[i], day.load_q_mvar[i], day.der_p_mw[i], q_limit[i]) for i in rows]
+    peers = [peer.solve(load_p[i], load_q[i], der_p[i], q_limit[i]) for i in rows]
     ok = np.array([p.converged for p in peers], dtype=bool)
     # runopp's setpoints in the AC power flow (ours = pandapower's runpp to 1e-8 kW on SimBench):
     # what its solution loses against our certified optimum; and its OPF's own reported losses,
@@ -274,8 +277,8 @@ def bench_mv(code: str = MV_CASE, k: float = 0.0, repeats: int = 3, peer_every: 
         "mv_pandapower_failures": int((~ok).sum()),
         "mv_pandapower_excess_kw": _span(excess),
         "mv_pandapower_opf_vs_pf_kw": _span(model_gap),
-        "ratio_mv_socp_step_vs_pandapower": pp_ms / out["mv_socp_step_ms"],
-        "ratio_mv_acopf_step_vs_pandapower": pp_ms / out["mv_acopf_step_ms"],
+        "ratio_mv_socp_step_vs_pandapower": pp_ms / socp_step,
+        "ratio_mv_acopf_step_vs_pandapower": pp_ms / acopf_step,
     }
 
 

@@ -60,8 +60,8 @@ def operating_point(
             raise InputError(
                 f"--time {time!r} is not a step of {case.spec}'s profiles ({series.index[0]} .. {series.index[-1]}, every {series.step})"
             )
-        now, ahead = (Scenario.of_case(case, series.index[k : k + 1]) for k in (row, min(row + 1, len(series.index) - 1)))
-        sc = Scenario.from_series(net, now.load_p_mw, now.load_q_mvar, now.der_p_mw, ahead.der_p_mw)
+        load_p, load_q, der_p = series.rows(series.index[[row, min(row + 1, len(series.index) - 1)]])
+        sc = Scenario.from_series(net, load_p[:1], load_q[:1], der_p[:1], der_p[1:])
         return OperatingPoint(sc, f"{case.spec} profiles at {when.isoformat()}")
     if time is None:
         sc = Scenario.snapshot(net, load_scale, der_scale, forecast_der_scale=der_scale)

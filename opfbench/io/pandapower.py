@@ -348,24 +348,24 @@ def from_pandapower(pnet, name: str, der_pf: float = DEFAULT_DER_PF, label: str 
     bb = sw[(sw.et == "b") & _flag(sw, "closed", True)] if len(sw) else sw
     z_sw = _col(bb, "z_ohm", 0.0) if len(bb) else np.zeros(0)
     for (_, row), z in zip(bb.iterrows(), z_sw, strict=True):
-        a, c = int(row.bus), int(row.element)
+        a, e = int(row.bus), int(row.element)
         if z > 0:  # an impedance branch (pandapower's switch_rx_ratio)
-            kv = float(bus.vn_kv[a])
-            zpu = z / (kv**2 / pnet.sn_mva)
+            kv_a = float(bus.vn_kv[a])
+            zpu = z / (kv_a**2 / pnet.sn_mva)
             br.add(
                 a,
-                c,
+                e,
                 zpu * SWITCH_RX_RATIO / math.hypot(1, SWITCH_RX_RATIO),
                 zpu / math.hypot(1, SWITCH_RX_RATIO),
                 0.0,
                 0.0,
                 1.0,
                 0.0,
-                kv,
-                float(bus.vn_kv[c]),
+                kv_a,
+                float(bus.vn_kv[e]),
             )
         else:
-            fuse.join(a, c)
+            fuse.join(a, e)
     _lines(pnet, br, label)
     _trafos(pnet, br, label)
 
@@ -380,12 +380,12 @@ def from_pandapower(pnet, name: str, der_pf: float = DEFAULT_DER_PF, label: str 
     next_id = int(bus.index.max()) + 1
     aux_kv: list[float] = []
     for k in np.flatnonzero(keep & ((f < 0) | (t < 0))):
-        kv = br.kv_f[k] if f[k] < 0 else br.kv_t[k]
+        kv_end = br.kv_f[k] if f[k] < 0 else br.kv_t[k]
         if f[k] < 0:
             f[k] = next_id
         else:
             t[k] = next_id
-        aux_kv.append(kv)
+        aux_kv.append(kv_end)
         next_id += 1
     n_aux = len(aux_kv)
     if n_aux:
@@ -428,11 +428,11 @@ def from_pandapower(pnet, name: str, der_pf: float = DEFAULT_DER_PF, label: str 
     lo = pd.Series(_col(bus, "min_vm_pu", DEFAULT_VMIN), index=bus.index)
     hi = pd.Series(_col(bus, "max_vm_pu", DEFAULT_VMAX), index=bus.index)
     vmin, vmax = np.full(n, -np.inf), np.full(n, np.inf)
-    for b_, k in bus_of.items():  # a fused bus takes the tightest limits of its members
-        vmin[k], vmax[k] = max(vmin[k], lo[b_]), min(vmax[k], hi[b_])
-    for k in np.flatnonzero(~np.isfinite(vmin)):  # an auxiliary bus: the limits of the bus it hangs at
-        j = np.concatenate([ti[fi == k], fi[ti == k]])[0]
-        vmin[k], vmax[k] = vmin[j], vmax[j]
+    for b_, member in bus_of.items():  # a fused bus takes the tightest limits of its members
+        vmin[member], vmax[member] = max(vmin[member], lo[b_]), min(vmax[member], hi[b_])
+    for aux in np.flatnonzero(~np.isfinite(vmin)):  # an auxiliary bus: the limits of the bus it hangs at
+        j = int(np.concatenate([ti[fi == aux], fi[ti == aux]])[0])
+        vmin[aux], vmax[aux] = vmin[j], vmax[j]
 
     # loads
     load = pnet.load[_flag(pnet.load, "in_service", True)]
@@ -448,11 +448,11 @@ def from_pandapower(pnet, name: str, der_pf: float = DEFAULT_DER_PF, label: str 
         )
         if c in load
     ]
-    for c in zip_cols:
-        bad = _col(load, c, 0.0) != 0
+    for col in zip_cols:
+        bad = _col(load, col, 0.0) != 0
         if bad.any():
             raise CaseFormatError(
-                f"{label}: table 'load' index {load.index[bad][0]}: {c} ≠ 0 (a voltage-dependent load) is not modelled; loads are constant power"
+                f"{label}: table 'load' index {load.index[bad][0]}: {col} ≠ 0 (a voltage-dependent load) is not modelled; loads are constant power"
             )
     load_at = np.array([bus_of.get(int(v), -1) for v in load.bus], dtype=int)
     lscale = _col(load, "scaling", 1.0)
