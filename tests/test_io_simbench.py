@@ -7,11 +7,14 @@ The field suite's ten grids run under `pytest -m slow`; two of them (a small LV 
 
 from __future__ import annotations
 
+import json
+
 import numpy as np
 import pandas as pd
 import pytest
 
-from opfbench.errors import InputError
+from opfbench.cli import main
+from opfbench.errors import DataError, InputError
 from opfbench.io import load_case
 from opfbench.io.simbench import SUITE, check_code
 from opfbench.powerflow import solve_pf
@@ -149,3 +152,50 @@ def test_cached_per_process():
 def test_bad_codes(code, message):
     with pytest.raises(InputError, match=message):
         check_code(code)
+
+
+def test_pf_command_as_stored_and_at_a_profile_step(capsys):
+    code = "1-LV-rural1--0-sw"
+    assert main(["pf", f"simbench:{code}", "--json"]) == 0
+    stored = json.loads(capsys.readouterr().out)
+    assert stored["operating_point"] == "stored" and stored["load_scale"] is None and stored["der_scale"] is None
+    assert stored["losses_kw"] == pytest.approx(runpp_at(code, None)[1], abs=LOSS_TOL_KW)
+    assert main(["pf", f"simbench:{code}", "--time", "2016-11-08T12:00", "--json"]) == 0
+    step = json.loads(capsys.readouterr().out)
+    assert step["operating_point"] == "profile" and step["time"] == "2016-11-08T12:00:00+01:00"
+    assert step["losses_kw"] == pytest.approx(runpp_at(code, "november")[1], abs=LOSS_TOL_KW)
+    assert main(["pf", f"simbench:{code}", "--load-scale", "0.5", "--json"]) == 0
+    scaled = json.loads(capsys.readouterr().out)
+    assert scaled["operating_point"] == "scaled" and scaled["load_mw"] == pytest.approx(stored["load_mw"] / 2)
+    assert scaled["der_mw"] == pytest.approx(0.8 * stored["der_mw"])  # der-scale's default, of the ratings
+
+
+@pytest.mark.parametrize(
+    "argv, message",
+    [
+        (["pf", "simbench:1-LV-rural9--0-sw"], "unknown SimBench code '1-LV-rural9--0-sw'; closest:"),
+        (["pf", "simbench:1-HV-urban--0-sw"], "voltage-controlled generators"),
+        (["pf", "simbench:1-LV-rural1--0-sw", "--time", "2016-03-27T02:30"], "does not exist"),
+        (["pf", "simbench:1-LV-rural1--0-sw", "--time", "2016-06-01T12:00", "--der-scale", "0.5"], "drop --load-scale"),
+        (["pf", "paper33", "--time", "2016-06-01T12:00"], "needs a case with its own time series"),
+    ],
+)
+def test_bad_input_is_one_message_exit_2(capsys, argv, message):
+    assert main(argv) == 2
+    err = capsys.readouterr().err
+    assert message in err and err.count("\n") == 1
+
+
+def test_a_profile_with_nan_is_refused():
+    from opfbench.io.pandapower import from_pandapower
+    from opfbench.io.simbench import _series
+    from tests.support.simbench_oracle import fresh_net
+
+    net = fresh_net("1-LV-rural1--0-sw")
+    column = f"{net.load.profile.iloc[0]}_pload"
+    net.profiles["load"].loc[100, column] = np.nan
+    conv = from_pandapower(net, "nan")
+    with pytest.raises(
+        DataError, match=rf"profile '{column}' \('load'\) has 1 missing or non-numeric value\(s\), first at 2016-01-02 01:00"
+    ):
+        _series(net, conv, "1-LV-rural1--0-sw")

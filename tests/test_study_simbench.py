@@ -94,3 +94,18 @@ def test_refused_before_any_work(fields, message):
 def test_mixed_cases_at_a_common_step():
     config, period, tasks = prepare(StudyConfig(cases=("paper33", SPEC), strategies=("llma",), step_minutes=15))
     assert len(period.index) == 96 and {t.case for t in tasks} == {"paper33", SPEC}
+
+
+def test_a_case_without_der_gets_a_note_in_the_run_and_the_report(tmp_path, capsys):
+    from opfbench.io import NO_DER_NOTE
+    from opfbench.report import write_report
+
+    config = StudyConfig(
+        cases=("case33bw",), strategies=("no-action", "llma"), ks=(0.0,), period="2016-03-01T10:00..2016-03-01T11:00"
+    )
+    run = run_study(config, tmp_path / "run", quiet=False)
+    assert f"note: case33bw: {NO_DER_NOTE}" in capsys.readouterr().err
+    manifest = json.loads((run.out / "manifest.json").read_text())
+    assert manifest["cases"]["case33bw"]["notes"] == [NO_DER_NOTE]
+    page = write_report(run.out).read_text()
+    assert "case33bw: the case has no DER: every strategy gives the no-action result" in page

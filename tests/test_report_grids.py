@@ -1,0 +1,56 @@
+"""The report's per-grid leaderboard and the ranking claim checked per grid, on a summary
+whose energies are set by hand (each table's rule is checked, not a run)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from opfbench.report.claims import FAILS, HOLDS, ranking_per_case
+from opfbench.report.tables import leaderboard
+
+
+def _summary() -> pd.DataFrame:
+    energy = {  # case → strategy → kWh, at k = 0, night connected, forecast off
+        "grid-a": {"no-action": 100.0, "llma": 96.0, "lfma": 90.0, "acopf": 80.0, "socp": 80.0},
+        "grid-b": {"no-action": 50.0, "llma": 51.0, "lfma": 49.0, "acopf": 48.0, "socp": 48.0},
+    }
+    rows = [
+        {
+            "case": case,
+            "strategy": s,
+            "k": 0.0,
+            "night_mode": "connected",
+            "forecast": "off",
+            "energy_kwh": e,
+            "no_action_kwh": by["no-action"],
+            "savings_pct": 100 * (1 - e / by["no-action"]),
+            "voltage_violation_steps": 3 if s == "llma" else 0,
+            "not_ok_steps": 0,
+        }
+        for case, by in energy.items()
+        for s, e in by.items()
+    ]
+    return pd.DataFrame(rows)
+
+
+def test_leaderboard_shares_of_the_opf_reduction():
+    board = leaderboard(_summary()).set_index(["case", "strategy"])
+    assert board.loc[("grid-a", "lfma"), "opf_share_pct"] == pytest.approx(50.0)
+    assert board.loc[("grid-a", "llma"), "opf_share_pct"] == pytest.approx(20.0)
+    assert board.loc[("grid-b", "llma"), "opf_share_pct"] == pytest.approx(-50.0)  # worse than no action
+    assert board.loc[("grid-a", "acopf"), "rank"] == 1 and board.loc[("grid-a", "llma"), "rank"] == 4
+    assert board.loc[("grid-a", "llma"), "voltage_violation_steps"] == 3 and "no-action" not in board.index.get_level_values(1)
+
+
+def test_leaderboard_without_an_opf_reduction_gives_no_share():
+    s = _summary()
+    s.loc[s.strategy == "acopf", "energy_kwh"] = s.loc[s.strategy == "acopf", "no_action_kwh"]
+    assert np.isnan(leaderboard(s).opf_share_pct).all()
+
+
+def test_ranking_claim_per_grid():
+    table = ranking_per_case(_summary()).set_index("case")
+    assert table.loc["grid-a", "verdict"] == HOLDS and table.loc["grid-a", "ordered"] == 1
+    assert table.loc["grid-b", "verdict"] == FAILS and "grid-b, night connected, k=0" in table.loc["grid-b", "first exception"]
