@@ -561,14 +561,16 @@ def from_pandapower(pnet, name: str, der_pf: float = DEFAULT_DER_PF, label: str 
     )
 
 
-def _merge_parallel(f, t, r, x, b, g, tap, shift):
+def _merge_parallel(
+    f: np.ndarray, t: np.ndarray, r: np.ndarray, x: np.ndarray, b: np.ndarray, g: np.ndarray, tap: np.ndarray, shift: np.ndarray
+) -> tuple:
     """Merge branches with the same (from, to) buses, tap and shift into one: series
     admittances and shunts add (exact for the π model with a common ideal transformer)."""
     groups: dict[tuple, list[int]] = {}
     for k in range(len(f)):
         groups.setdefault((int(f[k]), int(t[k]), float(tap[k]), float(shift[k])), []).append(k)
     rows, merged = [], 0
-    out = {name: [] for name in ("f", "t", "r", "x", "b", "g", "tap", "shift")}
+    out: dict[str, list[float]] = {name: [] for name in ("f", "t", "r", "x", "b", "g", "tap", "shift")}
     for (fk, tk, tp, sh), members in groups.items():
         ys = sum(1 / complex(r[k], x[k]) for k in members)
         z = 1 / ys
