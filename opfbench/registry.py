@@ -121,6 +121,10 @@ STRATEGIES: dict[str, StrategySpec] = {
     )
 }
 STRATEGY_NAMES = tuple(STRATEGIES)
+#: The reference configurations every comparison is made against: the baseline (every DER
+#: at Q = 0) and the optimum whose loss reduction the others' shares are measured by.
+BASELINE = "no-action"
+REFERENCE_OPTIMUM = "acopf"
 LOCAL_RULES = tuple(n for n, s in STRATEGIES.items() if s.kind == "local")
 FORMULATIONS = tuple(n for n, s in STRATEGIES.items() if s.kind == "formulation")
 
