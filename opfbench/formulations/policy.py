@@ -3,13 +3,13 @@ policy (`options.FALLBACKS`), every decision recorded.
 
 Fast path (`fast_path`): the SOCP relaxation's setpoints of every snapshot, evaluated by
 ONE batched AC power flow. Where the relaxation is infeasible the AC OPF is too, and so
-it is where the slack may not export and the loss bound (`loss_bound.slack_must_export`)
-shows that every AC point within the limits has it exporting (solver_status
-LOSS_BOUND_STATUS; the relaxation cannot show that: it may burn the surplus in losses no
-AC point has); where its setpoints are AC-feasible (`OpfProblem.feasible`) and their AC
-losses lie within CERTIFY_RTOL (relative) of the relaxation's bound — a lower bound on
-every AC-feasible point's losses — they are the AC optimum up to that tolerance
-(certified by "socp").
+it is where the interval bounds on the exact branch flows prove it
+(`infeasibility.proven_infeasible`: a voltage limit out of reach, or the slack must export
+where it may not; the solver_status says which — the relaxation cannot show these: it may
+burn power in losses no AC point has); where its setpoints are AC-feasible
+(`OpfProblem.feasible`) and their AC losses lie within CERTIFY_RTOL (relative) of the
+relaxation's bound — a lower bound on every AC-feasible point's losses — they are the AC
+optimum up to that tolerance (certified by "socp").
 
 IPOPT's snapshots (`IpoptPolicy.settle`, warm-started from its last success):
 
@@ -20,7 +20,7 @@ IPOPT's snapshots (`IpoptPolicy.settle`, warm-started from its last success):
 
 When no point is found feasible, the setpoints are those of no action (fallback
 "no-action", its AC losses reported) and the status is "infeasible" if IPOPT reported
-infeasibility or the SOCP relaxation or the loss bound proves it, "solver-failed"
+infeasibility or the SOCP relaxation or the bounds prove it, "solver-failed"
 otherwise.
 """
 
@@ -30,7 +30,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from opfbench.formulations.loss_bound import slack_must_export
+from opfbench.formulations.infeasibility import proven_infeasible
 from opfbench.formulations.models.polar_ac import AcOpf, ac_opf
 from opfbench.formulations.models.soc import SocpSolve
 from opfbench.formulations.options import Fallback
@@ -42,7 +42,6 @@ from opfbench.result import FALLBACK_COLD, FALLBACK_NO_ACTION, FALLBACK_SOCP, IN
 from opfbench.scenario import Scenario
 
 CERTIFY_RTOL = 1e-6  # fast path: AC losses of the SOCP point ≤ bound·(1 + this) (relative)
-LOSS_BOUND_STATUS = "loss bound: the slack must export"  # solver_status of a snapshot the loss bound proves infeasible
 
 
 @dataclass
@@ -50,7 +49,7 @@ class Settled:
     """How one snapshot was settled: its setpoints (p.u.), status, where the point comes
     from (`results.FROM_*`), the IPOPT attempts, the relaxation's solve, the power flows
     the policy used to check points, who certified it, its losses where certified by
-    the SOCP (kW), and whether the loss bound proved it infeasible."""
+    the SOCP (kW), and the bounds' proof of its infeasibility (`infeasibility`; "" if none)."""
 
     q_pu: np.ndarray
     status: str
@@ -60,7 +59,7 @@ class Settled:
     power_flows: int
     certified_by: str
     objective_kw: float = np.nan
-    by_loss_bound: bool = False
+    proof: str = ""
 
     @property
     def accepted(self) -> IpoptSolve | None:
@@ -71,8 +70,8 @@ class Settled:
         acc = self.accepted
         socp = self.socp.diagnostics()
         by_socp = self.certified_by == CERTIFIED_BY_SOCP
-        if self.by_loss_bound:
-            solver_status = LOSS_BOUND_STATUS
+        if self.proof:
+            solver_status = self.proof
         elif by_socp or not self.attempts:
             solver_status = socp["solver_status"]
         else:
@@ -94,21 +93,21 @@ class Settled:
 @dataclass(frozen=True)
 class FastPath:
     """The SOCP setpoints of every snapshot, AC-evaluated by one batched power flow, and
-    the snapshots the loss bound proves infeasible."""
+    the bounds' proof of infeasibility of each snapshot."""
 
     q_pu: np.ndarray  # (S, n_der); zeros where the relaxation was not solved
     pf: PowerFlowResult
     certified: np.ndarray  # (S,) bool
-    must_export: np.ndarray  # (S,) bool: `loss_bound.slack_must_export`
+    proofs: np.ndarray  # (S,) str: `infeasibility.proven_infeasible`
 
     def settled(self, i: int, socp: SocpSolve) -> Settled | None:
         """Snapshot i settled without IPOPT — certified, or proven infeasible by the
-        relaxation or the loss bound (then no action) — else None."""
+        relaxation or the bounds (then no action) — else None."""
         if self.certified[i]:
             return Settled(self.q_pu[i], OK, FROM_SOLVER, [], socp, 0, CERTIFIED_BY_SOCP, float(self.pf.losses_kw[i]))
-        if socp.infeasible or self.must_export[i]:
-            by_bound = not socp.infeasible
-            return Settled(np.zeros_like(self.q_pu[i]), INFEASIBLE, FROM_NO_ACTION, [], socp, 1, "", by_loss_bound=by_bound)
+        if socp.infeasible or self.proofs[i]:
+            proof = "" if socp.infeasible else self.proofs[i]
+            return Settled(np.zeros_like(self.q_pu[i]), INFEASIBLE, FROM_NO_ACTION, [], socp, 1, "", proof=proof)
         return None
 
 
@@ -122,7 +121,7 @@ def fast_path(scenario: Scenario, problem: OpfProblem, data: SnapshotData, solve
     bound = np.array([s.lower_bound_kw for s in solves])
     with np.errstate(invalid="ignore"):
         close = np.abs(pf.losses_kw - bound) <= CERTIFY_RTOL * np.abs(bound)
-    return FastPath(q_pu, pf, optimal & problem.feasible(pf, data.s_fixed) & close, slack_must_export(problem, data))
+    return FastPath(q_pu, pf, optimal & problem.feasible(pf, data.s_fixed) & close, proven_infeasible(problem, data))
 
 
 def merge_flows(fast: PowerFlowResult, rest: PowerFlowResult, rows: np.ndarray) -> PowerFlowResult:
