@@ -9,7 +9,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from opfbench.formulations import policy as policy_module
+from opfbench.formulations import acopf as acopf_module
 from opfbench.formulations.acopf import run_acopf
 from opfbench.formulations.infeasibility import SLACK_MUST_EXPORT, VOLTAGES_OUT_OF_REACH, flow_bounds, proven_infeasible
 from opfbench.formulations.problem import VOLTAGE_TOLERANCE, OpfProblem, slack_p_mw, snapshot_data
@@ -68,7 +68,7 @@ def test_no_proof_on_a_meshed_feeder_and_no_slack_rule_where_the_slack_may_expor
 
 
 def _without_proofs(monkeypatch) -> None:
-    monkeypatch.setattr(policy_module, "proven_infeasible", lambda problem, data: np.full(data.n_snapshots, "", dtype=object))
+    monkeypatch.setattr(acopf_module, "proven_infeasible", lambda problem, data: np.full(data.n_snapshots, "", dtype=object))
 
 
 def _same_results(fast, plain, proven) -> None:

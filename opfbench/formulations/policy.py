@@ -4,7 +4,8 @@ policy (`options.FALLBACKS`), every decision recorded.
 Fast path (`fast_path`): the SOCP relaxation's setpoints of every snapshot, evaluated by
 ONE batched AC power flow. Where the relaxation is infeasible the AC OPF is too, and so
 it is where the interval bounds on the exact branch flows prove it
-(`infeasibility.proven_infeasible`: a voltage limit out of reach, or the slack must export
+(`infeasibility.proven_infeasible`, computed first: then the relaxation is not solved
+there; a voltage limit out of reach, or the slack must export
 where it may not; the solver_status says which — the relaxation cannot show these: it may
 burn power in losses no AC point has); where its setpoints are AC-feasible
 (`OpfProblem.feasible`) and their AC losses lie within CERTIFY_RTOL (relative) of the
@@ -30,7 +31,6 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from opfbench.formulations.infeasibility import proven_infeasible
 from opfbench.formulations.models.polar_ac import AcOpf, ac_opf
 from opfbench.formulations.models.soc import SocpSolve
 from opfbench.formulations.options import Fallback
@@ -111,8 +111,11 @@ class FastPath:
         return None
 
 
-def fast_path(scenario: Scenario, problem: OpfProblem, data: SnapshotData, solves: tuple[SocpSolve, ...]) -> FastPath:
-    """The fast path's evaluation of every snapshot (module docstring)."""
+def fast_path(
+    scenario: Scenario, problem: OpfProblem, data: SnapshotData, solves: tuple[SocpSolve, ...], proofs: np.ndarray
+) -> FastPath:
+    """The fast path's evaluation of every snapshot (module docstring); `proofs`: the
+    snapshots' `infeasibility.proven_infeasible` (their relaxation need not be solved)."""
     net = scenario.net
     n_der = len(net.ders)
     optimal = np.array([s.optimal for s in solves], dtype=bool)
@@ -121,7 +124,7 @@ def fast_path(scenario: Scenario, problem: OpfProblem, data: SnapshotData, solve
     bound = np.array([s.lower_bound_kw for s in solves])
     with np.errstate(invalid="ignore"):
         close = np.abs(pf.losses_kw - bound) <= CERTIFY_RTOL * np.abs(bound)
-    return FastPath(q_pu, pf, optimal & problem.feasible(pf, data.s_fixed) & close, proven_infeasible(problem, data))
+    return FastPath(q_pu, pf, optimal & problem.feasible(pf, data.s_fixed) & close, proofs)
 
 
 def merge_flows(fast: PowerFlowResult, rest: PowerFlowResult, rows: np.ndarray) -> PowerFlowResult:
