@@ -79,12 +79,14 @@ class FlowBounds:
 
 
 class _Passes:
-    """The up and down passes over one feeder's branches for all snapshots at once."""
+    """The up and down passes over one feeder's branches for all snapshots at once; every
+    per-bus array is (n_bus, S), a bus's snapshots contiguous."""
 
     def __init__(self, problem: OpfProblem, data: SnapshotData):
         self.problem, self.br = problem, RadialBranches.of(problem.net)
-        self.p_fixed, self.q_fixed = data.s_fixed.real, data.s_fixed.imag
-        self.q_der = data.q_limit @ problem.der_at_bus.T.toarray()  # (S, n_bus) Σ usable |Q| at each bus
+        self.p_fixed = np.ascontiguousarray(data.s_fixed.real.T)
+        self.q_fixed = np.ascontiguousarray(data.s_fixed.imag.T)
+        self.q_der = problem.der_at_bus @ data.q_limit.T  # Σ usable |Q| of the DER at each bus
         self.g = problem.gsh + self.br.conductance  # P drawn by a bus's shunts per p.u.² of v
         self.b = problem.bsh + self.br.charging  # Q they inject
         m, s = self.br.child.size, data.n_snapshots
@@ -94,19 +96,19 @@ class _Passes:
 
     def up(self, v_lo: np.ndarray, v_hi: np.ndarray) -> np.ndarray:
         """Leaves first: the branches' intervals (kept for `down`); returns slack_p_hi."""
-        br, n_snap, n_bus = self.br, self.p_fixed.shape[0], self.p_fixed.shape[1]
-        p_lo, p_hi = np.zeros((n_bus, n_snap)), np.zeros((n_bus, n_snap))  # what a bus sends to its children
-        q_lo, q_hi = np.zeros((n_bus, n_snap)), np.zeros((n_bus, n_snap))
+        br = self.br
+        p_lo, p_hi = np.zeros_like(v_lo), np.zeros_like(v_lo)  # what a bus sends to its children
+        q_lo, q_hi = np.zeros_like(v_lo), np.zeros_like(v_lo)
         for k in range(br.child.size - 1, -1, -1):
             j, parent = br.child[k], br.parent[k]
-            gv_lo, gv_hi = _scaled(self.g[j], v_lo[:, j], v_hi[:, j])
-            bv_lo, bv_hi = _scaled(self.b[j], v_lo[:, j], v_hi[:, j])
-            pj_lo = p_lo[j] + gv_lo - self.p_fixed[:, j]
-            pj_hi = p_hi[j] + gv_hi - self.p_fixed[:, j]
-            qj_lo = q_lo[j] - bv_hi - self.q_fixed[:, j] - self.q_der[:, j]
-            qj_hi = q_hi[j] - bv_lo - self.q_fixed[:, j] + self.q_der[:, j]
+            gv_lo, gv_hi = _scaled(self.g[j], v_lo[j], v_hi[j])
+            bv_lo, bv_hi = _scaled(self.b[j], v_lo[j], v_hi[j])
+            pj_lo = p_lo[j] + gv_lo - self.p_fixed[j]
+            pj_hi = p_hi[j] + gv_hi - self.p_fixed[j]
+            qj_lo = q_lo[j] - bv_hi - self.q_fixed[j] - self.q_der[j]
+            qj_hi = q_hi[j] - bv_lo - self.q_fixed[j] + self.q_der[j]
             (pp_lo, pp_hi), (qq_lo, qq_hi) = _square(pj_lo, pj_hi), _square(qj_lo, qj_hi)
-            w_lo, w_hi = v_lo[:, j] * br.child_scale[k], v_hi[:, j] * br.child_scale[k]
+            w_lo, w_hi = v_lo[j] * br.child_scale[k], v_hi[j] * br.child_scale[k]
             l_lo = (pp_lo + qq_lo) / w_hi
             l_hi = np.where(pp_hi + qq_hi > 0, (pp_hi + qq_hi) / w_lo, 0.0)
             xl_lo, xl_hi = _scaled(br.x[k], l_lo, l_hi)
@@ -120,20 +122,20 @@ class _Passes:
             q_lo[parent] += qs_lo
             q_hi[parent] += qs_hi
         slack = self.problem.slack
-        return p_hi[slack] + _scaled(self.g[slack], v_lo[:, slack], v_hi[:, slack])[1] - self.p_fixed[:, slack]
+        return p_hi[slack] + _scaled(self.g[slack], v_lo[slack], v_hi[slack])[1] - self.p_fixed[slack]
 
     def down(self, v_lo: np.ndarray, v_hi: np.ndarray, lim_lo: np.ndarray, lim_hi: np.ndarray) -> np.ndarray:
         """Parents first: each v's interval from its parent's and its branch's, intersected
         with the limits in place; returns which snapshots got an empty one (beyond MARGIN)."""
         br = self.br
-        empty = np.zeros(v_lo.shape[0], dtype=bool)
+        empty = np.zeros(v_lo.shape[1], dtype=bool)
         for k in range(br.child.size):
             j, parent, z2 = br.child[k], br.parent[k], br.r[k] ** 2 + br.x[k] ** 2
-            lo = (v_lo[:, parent] * br.parent_scale[k] - 2 * self.drop_hi[k] + z2 * self.l_lo[k]) / br.child_scale[k]
-            hi = (v_hi[:, parent] * br.parent_scale[k] - 2 * self.drop_lo[k] + z2 * self.l_hi[k]) / br.child_scale[k]
+            lo = (v_lo[parent] * br.parent_scale[k] - 2 * self.drop_hi[k] + z2 * self.l_lo[k]) / br.child_scale[k]
+            hi = (v_hi[parent] * br.parent_scale[k] - 2 * self.drop_lo[k] + z2 * self.l_hi[k]) / br.child_scale[k]
             empty |= (lo > lim_hi[j] + MARGIN) | (hi < lim_lo[j] - MARGIN)
-            v_lo[:, j] = np.maximum(np.minimum(lo, lim_hi[j]), lim_lo[j])
-            v_hi[:, j] = np.minimum(np.maximum(hi, lim_lo[j]), lim_hi[j])
+            v_lo[j] = np.maximum(np.minimum(lo, lim_hi[j]), lim_lo[j])
+            v_hi[j] = np.minimum(np.maximum(hi, lim_lo[j]), lim_hi[j])
         return empty
 
 
@@ -143,15 +145,15 @@ def flow_bounds(problem: OpfProblem, data: SnapshotData) -> FlowBounds:
     lim_lo = np.maximum(net.vmin - VOLTAGE_TOLERANCE, 0.0) ** 2
     lim_hi = (net.vmax + VOLTAGE_TOLERANCE) ** 2
     lim_lo[problem.slack] = lim_hi[problem.slack] = problem.v_slack**2
-    v_lo = np.tile(lim_lo, (data.n_snapshots, 1))
-    v_hi = np.tile(lim_hi, (data.n_snapshots, 1))
+    v_lo = np.repeat(lim_lo[:, None], data.n_snapshots, axis=1)  # (n_bus, S)
+    v_hi = np.repeat(lim_hi[:, None], data.n_snapshots, axis=1)
     passes = _Passes(problem, data)
     empty = np.zeros(data.n_snapshots, dtype=bool)
     with np.errstate(divide="ignore", invalid="ignore", over="ignore"):  # vmin 0: ℓ unbounded
         for _ in range(ROUNDS):
             slack_p_hi = passes.up(v_lo, v_hi)
             empty |= passes.down(v_lo, v_hi, lim_lo, lim_hi)
-    return FlowBounds(np.where(np.isnan(slack_p_hi), np.inf, slack_p_hi), v_lo, v_hi, empty)
+    return FlowBounds(np.where(np.isnan(slack_p_hi), np.inf, slack_p_hi), v_lo.T, v_hi.T, empty)
 
 
 def proven_infeasible(problem: OpfProblem, data: SnapshotData) -> np.ndarray:
