@@ -57,6 +57,35 @@ def test_the_bounds_hold_at_random_ac_points_within_the_limits(code, surplus):
     assert (proven_infeasible(problem, data) == SLACK_MUST_EXPORT).any() == surplus  # not vacuous: the June noon surplus
 
 
+def test_the_bounds_hold_with_taps_at_either_end_charging_and_shunts():
+    """paper33 with a tap on a branch written parent → child, another on one written child →
+    parent (so the child is the tap's side), line charging, bus shunts and a conductance:
+    random loads, DER output and Q; every AC point within the limits lies within the bounds."""
+    base = load_network("paper33")
+    f, t, tap = base.f.copy(), base.t.copy(), base.tap.copy()
+    f[7], t[7] = base.t[7], base.f[7]  # branch 7 written child → parent
+    tap[[2, 7]] = [0.97, 1.03]
+    gs, bs = base.gs_mw.copy(), base.bs_mvar.copy()
+    gs[12], bs[20] = 0.01, 0.2
+    g = np.zeros(base.n_branch)
+    g[2] = 1e-3
+    net = base.with_changes(f=f, t=t, tap=tap, b=np.full(base.n_branch, 1e-4), gs_mw=gs, bs_mvar=bs, g=g)
+    rng = np.random.default_rng(9)
+    n = 60
+    scenario = Scenario(net, rng.uniform(0.1, 1.3, n), rng.uniform(0, 1, (n, len(net.ders))) * net.der_rating_mw)
+    data = snapshot_data(scenario, 0.0)
+    bounds = flow_bounds(OpfProblem.of(net, slack_export=False), data)
+    unit = rng.choice([-1.0, 1.0], data.q_limit.shape) * rng.uniform(0.5, 1, data.q_limit.shape)
+    pf = solve_pf_batch(net, scenario.injections(unit * data.q_limit * net.base_mva))
+    within = within_limits(net, pf)
+    assert within.mean() > 0.5
+    slack_p = (slack_p_mw(net, pf) / net.base_mva) - data.s_fixed[:, net.slack].real
+    assert np.all(slack_p[within] <= bounds.slack_p_hi[within] + 1e-12)
+    v = pf.vm[within] ** 2
+    assert np.all(v >= bounds.v_lo[within] - 1e-12) and np.all(v <= bounds.v_hi[within] + 1e-12)
+    assert not bounds.out_of_reach[within].any()
+
+
 def test_no_proof_on_a_meshed_feeder_and_no_slack_rule_where_the_slack_may_export():
     net = load_network("paper33-meshed")
     data = snapshot_data(Scenario(net, np.array([0.2]), net.der_rating_mw[None]), 0.0)
