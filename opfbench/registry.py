@@ -79,11 +79,11 @@ class StrategySpec:
 STRATEGIES: dict[str, StrategySpec] = {
     s.name: s
     for s in (
-        StrategySpec("no-action", "local", "opfbench.strategies.local:no_action", "every DER at Q = 0"),
+        StrategySpec("no-action", "local", "opfbench.strategies.paper:no_action", "every DER at Q = 0"),
         StrategySpec(
             "llma",
             "local",
-            "opfbench.strategies.local:llma",
+            "opfbench.strategies.paper:llma",
             "Algorithm 1: Q = the load's Q at the DER's own bus, within (1 − k)·Qmax",
             options={"safe": False},
             uses_forecast=True,
@@ -91,7 +91,7 @@ STRATEGIES: dict[str, StrategySpec] = {
         StrategySpec(
             "lfma",
             "local",
-            "opfbench.strategies.local:lfma",
+            "opfbench.strategies.paper:lfma",
             "Algorithm 2: LLMA plus the measured upstream Q inflow, sign-change rules",
             options={"safe": False},
             uses_forecast=True,
