@@ -10,7 +10,7 @@ import opfbench.strategies.engine as engine
 import opfbench.strategies.paper as paper
 from opfbench.bench.local import bench_local
 from opfbench.bench.profiles import paper_day_scenario
-from opfbench.commands.table import format_table, loss_table
+from opfbench.commands.table import format_table, local_rules, loss_table
 from opfbench.errors import InputError
 from opfbench.io import load_network
 from opfbench.powerflow import PowerFlowResult, solve_pf_batch
@@ -75,7 +75,8 @@ def test_bad_reserve_raises_input_error(k) -> None:
 
 def test_loss_table_matches_direct_runs() -> None:
     table = loss_table(ks=(0.0, 0.5), der_scale=0.5)
-    assert len(table) == 2 * 2 * 3 and set(table["status"]) == {"ok"}
+    assert len(table) == 2 * 2 * len(local_rules()) and set(table["status"]) == {"ok"}
+    assert {"no-action", "llma", "lfma", "volt-var", "cosphi-p"} <= set(table["strategy"])
     net = load_network("paper33")
     p_now = 0.5 * net.der_rating_mw
     with_fc = Scenario(net, [1.0], [p_now], [np.minimum(1.2 * p_now, net.der_rating_mw)])  # the table's forecast rule

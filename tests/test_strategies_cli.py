@@ -72,7 +72,12 @@ def test_text_output_shows_lfma_diagnostics(capsys: pytest.CaptureFixture) -> No
         (["--strategy", "lfma", "--k", "nan"], "--k"),
         (["--strategy", "lfma", "--der-scale", "1.5"], "argument --der-scale: must lie in [0, 1], got 1.5"),
         (["--strategy", "llma", "--fallback", "chain"], "--fallback"),
-        (["--strategy", "teleport"], "invalid choice"),
+        (["--strategy", "teleport"], "unknown strategy 'teleport'"),
+        (["--strategy", "volt-var:curve=c"], "option curve: 'c' is not one of a, b"),
+        (["--strategy", "volt-var:v=1.0/0.9,q=0/0"], "the curve's v values must increase"),
+        (["--strategy", "const-pf:pf=1.5"], "a power factor must lie in (0, 1]"),
+        (["--strategy", "volt-var", "--fallback", "paper"], "--fallback applies to acopf, not to volt-var"),
+        (["--strategy", "llma", "--plugin", "no_such_plugin_module"], "plugin no_such_plugin_module: cannot import it"),
     ],
 )
 def test_bad_arguments_exit_2(capsys: pytest.CaptureFixture, args: list[str], message: str) -> None:

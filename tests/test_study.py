@@ -12,7 +12,7 @@ import pytest
 from opfbench.capability import PAPER_KS
 from opfbench.cli import main
 from opfbench.errors import DataError, InputError
-from opfbench.registry import STRATEGY_NAMES, get_strategy
+from opfbench.registry import DEFAULT_RUN, get_strategy
 from opfbench.study import StudyConfig
 from opfbench.study.periods import resolve_period
 from opfbench.study.runner import prepare, run_study
@@ -333,9 +333,9 @@ def test_the_default_grid_runs_a_forecast_only_where_a_strategy_reads_it():
     forecast off, 30 with the oracle), the oracle's tasks run only the rules the registry
     says read a forecast."""
     _, _, tasks = prepare(StudyConfig())
-    readers = {name for name in STRATEGY_NAMES if get_strategy(name).uses_forecast}
-    assert {t.strategies for t in tasks if t.forecast == "oracle"} == {tuple(s for s in STRATEGY_NAMES if s in readers)}
-    assert {t.strategies for t in tasks if t.forecast == "off"} == {STRATEGY_NAMES}
+    readers = {name for name in DEFAULT_RUN if get_strategy(name).uses_forecast}
+    assert {t.strategies for t in tasks if t.forecast == "oracle"} == {tuple(s for s in DEFAULT_RUN if s in readers)}
+    assert {t.strategies for t in tasks if t.forecast == "off"} == {DEFAULT_RUN}
     configurations = {(t.case, s, t.k, m, t.forecast) for t in tasks for s in t.strategies for m in t.night_modes}
     assert len(configurations) == 120 and len(tasks) == 2 * 5 * 4
 

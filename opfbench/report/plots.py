@@ -18,6 +18,7 @@ import plotly.graph_objects as go
 import plotly.io as pio
 from plotly.subplots import make_subplots
 
+from opfbench.registry import BASELINE
 from opfbench.report.inputs import TRACE_BUS
 from opfbench.report.tables import REFERENCE_NIGHT, order
 
@@ -140,7 +141,7 @@ def der_q_day(der_q: pd.DataFrame) -> list[Plot]:
     out = []
     for i, case in enumerate(_cases(der_q)):
         sub, k = _reference(der_q[der_q["case"] == case])
-        strategies = [s for s in order(sub[["strategy"]].drop_duplicates())["strategy"] if s != "no-action"]
+        strategies = [s for s in order(sub[["strategy"]].drop_duplicates())["strategy"] if s != BASELINE]
         if not strategies:
             continue
         buses = sorted(sub["bus"].unique())

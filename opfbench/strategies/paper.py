@@ -26,8 +26,9 @@ from opfbench.capability import check_reserve
 from opfbench.powerflow import PowerFlowResult
 from opfbench.result import StrategyResult
 from opfbench.scenario import Scenario
-from opfbench.strategies.engine import Grid, Measurements, Rule, run_rule
+from opfbench.strategies.engine import Grid, run_rule
 from opfbench.strategies.limits import clip, reactive_limit
+from opfbench.strategies.rules import Measurements, Rule
 from opfbench.timing import elapsed_ms, now
 
 # What LFMA step 4 did at each DER (LfmaTrace.rule).
