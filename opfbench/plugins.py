@@ -6,16 +6,17 @@ a function of the DER's local measurements:
     import numpy as np
     from opfbench.plugins import local_rule
 
-    @local_rule("droop", reads=("v",), options={"gain": 10.0, "v_ref": 1.0})
-    def droop(m, gain, v_ref):
-        # Q target in MVAr (positive = injected): −gain·(|V| − v_ref) p.u. of S̄
-        return -gain * (m.v_pu - v_ref) * m.s_rated_mva
+    @local_rule("my-rule", reads=("v", "load"), options={"share": 0.5})
+    def my_rule(m, share):
+        # Q target in MVAr (positive = injected): a share of the own-bus reactive load,
+        # doubled below 0.95 p.u.
+        return share * m.load_q_mvar * np.where(m.v_pu < 0.95, 2.0, 1.0)
 
 The function receives `strategies.engine.Measurements` (only what `reads` declares) and
 the options as keywords, and returns each DER's Q target (S, n_der) in MVAr. The engine
 clips it to the usual limits (reserve k, capability, Algorithm 3, "Q at night"), and
 solves a rule that reads |V| or line flows for its closed-loop steady state. It is then a
-strategy like the built-in ones: labels with options (`droop:gain=20`), every table, the
+strategy like the built-in ones: labels with options (`my-rule:share=0.8`), every table, the
 report, `snapshot`, `run` and `fault`.
 
 Loading: `--plugin FILE.py|MODULE` (repeatable) on the commands, or the entry-point group
@@ -48,7 +49,7 @@ import numpy as np
 from opfbench.errors import InputError
 from opfbench.registry import CLOSED_LOOP_COLUMNS, SAFE, SETTLING_OPTIONS, STRATEGIES, Option, OptionValue, StrategySpec, register
 
-__all__ = ["Option", "PluginSource", "ensure", "load", "load_entry_points", "loaded", "local_rule", "probe"]
+__all__ = ["Option", "PluginSource", "ensure", "load", "load_entry_points", "loaded", "local_rule", "probe", "unload"]
 from opfbench.strategies.rules import FEEDBACK, Measurements, Rule, targets
 
 ENTRY_POINT_GROUP = "opfbench.strategies"
@@ -264,6 +265,16 @@ def ensure(sources: Sequence[PluginSource]) -> None:
             raise InputError(
                 f"plugin {src.ref}: its source on this worker differs from the run's (digest {got.digest[:12]} ≠ {src.digest[:12]})"
             )
+
+
+def unload(ref: str) -> None:
+    """Forget the plugin `ref`: its strategies leave the registry (a notebook reloading an
+    edited plugin, or a test cleaning up)."""
+    for name in [n for n, s in STRATEGIES.items() if s.source == ref]:
+        del STRATEGIES[name]
+    source = _loaded.pop(ref, None)
+    if source is not None and source.text is not None:  # a file plugin's module: loaded anew next time
+        sys.modules.pop(source.module, None)
 
 
 def loaded(refs: Sequence[str] | None = None) -> tuple[PluginSource, ...]:

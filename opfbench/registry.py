@@ -513,6 +513,9 @@ PAPER_RULES = ("llma", "lfma")
 PAPER_OPF = "acopf-paper"
 #: `opfbench run`'s default grid: every built-in strategy at its default options.
 DEFAULT_RUN = tuple(STRATEGIES)
+#: The default grid's strategies under a forecast source: the paper's Algorithm 3 rules
+#: (the grid codes' rules know no forecast; only Algorithm 3's limit would change them).
+DEFAULT_FORECAST = PAPER_RULES
 #: `opfbench fault`'s default strategies: the baseline, the paper's rules, the grid code's
 #: Volt-VAR and the optimum.
 DEFAULT_FAULT = (BASELINE, "llma", "lfma", "volt-var", REFERENCE_OPTIMUM)

@@ -90,7 +90,9 @@ def test_every_rule_passes_through_the_limits_of_llma_and_lfma():
             assert safe.excursion_mvar[0] == 0 < aware.excursion_mvar[0], label  # Algorithm 3 goes beyond P^C's capability
     night = Scenario(net, [1.0], [np.where(net.der_solar, 0.0, 0.3)]).with_night_q(np.array([True]))
     res = run_strategy("volt-var", night, 0.0)
-    assert (res.q_mvar[0, net.der_solar] > 0.01).sum() == 3  # Q at night: PV injects with no output (bus 19 sits in the dead band)
+    assert (
+        res.q_mvar[0, net.der_solar] > 0.01
+    ).sum() == 3  # Q at night: PV injects with no output (bus 19 sits in the dead band)
     assert np.all(run_strategy("volt-var", night.without_forecast(), 0.0).q_mvar[0, net.der_solar] == 0)
 
 

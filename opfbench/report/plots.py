@@ -249,6 +249,41 @@ def gap_vs_k(summary: pd.DataFrame) -> list[Plot]:
     return out
 
 
+def share_vs_violations(board: pd.DataFrame) -> list[Plot]:
+    """Per case: each strategy's share of the AC OPF's loss reduction against its minutes
+    outside the voltage limits, one point per k (a `tables.leaderboard`)."""
+    out = []
+    if "voltage_violation_min" not in board or board.empty:
+        return out
+    for i, case in enumerate(_cases(board)):
+        sub = board[board["case"] == case].dropna(subset=["opf_share_pct", "voltage_violation_min"])
+        if sub.empty:
+            continue
+        fig = _figure()
+        for strategy, grp in order(sub).groupby("strategy", sort=False):
+            grp = grp.sort_values("k")
+            fig.add_scatter(
+                x=grp["voltage_violation_min"],
+                y=grp["opf_share_pct"],
+                mode="markers+lines",
+                name=escape(strategy),
+                customdata=np.stack([grp["k"], grp["energy_kwh"]], axis=1),
+                hovertemplate="k=%{customdata[0]}<br>%{y:.1f} % of the OPF's reduction<br>%{x:.0f} min outside"
+                "<br>%{customdata[1]:.2f} kWh",
+            )
+        out.append(
+            plot_json(
+                f"share-violations-{i}",
+                f"{case}: share of the AC OPF's loss reduction vs minutes outside the voltage limits "
+                "(one point per k, night connected, forecast off)",
+                fig,
+                "minutes outside the voltage limits",
+                "share of the AC OPF's loss reduction (%)",
+            )
+        )
+    return out
+
+
 def night_bars(summary: pd.DataFrame) -> list[Plot]:
     out = []
     for i, case in enumerate(_cases(summary)):

@@ -58,7 +58,9 @@ class StudyConfig:
     "oracle" (P^F = the next step's actual output) or a forecasting model's name whose PV
     forecasts `opfbench forecast --dataset pv --out DIR` wrote to `forecast_dir`.
     A forecast other than "off" runs only the strategies that read one (the registry's
-    `uses_forecast`: Algorithm 3's rules); the others would repeat their "off" rows.
+    `uses_forecast`: every local rule passes through Algorithm 3's limit); the others would
+    repeat their "off" rows; `forecast_strategies`, where given, narrows that to some of
+    the strategies (`opfbench run`'s default grid: the paper's Algorithm 3 rules).
     `chunk`: the length of one task's slice of the period (6h/day/week/month, local time;
     "auto": 6h for periods of up to two days, so the paper day's tasks spread over the
     workers, month otherwise), fixed by the config and never by the number of workers. `detail`: also write the long
@@ -88,6 +90,7 @@ class StudyConfig:
     price_per_kwh: float = DEFAULT_PRICE_PER_KWH
     currency: str = DEFAULT_CURRENCY
     price_source: str = DEFAULT_PRICE_SOURCE
+    forecast_strategies: tuple[str, ...] | None = None
     plugins: tuple[str, ...] = ()
     plugin_digests: tuple[str, ...] = ()
     notes: tuple[str, ...] = field(default=(), compare=False)
@@ -97,6 +100,12 @@ class StudyConfig:
 
         labels = tuple(configuration(label).label for label in self.strategies)
         object.__setattr__(self, "strategies", labels)
+        if self.forecast_strategies is not None:
+            chosen = tuple(dict.fromkeys(configuration(label).label for label in self.forecast_strategies))
+            stray = [label for label in chosen if label not in labels]
+            if stray:
+                raise InputError(f"forecast strategies {', '.join(stray)} are not among the run's strategies")
+            object.__setattr__(self, "forecast_strategies", chosen)
         sources = tuple(dict.fromkeys(s.source for s in map(_spec, labels) if s.source != "opfbench"))
         loaded = [load(ref) for ref in sources]
         object.__setattr__(self, "plugins", tuple(p.ref for p in loaded))
@@ -149,8 +158,12 @@ class StudyConfig:
 
     def strategies_for(self, forecast: str) -> tuple[str, ...]:
         """The strategies a forecast source runs: all with "off"; under a forecast only those
-        the registry says read one (`uses_forecast`) — any other would repeat its "off" rows."""
-        return tuple(s for s in self.strategies if forecast == "off" or _spec(s).uses_forecast)
+        the registry says read one (`uses_forecast`) — any other would repeat its "off" rows —
+        and, where `forecast_strategies` is given, only those of it."""
+        if forecast == "off":
+            return self.strategies
+        chosen = self.strategies if self.forecast_strategies is None else self.forecast_strategies
+        return tuple(s for s in self.strategies if s in chosen and _spec(s).uses_forecast)
 
     def settings(self) -> dict[str, str]:
         """The run-level settings options may take their defaults from (`Option.setting`)."""
