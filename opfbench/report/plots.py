@@ -252,7 +252,7 @@ def gap_vs_k(summary: pd.DataFrame) -> list[Plot]:
 def share_vs_violations(board: pd.DataFrame) -> list[Plot]:
     """Per case: each strategy's share of the AC OPF's loss reduction against its minutes
     outside the voltage limits, one point per k (a `tables.leaderboard`)."""
-    out = []
+    out: list[Plot] = []
     if "voltage_violation_min" not in board or board.empty:
         return out
     for i, case in enumerate(_cases(board)):
