@@ -190,6 +190,18 @@ def test_a_rule_that_gives_nan_at_run_time_is_a_named_status_and_the_others_go_o
     assert np.isnan(res.q_mvar[0]).all() and np.isnan(res.losses_kw[0]) and np.isfinite(res.losses_kw[1:]).all()
 
 
+def test_an_open_loop_rule_that_gives_nan_is_named_too(tmp_path):
+    body = """
+    @local_rule("nan-p", reads=("p",), options={"above": 10.0})
+    def nan_p(m, above):
+        return np.where(m.p_mw > above, np.inf, -0.1 * m.p_mw)
+    """
+    plugins.load(_plugin(tmp_path, body))
+    net = load_network("paper33")
+    res = run_strategy("nan-p:above=0.5", Scenario(net, [1.0, 1.0], [[0.3] * 5, [0.3, 0.3, 0.6, 0.3, 0.3]]), 0.0)
+    assert list(res.status) == [OK, RULE_NON_FINITE] and res.power_flows.tolist() == [1, 1]
+
+
 def test_the_entry_point_group_loads_an_installed_plugin(tmp_path, monkeypatch):
     module = tmp_path / "installed_rule.py"
     module.write_text(

@@ -1,6 +1,6 @@
 """`opfbench table [CASE]`: the local rules' loss table on one operating point — every local
-rule the registry lists (no action, LLMA, LFMA, the grid codes' rules) at their defaults, for the paper's reserve coefficients
-k, without and with a forecast (Algorithm 3).
+rule the registry lists (no action, LLMA, LFMA, the grid codes' rules) at its defaults, for
+the paper's reserve coefficients k, without and with a forecast (Algorithm 3).
 
 Forecast rule: P^F = min(factor · P^C, P̄) per DER (factor 1.2 = a +20 % forecast), with
 P^C = der_scale · P̄. The rules and their options come from the registry.

@@ -219,6 +219,20 @@ def voltage_envelope(steps: pd.DataFrame, limits: dict[str, tuple[float, float]]
     return out
 
 
+def _lines_over_k(fig: go.Figure, frame: pd.DataFrame, x: str, y: str, hover_columns: list[str], hover: str) -> None:
+    """One trace per strategy of `frame` (registry order), its points ordered by k."""
+    for strategy, grp in order(frame).groupby("strategy", sort=False):
+        grp = grp.sort_values("k")
+        fig.add_scatter(
+            x=grp[x],
+            y=grp[y],
+            mode="lines+markers",
+            name=escape(strategy),
+            customdata=grp[hover_columns].to_numpy(),
+            hovertemplate=hover,
+        )
+
+
 def gap_vs_k(summary: pd.DataFrame) -> list[Plot]:
     out = []
     for i, case in enumerate(_cases(summary)):
@@ -227,16 +241,7 @@ def gap_vs_k(summary: pd.DataFrame) -> list[Plot]:
         if sub.empty:
             continue
         fig = _figure()
-        for strategy, grp in order(sub).groupby("strategy", sort=False):
-            grp = grp.sort_values("k")
-            fig.add_scatter(
-                x=grp["k"],
-                y=grp["gap_pct"],
-                mode="lines+markers",
-                name=escape(strategy),
-                customdata=grp["gap_kwh"],
-                hovertemplate="k=%{x}<br>gap %{y:.2f} %<br>%{customdata:.2f} kWh",
-            )
+        _lines_over_k(fig, sub, "k", "gap_pct", ["gap_kwh"], "k=%{x}<br>gap %{y:.2f} %<br>%{customdata[0]:.2f} kWh")
         out.append(
             plot_json(
                 f"gap-{i}",
@@ -260,17 +265,8 @@ def share_vs_violations(board: pd.DataFrame) -> list[Plot]:
         if sub.empty:
             continue
         fig = _figure()
-        for strategy, grp in order(sub).groupby("strategy", sort=False):
-            grp = grp.sort_values("k")
-            fig.add_scatter(
-                x=grp["voltage_violation_min"],
-                y=grp["opf_share_pct"],
-                mode="markers+lines",
-                name=escape(strategy),
-                customdata=np.stack([grp["k"], grp["energy_kwh"]], axis=1),
-                hovertemplate="k=%{customdata[0]}<br>%{y:.1f} % of the OPF's reduction<br>%{x:.0f} min outside"
-                "<br>%{customdata[1]:.2f} kWh",
-            )
+        hover = "k=%{customdata[0]}<br>%{y:.1f} % of the OPF's reduction<br>%{x:.0f} min outside<br>%{customdata[1]:.2f} kWh"
+        _lines_over_k(fig, sub, "voltage_violation_min", "opf_share_pct", ["k", "energy_kwh"], hover)
         out.append(
             plot_json(
                 f"share-violations-{i}",
