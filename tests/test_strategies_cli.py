@@ -1,8 +1,9 @@
-"""`opfbench snapshot CASE --strategy {no-action,llma,lfma}` through `opfbench.cli.main`."""
+"""`opfbench snapshot CASE --strategy LABEL` and `opfbench strategies` through `opfbench.cli.main`."""
 
 from __future__ import annotations
 
 import json
+from pathlib import Path
 
 import pytest
 
@@ -89,3 +90,30 @@ def test_bad_arguments_exit_2(capsys: pytest.CaptureFixture, args: list[str], me
 def test_unknown_case_exit_2(capsys: pytest.CaptureFixture) -> None:
     assert main(["snapshot", "nowhere33", "--strategy", "lfma"]) == 2
     assert "unknown case" in capsys.readouterr().err
+
+
+def test_a_label_with_options_runs_in_snapshot(capsys: pytest.CaptureFixture) -> None:
+    out = snapshot_json(capsys, "--strategy", "volt-var:curve=b,step_factor=0.50", "--k", "0.2")
+    assert out["strategy"] == "volt-var" and out["status"] == "ok" and out["power_flows"] > 1
+    assert out["residual_mvar"] <= 1e-7  # the closed loop settled
+    curve_a = snapshot_json(capsys, "--strategy", "volt-var:curve=a", "--k", "0.2")
+    assert curve_a["strategy"] == "volt-var:curve=a" and curve_a["q_mvar"] != out["q_mvar"]
+
+
+@pytest.mark.usefixtures("isolated_registry")
+def test_strategies_lists_every_strategy_with_its_options(capsys: pytest.CaptureFixture) -> None:
+    assert main(["strategies", "--json"]) == 0
+    entries = {e["name"]: e for e in json.loads(capsys.readouterr().out)}
+    assert {"no-action", "llma", "lfma", "volt-var", "watt-var", "const-pf", "cosphi-p", "q-u", "acopf", "socp"} <= set(entries)
+    vv = entries["volt-var"]
+    assert vv["kind"] == "local" and vv["reads"] == ["v"] and vv["closed_loop"] and vv["uses_forecast"]
+    curve = next(o for o in vv["options"] if o["name"] == "curve")
+    assert curve == {"name": "curve", "type": "choice", "default": "b", "help": curve["help"], "allowed": ["a", "b"]}
+    solver = next(o for o in entries["acopf"]["options"] if o["name"] == "solver")
+    assert (
+        solver["default_from"] == "acopf_solver" and entries["socp"]["lower_bound"] and entries["acopf"]["kind"] == "formulation"
+    )
+    example = str(Path(__file__).resolve().parents[1] / "docs" / "custom_rule.py")
+    assert main(["strategies", "--plugin", example]) == 0
+    text = capsys.readouterr().out
+    assert f"droop  [plugin {example}]" in text and "gain=5  number" in text
