@@ -11,7 +11,7 @@ from pathlib import Path
 import pandas as pd
 
 from opfbench.io import load_network
-from opfbench.registry import FORMULATIONS
+from opfbench.registry import configuration
 from opfbench.study.config import StudyConfig
 from opfbench.study.execution import STOPPED, execute
 from opfbench.study.periods import Period
@@ -49,12 +49,12 @@ def prepare(config: StudyConfig) -> tuple[StudyConfig, Period, list[Task]]:
 
         for model in models:
             load_forecast(config.forecast_dir, "pv", model)
+    running = {label for source in config.forecast for label in config.strategies_for(source)}
     for case in config.cases:
         net = load_network(case)
-        if any(s in FORMULATIONS for s in config.strategies) and "off" in config.forecast:
-            from opfbench.formulations.problem import check_supported
-
-            check_supported(net)
+        for label in config.strategies:
+            if label in running:
+                configuration(label).spec.check_network(net)
     return config, period, plan_tasks(config, period)
 
 
