@@ -106,6 +106,10 @@ def test_bench_reports_null_without_andes(monkeypatch):
     import opfbench.dynamics.andes_ref as andes_ref
 
     monkeypatch.setattr(andes_ref, "andes_available", lambda: False)
-    monkeypatch.setattr(bench_fault, "run_study", lambda config, point: ([], {"study_s": 1.0, "simulations": 0}))
+
+    class Study:
+        timings = {"study_s": 1.0, "simulations": 0}
+
+    monkeypatch.setattr(bench_fault, "run_fault_study", lambda config, case, **kw: Study())
     f = bench_fault.run()
     assert f["andes_sim_ms"] is None and f["ratio_vs_andes"] is None and f["sim_ms"] > 0 and f["steps"] == 3000

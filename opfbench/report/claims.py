@@ -13,6 +13,7 @@ from typing import Callable
 import numpy as np
 import pandas as pd
 
+from opfbench.registry import BASELINE
 from opfbench.report import paper, tables
 from opfbench.report.inputs import Inputs
 
@@ -266,7 +267,7 @@ def larger_k_faster(inputs: Inputs) -> Claim:
     rec = _recovery(inputs)
     if rec is None:
         return _missing(claim, figure, inputs, "fault.parquet")
-    rec = rec[rec["strategy"] != "no-action"].dropna(subset=["recovery_ms"])
+    rec = rec[rec["strategy"] != BASELINE].dropna(subset=["recovery_ms"])
     groups = [
         g.sort_values("k")["recovery_ms"].to_numpy()
         for _, g in rec.groupby(["case", "fault_bus", "strategy", "forecast", "variant"])

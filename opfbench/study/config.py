@@ -43,12 +43,29 @@ def check_night(night: str) -> str:
     return night
 
 
-def _unique(label: str, values: tuple, notes: list[str]) -> tuple:
+def unique_values(label: str, values: tuple, notes: list[str]) -> tuple:
+    """`values` without repeats (first kept); a note in `notes` names what was dropped."""
     out = tuple(dict.fromkeys(values))
     if len(out) < len(values):
         dropped = [v for i, v in enumerate(values) if v in values[:i]]
         notes.append(f"note: duplicated {label} dropped: {', '.join(str(v) for v in dropped)}")
     return out
+
+
+def strategies_for(strategies: tuple[str, ...], forecast: str) -> tuple[str, ...]:
+    """The strategies a forecast source runs: all with "off"; under a forecast only those
+    the registry says read one (`uses_forecast`) — any other would repeat its "off" rows."""
+    return tuple(s for s in strategies if forecast == "off" or get_strategy(s).uses_forecast)
+
+
+def check_something_to_run(strategies: tuple[str, ...], forecasts: tuple[str, ...]) -> None:
+    """InputError when no strategy runs under any of the forecasts (`strategies_for`)."""
+    if not any(strategies_for(strategies, source) for source in forecasts):
+        readers = [s for s in STRATEGY_NAMES if get_strategy(s).uses_forecast]
+        raise InputError(
+            f"nothing to run: only the strategies that read a forecast ({', '.join(readers)}) run under "
+            f"forecast {', '.join(forecasts)}, and the grid has none of them"
+        )
 
 
 @dataclass(frozen=True)
@@ -109,12 +126,7 @@ class StudyConfig:
         check_option("AC OPF solver", self.acopf_solver, ACOPF_SOLVERS)
         if not (self.cases and self.strategies and self.ks and self.night_modes and self.forecast):
             raise InputError("nothing to run: give at least one case, strategy, k, night mode and forecast")
-        if not any(self.strategies_for(source) for source in self.forecast):
-            readers = [s for s in STRATEGY_NAMES if get_strategy(s).uses_forecast]
-            raise InputError(
-                f"nothing to run: only the strategies that read a forecast ({', '.join(readers)}) run under "
-                f"forecast {', '.join(self.forecast)}, and the grid has none of them"
-            )
+        check_something_to_run(self.strategies, self.forecast)
 
     @classmethod
     def build(cls, **fields) -> "StudyConfig":
@@ -129,13 +141,12 @@ class StudyConfig:
         ):
             if key in fields:
                 values = tuple(float(v) for v in fields[key]) if key == "ks" else tuple(fields[key])
-                fields[key] = _unique(label, values, notes)
+                fields[key] = unique_values(label, values, notes)
         return cls(**fields, notes=tuple(notes))
 
     def strategies_for(self, forecast: str) -> tuple[str, ...]:
-        """The strategies a forecast source runs: all with "off"; under a forecast only those
-        the registry says read one (`uses_forecast`) — any other would repeat its "off" rows."""
-        return tuple(s for s in self.strategies if forecast == "off" or get_strategy(s).uses_forecast)
+        """The strategies a forecast source runs (`strategies_for`)."""
+        return strategies_for(self.strategies, forecast)
 
     def as_dict(self) -> dict:
         """The manifest's `config` (JSON-ready)."""

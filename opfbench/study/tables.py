@@ -8,7 +8,6 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 
-from opfbench.errors import InputError
 from opfbench.result import OK, StrategyResult
 from opfbench.study.config import DETAIL_TABLES
 
@@ -187,29 +186,6 @@ def partial_summary(steps: pd.DataFrame) -> pd.DataFrame:
     ).reset_index()
 
 
-PARTIAL_COLUMNS = (
-    "steps",
-    "hours",
-    "pf_converged_steps",
-    "measured_hours",
-    "energy_kwh",
-    "not_ok_steps",
-    "voltage_violation_steps",
-    "vmin_pu",
-    "vmax_pu",
-    "max_excursion_mvar",
-    "excursion_steps",
-    "lower_bound_kwh",
-    "lb_missing",
-    "wall_s",
-    "solver_s",
-    "solver_known",
-    "certified",
-)
-"""The columns of a task's partial sums (`partial_summary`) besides KEYS: a checkpoint
-without one of them was written by another version."""
-
-
 def summarize(partials: list[pd.DataFrame], order: list[tuple]) -> pd.DataFrame:
     """The summary (one row per configuration, in `order` of KEYS tuples) from
     `partial_summary` frames. A step whose power flow did not converge (pf-diverged) has
@@ -221,12 +197,6 @@ def summarize(partials: list[pd.DataFrame], order: list[tuple]) -> pd.DataFrame:
     over the same steps, from the socp rows (else the acopf rows), NaN unless every step
     has one."""
     p = pd.concat(partials, ignore_index=True)
-    missing = [c for c in PARTIAL_COLUMNS if c not in p.columns]
-    if missing:  # a checkpoint of an older opfbench: its rows do not mean what this version's do
-        raise InputError(
-            f"the run folder holds finished tasks whose partial sums lack {', '.join(missing)} (written by another "
-            "opfbench version); rerun with --fresh"
-        )
     g = p.groupby(KEYS, sort=False)
     sums = g[
         [
