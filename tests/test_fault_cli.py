@@ -7,6 +7,7 @@ import pandas as pd
 import pytest
 
 from opfbench.cli import main
+from tests.support.matpower_texts import CASE4_PV
 
 SHORT = ["paper33", "--strategies", "no-action", "llma", "--k", "0", "0.8", "--t-end", "0.6"]
 
@@ -24,12 +25,56 @@ SHORT = ["paper33", "--strategies", "no-action", "llma", "--k", "0", "0.8", "--t
         (["paper33", "--fault-bus", "17", "--variants", "source=abc"], "not a number"),
         (["paper33", "--fault-bus", "17", "--variants", "colour=red"], "unknown key"),
         (["paper33", "--fault-bus", "17", "--time", "25:00"], "--time"),
+        (["paper33", "--fault-bus", "17", "--variants", "emf=held,emf-pu=1.05"], "emf and emf-pu both set the source EMF"),
+        (["paper33", "--fault-bus", "17", "--variants", "emf-pu=1.05,emf=reset"], "emf and emf-pu both set the source EMF"),
+        (["paper33", "--fault-bus", "17", "--variants", "motors=0.3,motors=0.5"], "motors is given twice; give each key once"),
+        (["paper33", "--fault-bus", "17", "--strategies", "acopf", "--forecast", "oracle"], "nothing to run"),
+        (["paper33", "--fault-bus", "17", "--step-ms", "1e-6"], "lengthen the step (--step-ms) or shorten the simulated time"),
+        (["paper33", "--fault-bus", "17", "--t-end", "1e9"], "a simulation of 1e+09 s at a 1-ms step is 1e+12 steps"),
     ],
 )
 def test_bad_input_is_one_message_and_exit_2(argv, needle, capsys):
     assert main(["fault", *argv]) == 2
     err = capsys.readouterr().err.strip()
     assert needle in err and len(err.splitlines()) == 1 and "Traceback" not in err
+
+
+@pytest.fixture
+def no_simulation(monkeypatch):
+    """`opfbench fault` must refuse before any simulation."""
+
+    def fail(*args, **kwargs):
+        raise AssertionError("a simulation ran before the input was refused")
+
+    monkeypatch.setattr("opfbench.dynamics.study.simulate_task", fail)
+
+
+def test_a_voltage_controlled_bus_is_refused(tmp_path, capsys, no_simulation):
+    """The RMS model holds every generator at a fixed current: a PV bus would start off its
+    steady state (every bus "not recovered" at 0.79 p.u., even without a fault)."""
+    path = tmp_path / "pv4.m"
+    path.write_text(CASE4_PV)
+    assert main(["fault", f"{path}?der=3:PV:0.1", "--fault-bus", "2", "--workers", "1"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err == (
+        "opfbench fault: error: pv4: the fault model does not model voltage-controlled (PV) buses (400); "
+        "make them PQ buses (type 1) with fixed P and Q"
+    )
+
+
+@pytest.mark.parametrize("out, message", [("file", "exists and is not a folder"), ("/proc/fault", "cannot write there")])
+def test_a_bad_out_is_refused_before_the_simulations(tmp_path, capsys, no_simulation, out, message):
+    (tmp_path / "file").write_text("x")
+    target = tmp_path / out if out == "file" else out
+    assert main(["fault", *SHORT, "--fault-bus", "18", "--workers", "1", "--out", str(target)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert message in err and len(err.splitlines()) == 1, err
+
+
+def test_a_bus_given_twice_is_simulated_once(capsys):
+    assert main(["fault", *SHORT, "--fault-bus", "18", "18", "--strategies", "no-action", "--k", "0", "--json"]) == 0
+    out, err = capsys.readouterr()
+    assert len(json.loads(out)) == 1 and "note: duplicated fault buses dropped: 18" in err
 
 
 def test_json_and_out_files(tmp_path, capsys):

@@ -204,7 +204,7 @@ def run_family(
         store = RunStore(folder, _note)
 
         def planning_stopped() -> None:
-            _note("\nstopped while planning; nothing was run")
+            _note(f"\n{' '.join((command or ['opfbench'])[:2])}: stopped while planning; nothing was run")
             _remove(folder, temporary)
             os._exit(execution.STOPPED)
 

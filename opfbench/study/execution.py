@@ -9,8 +9,9 @@ thread (`signal.sigwait`), which stops the process at once (exit code 130) — e
 finished task is already on disk (each written atomically), the running one is dropped.
 With Dask the tasks run in other processes, which never see the signal (the local
 cluster's worker processes start with SIGINT blocked, so a terminal's Ctrl-C reaches this
-process alone); the interrupt stops the wait at once, the local cluster is shut down and
-KeyboardInterrupt propagates.
+process alone); here Ctrl-C only raises a flag the wait for results looks at every 50 ms,
+so it stops the wait at once — the local cluster is shut down and KeyboardInterrupt
+propagates from there, never from inside a library's callback.
 """
 
 from __future__ import annotations
@@ -29,6 +30,7 @@ Save = Callable[[Any], None]
 
 STOPPED = 130  # exit code after Ctrl-C (128 + SIGINT)
 CONNECT_S = 10  # seconds to reach a scheduler
+POLL_S = 0.05  # seconds between looks for finished tasks and Ctrl-C while a cluster works
 #: The local cluster's workers:
 #: - with glibc's default heap trimming: Dask's MALLOC_TRIM_THRESHOLD_=65536 (it returns
 #:   freed memory to the OS at once) made the tasks slower than in this process; the
@@ -88,7 +90,10 @@ def check_scheduler(address: str) -> None:
 
 class _SigintWatcher:
     """Inside the block SIGINT is blocked in this (main) thread and a daemon thread waits
-    for it (`signal.sigwait`) and calls `on_stop`, which must end the process."""
+    for it (`signal.sigwait`) and calls `on_stop`, which must end the process. A SIGINT
+    the kernel hands to another thread that does not block it (threads started before the
+    block, e.g. BLAS's) runs Python's handler in the main thread: it passes the signal on
+    to the watcher."""
 
     def __init__(self, on_stop: Callable[[], None]):
         self.on_stop, self.armed = on_stop, True
@@ -98,14 +103,20 @@ class _SigintWatcher:
         if self.armed:
             self.on_stop()
 
+    def _pass_on(self, signum: int, frame: object) -> None:
+        if self.thread.ident is not None:
+            signal.pthread_kill(self.thread.ident, signal.SIGINT)
+
     def __enter__(self) -> "_SigintWatcher":
         signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
         self.thread = threading.Thread(target=self._wait, daemon=True, name="opfbench-sigint")
         self.thread.start()
+        self.handler = signal.signal(signal.SIGINT, self._pass_on)
         return self
 
     def __exit__(self, *exc) -> None:
         self.armed = False
+        signal.signal(signal.SIGINT, self.handler)
         if self.thread.ident is not None:  # started in __enter__
             signal.pthread_kill(self.thread.ident, signal.SIGINT)  # wakes the watcher, which ends
         self.thread.join(5)
@@ -123,7 +134,12 @@ def stop_on_ctrl_c(on_stop: Callable[[], None]) -> contextlib.AbstractContextMan
 @contextlib.contextmanager
 def _sigint_blocked() -> Iterator[None]:
     """SIGINT blocked in this thread inside the block: threads and processes started here
-    inherit the mask (a local cluster's event loop and its worker processes)."""
+    inherit the mask (a local cluster's event loop and its worker processes). The
+    multiprocessing resource tracker is started first: starting it unblocks SIGINT in the
+    thread that does (the cluster's event loop, else)."""
+    from multiprocessing import resource_tracker
+
+    resource_tracker.ensure_running()
     previous = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
     try:
         yield
@@ -147,6 +163,23 @@ def run_in_process(jobs: list[tuple[Any, Any]], runner: Callable, save: Save, on
                 save(result)
 
 
+@contextlib.contextmanager
+def _ctrl_c_requests() -> Iterator[threading.Event]:
+    """Inside the block Ctrl-C only sets the event it yields (the main thread's SIGINT
+    handler), so it never lands as a KeyboardInterrupt inside some library's callback,
+    where Python would print and ignore it; the caller checks the event where stopping is
+    safe."""
+    pressed = threading.Event()
+    if threading.current_thread() is not threading.main_thread():
+        yield pressed
+        return
+    previous = signal.signal(signal.SIGINT, lambda signum, frame: pressed.set())
+    try:
+        yield pressed
+    finally:
+        signal.signal(signal.SIGINT, previous)
+
+
 def _done() -> None:
     """Nothing left to wait for."""
 
@@ -161,32 +194,41 @@ def run_dask(
     import dask
     from dask.distributed import Client, LocalCluster, as_completed
 
-    if scheduler:
+    with _ctrl_c_requests() as pressed:
+        if scheduler:
+            try:
+                cluster, client = None, Client(scheduler, timeout=f"{CONNECT_S}s")
+            except (OSError, TimeoutError) as exc:
+                raise InputError(f"--scheduler {scheduler}: could not connect ({type(exc).__name__})") from None
+        else:
+            with warnings.catch_warnings(), dask.config.set(LOCAL_CLUSTER_CONFIG), _sigint_blocked():
+                # its small HTTP server (health checks) moves off a busy port
+                warnings.filterwarnings("ignore", message="Port .* is already in use")
+                cluster = LocalCluster(
+                    n_workers=workers, threads_per_worker=1, processes=True, dashboard_address=None, silence_logs=40
+                )
+                client = Client(cluster)
         try:
-            cluster, client = None, Client(scheduler, timeout=f"{CONNECT_S}s")
-        except (OSError, TimeoutError) as exc:
-            raise InputError(f"--scheduler {scheduler}: could not connect ({type(exc).__name__})") from None
-    else:
-        with warnings.catch_warnings(), dask.config.set(LOCAL_CLUSTER_CONFIG), _sigint_blocked():
-            # its small HTTP server (health checks) moves off a busy port
-            warnings.filterwarnings("ignore", message="Port .* is already in use")
-            cluster = LocalCluster(
-                n_workers=workers, threads_per_worker=1, processes=True, dashboard_address=None, silence_logs=40
-            )
-            client = Client(cluster)
-    try:
-        futures = [
-            client.submit(runner, job, pure=False, priority=-i, key=f"task-{task.id}") for i, (task, job) in enumerate(jobs)
-        ]
-        for future in as_completed(futures):
-            save(future.result())
-            future.release()
-    except BaseException:
-        with _sigint_blocked():  # a second Ctrl-C does not interrupt the shutdown
+            futures = [
+                client.submit(runner, job, pure=False, priority=-i, key=f"task-{task.id}") for i, (task, job) in enumerate(jobs)
+            ]
+            finished = as_completed(futures)
+            while not finished.is_empty():
+                if pressed.is_set():
+                    raise KeyboardInterrupt
+                batch = finished.next_batch(block=False)
+                for future in batch:
+                    save(future.result())
+                    future.release()
+                if not batch:
+                    pressed.wait(POLL_S)
+        except BaseException:
+            if cluster is not None:
+                cluster.scale(0)  # the workers first, while the scheduler they report to is up
             client.close()
             if cluster is not None:
                 cluster.close()
-        raise
+            raise
     client.close()
     if cluster is None:
         return _done

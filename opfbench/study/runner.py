@@ -123,12 +123,20 @@ class RunAssembler:
         for w in self.writers.values():
             w.commit()
         summary = summarize(self.partials, list(dict.fromkeys(self.order)))
-        write_atomic(self.out / "summary.csv", summary.to_csv(index=False, float_format="%.6g"))
+        # figures to 6 significant digits; k exactly (0.1 and 0.1000001 are two configurations)
+        exact_k = summary.assign(k=summary["k"].map(_exact))
+        write_atomic(self.out / "summary.csv", exact_k.to_csv(index=False, float_format="%.6g"))
         return summary
 
     def abort(self) -> None:
         for w in self.writers.values():
             w.abort()
+
+
+def _exact(value: float) -> str:
+    """`value` as 6 significant digits where that is exact, else its shortest exact text."""
+    short = f"{value:.6g}"
+    return short if float(short) == value else repr(value)
 
 
 def prepare(config: StudyConfig) -> RunFamily:

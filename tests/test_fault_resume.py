@@ -1,0 +1,118 @@
+"""The fault study on the study engine: killed (SIGKILL) at random moments and run again it
+ends with the uninterrupted study's tables; damaged checkpoints are recomputed, an edited
+case file is refused; a real Dask cluster (`--scheduler`) gives the same tables."""
+
+import json
+import multiprocessing
+import random
+import shutil
+import time
+
+import pandas as pd
+import pytest
+
+from opfbench.cli import main
+from opfbench.dynamics.params import FaultParams
+from opfbench.dynamics.study import FaultConfig, run_fault_study
+from opfbench.io import load_case
+from opfbench.study.store import finished_tasks
+from tests.support.checkpoints import KINDS, damage
+from tests.support.matpower_texts import TINY_CASE
+
+CASE = load_case("paper33")
+# 2 variants × (no action, LLMA and LFMA at three k: 5 distinct setpoints) = 10 tasks of two
+# short simulations
+CONFIG = FaultConfig.build(
+    case="paper33",
+    fault_buses=(18, 27),
+    strategies=("no-action", "llma", "lfma"),
+    ks=(0.0, 0.4, 0.8),
+    variants=("reference", "motors=0.3"),
+    fault=FaultParams(bus=0, t_end_s=1.0),
+)
+TIMING = ["sim_ms"]
+
+
+def _tables(out) -> tuple[pd.DataFrame, pd.DataFrame]:
+    return pd.read_parquet(out / "fault.parquet").drop(columns=TIMING), pd.read_parquet(out / "traces.parquet")
+
+
+def _same(a, b) -> None:
+    for x, y in zip(_tables(a), _tables(b), strict=True):
+        pd.testing.assert_frame_equal(x, y, check_exact=True)
+
+
+@pytest.fixture(scope="module")
+def reference(tmp_path_factory):
+    study = run_fault_study(CONFIG, CASE, tmp_path_factory.mktemp("fault") / "ref", quiet=True)
+    assert len(study.family.tasks) == 10 and study.timings["simulations"] == 20
+    return study
+
+
+def _child(out):
+    run_fault_study(CONFIG, CASE, out, quiet=True)
+
+
+def test_sigkill_at_random_moments_then_resume(tmp_path, reference):
+    ctx = multiprocessing.get_context("fork")
+    rng = random.Random(7)
+    out = tmp_path / "killed"
+    kills, finished = 0, False
+    for _ in range(5):
+        child = ctx.Process(target=_child, args=(out,))
+        child.start()
+        child.join(rng.uniform(0.1, 0.5) * reference.run.wall_s)
+        if child.exitcode is not None:
+            assert child.exitcode == 0
+            finished = True
+            break
+        child.kill()  # SIGKILL: no cleanup, lock left behind, maybe a half-written temporary file
+        child.join(30)
+        kills += 1
+        time.sleep(0.05)
+    assert kills >= 2
+    kept = finished_tasks(out)
+    resumed = run_fault_study(CONFIG, CASE, out, quiet=True)
+    assert resumed.run.kept == 10 and (finished or resumed.run.ran == 10 - kept)
+    _same(reference.out, out)
+    assert not list(out.glob(".*")) and not list((out / "tasks").glob(".*"))  # no lock, no temporary files
+
+
+def test_damaged_checkpoints_are_recomputed(tmp_path, reference, capsys):
+    out = tmp_path / "damaged"
+    shutil.copytree(reference.out, out)
+    files = damage(out, "traces")
+    capsys.readouterr()
+    again = run_fault_study(CONFIG, CASE, out, quiet=True)
+    err = capsys.readouterr().err
+    assert again.run.ran == 4 and again.run.kept == 10
+    for file, why in zip(files, KINDS, strict=True):
+        assert f"note: {file} {why}" in err, err
+    assert "Traceback" not in err
+    _same(reference.out, out)
+
+
+def test_an_edited_case_file_is_refused_on_resume(tmp_path, capsys):
+    path = tmp_path / "tiny.m"
+    path.write_text(TINY_CASE)
+    out = tmp_path / "fault"
+    argv = ["fault", f"{path}?der=3:PV:0.05", "--fault-bus", "3", "--strategies", "no-action", "llma", "--k", "0"]
+    argv += ["--t-end", "0.4", "--workers", "1", "--quiet", "--out", str(out)]
+    assert main(argv) == 0
+    path.write_text(TINY_CASE.replace("\t3\t1\t90\t40", "\t3\t1\t95\t40"))  # bus 3 draws 95 kW, not 90
+    assert main(argv) == 2
+    err = capsys.readouterr().err
+    assert f"the data of case {path}?der=3:PV:0.05 changed since this run began" in err and "--fresh" in err, err
+    assert len(err.strip().splitlines()) == 1 and not (out / ".lock").exists()
+    assert main([*argv, "--fresh"]) == 0
+    manifest = json.loads((out / "manifest.json").read_text())
+    assert manifest["data_sha256"][f"case {path}?der=3:PV:0.05"] == load_case(f"{path}?der=3:PV:0.05").data_sha256
+
+
+def test_on_a_dask_cluster_like_in_process(dask_cluster, tmp_path, reference):
+    argv = ["fault", "paper33", "--fault-bus", "18", "27", "--strategies", "no-action", "llma", "lfma", "--k", "0", "0.4", "0.8"]
+    argv += ["--variants", "reference", "motors=0.3", "--t-end", "1", "--quiet"]
+    assert main([*argv, "--scheduler", dask_cluster, "--out", str(tmp_path / "cluster")]) == 0
+    _same(reference.out, tmp_path / "cluster")
+    manifest = json.loads((tmp_path / "cluster" / "manifest.json").read_text())
+    assert manifest["kind"] == "fault" and manifest["timings"]["scheduler"] == dask_cluster
