@@ -40,7 +40,7 @@ from opfbench.dynamics.simulate import (
 from opfbench.errors import InputError
 from opfbench.io import Case
 from opfbench.network import Network
-from opfbench.parquetio import ParquetStream, write_parquet
+from opfbench.parquetio import ParquetStream, arrow_table, write_parquet
 from opfbench.registry import get_strategy, run_strategy
 from opfbench.scenario import Scenario
 from opfbench.study.config import check_something_to_run, strategies_for, unique_values
@@ -375,19 +375,21 @@ def simulate_task(job: FaultJob) -> TaskOutput:
 class FaultAssembler:
     """fault.parquet and traces.parquet, one configuration after another in planned order
     as their tasks arrive (a task's tables kept until its last configuration is written):
-    the traces streamed, the fault table written on commit (after the traces)."""
+    the traces streamed as arrow tables in batches of TRACE_BATCH rows, the fault table
+    written on commit (after the traces)."""
 
     def __init__(self, out: Path, family: FaultFamily):
         self.out, self.family = out, family
         self.traces = ParquetStream(out / "traces.parquet")
-        self.rows: list[pd.DataFrame] = []
-        self.tables: dict[int, dict[str, pd.DataFrame]] = {}
+        self.batch: list[pa.Table] = []
+        self.rows: list[pa.Table] = []
+        self.tables: dict[int, dict[str, pa.Table]] = {}
         self.left = np.bincount([c.task for c in family.configurations], minlength=len(family.tasks))
         self.index = {t.id: i for i, t in enumerate(family.tasks)}
         self.next = 0
 
     def add(self, task: FaultTask, tables: dict[str, pa.Table]) -> None:
-        self.tables[self.index[task.id]] = {name: table.to_pandas() for name, table in tables.items()}
+        self.tables[self.index[task.id]] = tables
         configurations = self.family.configurations
         while self.next < len(configurations) and configurations[self.next].task in self.tables:
             self._write(configurations[self.next])
@@ -398,20 +400,44 @@ class FaultAssembler:
         src = c.params.source
         label = {"case": self.family.config.case, "strategy": c.strategy, "k": c.k, "forecast": c.forecast, "variant": c.variant}
         model = {"source_impedance_pu": src.impedance_pu, "emf": src.emf, "motor_share": c.params.motors.share}
-        self.rows.append(tables["measures"].assign(**label, **model)[FAULT_COLUMNS])
-        self.traces.write(tables["traces"].assign(**label)[TRACE_COLUMNS])
+        self.rows.append(_labelled(tables["measures"], label | model, FAULT_COLUMNS))
+        self.batch.append(_labelled(tables["traces"], label, TRACE_COLUMNS))
+        if sum(t.num_rows for t in self.batch) >= TRACE_BATCH:
+            self._flush()
         self.left[c.task] -= 1
         if not self.left[c.task]:
             del self.tables[c.task]
 
+    def _flush(self) -> None:
+        if self.batch:
+            self.traces.write(pa.concat_tables(self.batch))
+            self.batch = []
+
     def commit(self) -> pd.DataFrame:
-        table = pd.concat(self.rows, ignore_index=True)
+        table = arrow_table(pa.concat_tables(self.rows)).replace_schema_metadata(None)
+        self._flush()
         self.traces.commit()
         write_parquet(self.out / "fault.parquet", table)
-        return table
+        return table.to_pandas()
 
     def abort(self) -> None:
         self.traces.abort()
+
+
+TRACE_BATCH = 1 << 17  # rows of traces.parquet written at once (one row group)
+
+
+def _labelled(table: pa.Table, values: dict[str, str | float], columns: list[str]) -> pa.Table:
+    """`table` with `columns`: its own, and each of `values` repeated on every row (text
+    dictionary-encoded, written as plain text; numbers as float64)."""
+    n = table.num_rows
+
+    def repeated(value: str | float) -> pa.Array:
+        if isinstance(value, str):
+            return pa.DictionaryArray.from_arrays(pa.array(np.zeros(n, dtype=np.int32)), pa.array([value]))
+        return pa.array(np.full(n, value, dtype=np.float64))
+
+    return pa.table({name: repeated(values[name]) if name in values else table.column(name) for name in columns})
 
 
 @dataclass
