@@ -398,7 +398,8 @@ class FaultAssembler:
     def _write(self, c: Configuration) -> None:
         tables = self.tables[c.task]
         src = c.params.source
-        label = {"case": self.family.config.case, "strategy": c.strategy, "k": c.k, "forecast": c.forecast, "variant": c.variant}
+        label: dict[str, str | float] = {"case": self.family.config.case, "strategy": c.strategy, "k": c.k}
+        label |= {"forecast": c.forecast, "variant": c.variant}
         model = {"source_impedance_pu": src.impedance_pu, "emf": src.emf, "motor_share": c.params.motors.share}
         self.rows.append(_labelled(tables["measures"], label | model, FAULT_COLUMNS))
         self.batch.append(_labelled(tables["traces"], label, TRACE_COLUMNS))
