@@ -400,7 +400,8 @@ class FaultAssembler:
         src = c.params.source
         label: dict[str, str | float] = {"case": self.family.config.case, "strategy": c.strategy, "k": c.k}
         label |= {"forecast": c.forecast, "variant": c.variant}
-        model = {"source_impedance_pu": src.impedance_pu, "emf": src.emf, "motor_share": c.params.motors.share}
+        model: dict[str, str | float] = {"source_impedance_pu": src.impedance_pu, "emf": str(src.emf)}
+        model["motor_share"] = c.params.motors.share
         self.rows.append(_labelled(tables["measures"], label | model, FAULT_COLUMNS))
         self.batch.append(_labelled(tables["traces"], label, TRACE_COLUMNS))
         if sum(t.num_rows for t in self.batch) >= TRACE_BATCH:
