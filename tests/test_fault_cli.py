@@ -1,5 +1,5 @@
 """`opfbench fault`: bad input is one message and exit 2; --json records; --out files
-per CONTRACTS.md (fault folder)."""
+per docs/CONTRACTS.md (fault folder)."""
 
 import json
 
@@ -7,6 +7,7 @@ import pandas as pd
 import pytest
 
 from opfbench.cli import main
+from tests.support.contracts import check_folder, parse
 from tests.support.matpower_texts import CASE4_PV
 
 SHORT = ["paper33", "--strategies", "no-action", "llma", "--k", "0", "0.8", "--t-end", "0.6"]
@@ -88,30 +89,10 @@ def test_json_and_out_files(tmp_path, capsys):
         assert r["status"] in ("recovered", "not-recovered", "diverged")
         assert r["vmin"]["18"] < 0.2  # a bolted-through-j0.02 fault
     table = pd.read_parquet(out / "fault.parquet")
-    assert list(table.columns) == [
-        "case",
-        "fault_bus",
-        "strategy",
-        "k",
-        "forecast",
-        "variant",
-        "source_impedance_pu",
-        "emf",
-        "motor_share",
-        "bus",
-        "recovery_ms",
-        "status",
-        "vmin_pu",
-        "margin_pu",
-        "motors_stalled",
-        "sim_ms",
-        "der_bus",
-        "faulted",
-    ]
+    assert check_folder(parse(), "fault", out) == []  # files and columns as docs/CONTRACTS.md says
     assert len(table) == 4 * 33 and table["faulted"].sum() == 4 and table["der_bus"].sum() == 4 * 5
     assert set(table["variant"]) == {"reference"} and set(table["emf"]) == {"reset"}
     traces = pd.read_parquet(out / "traces.parquet")
-    assert list(traces.columns) == ["case", "fault_bus", "strategy", "k", "forecast", "variant", "bus", "t_s", "v_pu", "q_mvar"]
     assert set(traces["bus"]) == {10, 16, 19, 27, 29, 18}
     assert traces.groupby(["strategy", "k", "bus"])["t_s"].diff().dropna().max() <= 0.005 + 1e-9
     assert traces.loc[traces["bus"] == 18, "q_mvar"].isna().all()

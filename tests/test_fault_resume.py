@@ -3,10 +3,7 @@ ends with the uninterrupted study's tables; damaged checkpoints are recomputed, 
 case file is refused; a real Dask cluster (`--scheduler`) gives the same tables."""
 
 import json
-import multiprocessing
-import random
 import shutil
-import time
 
 import pandas as pd
 import pytest
@@ -18,6 +15,7 @@ from opfbench.io import load_case
 from opfbench.study.store import finished_tasks
 from tests.support.checkpoints import KINDS, damage
 from tests.support.matpower_texts import TINY_CASE
+from tests.support.processes import kill_at_random_moments
 
 CASE = load_case("paper33")
 # 2 variants × (no action, LLMA and LFMA at three k: 5 distinct setpoints) = 10 tasks of two
@@ -54,22 +52,8 @@ def _child(out):
 
 
 def test_sigkill_at_random_moments_then_resume(tmp_path, reference):
-    ctx = multiprocessing.get_context("fork")
-    rng = random.Random(7)
     out = tmp_path / "killed"
-    kills, finished = 0, False
-    for _ in range(5):
-        child = ctx.Process(target=_child, args=(out,))
-        child.start()
-        child.join(rng.uniform(0.1, 0.5) * reference.run.wall_s)
-        if child.exitcode is not None:
-            assert child.exitcode == 0
-            finished = True
-            break
-        child.kill()  # SIGKILL: no cleanup, lock left behind, maybe a half-written temporary file
-        child.join(30)
-        kills += 1
-        time.sleep(0.05)
+    kills, finished = kill_at_random_moments(_child, (out,), reference.run.wall_s, 7, (0.1, 0.5))
     assert kills >= 2
     kept = finished_tasks(out)
     resumed = run_fault_study(CONFIG, CASE, out, quiet=True)

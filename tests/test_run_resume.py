@@ -2,10 +2,7 @@
 table as an uninterrupted run: the same rows, no duplicates, bit-identical values (the
 timing columns aside); damaged checkpoints are recomputed, an edited case file refused."""
 
-import multiprocessing
-import random
 import shutil
-import time
 
 import pandas as pd
 
@@ -15,6 +12,7 @@ from opfbench.study import StudyConfig, run_study
 from opfbench.study.store import finished_tasks
 from tests.support.checkpoints import KINDS, damage
 from tests.support.matpower_texts import TINY_CASE
+from tests.support.processes import kill_at_random_moments
 
 # 4 k × 2 chunks (one per local day) = 8 tasks (each with 2 night modes) with the AC OPF
 CONFIG = StudyConfig(
@@ -39,22 +37,8 @@ def test_sigkill_at_random_moments_then_resume(tmp_path):
     ref = run_study(CONFIG, tmp_path / "ref", quiet=True)
     assert len(ref.tasks) == 8
     reference_s = ref.wall_s
-    ctx = multiprocessing.get_context("fork")
-    rng = random.Random(11)
     out = tmp_path / "killed"
-    kills, finished = 0, False
-    for _ in range(5):
-        child = ctx.Process(target=_child, args=(out,))
-        child.start()
-        child.join(rng.uniform(0.05, 0.3) * reference_s)
-        if child.exitcode is not None:
-            assert child.exitcode == 0
-            finished = True
-            break
-        child.kill()  # SIGKILL: no cleanup, lock left behind, maybe a half-written temporary file
-        child.join(30)
-        kills += 1
-        time.sleep(0.05)
+    kills, finished = kill_at_random_moments(_child, (out,), reference_s, 11, (0.05, 0.3))
     assert kills >= 2
     kept = finished_tasks(out)
     resumed = run_study(CONFIG, out, quiet=True)

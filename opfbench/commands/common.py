@@ -125,15 +125,16 @@ def workers(text: str) -> int:
     return n
 
 
-def add_execution_options(parser: argparse.ArgumentParser) -> None:
-    """How a study runs (`opfbench.study.engine`): --workers or --scheduler (not both),
-    --fresh, --quiet."""
+def add_execution_options(parser: argparse.ArgumentParser, default_workers: int | None = None) -> None:
+    """How a study runs (`opfbench.study.engine`): --workers (default `default_workers`,
+    None: every core) or --scheduler (not both), --fresh, --quiet."""
     where = parser.add_mutually_exclusive_group()
+    default = "every core" if default_workers is None else str(default_workers)
     where.add_argument(
         "--workers",
         type=workers,
-        default=None,
-        help="local worker processes (default: every core, never more than tasks to run; 1 runs in this process)",
+        default=default_workers,
+        help=f"local worker processes (default: {default}; never more than tasks to run; 1 runs in this process)",
     )
     where.add_argument("--scheduler", default=None, help="run on an existing Dask cluster, e.g. tcp://HOST:8786")
     parser.add_argument("--fresh", action="store_true", help="discard a previous run of another configuration in --out")

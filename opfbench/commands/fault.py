@@ -86,7 +86,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--sensitivity", action="store_true", help="run the sensitivity variants: " + " ".join(SENSITIVITY_VARIANTS))
     p.add_argument("--t-end", type=number, default=3.0, help="simulated time, s (default 3)")
     p.add_argument("--step-ms", type=number, default=1.0, help="fixed step, ms (default 1)")
-    add_execution_options(p)
+    add_execution_options(p, default_workers=1)  # a local cluster's start-up outweighs a small study's work
     p.add_argument(
         "--out",
         type=path,

@@ -43,7 +43,7 @@ from opfbench.network import Network
 from opfbench.parquetio import ParquetStream, arrow_table, write_parquet
 from opfbench.registry import get_strategy, run_strategy
 from opfbench.scenario import Scenario
-from opfbench.study.config import check_something_to_run, strategies_for, unique_values
+from opfbench.study.config import check_something_to_run, strategies_for, unique_grid
 from opfbench.study.engine import EngineRun, Task, TaskOutput, run_family
 from opfbench.timing import elapsed_ms, now
 
@@ -95,18 +95,9 @@ class FaultConfig:
     @classmethod
     def build(cls, **fields) -> "FaultConfig":
         """A config with repeated grid values dropped; `notes` say what was dropped."""
-        notes: list[str] = []
-        for key, label in (
-            ("fault_buses", "fault buses"),
-            ("strategies", "strategies"),
-            ("ks", "k values"),
-            ("forecasts", "forecasts"),
-            ("variants", "variants"),
-        ):
-            if key in fields:
-                values = tuple(float(v) for v in fields[key]) if key == "ks" else tuple(fields[key])
-                fields[key] = unique_values(label, values, notes)
-        return cls(**fields, notes=tuple(notes))
+        labels = {"fault_buses": "fault buses", "strategies": "strategies", "ks": "k values", "forecasts": "forecasts"}
+        unique, notes = unique_grid(fields, labels | {"variants": "variants"})
+        return cls(**unique, notes=notes)
 
     def check(self, net: Network) -> dict[str, ModelParams]:
         """Validate everything before any work starts; return the params of each variant."""

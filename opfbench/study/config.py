@@ -43,13 +43,19 @@ def check_night(night: str) -> str:
     return night
 
 
-def unique_values(label: str, values: tuple, notes: list[str]) -> tuple:
-    """`values` without repeats (first kept); a note in `notes` names what was dropped."""
-    out = tuple(dict.fromkeys(values))
-    if len(out) < len(values):
-        dropped = [v for i, v in enumerate(values) if v in values[:i]]
-        notes.append(f"note: duplicated {label} dropped: {', '.join(str(v) for v in dropped)}")
-    return out
+def unique_grid(fields: dict, labels: dict[str, str]) -> tuple[dict, tuple[str, ...]]:
+    """`fields` with the grid values of each key of `labels` as a tuple without repeats
+    (first kept; k values as floats), and notes naming what was dropped, by label."""
+    out, notes = dict(fields), []
+    for key, label in labels.items():
+        if key not in fields:
+            continue
+        values = tuple(float(v) for v in fields[key]) if key == "ks" else tuple(fields[key])
+        out[key] = tuple(dict.fromkeys(values))
+        if len(out[key]) < len(values):
+            dropped = [v for i, v in enumerate(values) if v in values[:i]]
+            notes.append(f"note: duplicated {label} dropped: {', '.join(str(v) for v in dropped)}")
+    return out, tuple(notes)
 
 
 def strategies_for(strategies: tuple[str, ...], forecast: str) -> tuple[str, ...]:
@@ -131,18 +137,9 @@ class StudyConfig:
     @classmethod
     def build(cls, **fields) -> "StudyConfig":
         """A config with duplicated grid values dropped; `notes` say what was dropped."""
-        notes: list[str] = []
-        for key, label in (
-            ("cases", "cases"),
-            ("strategies", "strategies"),
-            ("ks", "k values"),
-            ("night_modes", "night modes"),
-            ("forecast", "forecast sources"),
-        ):
-            if key in fields:
-                values = tuple(float(v) for v in fields[key]) if key == "ks" else tuple(fields[key])
-                fields[key] = unique_values(label, values, notes)
-        return cls(**fields, notes=tuple(notes))
+        labels = {"cases": "cases", "strategies": "strategies", "ks": "k values", "night_modes": "night modes"}
+        unique, notes = unique_grid(fields, labels | {"forecast": "forecast sources"})
+        return cls(**unique, notes=notes)
 
     def strategies_for(self, forecast: str) -> tuple[str, ...]:
         """The strategies a forecast source runs (`strategies_for`)."""
