@@ -69,7 +69,7 @@ def test_damaged_checkpoints_are_recomputed(tmp_path, reference, capsys):
     capsys.readouterr()
     again = run_fault_study(CONFIG, CASE, out, quiet=True)
     err = capsys.readouterr().err
-    assert again.run.ran == 4 and again.run.kept == 10
+    assert again.run.ran == 5 and again.run.kept == 10
     for file, why in zip(files, KINDS, strict=True):
         assert f"note: {file} {why}" in err, err
     assert "Traceback" not in err
@@ -100,3 +100,25 @@ def test_on_a_dask_cluster_like_in_process(dask_cluster, tmp_path, reference):
     _same(reference.out, tmp_path / "cluster")
     manifest = json.loads((tmp_path / "cluster" / "manifest.json").read_text())
     assert manifest["kind"] == "fault" and manifest["timings"]["scheduler"] == dask_cluster
+
+
+def test_a_crash_while_writing_over_an_older_study_leaves_no_mixed_set(tmp_path, reference, monkeypatch):
+    """The folder's files are one study's: opening it for another removes the older one's
+    tables first, and the new ones are committed traces first, the fault table (what marks
+    a fault study) after them — a crash in between leaves no fault table, never one
+    beside another study's traces."""
+    out = tmp_path / "over"
+    shutil.copytree(reference.out, out)
+    other = FaultConfig.build(case="paper33", fault_buses=(18,), strategies=("no-action",), ks=(0.0,), fault=CONFIG.fault)
+
+    def crash(path, *args, **kwargs):
+        raise OSError(28, "No space left on device")
+
+    monkeypatch.setattr("opfbench.dynamics.study.write_parquet", crash)
+    with pytest.raises(OSError):
+        run_fault_study(other, CASE, out, fresh=True, quiet=True)
+    assert not (out / "fault.parquet").exists() and not (out / ".lock").exists()
+    assert set(pd.read_parquet(out / "traces.parquet")["fault_bus"]) == {18}  # the new study's alone
+    monkeypatch.undo()
+    again = run_fault_study(other, CASE, out, quiet=True)  # the same command resumes: nothing to simulate
+    assert again.run.ran == 0 and set(pd.read_parquet(out / "fault.parquet")["fault_bus"]) == {18}

@@ -51,8 +51,8 @@ def test_sigkill_at_random_moments_then_resume(tmp_path):
 
 
 def test_damaged_checkpoints_are_recomputed(tmp_path, capsys):
-    """Truncated, empty, another task's and partly missing checkpoints are recomputed, each
-    with a note — never accepted, never a traceback — and the tables are the uninterrupted
+    """Truncated, empty, another task's, partly missing and another version's checkpoints
+    are recomputed, each with a note — never accepted, never a traceback — and the tables are the uninterrupted
     run's."""
     ref = run_study(CONFIG, tmp_path / "ref", quiet=True)
     out = tmp_path / "damaged"
@@ -61,7 +61,7 @@ def test_damaged_checkpoints_are_recomputed(tmp_path, capsys):
     capsys.readouterr()
     again = run_study(CONFIG, out, quiet=True)
     err = capsys.readouterr().err
-    assert again.ran == 4 and again.kept == 8 and "Traceback" not in err
+    assert again.ran == 5 and again.kept == 8 and "Traceback" not in err
     for file, why in zip(files, KINDS, strict=True):
         assert f"note: {file} {why}" in err, err
     for name in ("steps.parquet", "summary.csv"):

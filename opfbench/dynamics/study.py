@@ -70,6 +70,11 @@ FAULT_COLUMNS = [
     "faulted",
 ]
 TRACE_COLUMNS = ["case", "fault_bus", "strategy", "k", "forecast", "variant", "bus", "t_s", "v_pu", "q_mvar"]
+#: A task's tables: per bus of each fault, and the traces.
+TASK_COLUMNS = {
+    "measures": ["fault_bus", *FAULT_COLUMNS[FAULT_COLUMNS.index("bus") :]],
+    "traces": ["bus", "t_s", "v_pu", "q_mvar", "fault_bus"],
+}
 
 
 @dataclass(frozen=True)
@@ -257,6 +262,9 @@ class FaultFamily:
             },
         }
 
+    def columns(self, table: str) -> list[str]:
+        return TASK_COLUMNS[table]
+
     def job(self, task: FaultTask) -> FaultJob:
         return FaultJob(task, self.point.scenario.without_forecast())
 
@@ -343,7 +351,8 @@ def _measures(sim: Simulation, fault_bus: int) -> pd.DataFrame:
             "sim_ms": np.full(len(ids), sim.sim_ms),
             "der_bus": np.isin(np.arange(len(ids)), net.der_bus),
             "faulted": ids == fault_bus,
-        }
+        },
+        columns=TASK_COLUMNS["measures"],
     )
 
 
@@ -358,7 +367,7 @@ def simulate_task(job: FaultJob) -> TaskOutput:
         for bus in t.fault_buses:
             sim = simulate(model, replace(t.fault, bus=bus))
             measures.append(_measures(sim, bus))
-            traces.append(_trace(sim).assign(fault_bus=bus))
+            traces.append(_trace(sim).assign(fault_bus=bus)[TASK_COLUMNS["traces"]])
     tables = {"measures": pd.concat(measures, ignore_index=True), "traces": pd.concat(traces, ignore_index=True)}
     return TaskOutput(t, tables, elapsed_ms(start) / 1e3)
 

@@ -103,7 +103,8 @@ class TaskFamily(Protocol):
     """What a study runs (see the module docstring). `kind` names the folder's kind
     ("run", "fault"); `tables` a task's tables, the main one first; `outputs` the files
     the assembler writes; `notes` what planning wants the user to know; `label_fields` the
-    config fields that change no result (a resume may change them)."""
+    config fields that change no result (a resume may change them); `columns(table)` a
+    task table's columns (a checkpoint with others was written by another version)."""
 
     @property
     def kind(self) -> str: ...
@@ -122,6 +123,8 @@ class TaskFamily(Protocol):
 
     @property
     def tasks(self) -> list[Any]: ...
+
+    def columns(self, table: str) -> list[str]: ...
 
     def manifest(self) -> dict: ...
 

@@ -19,7 +19,7 @@ from opfbench.study.config import LABEL_FIELDS, StudyConfig
 from opfbench.study.engine import EngineRun, TaskOutput, run_family
 from opfbench.study.periods import Period
 from opfbench.study.scenarios import study_period
-from opfbench.study.tables import KEYS, summarize
+from opfbench.study.tables import DETAIL_COLUMNS, KEYS, PARTIAL_COLUMNS, STEP_COLUMNS, summarize
 from opfbench.study.tasks import RunTask, TaskInput, plan_tasks, task_input
 
 RUN_OUTPUTS = ("steps.parquet", "summary.csv", "der_q.parquet", "bus_v.parquet", "report.html")
@@ -71,6 +71,9 @@ class RunFamily:
     @property
     def tables(self) -> tuple[str, ...]:
         return ("steps", "summary", *self.config.detail_tables)
+
+    def columns(self, table: str) -> list[str]:
+        return {"steps": STEP_COLUMNS, "summary": [*KEYS, *PARTIAL_COLUMNS]}.get(table) or DETAIL_COLUMNS[table]
 
     @property
     def notes(self) -> tuple[str, ...]:

@@ -30,6 +30,7 @@ import socket
 import subprocess
 from datetime import datetime, timezone
 from pathlib import Path
+from typing import Callable
 
 import pyarrow as pa
 import pyarrow.parquet as pq
@@ -227,7 +228,7 @@ class RunStore:
             mine.update(f.name for f in files.values())
             if not files[family.tables[0]].exists():
                 continue
-            problem = _damage(task, files)
+            problem = _damage(task, files, family.columns)
             if problem is None:
                 done.add(task.id)
                 continue
@@ -268,9 +269,9 @@ def _object(value: object) -> dict:
     return value if isinstance(value, dict) else {}
 
 
-def _damage(task: Task, files: dict[str, Path]) -> str | None:
+def _damage(task: Task, files: dict[str, Path], columns: Callable[[str], list[str]]) -> str | None:
     """Why the checkpoint `files` (table name → file, the main one first) are not the
-    finished task `task`, or None."""
+    finished task `task` with each table's `columns`, or None."""
     rows: object = None
     for i, (name, path) in enumerate(files.items()):
         if not path.exists():
@@ -291,4 +292,6 @@ def _damage(task: Task, files: dict[str, Path]) -> str | None:
                 rows = None
         if not isinstance(rows, dict) or rows.get(name) != meta.num_rows:
             return f"is partly missing (rows of {path.name})"
+        if meta.schema.names != columns(name):
+            return f"has other columns than this version writes ({path.name})"
     return None

@@ -163,7 +163,7 @@ def partial_summary(steps: pd.DataFrame) -> pd.DataFrame:
         certified=(steps.certified_by != "").astype(np.int64),
     )
     g = s.groupby(KEYS, sort=False, observed=True)
-    return pd.DataFrame(
+    sums = pd.DataFrame(
         {
             "steps": g.size(),
             "hours": g.step_h.sum(),
@@ -183,7 +183,30 @@ def partial_summary(steps: pd.DataFrame) -> pd.DataFrame:
             "solver_known": g.solver_known.sum(),
             "certified": g.certified.sum(),
         }
-    ).reset_index()
+    )
+    return sums[list(PARTIAL_COLUMNS)].reset_index()
+
+
+PARTIAL_COLUMNS = (
+    "steps",
+    "hours",
+    "pf_converged_steps",
+    "measured_hours",
+    "energy_kwh",
+    "not_ok_steps",
+    "voltage_violation_steps",
+    "vmin_pu",
+    "vmax_pu",
+    "max_excursion_mvar",
+    "excursion_steps",
+    "lower_bound_kwh",
+    "lb_missing",
+    "wall_s",
+    "solver_s",
+    "solver_known",
+    "certified",
+)
+"""The columns of a task's partial sums (`partial_summary`) besides KEYS."""
 
 
 def summarize(partials: list[pd.DataFrame], order: list[tuple]) -> pd.DataFrame:
