@@ -2,6 +2,7 @@
 schema, where and how many workers run (the scheduler checked before any work)."""
 
 import json
+import shutil
 import time
 
 import pandas as pd
@@ -106,3 +107,27 @@ def test_workers_are_capped(tmp_path, capsys, monkeypatch, command):
     monkeypatch.setattr("opfbench.study.execution.run_dask", lambda *a: pytest.fail("a cluster for one task"))
     code, err = _cli(capsys, [*argv, "--workers", "2", "--out", str(tmp_path / "one")])
     assert code == 0 and "note: 1 task(s) to run: 1 worker(s), not 2" in err, err
+
+
+def test_a_folder_damaged_in_other_ways(tmp_path, capsys):
+    """A manifest that is not one is refused (--fresh starts over); a file where tasks/
+    belongs is refused; a folder where a checkpoint belongs is recomputed, with a note."""
+    out = tmp_path / "run"
+    argv = [*RUN, "--k", "0", "--workers", "1", "--out", str(out)]
+    assert main(argv) == 0
+    (out / "manifest.json").write_text("[1, 2")
+    code, err = _cli(capsys, argv)
+    assert code == 2 and err.endswith(
+        "manifest.json is not a manifest opfbench wrote; use --fresh to start over, or another --out"
+    )
+    assert main([*argv, "--fresh"]) == 0
+    capsys.readouterr()
+    task = json.loads((out / "manifest.json").read_text())["tasks"][0]["file"]
+    (out / task).unlink()
+    (out / task).mkdir()
+    code, err = _cli(capsys, argv)
+    assert code == 0 and f"note: {task} is partly unreadable" in err, err
+    shutil.rmtree(out / "tasks")
+    (out / "tasks").write_text("")
+    code, err = _cli(capsys, argv)
+    assert code == 2 and "tasks is not a folder" in err, err

@@ -1,6 +1,6 @@
 """`opfbench run`: the study — every case × strategy × k × night mode × forecast over a
 period — split into tasks, run on every core (Dask) or a Dask cluster, resumable, writing
-the run folder (manifest, tasks/, steps.parquet, summary.csv; see the run-folder contract)."""
+the run folder (manifest, tasks/, steps.parquet, summary.csv; docs/CONTRACTS.md)."""
 
 from __future__ import annotations
 

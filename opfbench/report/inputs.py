@@ -1,5 +1,5 @@
-"""Read the files a run, a forecast run and a fault study wrote (see the file contracts:
-run folder, forecast folder, fault folder). Every input is optional: a missing one is
+"""Read the files a run, a forecast run and a fault study wrote (docs/CONTRACTS.md: run
+folder, forecast folder, fault folder). Every input is optional: a missing one is
 None plus the command that produces it, so its report section can say so. A damaged
 one — not UTF-8, not JSON, not an object, a truncated or empty parquet file, a column
 missing or of the wrong kind, a manifest field of the wrong type or an unknown schema

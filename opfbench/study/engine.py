@@ -33,7 +33,7 @@ import tempfile
 from dataclasses import dataclass, field
 from functools import cached_property
 from pathlib import Path
-from typing import Any, Callable, Protocol
+from typing import TYPE_CHECKING, Any, Callable, Protocol
 
 import pandas as pd
 import pyarrow as pa
@@ -42,6 +42,9 @@ from opfbench.digests import digest
 from opfbench.errors import Stopped
 from opfbench.study import execution
 from opfbench.timing import elapsed_ms, now
+
+if TYPE_CHECKING:
+    from opfbench.study.store import RunStore
 
 LABEL_CHARS = 80  # a task's readable label is cut to this many characters in its id
 
@@ -155,14 +158,18 @@ class EngineRun:
 class _Assembly:
     """Hands the finished tasks' tables to the assembler in planned order as they arrive."""
 
-    def __init__(self, store, family: TaskFamily, done: set[str], assembler: Assembler):
+    def __init__(self, store: RunStore, family: TaskFamily, done: set[str], assembler: Assembler):
         self.store, self.family, self.done, self.assembler = store, family, done, assembler
         self.added = 0
 
-    def advance(self) -> None:
+    def advance(self, just_saved: tuple[str, dict[str, pa.Table]] | None = None) -> None:
+        """Add every next task that is done; `just_saved` (id, tables): a task's tables as
+        just written, used instead of reading them back when it is the next one."""
         tasks = self.family.tasks
         while self.added < len(tasks) and tasks[self.added].id in self.done:
-            self.assembler.add(tasks[self.added], self.store.read(tasks[self.added], self.family.tables))
+            task = tasks[self.added]
+            ready = just_saved[1] if just_saved is not None and just_saved[0] == task.id else None
+            self.assembler.add(task, self.store.read(task, self.family.tables) if ready is None else ready)
             self.added += 1
 
     def finish(self) -> Any:
@@ -170,10 +177,6 @@ class _Assembly:
         if self.added < len(self.family.tasks):
             raise RuntimeError(f"task {self.family.tasks[self.added].id} has no checkpoint in {self.store.tasks_dir}")
         return self.assembler.commit()
-
-
-def _say(quiet: bool) -> Callable[[str], None]:
-    return (lambda msg: None) if quiet else (lambda msg: print(msg, file=sys.stderr, flush=True))
 
 
 def _note(msg: str) -> None:
@@ -227,13 +230,13 @@ def run_family(
             assembly = _Assembly(store, family, done, family.assembler(store.out))
 
             def save(result: TaskOutput) -> None:
-                store.save(result, family.tables)
+                written = store.save(result, family.tables)
                 done.add(result.task.id)
                 run.kept += 1
                 run.ran += 1
                 run.task_wall[result.task.id] = result.wall_s
                 progress.update(result)
-                assembly.advance()
+                assembly.advance((result.task.id, written))
 
             def kept_note() -> str:
                 if temporary:

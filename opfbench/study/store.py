@@ -26,6 +26,7 @@ import json
 import os
 import platform
 import re
+import shutil
 import socket
 import subprocess
 from datetime import datetime, timezone
@@ -38,7 +39,7 @@ import pyarrow.parquet as pq
 from opfbench.errors import InputError
 from opfbench.folders import check_out_dir
 from opfbench.jsonio import write_json
-from opfbench.parquetio import write_parquet
+from opfbench.parquetio import arrow_table, write_parquet
 from opfbench.study.engine import Task, TaskFamily, TaskOutput
 
 SCHEMA = 2  # 2: kinds, task definitions and hashed ids, input data hashes
@@ -151,19 +152,20 @@ class RunStore:
         are kept (resume)."""
         path = self.out / "manifest.json"
         part = family.manifest()
-        old = self._previous(path, family.kind) if path.exists() else None
+        old = self._previous(path, family.kind, fresh) if path.exists() else None
         if old is not None and not fresh:
             self._check_resume(old, part, family)
+        if self.tasks_dir.exists() and not self.tasks_dir.is_dir():
+            raise InputError(f"{self.tasks_dir} is not a folder (a study keeps its checkpoints there); move it away")
         for name in family.outputs:  # a previous run's assembled files: never mixed with this run's
-            (self.out / name).unlink(missing_ok=True)
+            _remove(self.out / name)
         if fresh:
-            path.unlink(missing_ok=True)
-            if self.tasks_dir.is_dir():
-                for f in self.tasks_dir.glob("*.parquet"):
-                    f.unlink()
+            _remove(path)
+            for f in self.tasks_dir.glob("*.parquet"):
+                _remove(f)
         self.tasks_dir.mkdir(exist_ok=True)
         for stale in (*self.out.glob(".*.tmp"), *self.tasks_dir.glob(".*.tmp")):  # left by a killed run
-            stale.unlink()
+            _remove(stale)
         done = self._checkpoints(family)
         self.manifest = {
             "schema": SCHEMA,
@@ -181,13 +183,16 @@ class RunStore:
         write_json(path, self.manifest)
         return done
 
-    def _previous(self, path: Path, kind: str) -> dict:
-        """The folder's manifest; InputError if it is not one, or of another kind."""
+    def _previous(self, path: Path, kind: str, fresh: bool) -> dict | None:
+        """The folder's manifest (None: unreadable, to be discarded with `fresh`);
+        InputError if it is not one (without `fresh`) or of another kind."""
         try:
             old = json.loads(path.read_bytes().decode("utf-8"))
-        except (OSError, ValueError):
+        except (OSError, ValueError, RecursionError):
             old = None
         if not isinstance(old, dict):
+            if fresh:
+                return None
             raise InputError(f"{path} is not a manifest opfbench wrote; use --fresh to start over, or another --out")
         # schema 1 wrote no kind: its fault folders have an operating point
         theirs = old.get("kind") or ("fault" if "operating_point" in old else "run")
@@ -234,12 +239,12 @@ class RunStore:
                 continue
             self.note(f"note: {task.file} {problem}: recomputing that task")
             for f in files.values():
-                f.unlink(missing_ok=True)
+                _remove(f)
         foreign = [f for f in self.tasks_dir.glob("*.parquet") if f.name not in mine]
         if foreign:
             self.note(f"note: removed {len(foreign)} checkpoint file(s) of no task of this run from {self.tasks_dir}")
             for f in foreign:
-                f.unlink()
+                _remove(f)
         return done
 
     def finish_manifest(self, wall_s: float | None, workers: int, scheduler: str | None, task_wall: dict, extra: dict) -> None:
@@ -251,18 +256,30 @@ class RunStore:
         write_json(self.out / "manifest.json", self.manifest)
 
     # ----- checkpoints --------------------------------------------------------------------
-    def save(self, result: TaskOutput, tables: tuple[str, ...]) -> None:
-        """Write a finished task atomically (its side files first, the main file last)."""
+    def save(self, result: TaskOutput, tables: tuple[str, ...]) -> dict[str, pa.Table]:
+        """Write a finished task atomically (its side files first, the main file last);
+        returns the tables as written (arrow)."""
         task = result.task
         tag = {TASK_KEY: task.digest.encode()}
         rows = json.dumps({name: len(result.tables[name]) for name in tables}).encode()
+        written = {}
         for name in (*tables[1:], tables[0]):
             meta = tag | {ROWS_KEY: rows} if name == tables[0] else tag
-            write_parquet(self.out / side_file(task, name, tables), result.tables[name], meta)
+            written[name] = arrow_table(result.tables[name], meta)
+            write_parquet(self.out / side_file(task, name, tables), written[name])
+        return written
 
     def read(self, task: Task, tables: tuple[str, ...]) -> dict[str, pa.Table]:
         """A finished task's tables, as arrow tables."""
         return {name: pq.read_table(self.out / side_file(task, name, tables)) for name in tables}
+
+
+def _remove(path: Path) -> None:
+    """Remove the file (or a folder standing where one of the study's files belongs)."""
+    if path.is_dir() and not path.is_symlink():
+        shutil.rmtree(path)
+    else:
+        path.unlink(missing_ok=True)
 
 
 def _object(value: object) -> dict:
@@ -276,6 +293,8 @@ def _damage(task: Task, files: dict[str, Path], columns: Callable[[str], list[st
     for i, (name, path) in enumerate(files.items()):
         if not path.exists():
             return f"is partly missing (no {path.name})"
+        if not path.is_file():
+            return f"is partly unreadable ({path.name} is not a file)"
         if path.stat().st_size == 0:
             return "is empty" if i == 0 else f"is partly empty ({path.name})"
         try:

@@ -1,4 +1,4 @@
-"""The run's tables (columns in docs: the run-folder contract): per-step rows of one
+"""The run's tables (columns: docs/CONTRACTS.md, run folder): per-step rows of one
 strategy result, the optional detail tables (per-DER Q, per-bus V), and the summary,
 built from per-task partial sums so that a year never has to sit in memory at once.
 """
