@@ -236,10 +236,6 @@ class FaultFamily:
     def notes(self) -> tuple[str, ...]:
         return self.config.notes
 
-    @property
-    def net(self) -> Network:
-        return self.point.scenario.net
-
     def manifest(self) -> dict:
         return {
             "case": self.config.case,
