@@ -30,6 +30,8 @@ InverterControl = Literal["grid-code", "constant-current"]
 C = TypeVar("C", bound=str)
 NOMINAL_HZ = 50.0
 RECOVERY_PU = 0.9  # the recovery threshold |V| ≥ 0.9 p.u.
+#: A bus's (and a simulation's, its worst bus's) outcome.
+RECOVERED, NOT_RECOVERED, DIVERGED = "recovered", "not-recovered", "diverged"
 
 
 @dataclass(frozen=True)

@@ -1,13 +1,13 @@
 """Recovery per simulation and against no action: the one comparison of a fault study's
 strategies with the baseline (`registry.BASELINE`), read by `opfbench fault` and the
-report."""
+report (light: no simulation code, no numba)."""
 
 from __future__ import annotations
 
 import numpy as np
 import pandas as pd
 
-from opfbench.dynamics.simulate import DIVERGED, NOT_RECOVERED, RECOVERED
+from opfbench.dynamics.params import DIVERGED, NOT_RECOVERED, RECOVERED
 from opfbench.registry import BASELINE, get_strategy
 
 WORST_FIRST = (DIVERGED, NOT_RECOVERED, RECOVERED)

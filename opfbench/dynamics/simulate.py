@@ -20,8 +20,6 @@ from opfbench.timing import elapsed_ms, now
 TRACE_EVERY_S = 0.005  # traces: one sample per 5 ms
 MARGIN_WINDOW_S = 0.100  # voltage margin: the last 100 ms
 
-RECOVERED, NOT_RECOVERED, DIVERGED = "recovered", "not-recovered", "diverged"
-
 
 @dataclass(frozen=True, eq=False)
 class Simulation:
