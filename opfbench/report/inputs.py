@@ -316,7 +316,8 @@ def _summary(path: Path, command: str) -> pd.DataFrame | None:
         return None
     try:
         text = path.read_bytes().decode("utf-8")
-        summary = pd.read_csv(io.StringIO(text), dtype={"case": str, "strategy": str, "night_mode": str, "forecast": str})
+        keys = {"case": str, "strategy": str, "night_mode": str, "forecast": str}
+        summary = pd.read_csv(io.StringIO(text), dtype=keys, float_precision="round_trip")  # k exactly as written
     except OSError as exc:
         raise InputError(f"{path}: cannot read it ({exc.strerror})") from None
     except UnicodeDecodeError as exc:
