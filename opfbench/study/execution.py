@@ -17,6 +17,7 @@ propagates from there, never from inside a library's callback.
 from __future__ import annotations
 
 import contextlib
+import logging
 import os
 import signal
 import socket
@@ -31,6 +32,10 @@ Save = Callable[[Any], None]
 STOPPED = 130  # exit code after Ctrl-C (128 + SIGINT)
 CONNECT_S = 10  # seconds to reach a scheduler
 POLL_S = 0.05  # seconds between looks for finished tasks and Ctrl-C while a cluster works
+#: SILENT_LOGS: the local cluster logs only what is critical. A task's error reaches this
+#: process through its future; what the workers would log besides is noise here — e.g. a
+#: worker still busy when Ctrl-C shuts the scheduler down logs a traceback ("Failed to
+#: communicate with scheduler during heartbeat").
 #: The local cluster's workers:
 #: - with glibc's default heap trimming: Dask's MALLOC_TRIM_THRESHOLD_=65536 (it returns
 #:   freed memory to the OS at once) made the tasks slower than in this process; the
@@ -205,7 +210,11 @@ def run_dask(
                 # its small HTTP server (health checks) moves off a busy port
                 warnings.filterwarnings("ignore", message="Port .* is already in use")
                 cluster = LocalCluster(
-                    n_workers=workers, threads_per_worker=1, processes=True, dashboard_address=None, silence_logs=40
+                    n_workers=workers,
+                    threads_per_worker=1,
+                    processes=True,
+                    dashboard_address=None,
+                    silence_logs=logging.CRITICAL,  # SILENT_LOGS
                 )
                 client = Client(cluster)
         try:
@@ -223,8 +232,6 @@ def run_dask(
                 if not batch:
                     pressed.wait(POLL_S)
         except BaseException:
-            if cluster is not None:
-                cluster.scale(0)  # the workers first, while the scheduler they report to is up
             client.close()
             if cluster is not None:
                 cluster.close()
