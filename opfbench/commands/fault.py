@@ -12,18 +12,21 @@ from typing import TYPE_CHECKING
 from opfbench.capability import PAPER_KS
 from opfbench.commands.common import (
     CASE_HELP,
+    STRATEGY_HELP,
     add_case_options,
     add_execution_options,
+    add_plugin_option,
     case_spec,
     fraction,
     number,
     path,
     share,
+    strategy_labels,
 )
 from opfbench.dynamics.params import FORECASTS, SENSITIVITY_VARIANTS, FaultParams, ModelParams
 from opfbench.errors import InputError
 from opfbench.jsonio import print_json
-from opfbench.registry import STRATEGY_NAMES
+from opfbench.registry import DEFAULT_FAULT
 
 if TYPE_CHECKING:
     from opfbench.io.case import Case
@@ -36,7 +39,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--fault-bus", nargs="+", required=True, help="bus number(s) to fault, or 'all'")
     p.add_argument("--fault-impedance", type=number, default=0.02, help="fault reactance, p.u. (default 0.02)")
     p.add_argument("--duration-ms", type=number, default=150.0, help="fault duration, ms (default 150)")
-    p.add_argument("--strategies", nargs="+", choices=STRATEGY_NAMES, default=["no-action", "llma", "lfma", "acopf"])
+    p.add_argument("--strategies", nargs="+", default=list(DEFAULT_FAULT), metavar="LABEL", help=STRATEGY_HELP)
+    add_plugin_option(p)
     p.add_argument("--k", nargs="+", type=fraction, default=list(PAPER_KS), help="reserve coefficients")
     p.add_argument(
         "--forecast",
@@ -148,7 +152,7 @@ def run(args: argparse.Namespace) -> int:
     config = FaultConfig.build(
         case=case.spec,
         fault_buses=_buses(args, net),
-        strategies=args.strategies,
+        strategies=strategy_labels(args.strategies, args),
         ks=args.k,
         forecasts=args.forecast,
         variants=_variants(args),

@@ -32,13 +32,12 @@ from opfbench.errors import InputError
 from opfbench.io import Case
 from opfbench.network import Network
 from opfbench.parquetio import ParquetStream, arrow_table, write_parquet
-from opfbench.registry import get_strategy, run_strategy
+from opfbench.registry import DEFAULT_FAULT, get_strategy, run_strategy
 from opfbench.scenario import Scenario
 from opfbench.study.config import check_something_to_run, strategies_for, unique_grid
 from opfbench.study.engine import EngineRun, Task, TaskOutput, run_family
 from opfbench.timing import elapsed_ms, now
 
-DEFAULT_STRATEGIES = ("no-action", "llma", "lfma", "acopf")
 FAULT_OUTPUTS = ("fault.parquet", "traces.parquet")
 FAULT_COLUMNS = [
     "case",
@@ -77,7 +76,7 @@ class FaultConfig:
 
     case: str
     fault_buses: tuple[int, ...]
-    strategies: tuple[str, ...] = DEFAULT_STRATEGIES
+    strategies: tuple[str, ...] = DEFAULT_FAULT
     ks: tuple[float, ...] = PAPER_KS
     forecasts: tuple[str, ...] = ("off",)
     variants: tuple[str, ...] = ("reference",)

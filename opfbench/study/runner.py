@@ -14,12 +14,12 @@ import pyarrow as pa
 from opfbench.io import load_case
 from opfbench.jsonio import write_atomic
 from opfbench.parquetio import ParquetStream
-from opfbench.registry import FORMULATIONS
+from opfbench.registry import configuration
 from opfbench.study.config import LABEL_FIELDS, StudyConfig
 from opfbench.study.engine import EngineRun, TaskOutput, run_family
 from opfbench.study.periods import Period
 from opfbench.study.scenarios import study_period
-from opfbench.study.tables import DETAIL_COLUMNS, KEYS, PARTIAL_COLUMNS, STEP_COLUMNS, summarize
+from opfbench.study.tables import DETAIL_COLUMNS, KEYS, PARTIAL_COLUMNS, extra_columns, step_columns, summarize
 from opfbench.study.tasks import RunTask, TaskInput, plan_tasks, task_input
 
 RUN_OUTPUTS = ("steps.parquet", "summary.csv", "der_q.parquet", "bus_v.parquet", "report.html")
@@ -73,7 +73,9 @@ class RunFamily:
         return ("steps", "summary", *self.config.detail_tables)
 
     def columns(self, table: str) -> list[str]:
-        return {"steps": STEP_COLUMNS, "summary": [*KEYS, *PARTIAL_COLUMNS]}.get(table) or DETAIL_COLUMNS[table]
+        if table == "steps":
+            return step_columns(extra_columns(self.config.strategies))
+        return [*KEYS, *PARTIAL_COLUMNS] if table == "summary" else DETAIL_COLUMNS[table]
 
     @property
     def notes(self) -> tuple[str, ...]:
@@ -153,14 +155,14 @@ def prepare(config: StudyConfig) -> RunFamily:
 
         for model in models:
             load_forecast(config.forecast_dir, "pv", model)
+    running = {label for source in config.forecast for label in config.strategies_for(source)}
     data = {}
     for case in config.cases:
         loaded = load_case(case)
         data[case] = loaded.data_sha256
-        if any(s in FORMULATIONS for s in config.strategies) and "off" in config.forecast:
-            from opfbench.formulations.problem import check_supported
-
-            check_supported(loaded.network)
+        for label in config.strategies:
+            if label in running:
+                configuration(label).spec.check_network(loaded.network)
     return RunFamily(config, period, plan_tasks(config, period, data))
 
 

@@ -21,14 +21,24 @@ import pandas as pd
 from threadpoolctl import threadpool_limits
 
 from opfbench.errors import InputError
-from opfbench.registry import get_strategy, run_strategy
+from opfbench.plugins import PluginSource, ensure, loaded
+from opfbench.registry import run_strategy
 from opfbench.result import StrategyResult
 from opfbench.scenario import Scenario
 from opfbench.study.config import StudyConfig
 from opfbench.study.engine import Task, TaskOutput
 from opfbench.study.periods import Period
 from opfbench.study.scenarios import chunk_scenario
-from opfbench.study.tables import DETAIL_COLUMNS, STEP_COLUMNS, Columns, detail_rows, partial_summary, stack, step_rows
+from opfbench.study.tables import (
+    DETAIL_COLUMNS,
+    Columns,
+    detail_rows,
+    extra_columns,
+    partial_summary,
+    stack,
+    step_columns,
+    step_rows,
+)
 
 
 @dataclass(frozen=True)
@@ -69,7 +79,9 @@ class RunTask(Task):
 @dataclass(frozen=True)
 class TaskInput:
     """Everything a worker needs: the task, its profiles (the chunk plus, when the
-    period goes on, the next step), the night mask on those rows, the step."""
+    period goes on, the next step), the night mask on those rows, the step, the run-level
+    settings of the strategies' options (`StudyConfig.settings`), the extra step columns
+    of the run's strategies and the plugins they come from (loaded in the worker first)."""
 
     task: RunTask
     profiles: pd.DataFrame
@@ -78,7 +90,9 @@ class TaskInput:
     step_h: float
     forecast_dir: str
     detail: tuple[str, ...]  # the long tables to write (`tables.DETAIL_TABLES`)
-    acopf_solver: str = "auto"
+    settings: tuple[tuple[str, str], ...] = ()
+    columns: tuple[str, ...] = ()
+    plugins: tuple[PluginSource, ...] = ()
 
 
 def plan_tasks(config: StudyConfig, period: Period, data_sha256: dict[str, str]) -> list[RunTask]:
@@ -128,7 +142,9 @@ def task_input(task: RunTask, config: StudyConfig, period: Period) -> TaskInput:
         period.step_h,
         config.forecast_dir,
         config.detail_tables,
-        config.acopf_solver,
+        tuple(config.settings().items()),
+        extra_columns(config.strategies),
+        loaded(config.plugins),
     )
 
 
@@ -142,6 +158,8 @@ def run_task(inp: TaskInput) -> TaskOutput:
     t = inp.task
     if load_case(t.case).data_sha256 != t.data_sha256:
         raise InputError(f"case {t.case}: its data changed while the run went on (or differ on this worker); rerun")
+    ensure(inp.plugins)
+    settings = dict(inp.settings)
     with threadpool_limits(1):
         step = pd.Timedelta(hours=inp.step_h)
         time, night = inp.profiles.index[: inp.n_steps], inp.night[: inp.n_steps]
@@ -153,17 +171,14 @@ def run_task(inp: TaskInput) -> TaskOutput:
             same = next((results for earlier, results in ran if earlier.same_data(scenario)), None)
             results = {}
             for name in t.strategies:
-                takes_solver = "solver" in get_strategy(name).options  # the AC OPF entries
                 res = results[name] = (
-                    replace(same[name], wall_ms=0.0)
-                    if same is not None
-                    else run_strategy(name, scenario, t.k, **({"solver": inp.acopf_solver} if takes_solver else {}))
+                    replace(same[name], wall_ms=0.0) if same is not None else run_strategy(name, scenario, t.k, settings)
                 )
-                steps.append(step_rows(t.case, mode, t.forecast, time, inp.step_h, night, res))
+                steps.append(step_rows(t.case, mode, t.forecast, time, inp.step_h, night, res, inp.columns))
                 for table, columns in detail_rows(t.case, mode, t.forecast, time, res, inp.detail).items():
                     detail[table].append(columns)
             if same is None:
                 ran.append((scenario, results))
-        table = stack(steps, STEP_COLUMNS, time.tz)
+        table = stack(steps, step_columns(inp.columns), time.tz)
     details = {name: stack(parts, DETAIL_COLUMNS[name], time.tz) for name, parts in detail.items()}
     return TaskOutput(t, {"steps": table, "summary": partial_summary(table), **details}, elapsed_ms(start) / 1e3)

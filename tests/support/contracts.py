@@ -131,16 +131,19 @@ def _arrow_kind(t: pa.DataType) -> str:
 
 def check_table(contract: Contract, folder: str, name: str, path: Path) -> list[str]:
     """A parquet file's columns (names, order, kinds) or a CSV file's column names are the
-    documented ones (a `<name>` column stands for one or more)."""
+    documented ones; a documented `<name>` column stands for any further columns."""
     documented = contract.columns[folder, name]
+    fixed = [(c, kind) for c, kind in documented if not c.startswith("<")]
+    more = len(fixed) < len(documented)
     if path.suffix == ".parquet":
         actual = [(f.name, _arrow_kind(f.type)) for f in pq.read_schema(path)]
-        return [] if actual == documented else [f"{path.name}: columns {actual}, documented {documented}"]
-    columns = list(pd.read_csv(path, nrows=0).columns)
-    fixed = [c for c, _ in documented if not c.startswith("<")]
-    many = any(c.startswith("<") for c, _ in documented)
-    ok = columns[: len(fixed)] == fixed and (len(columns) > len(fixed) if many else len(columns) == len(fixed))
-    return [] if ok else [f"{path.name}: columns {columns}, documented {[c for c, _ in documented]}"]
+        head_ok = actual[: len(fixed)] == fixed
+    else:  # CSV: names only, the text says nothing of kinds
+        actual = [(c, "") for c in pd.read_csv(path, nrows=0).columns]
+        head_ok = [c for c, _ in actual[: len(fixed)]] == [c for c, _ in fixed]
+    if head_ok and (more or len(actual) == len(fixed)):
+        return []
+    return [f"{path.name}: columns {actual}, documented {documented}"]
 
 
 def _kind_of(value: object) -> str:
