@@ -11,11 +11,12 @@ import pandas as pd
 import pytest
 
 from opfbench.cli import main
+from opfbench.study.tables import extra_columns
 from tests.support.contracts import check_folder, check_json, check_table, parse
 from tests.support.forecast_synthetic import use_tiny_synthetic
 
 CONTRACT = parse()
-RUN = ["run", "--period", "2016-06-28T10:00..2016-06-28T10:20", "--strategies", "no-action", "--k", "0"]
+RUN = ["run", "--period", "2016-06-28T10:00..2016-06-28T10:20", "--strategies", "no-action", "volt-var", "--k", "0"]
 RUN += ["--night-modes", "connected", "--forecast", "off", "--detail", "--workers", "1", "--quiet"]
 FAULT = ["fault", "paper33", "--fault-bus", "18", "--strategies", "no-action", "--k", "0", "--t-end", "0.4"]
 FAULT += ["--workers", "1", "--quiet"]
@@ -43,7 +44,9 @@ def test_the_page_declares_every_folder_file_and_block():
 
 
 def test_a_fresh_run_folder(run_folder):
-    assert check_folder(CONTRACT, "run", run_folder) == []
+    extra = list(extra_columns(("no-action", "volt-var")))
+    assert extra == ["residual_mvar"]  # a closed-loop rule's column
+    assert check_folder(CONTRACT, "run", run_folder, {"<extra>": extra}) == []
 
 
 def test_a_fresh_fault_folder(fault_folder):
@@ -52,8 +55,9 @@ def test_a_fresh_fault_folder(fault_folder):
 
 def test_a_fresh_forecast_folder(tmp_path, monkeypatch, capsys):
     use_tiny_synthetic(monkeypatch)
-    assert main(["forecast", "--dataset", "pv", "--quick", "--models", "persistence,arima,lstm", "--out", str(tmp_path)]) == 0
-    assert check_folder(CONTRACT, "forecast", tmp_path) == []
+    models = ["persistence", "arima", "lstm"]
+    assert main(["forecast", "--dataset", "pv", "--quick", "--models", ",".join(models), "--out", str(tmp_path)]) == 0
+    assert check_folder(CONTRACT, "forecast", tmp_path, {"<model>": models}) == []
 
 
 def test_the_check_sees_a_column_added_renamed_or_dropped(run_folder, tmp_path):
@@ -65,7 +69,7 @@ def test_the_check_sees_a_column_added_renamed_or_dropped(run_folder, tmp_path):
         ("retyped", steps.assign(power_flows=steps.power_flows.astype(float))),
     ):
         frame.to_parquet(tmp_path / f"{name}.parquet", index=False)
-        assert check_table(CONTRACT, "run", "steps.parquet", tmp_path / f"{name}.parquet"), name
+        assert check_table(CONTRACT, "run", "steps.parquet", tmp_path / f"{name}.parquet", {"<extra>": ["residual_mvar"]}), name
     summary = pd.read_csv(run_folder / "summary.csv")
     summary.rename(columns={"gap_pct": "gap_percent"}).to_csv(tmp_path / "summary.csv", index=False)
     assert check_table(CONTRACT, "run", "summary.csv", tmp_path / "summary.csv")

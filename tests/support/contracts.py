@@ -1,7 +1,8 @@
 """docs/CONTRACTS.md read as data, and checks of a folder against it: the files it holds,
 each table's columns (names, order, kinds) and each JSON file's fields (see the page's
 conventions: `/` between keys, `[]` every element of a list, `<name>` every key of an
-object whose keys are data, `object: NAME` a block, `?` a field that may be absent)."""
+object whose keys are data — or, as a column, the columns a run adds, named by the
+caller —, `object: NAME` a block, `?` a field that may be absent)."""
 
 from __future__ import annotations
 
@@ -129,21 +130,20 @@ def _arrow_kind(t: pa.DataType) -> str:
     return "time" if pa.types.is_timestamp(t) else str(t)
 
 
-def check_table(contract: Contract, folder: str, name: str, path: Path) -> list[str]:
+def check_table(contract: Contract, folder: str, name: str, path: Path, expand: dict[str, list[str]] | None = None) -> list[str]:
     """A parquet file's columns (names, order, kinds) or a CSV file's column names are the
-    documented ones; a documented `<name>` column stands for any further columns."""
-    documented = contract.columns[folder, name]
-    fixed = [(c, kind) for c, kind in documented if not c.startswith("<")]
-    more = len(fixed) < len(documented)
+    documented ones, a documented `<name>` column standing for the columns `expand` gives
+    it (none if it gives none)."""
+    documented: list[tuple[str, str]] = []
+    for column, kind in contract.columns[folder, name]:
+        documented += [(c, kind) for c in (expand or {}).get(column, [])] if column.startswith("<") else [(column, kind)]
     if path.suffix == ".parquet":
         actual = [(f.name, _arrow_kind(f.type)) for f in pq.read_schema(path)]
-        head_ok = actual[: len(fixed)] == fixed
+        ok = actual == documented
     else:  # CSV: names only, the text says nothing of kinds
         actual = [(c, "") for c in pd.read_csv(path, nrows=0).columns]
-        head_ok = [c for c, _ in actual[: len(fixed)]] == [c for c, _ in fixed]
-    if head_ok and (more or len(actual) == len(fixed)):
-        return []
-    return [f"{path.name}: columns {actual}, documented {documented}"]
+        ok = [c for c, _ in actual] == [c for c, _ in documented]
+    return [] if ok else [f"{path.name}: columns {actual}, documented {documented}"]
 
 
 def _kind_of(value: object) -> str:
@@ -191,13 +191,14 @@ def check_json(contract: Contract, folder: str, name: str, path: Path) -> list[s
     return check_value(contract, contract.fields[folder, name], json.loads(path.read_text()), path.name)
 
 
-def check_folder(contract: Contract, folder: str, root: Path) -> list[str]:
-    """Files, tables and JSON fields of the folder `root` against the contract."""
+def check_folder(contract: Contract, folder: str, root: Path, expand: dict[str, list[str]] | None = None) -> list[str]:
+    """Files, tables and JSON fields of the folder `root` against the contract (`expand`:
+    the columns each `<name>` column stands for, `check_table`)."""
     errors = check_files(contract, folder, root)
     for path in sorted(p for p in root.rglob("*") if p.is_file()):
         name = file_pattern(contract.files[folder], str(path.relative_to(root)))
         if (folder, name) in contract.columns:
-            errors += check_table(contract, folder, name, path)
+            errors += check_table(contract, folder, name, path, expand)
         elif (folder, name) in contract.fields:
             errors += check_json(contract, folder, name, path)
     return errors
