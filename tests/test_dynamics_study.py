@@ -65,7 +65,7 @@ def test_the_oracle_is_compared_with_no_action_too():
 
 @pytest.mark.slow
 def test_reference_study_buses_17_and_27():
-    config = FaultConfig("paper33", (17, 27), forecasts=("off", "oracle"), time="09:00")
+    config = FaultConfig("paper33", (17, 27), ("no-action", "llma", "lfma", "acopf"), forecasts=("off", "oracle"), time="09:00")
     table = _table(config, workers=2)
     n_cfg = 5 + 2 * 2 * 5 + 5  # no action at each k, LLMA/LFMA × forecast × k, AC OPF × k
     assert len(table) == 2 * n_cfg * NET.n_bus

@@ -232,6 +232,8 @@ PARTIAL_COLUMNS = (
     "certified",
 )
 """The columns of a task's partial sums (`partial_summary`) besides KEYS."""
+EXTREMES = {"vmin_pu": "min", "vmax_pu": "max", "max_excursion_mvar": "max", "max_violation_pu": "max"}
+"""The partial sums' extremes (combined by `summarize` with these; the others are summed)."""
 
 
 def summarize(partials: list[pd.DataFrame], order: list[tuple]) -> pd.DataFrame:
@@ -249,27 +251,9 @@ def summarize(partials: list[pd.DataFrame], order: list[tuple]) -> pd.DataFrame:
     steps where a closed-loop rule did not settle."""
     p = pd.concat(partials, ignore_index=True)
     g = p.groupby(KEYS, sort=False)
-    sums = g[
-        [
-            "steps",
-            "hours",
-            "pf_converged_steps",
-            "measured_hours",
-            "energy_kwh",
-            "not_ok_steps",
-            "not_settled_steps",
-            "voltage_violation_steps",
-            "voltage_violation_h",
-            "excursion_steps",
-            "lower_bound_kwh",
-            "lb_missing",
-            "wall_s",
-            "solver_s",
-            "solver_known",
-            "certified",
-        ]
-    ].sum()
-    out = sums.join(g.vmin_pu.min()).join(g.vmax_pu.max()).join(g.max_excursion_mvar.max()).join(g.max_violation_pu.max())
+    out = g[[c for c in PARTIAL_COLUMNS if c not in EXTREMES]].sum()
+    for column, how in EXTREMES.items():
+        out = out.join(g[column].agg(how))
     out = out.reindex(pd.MultiIndex.from_tuples(order, names=KEYS)).reset_index()
     out["pf_diverged_steps"] = out.steps - out.pf_converged_steps
     out["avg_loss_kw"] = (out.energy_kwh / out.measured_hours).where(out.pf_converged_steps > 0)
