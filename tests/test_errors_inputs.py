@@ -380,6 +380,21 @@ def test_scenario_refuses_complex_and_non_numeric(net):
         Scenario(net, [1.0, 1.0], [[0.3] * 5, [0.3] * 4])
 
 
+def test_scenario_loads_must_add_up_to_a_finite_number(capsys, net):
+    with pytest.raises(InputError, match=r"total load of snapshot 1 \(load_scale 1e\+308 × the nominal loads\) is not a finite"):
+        Scenario(net, [1.0, 1e308], np.zeros((2, 5)))
+    huge = np.full((1, net.n_load), 1e307)  # each finite, their sum not
+    with pytest.raises(InputError, match="total load of snapshot 0 is not a finite number of MW"):
+        Scenario.from_series(net, huge, np.zeros_like(huge), np.zeros((1, 5)))
+    with pytest.raises(InputError, match="scenario: net must be a Network .*, got NoneType"):
+        Scenario.snapshot(None)
+    code, err = _cli(capsys, ["pf", "paper33", "--load-scale", "1e308", "--json"])  # printed an overflow warning
+    assert code == 2 and err == (
+        "opfbench pf: error: scenario: the total load of snapshot 0 (load_scale 1e+308 × the nominal loads) is not a "
+        "finite number of MW\n"
+    )
+
+
 def test_scenario_copies_its_inputs(net):
     load, p = np.ones(2), np.full((2, 5), 0.3)
     scenario = Scenario(net, load, p)
