@@ -1,10 +1,11 @@
 """Read the files a run, a forecast run and a fault study wrote (see the file contracts:
 run folder, forecast folder, fault folder). Every input is optional: a missing one is
 None plus the command that produces it, so its report section can say so. A damaged
-one — not UTF-8, not JSON, not an object, a truncated or empty parquet file, a column
-missing or of the wrong kind, a manifest field of the wrong type or an unknown schema
-version — is an `InputError` naming the file and what is wrong, before anything is
-drawn."""
+one — not UTF-8, not JSON, not an object, a JSON name given twice, a truncated or empty
+parquet file, a folder where the file belongs, a column missing or of the wrong kind, a
+number outside its domain (±inf, a k outside [0, 1]), a manifest field of the wrong kind
+or an unknown schema version — is an `InputError` naming the file and what is wrong,
+before anything is drawn."""
 
 from __future__ import annotations
 
