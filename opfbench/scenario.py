@@ -262,11 +262,13 @@ class Scenario:
         load = _real_array("load_pu", load_pu)
         if load.ndim != 1:
             raise InputError(f"scenario: load_pu must be a 1-D profile (S,), got shape {load.shape}")
+        _check_finite("load_pu", load)
 
         def profile(label: str, value: np.ndarray) -> np.ndarray:
             arr = _real_array(label, value)
             if arr.shape != load.shape:
                 raise InputError(f"scenario: {label} must have the shape of load_pu {load.shape}, got {arr.shape}")
+            _check_finite(label, arr)
             return arr
 
         def der_mw(pv: np.ndarray, wind: np.ndarray, prefix: str = "") -> np.ndarray:

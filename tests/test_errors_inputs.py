@@ -534,3 +534,18 @@ def test_cli_pf_and_forecast_files_do_not_import_torch_statsmodels_matplotlib():
     )
     proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
     assert proc.stdout.strip() == "[] [] [] 0", proc.stderr
+
+
+def test_api_numbers_of_the_wrong_kind_or_domain(net):
+    from opfbench.capability import check_reserve
+    from opfbench.study.periods import resolve_period
+
+    for k in ("0.5", True, None):
+        with pytest.raises(InputError, match="reserve coefficient k must be a number in"):
+            check_reserve(k)  # type: ignore[arg-type]
+    assert check_reserve(np.float32(0.5)) == 0.5 and check_reserve(np.array(0.25)) == 0.25
+    for step in (0.0, -5, True, float("nan")):  # 0 read as "not given": the period's own step
+        with pytest.raises(InputError, match="--step-minutes must be a finite number of minutes > 0"):
+            resolve_period("paper-day", "sun", step)
+    with pytest.raises(InputError, match=r"scenario: pv_pu has NaN or inf at index \(1,\)"):
+        Scenario.from_profiles(net, np.ones(3), np.array([0.1, np.nan, 0.1]), np.zeros(3))
