@@ -107,6 +107,11 @@ BAD_VALUES = {
     ),
     "Python-only number 1_00": (with_entry(TINY_CASE, "bus", 2, 3, "1_00"), "column 3: non-numeric entry '1_00'"),
     "Arabic-Indic digits": (with_entry(TINY_CASE, "bus", 2, 3, "١٠٠"), "column 3: non-numeric entry '١٠٠'"),
+    "a transposed matrix": (
+        TINY_CASE.replace("];\nmpc.gen", "]';\nmpc.gen", 1),
+        'mpc.bus = [...] is followed by "\';"; a matrix',
+    ),
+    "a matrix times a number": (TINY_CASE.replace("];\nmpc.branch", "] * 1e3;\nmpc.branch", 1), "is followed by '* 1e3;'"),
     "a matrix defined twice": (
         TINY_CASE.replace(
             "mpc.gencost = [", "mpc.bus = [\n\t9\t1\t0\t0\t0\t0\t1\t1\t0\t12.66\t1\t1.1\t0.9;\n];\nmpc.gencost = ["
