@@ -14,7 +14,7 @@ import sys
 
 from opfbench.errors import OpfbenchError
 
-COMMANDS = ("cases", "pf", "snapshot", "table", "data", "run", "forecast", "report", "fault")
+COMMANDS = ("cases", "pf", "snapshot", "strategies", "table", "data", "run", "forecast", "report", "fault")
 
 
 def build_parser() -> argparse.ArgumentParser:

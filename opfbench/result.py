@@ -26,7 +26,19 @@ FALLBACK_NO_ACTION = "fallback-no-action"  # nothing better found; Q = 0 is AC-f
 INFEASIBLE = "infeasible"  # the OPF has no feasible point (shown by a solver); Q = 0 reported
 SOLVER_FAILED = "solver-failed"  # solver failed, no feasible fallback, infeasibility not shown
 PF_DIVERGED = "pf-diverged"  # the AC power flow at the setpoints did not converge: no figures
-STATUSES = (OK, FALLBACK_COLD, FALLBACK_SOCP, FALLBACK_NO_ACTION, INFEASIBLE, SOLVER_FAILED, PF_DIVERGED)
+NOT_SETTLED = "not-settled"  # a closed-loop local rule did not settle within its iteration limit: its last iterate
+RULE_NON_FINITE = "rule-non-finite"  # a local rule gave NaN or inf for some DER: no setpoint, no figures
+STATUSES = (
+    OK,
+    FALLBACK_COLD,
+    FALLBACK_SOCP,
+    FALLBACK_NO_ACTION,
+    INFEASIBLE,
+    SOLVER_FAILED,
+    PF_DIVERGED,
+    NOT_SETTLED,
+    RULE_NON_FINITE,
+)
 
 
 @dataclass(eq=False)

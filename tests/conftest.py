@@ -25,3 +25,19 @@ def dask_cluster(tmp_path) -> Iterator[str]:
     workers, each its own process (log in `tmp_path / "dask.log"`)."""
     with _dask_cluster(tmp_path / "dask.log") as address:
         yield address
+
+
+@pytest.fixture
+def isolated_registry() -> Iterator[None]:
+    """Plugins loaded inside the test are forgotten after it: the registry's entries and
+    the loaded-plugin list are restored (every plugin registers into the one registry)."""
+    from opfbench import plugins
+    from opfbench.registry import STRATEGIES
+
+    entries, before = dict(STRATEGIES), {p.ref for p in plugins.loaded()}
+    yield
+    for source in plugins.loaded():
+        if source.ref not in before:
+            plugins.unload(source.ref)
+    STRATEGIES.clear()
+    STRATEGIES.update(entries)

@@ -16,6 +16,7 @@ from opfbench.errors import NetworkError
 from opfbench.io import load_network
 from opfbench.io.matpower import load_case_file
 from opfbench.powerflow import bus_injections, solve_pf
+from opfbench.registry import specs
 from tests.support.matpower_texts import CASE4_PV
 
 PF_KEYS = {
@@ -86,9 +87,11 @@ def test_pandapower_builder_keeps_taps_and_fixed_generators(tmp_path):
 def test_local_bench_batched_equals_one_by_one():
     day = paper_day_scenario("paper33").take(slice(0, 1440, 60))
     f = bench_local.bench_local(day, repeats=1, loop_sample=4)
-    assert set(f["rules"]) == {"no-action", "llma", "lfma"}
+    assert set(f["rules"]) == {s.name for s in specs() if s.kind == "local" and s.source == "opfbench"}
     assert all(r["ok"] == day.n_snapshots for r in f["rules"].values())
     assert f["rules"]["lfma"]["power_flows_per_snapshot"] == 4
+    assert f["voltvar_day_ms"] == f["rules"]["volt-var"]["wall_ms"] > 0
+    assert 1 < f["voltvar_iterations_mean"] <= f["rules"]["volt-var"]["power_flows_per_snapshot"]
     assert f["lfma_one_by_one_max_dq_mvar"] < 1e-9
     assert f["rules"]["lfma"]["energy_losses_kwh"] <= f["rules"]["no-action"]["energy_losses_kwh"]
 

@@ -165,11 +165,13 @@ def test_strategy_options_are_type_checked(net):
 
     scenario = Scenario.snapshot(net)
     for name, options, message in (
-        ("acopf", {"slack_export": "false"}, "option slack_export must be a bool like its default True, got 'false'"),
-        ("acopf", {"slack_export": 0}, "option slack_export must be a bool like its default True, got 0"),
-        ("socp", {"slack_export": None}, "option slack_export must be a bool"),
-        ("llma", {"safe": "yes"}, "option safe must be a bool like its default False, got 'yes'"),
-        ("acopf", {"fallback": 1}, "option fallback must be a str like its default 'chain', got 1"),
+        ("acopf", {"slack_export": "false"}, "'acopf': option slack_export: 'false' is not a bool like its default 'true'"),
+        ("acopf", {"slack_export": 0}, "'acopf': option slack_export: 0 is not a bool like its default 'true'"),
+        ("socp", {"slack_export": None}, "option slack_export: None is not a bool"),
+        ("llma", {"safe": "yes"}, "'llma': option safe: 'yes' is not a bool like its default 'false'"),
+        ("acopf", {"fallback": 1}, "'acopf': option fallback: 1 is not a choice like its default 'chain'"),
+        ("acopf", {"fallback": "maybe"}, "'acopf': option fallback: 'maybe' is not one of chain, paper"),
+        ("volt-var", {"v": (1.0, 0.9), "q": (0.1, 0.0)}, "the curve's v values must increase"),
     ):
         with pytest.raises(InputError, match=message):
             run_strategy(name, scenario, 0.0, **options)

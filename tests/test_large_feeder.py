@@ -13,7 +13,7 @@ from opfbench.cli import main
 from opfbench.io import load_network
 from opfbench.powerflow import bus_injections, solve_pf, solve_pf_batch
 from opfbench.registry import run_strategy
-from opfbench.strategies.local import lfma_trace
+from opfbench.strategies.paper import lfma_trace
 
 
 def test_one_copy_is_case33bw_with_place_ders():

@@ -1,22 +1,37 @@
-"""Every registered strategy runs through the one registry and returns the one record."""
+"""Every registered strategy runs through the one registry and returns the one record;
+configuration labels are parsed, checked and canonical."""
 
 import numpy as np
 import pytest
 
 from opfbench.errors import InputError
 from opfbench.io import load_network
-from opfbench.registry import FORMULATIONS, LOCAL_RULES, STRATEGIES, STRATEGY_NAMES, get_strategy, run_strategy
+from opfbench.registry import (
+    BASELINE,
+    DEFAULT_RUN,
+    REFERENCE_OPTIMUM,
+    STRATEGIES,
+    canonical,
+    configuration,
+    get_strategy,
+    run_strategy,
+    specs,
+)
 from opfbench.result import StrategyResult
 from opfbench.scenario import Scenario
 
 
-def test_registry_partitions_strategies():
-    assert set(LOCAL_RULES) | set(FORMULATIONS) == set(STRATEGY_NAMES)
-    assert not set(LOCAL_RULES) & set(FORMULATIONS)
-    assert {"no-action", "llma", "lfma", "acopf", "acopf-paper", "socp"} <= set(STRATEGY_NAMES)
+def test_registry_lists_every_builtin_strategy_once():
+    kinds = {s.name: s.kind for s in specs()}
+    assert {"no-action", "llma", "lfma", "volt-var", "watt-var", "const-pf", "cosphi-p", "q-u"} <= {
+        n for n, k in kinds.items() if k == "local"
+    }
+    assert {"acopf", "acopf-paper", "socp"} == {n for n, k in kinds.items() if k == "formulation"}
+    assert set(DEFAULT_RUN) == {s.name for s in specs() if s.source == "opfbench"}
+    assert STRATEGIES[BASELINE].kind == "local" and STRATEGIES[REFERENCE_OPTIMUM].bound_rank is not None
 
 
-@pytest.mark.parametrize("name", STRATEGY_NAMES)
+@pytest.mark.parametrize("name", DEFAULT_RUN)
 def test_every_registered_strategy_returns_the_record(name):
     net = load_network("paper33")
     scenario = Scenario.snapshot(net, 1.0, 0.8, 0.9 if STRATEGIES[name].uses_forecast else None)
@@ -25,16 +40,85 @@ def test_every_registered_strategy_returns_the_record(name):
     assert res.strategy == name and res.k == 0.2
     assert res.q_mvar.shape == (1, len(net.ders))
     assert res.status[0] == "ok" and np.isfinite(res.losses_kw[0])
-    assert res.losses_kw[0] <= 84.26 + 1e-3  # never worse than no action's 84.260 kW (pandapower-checked)
     assert res.snapshot_json(0)["strategy"] == name
 
 
+@pytest.mark.parametrize("name", ["no-action", "llma", "lfma", "volt-var", "q-u", "acopf", "socp"])
+def test_the_papers_and_the_injecting_rules_never_lose_to_no_action_here(name):
+    """At 0.8 × rating on paper33 (voltages 0.91–1.0 p.u.) every rule that injects Q cuts the
+    losses below no action's 84.260 kW (pandapower-checked)."""
+    res = run_strategy(name, Scenario.snapshot(load_network("paper33"), 1.0, 0.8, 0.9), 0.2)
+    assert res.losses_kw[0] <= 84.26 + 1e-3
+
+
 def test_acopf_paper_pins_the_papers_setup():
-    spec = get_strategy("acopf-paper")
+    spec = get_strategy("acopf-paper").spec
     assert spec.fixed == {"fallback": "paper", "slack_export": False}
-    assert spec.options == {"solver": "auto"}  # the fast path, or IPOPT on every step
+    assert [o.name for o in spec.options] == ["solver"]  # the fast path, or IPOPT on every step
+    assert spec.option["solver"].setting == "acopf_solver"  # its default: the run's --acopf-solver
     res = run_strategy("acopf-paper", Scenario.snapshot(load_network("paper33")), 0.0)
     assert res.extra["slack_export"] is False
+
+
+def test_run_level_setting_is_an_option_default_the_label_overrides():
+    config = configuration("acopf")
+    assert config.options({"acopf_solver": "ipopt"})["solver"] == "ipopt"
+    assert configuration("acopf:solver=auto").options({"acopf_solver": "ipopt"})["solver"] == "auto"
+    assert canonical("acopf:solver=auto") == "acopf:solver=auto"  # kept: the run's setting may be another
+    assert configuration("acopf:fallback=paper").options({"acopf_solver": "ipopt"})["fallback"] == "paper"
+    assert configuration("lfma").options({"acopf_solver": "ipopt"}) == {"safe": False}  # no option takes it
+
+
+@pytest.mark.parametrize(
+    "label, expected",
+    [
+        ("volt-var", "volt-var"),
+        ("volt-var:curve=b", "volt-var"),
+        (" volt-var:curve=a ", "volt-var:curve=a"),
+        ("volt-var:curve=a,", "volt-var:curve=a"),
+        ("volt-var:q=0.25/0/-0.25,v=0.90/1.0/1.10", "volt-var:v=0.9/1/1.1,q=0.25/0/-0.25"),
+        ("const-pf:mode=inject,pf=0.900", "const-pf:pf=0.9,mode=inject"),
+        ("cosphi-p:pf_min=0.95", "cosphi-p:pf_min=0.95"),
+        ("q-u:deadband=TRUE", "q-u:deadband=true"),
+        ("acopf:solver=ipopt", "acopf:solver=ipopt"),
+        ("volt-var:tol_v_pu=1e-9", "volt-var:tol_v_pu=1e-09"),
+    ],
+)
+def test_labels_are_canonical(label, expected):
+    assert canonical(label) == expected
+    assert canonical(expected) == expected
+
+
+@pytest.mark.parametrize(
+    "label, message",
+    [
+        ("nope", "unknown strategy 'nope'"),
+        ("volt-varr", "did you mean volt-var"),
+        ("volt-var:curve=c", "option curve: 'c' is not one of a, b"),
+        ("volt-var:foo=1", "volt-var takes no option foo"),
+        ("volt-var:curve", "'curve' is not key=value"),
+        ("volt-var:curve=a,curve=b", "option curve given twice"),
+        ("volt-var:v=1.0/0.9,q=0/0", "the curve's v values must increase"),
+        ("volt-var:v=0.9/1.1,q=1.5/0", "must lie in \\[−1, 1\\]"),
+        ("volt-var:v=0.9/1.1", "give both v= and q="),
+        ("volt-var:v=0.9/1.0/1.1,q=0.2/0", "same number of points"),
+        ("volt-var:curve=a,v=0.9/1.1,q=0.2/0", "give curve= or the points"),
+        ("volt-var:v=0.9/nan,q=0/0", "not a decimal number"),
+        ("const-pf:pf=0", "a power factor must lie in \\(0, 1\\]"),
+        ("const-pf:pf=1.01", "a power factor must lie in \\(0, 1\\]"),
+        ("const-pf:mode=both", "not one of absorb, inject"),
+        ("cosphi-p:p_start=1", "p_start is a share of P̄"),
+        ("q-u:q_max=2", "q_max is per unit of P̄"),
+        ("volt-var:step_factor=0", "a step factor lies in \\(0, 1\\]"),
+        ("volt-var:max_steps=1.5", "not a whole number"),
+        ("q-u:deadband=yes", "not true or false"),
+        ("acopf:safe=true", "acopf takes no option safe"),
+        ("acopf-paper:fallback=chain", "acopf-paper takes no option fallback"),
+    ],
+)
+def test_bad_labels_are_one_input_error_naming_it(label, message):
+    with pytest.raises(InputError, match=message):
+        configuration(label)
 
 
 def test_unknown_strategy_and_option_are_input_errors():
@@ -45,3 +129,10 @@ def test_unknown_strategy_and_option_are_input_errors():
         run_strategy("acopf", scenario, 0.0, safe=True)
     with pytest.raises(InputError, match="takes no option fallback"):
         run_strategy("acopf-paper", scenario, 0.0, fallback="chain")
+    with pytest.raises(InputError, match="option safe: 'false' is not a bool"):
+        run_strategy("llma", scenario, 0.0, safe="false")
+
+
+def test_a_label_names_its_result():
+    res = run_strategy("volt-var:curve=a,", Scenario.snapshot(load_network("paper33")), 0.0)
+    assert res.strategy == "volt-var:curve=a"

@@ -54,3 +54,25 @@ def test_ranking_claim_per_grid():
     table = ranking_per_case(_summary()).set_index("case")
     assert table.loc["grid-a", "verdict"] == HOLDS and table.loc["grid-a", "ordered"] == 1
     assert table.loc["grid-b", "verdict"] == FAILS and "grid-b, night connected, k=0" in table.loc["grid-b", "first exception"]
+
+
+def test_leaderboard_columns_and_the_recovery_added_from_a_fault_study():
+    s = _summary().assign(avg_loss_kw=4.0, voltage_violation_min=0.0, max_violation_pu=0.0, not_settled_steps=0)
+    s.loc[s.strategy == "llma", ["voltage_violation_min", "max_violation_pu"]] = (3.0, 0.012)
+    recovery = pd.DataFrame(
+        {
+            "case": "grid-a",
+            "fault_bus": [18, 18, 18, 33, 33, 33],
+            "strategy": ["no-action", "llma", "lfma"] * 2,
+            "k": 0.0,
+            "forecast": "off",
+            "variant": "reference",
+            "added_ms": [0.0, 4.0, 10.0, 0.0, 6.0, 30.0],
+        }
+    )
+    board = leaderboard(s, recovery=recovery).set_index(["case", "strategy"])
+    assert board.loc[("grid-a", "lfma"), "recovery_added_ms"] == pytest.approx(20.0)  # mean over the fault buses
+    assert board.loc[("grid-a", "llma"), "recovery_added_ms"] == pytest.approx(5.0)
+    assert np.isnan(board.loc[("grid-b", "lfma"), "recovery_added_ms"])  # no fault study of grid-b
+    assert board.loc[("grid-a", "llma"), "max_violation_pu"] == 0.012 and board.loc[("grid-a", "llma"), "avg_loss_kw"] == 4.0
+    assert "recovery_added_ms" not in leaderboard(s).columns  # without a fault study

@@ -11,7 +11,7 @@ from opfbench.errors import InputError
 from opfbench.io import load_network
 from opfbench.network import DER
 from opfbench.powerflow import solve_pf_batch
-from opfbench.registry import STRATEGY_NAMES, run_strategy
+from opfbench.registry import DEFAULT_RUN, run_strategy
 from opfbench.scenario import Scenario
 
 
@@ -35,7 +35,7 @@ def test_per_load_scenario_equals_load_scale_when_it_is_one():
     assert np.allclose(per_load.bus_load_mva(), scaled.bus_load_mva(), atol=1e-15)
     assert np.allclose(per_load.load_q_at_der_mvar(), scaled.load_q_at_der_mvar(), atol=1e-15)
     assert np.allclose(per_load.load_p_at_der_mw(), scaled.load_p_at_der_mw(), atol=1e-15)
-    for name in STRATEGY_NAMES:  # every strategy reads the loads through the accessors
+    for name in DEFAULT_RUN:  # every strategy reads the loads through the accessors
         a, b = run_strategy(name, scaled, 0.2), run_strategy(name, per_load, 0.2)
         assert np.allclose(a.losses_kw, b.losses_kw, rtol=1e-6), name
 

@@ -6,10 +6,11 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-import opfbench.strategies.local as local
+import opfbench.strategies.engine as engine
+import opfbench.strategies.paper as paper
 from opfbench.bench.local import bench_local
 from opfbench.bench.profiles import paper_day_scenario
-from opfbench.commands.table import format_table, loss_table
+from opfbench.commands.table import format_table, local_rules, loss_table
 from opfbench.errors import InputError
 from opfbench.io import load_network
 from opfbench.powerflow import PowerFlowResult, solve_pf_batch
@@ -24,22 +25,22 @@ def paper33(load_scales: list[float]) -> Scenario:
 
 def test_voltage_collapse_is_pf_diverged_per_snapshot() -> None:
     scenario = paper33([1.0, 8.0, 1.2])  # 8 × nominal load has no power-flow solution
-    alone = local.lfma(scenario.take(slice(0, 1)), 0.2)
+    alone = paper.lfma(scenario.take(slice(0, 1)), 0.2)
     for name in ("no-action", "llma", "lfma"):
         res = run_strategy(name, scenario, 0.2)
         assert res.status.tolist() == ["ok", "pf-diverged", "ok"]
         assert np.isnan(res.losses_kw[1]) and np.all(np.isfinite(res.losses_kw[[0, 2]]))
-    res = local.lfma(scenario, 0.2)
+    res = paper.lfma(scenario, 0.2)
     assert res.extra["diverged_step"].tolist() == [0, 1, 0]
     assert res.extra["upstream_disagreements"][1] is None
-    assert np.all(local.lfma_trace(scenario, 0.2).upstream_branch[1] == -1)  # nothing was measured
+    assert np.all(paper.lfma_trace(scenario, 0.2).upstream_branch[1] == -1)  # nothing was measured
     np.testing.assert_allclose(res.q_mvar[0], alone.q_mvar[0], atol=1e-9)
     assert res.power_flows.tolist() == [4, 4, 4]
 
 
 def test_lfma_uses_one_batched_flow_per_step_and_shows_intermediate_divergence(monkeypatch: pytest.MonkeyPatch) -> None:
     scenario = paper33([0.9, 1.0, 1.1])
-    clean = local.lfma_trace(scenario, 0.0)
+    clean = paper.lfma_trace(scenario, 0.0)
     calls: list[int] = []
 
     def flaky(net, s_mw, v0=None):  # the grid "fails" snapshot 1 at the answer to step 3
@@ -51,15 +52,15 @@ def test_lfma_uses_one_batched_flow_per_step_and_shows_intermediate_divergence(m
             return PowerFlowResult(pf.net, pf.v, converged, pf.iterations)
         return pf
 
-    monkeypatch.setattr(local, "solve_pf_batch", flaky)
-    trace = local.lfma_trace(scenario, 0.0)
+    monkeypatch.setattr(engine, "solve_pf_batch", flaky)  # every answer of the grid
+    trace = paper.lfma_trace(scenario, 0.0)
     assert calls == [3, 3, 3, 3]
     assert trace.diverged_step.tolist() == [0, 3, 0]
-    assert np.all(trace.rule[1] == local.STOPPED)  # paper33: every DER bus is a branch node
+    assert np.all(trace.rule[1] == paper.STOPPED)  # paper33: every DER bus is a branch node
     np.testing.assert_array_equal(trace.q_final[1], trace.q_step3[1])  # frozen after the failed step
     np.testing.assert_array_equal(trace.q_final[[0, 2]], clean.q_final[[0, 2]])
     calls.clear()
-    res = local.lfma(scenario, 0.0)
+    res = paper.lfma(scenario, 0.0)
     assert res.status.tolist() == ["ok", "pf-diverged", "ok"] and np.isnan(res.losses_kw[1])
     assert res.extra["diverged_step"].tolist() == [0, 3, 0]
 
@@ -74,7 +75,8 @@ def test_bad_reserve_raises_input_error(k) -> None:
 
 def test_loss_table_matches_direct_runs() -> None:
     table = loss_table(ks=(0.0, 0.5), der_scale=0.5)
-    assert len(table) == 2 * 2 * 3 and set(table["status"]) == {"ok"}
+    assert len(table) == 2 * 2 * len(local_rules()) and set(table["status"]) == {"ok"}
+    assert {"no-action", "llma", "lfma", "volt-var", "cosphi-p"} <= set(table["strategy"])
     net = load_network("paper33")
     p_now = 0.5 * net.der_rating_mw
     with_fc = Scenario(net, [1.0], [p_now], [np.minimum(1.2 * p_now, net.der_rating_mw)])  # the table's forecast rule

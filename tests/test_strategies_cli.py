@@ -1,8 +1,9 @@
-"""`opfbench snapshot CASE --strategy {no-action,llma,lfma}` through `opfbench.cli.main`."""
+"""`opfbench snapshot CASE --strategy LABEL` and `opfbench strategies` through `opfbench.cli.main`."""
 
 from __future__ import annotations
 
 import json
+from pathlib import Path
 
 import pytest
 
@@ -72,7 +73,12 @@ def test_text_output_shows_lfma_diagnostics(capsys: pytest.CaptureFixture) -> No
         (["--strategy", "lfma", "--k", "nan"], "--k"),
         (["--strategy", "lfma", "--der-scale", "1.5"], "argument --der-scale: must lie in [0, 1], got 1.5"),
         (["--strategy", "llma", "--fallback", "chain"], "--fallback"),
-        (["--strategy", "teleport"], "invalid choice"),
+        (["--strategy", "teleport"], "unknown strategy 'teleport'"),
+        (["--strategy", "volt-var:curve=c"], "option curve: 'c' is not one of a, b"),
+        (["--strategy", "volt-var:v=1.0/0.9,q=0/0"], "the curve's v values must increase"),
+        (["--strategy", "const-pf:pf=1.5"], "a power factor must lie in (0, 1]"),
+        (["--strategy", "volt-var", "--fallback", "paper"], "--fallback applies to acopf, not to volt-var"),
+        (["--strategy", "llma", "--plugin", "no_such_plugin_module"], "plugin no_such_plugin_module: cannot import it"),
     ],
 )
 def test_bad_arguments_exit_2(capsys: pytest.CaptureFixture, args: list[str], message: str) -> None:
@@ -84,3 +90,30 @@ def test_bad_arguments_exit_2(capsys: pytest.CaptureFixture, args: list[str], me
 def test_unknown_case_exit_2(capsys: pytest.CaptureFixture) -> None:
     assert main(["snapshot", "nowhere33", "--strategy", "lfma"]) == 2
     assert "unknown case" in capsys.readouterr().err
+
+
+def test_a_label_with_options_runs_in_snapshot(capsys: pytest.CaptureFixture) -> None:
+    out = snapshot_json(capsys, "--strategy", "volt-var:curve=b,step_factor=0.50", "--k", "0.2")
+    assert out["strategy"] == "volt-var" and out["status"] == "ok" and out["power_flows"] > 1
+    assert out["residual_mvar"] <= 1e-7  # the closed loop settled
+    curve_a = snapshot_json(capsys, "--strategy", "volt-var:curve=a", "--k", "0.2")
+    assert curve_a["strategy"] == "volt-var:curve=a" and curve_a["q_mvar"] != out["q_mvar"]
+
+
+@pytest.mark.usefixtures("isolated_registry")
+def test_strategies_lists_every_strategy_with_its_options(capsys: pytest.CaptureFixture) -> None:
+    assert main(["strategies", "--json"]) == 0
+    entries = {e["name"]: e for e in json.loads(capsys.readouterr().out)}
+    assert {"no-action", "llma", "lfma", "volt-var", "watt-var", "const-pf", "cosphi-p", "q-u", "acopf", "socp"} <= set(entries)
+    vv = entries["volt-var"]
+    assert vv["kind"] == "local" and vv["reads"] == ["v"] and vv["closed_loop"] and vv["uses_forecast"]
+    curve = next(o for o in vv["options"] if o["name"] == "curve")
+    assert curve == {"name": "curve", "type": "choice", "default": "b", "help": curve["help"], "allowed": ["a", "b"]}
+    solver = next(o for o in entries["acopf"]["options"] if o["name"] == "solver")
+    assert (
+        solver["default_from"] == "acopf_solver" and entries["socp"]["lower_bound"] and entries["acopf"]["kind"] == "formulation"
+    )
+    example = str(Path(__file__).resolve().parents[1] / "docs" / "custom_rule.py")
+    assert main(["strategies", "--plugin", example]) == 0
+    text = capsys.readouterr().out
+    assert f"droop  [plugin {example}]" in text and "gain=5  number" in text

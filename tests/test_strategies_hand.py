@@ -14,8 +14,8 @@ import numpy as np
 import pytest
 
 from opfbench.scenario import Scenario
-from opfbench.strategies.local import BACK_TO_LLMA, KEPT, LEAF, STOPPED, SUBTRACTED, lfma, lfma_step4, lfma_trace, llma, no_action
 from opfbench.strategies.meters import LocalMeters
+from opfbench.strategies.paper import BACK_TO_LLMA, KEPT, LEAF, STOPPED, SUBTRACTED, lfma, lfma_step4, lfma_trace, llma, no_action
 from tests.support.feeders import radial_feeder
 
 TOL = 1e-3  # MVAr, see module docstring

@@ -12,7 +12,7 @@ from hypothesis import strategies as st
 from opfbench.capability import qmax
 from opfbench.io import load_network
 from opfbench.scenario import Scenario
-from opfbench.strategies.local import lfma, lfma_trace, llma, no_action
+from opfbench.strategies.paper import lfma, lfma_trace, llma, no_action
 from tests.support.feeders import radial_feeder
 
 SNAPSHOTS = 4

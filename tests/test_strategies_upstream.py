@@ -13,7 +13,7 @@ from opfbench.io import load_network
 from opfbench.network import Network
 from opfbench.powerflow import PowerFlowResult
 from opfbench.scenario import Scenario
-from opfbench.strategies.local import lfma, lfma_trace, upstream_disagreements
+from opfbench.strategies.paper import lfma, lfma_trace, upstream_disagreements
 from tests.support.feeders import radial_feeder
 
 

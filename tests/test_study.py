@@ -12,7 +12,7 @@ import pytest
 from opfbench.capability import PAPER_KS
 from opfbench.cli import main
 from opfbench.errors import DataError, InputError
-from opfbench.registry import STRATEGY_NAMES, get_strategy
+from opfbench.registry import BASELINE, DEFAULT_FORECAST, DEFAULT_RUN, get_strategy
 from opfbench.study import StudyConfig
 from opfbench.study.periods import resolve_period
 from opfbench.study.runner import prepare, run_study
@@ -329,15 +329,24 @@ def test_the_repeat_check_finds_a_repeated_configuration(day_run):
 
 
 def test_the_default_grid_runs_a_forecast_only_where_a_strategy_reads_it():
-    """Planned without running: `opfbench run`'s default grid has 120 configurations (90 with
-    forecast off, 30 with the oracle), the oracle's tasks run only the rules the registry
-    says read a forecast."""
-    _, _, tasks = prepare(StudyConfig())
-    readers = {name for name in STRATEGY_NAMES if get_strategy(name).uses_forecast}
-    assert {t.strategies for t in tasks if t.forecast == "oracle"} == {tuple(s for s in STRATEGY_NAMES if s in readers)}
-    assert {t.strategies for t in tasks if t.forecast == "off"} == {STRATEGY_NAMES}
+    """Planned without running: `opfbench run`'s default grid has 195 configurations (165
+    with forecast off: every built-in strategy; 30 with the oracle: the paper's Algorithm 3
+    rules, `DEFAULT_FORECAST`); without that choice every strategy the registry says reads a
+    forecast runs under the oracle too, and no other."""
+    _, _, tasks = prepare(StudyConfig(forecast_strategies=DEFAULT_FORECAST))
+    assert {t.strategies for t in tasks if t.forecast == "oracle"} == {DEFAULT_FORECAST}
+    assert {t.strategies for t in tasks if t.forecast == "off"} == {DEFAULT_RUN}
     configurations = {(t.case, s, t.k, m, t.forecast) for t in tasks for s in t.strategies for m in t.night_modes}
-    assert len(configurations) == 120 and len(tasks) == 2 * 5 * 4
+    assert len(configurations) == 195 and len(tasks) == 2 * 5 * 4
+    _, _, every = prepare(StudyConfig())
+    readers = {name for name in DEFAULT_RUN if get_strategy(name).uses_forecast}
+    assert {t.strategies for t in every if t.forecast == "oracle"} == {tuple(s for s in DEFAULT_RUN if s in readers)}
+    assert BASELINE not in readers and {"llma", "lfma", "volt-var", "cosphi-p"} <= readers
+
+
+def test_forecast_strategies_must_be_in_the_grid():
+    with pytest.raises(InputError, match="forecast strategies volt-var are not among the run's strategies"):
+        StudyConfig(strategies=("lfma",), forecast_strategies=("volt-var:curve=b",))
 
 
 def test_acopf_solver_ipopt_runs_ipopt_on_every_step(tmp_path):

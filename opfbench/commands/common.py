@@ -11,20 +11,29 @@ from opfbench.jsonio import print_json
 
 __all__ = [
     "CASE_HELP",
+    "STRATEGY_HELP",
     "add_case_options",
     "add_operating_point",
+    "add_plugin_option",
     "case_spec",
     "fraction",
+    "load_plugins",
     "number",
     "path",
     "print_json",
     "share",
+    "strategy_labels",
 ]
 
 CASE_HELP = (
     "a shipped case (see `opfbench cases`), a MATPOWER .m or pandapower .json file, or simbench:CODE "
     "(a SimBench LV/MV grid with its own profiles, e.g. simbench:1-MV-rural--0-sw); options ?der=…&der-pf=… "
     "as --der/--der-pf"
+)
+
+STRATEGY_HELP = (
+    "strategy configurations NAME or NAME:key=value,… (e.g. lfma volt-var volt-var:curve=a cosphi-p:pf_min=0.95); "
+    "`opfbench strategies` lists every strategy and its options"
 )
 
 DECIMAL = re.compile(r"^\s*[+-]?(?:\d+\.?\d*|\.\d+)(?:[eE][+-]?\d+)?\s*$", re.ASCII)
@@ -103,3 +112,31 @@ def case_spec(case: str, args: argparse.Namespace) -> str:
     if not opts:
         return case
     return case + ("&" if "?" in case else "?") + "&".join(opts)
+
+
+def add_plugin_option(parser: argparse.ArgumentParser) -> None:
+    """--plugin FILE.py|MODULE, repeatable: strategies of your own (`opfbench.plugins`)."""
+    parser.add_argument(
+        "--plugin",
+        action="append",
+        default=[],
+        metavar="MODULE",
+        help="load the local rules of a plugin: a .py file or an importable module (repeatable); see docs/custom_rule.py",
+    )
+
+
+def load_plugins(args: argparse.Namespace) -> None:
+    """Load the --plugin modules (InputError naming a bad one), before any work."""
+    from opfbench.plugins import load
+
+    for ref in getattr(args, "plugin", None) or []:
+        load(ref)
+
+
+def strategy_labels(labels: list[str], args: argparse.Namespace) -> list[str]:
+    """The --plugin modules loaded, then every label of `labels` checked and canonical
+    (`registry.configuration`; InputError naming a bad one), before any work."""
+    from opfbench.registry import canonical
+
+    load_plugins(args)
+    return [canonical(label) for label in labels]

@@ -12,11 +12,22 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from opfbench.capability import PAPER_KS
-from opfbench.commands.common import CASE_HELP, add_case_options, case_spec, fraction, number, path, share
+from opfbench.commands.common import (
+    CASE_HELP,
+    STRATEGY_HELP,
+    add_case_options,
+    add_plugin_option,
+    case_spec,
+    fraction,
+    number,
+    path,
+    share,
+    strategy_labels,
+)
 from opfbench.dynamics.params import FORECASTS, SENSITIVITY_VARIANTS, FaultParams, ModelParams
 from opfbench.errors import InputError
 from opfbench.jsonio import print_json
-from opfbench.registry import STRATEGY_NAMES
+from opfbench.registry import DEFAULT_FAULT
 
 if TYPE_CHECKING:
     from opfbench.io.case import Case
@@ -29,7 +40,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--fault-bus", nargs="+", required=True, help="bus number(s) to fault, or 'all'")
     p.add_argument("--fault-impedance", type=number, default=0.02, help="fault reactance, p.u. (default 0.02)")
     p.add_argument("--duration-ms", type=number, default=150.0, help="fault duration, ms (default 150)")
-    p.add_argument("--strategies", nargs="+", choices=STRATEGY_NAMES, default=["no-action", "llma", "lfma", "acopf"])
+    p.add_argument("--strategies", nargs="+", default=list(DEFAULT_FAULT), metavar="LABEL", help=STRATEGY_HELP)
+    add_plugin_option(p)
     p.add_argument("--k", nargs="+", type=fraction, default=list(PAPER_KS), help="reserve coefficients")
     p.add_argument(
         "--forecast",
@@ -126,7 +138,7 @@ def run(args: argparse.Namespace) -> int:
     config = StudyConfig(
         case.spec,
         buses,
-        tuple(args.strategies),
+        tuple(strategy_labels(args.strategies, args)),
         tuple(args.k),
         tuple(args.forecast),
         variants,

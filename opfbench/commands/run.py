@@ -11,10 +11,18 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from opfbench.capability import PAPER_KS
-from opfbench.commands.common import add_case_options, case_spec, fraction, path
+from opfbench.commands.common import (
+    STRATEGY_HELP,
+    add_case_options,
+    add_plugin_option,
+    case_spec,
+    fraction,
+    path,
+    strategy_labels,
+)
 from opfbench.formulations.options import ACOPF_SOLVERS
 from opfbench.jsonio import print_json
-from opfbench.registry import STRATEGY_NAMES
+from opfbench.registry import DEFAULT_FORECAST, DEFAULT_RUN
 from opfbench.study.config import CHUNKS, DEFAULT_NIGHT, NIGHT_MODES, StudyConfig
 from opfbench.study.price import DEFAULT_CURRENCY, DEFAULT_PRICE_PER_KWH, DEFAULT_PRICE_SOURCE
 
@@ -69,8 +77,23 @@ def register(sub: argparse._SubParsersAction) -> None:
     )
     add_case_options(p)
     p.add_argument(
-        "--strategies", nargs="+", default=list(STRATEGY_NAMES), choices=STRATEGY_NAMES, help="default: every registered strategy"
+        "--strategies",
+        nargs="+",
+        default=None,
+        metavar="LABEL",
+        help=STRATEGY_HELP + "; default: every built-in one",
     )
+    p.add_argument(
+        "--forecast-strategies",
+        nargs="+",
+        default=None,
+        metavar="LABEL",
+        help="which of the strategies run under the forecast sources other than off (only those that read a forecast "
+        "do), or 'all'; default: with the default --strategies the paper's Algorithm 3 rules "
+        f"({' '.join(DEFAULT_FORECAST)}: the grid codes' rules know no forecast, only Algorithm 3's limit would "
+        "change), else all",
+    )
+    add_plugin_option(p)
     p.add_argument("--k", nargs="+", type=fraction, default=list(PAPER_KS), help="reserve coefficients in [0, 1]")
     p.add_argument("--night-modes", nargs="+", default=list(NIGHT_MODES), choices=NIGHT_MODES)
     p.add_argument(
@@ -150,6 +173,14 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.set_defaults(func=run)
 
 
+def _forecast_strategies(args: argparse.Namespace) -> list[str] | None:
+    """--forecast-strategies as labels (None: every strategy that reads a forecast)."""
+    chosen = args.forecast_strategies
+    if chosen is None:
+        return None if args.strategies else list(DEFAULT_FORECAST)
+    return None if chosen == ["all"] else strategy_labels(chosen, args)
+
+
 def run(args: argparse.Namespace) -> int:
     source = DEFAULT_PRICE_SOURCE if args.price == DEFAULT_PRICE_PER_KWH else "--price"
     from opfbench.report.inputs import checked_sources
@@ -161,7 +192,8 @@ def run(args: argparse.Namespace) -> int:
     checked_sources(forecast_dir if holds_forecasts(forecast_dir) else None, args.fault_dir, args.year_dir)  # before any work
     config = StudyConfig.build(
         cases=[case_spec(c, args) for c in suite_cases(args.suite) or args.case or ["paper33"]],
-        strategies=args.strategies,
+        strategies=strategy_labels(args.strategies or list(DEFAULT_RUN), args),
+        forecast_strategies=_forecast_strategies(args),
         ks=args.k,
         night_modes=args.night_modes,
         night=args.night,

@@ -4,17 +4,32 @@ from __future__ import annotations
 
 import argparse
 
-from opfbench.commands.common import CASE_HELP, add_case_options, add_operating_point, case_spec, fraction, print_json, share
+from opfbench.commands.common import (
+    CASE_HELP,
+    add_case_options,
+    add_operating_point,
+    add_plugin_option,
+    case_spec,
+    fraction,
+    print_json,
+    share,
+    strategy_labels,
+)
 from opfbench.errors import InputError
 from opfbench.formulations.options import ACOPF_SOLVERS, FALLBACKS
-from opfbench.registry import STRATEGIES, STRATEGY_NAMES, get_strategy, run_strategy
 
 
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("snapshot", help="run one strategy on one operating point")
     p.add_argument("case", help=CASE_HELP)
     add_case_options(p)
-    p.add_argument("--strategy", required=True, choices=STRATEGY_NAMES)
+    p.add_argument(
+        "--strategy",
+        required=True,
+        metavar="LABEL",
+        help="a strategy configuration NAME or NAME:key=value,… (e.g. volt-var:curve=a); `opfbench strategies` lists them",
+    )
+    add_plugin_option(p)
     p.add_argument("--k", type=fraction, default=0.0, help="reactive reserve coefficient in [0, 1] (default 0)")
     add_operating_point(p)
     p.add_argument(
@@ -46,10 +61,12 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.set_defaults(func=run)
 
 
-def _options(args: argparse.Namespace) -> dict:
+def _options(args: argparse.Namespace, label: str) -> dict:
     """The strategy options the flags set; a flag the strategy does not take is an error
     (which strategies take it is the registry's word)."""
-    spec = get_strategy(args.strategy)
+    from opfbench.registry import configuration, specs
+
+    spec = configuration(label).spec
     given = {
         "--safe": ("safe", True) if args.safe else None,
         "--fallback": ("fallback", args.fallback) if args.fallback is not None else None,
@@ -60,24 +77,26 @@ def _options(args: argparse.Namespace) -> dict:
     for flag, option in given.items():
         if option is None:
             continue
-        if option[0] not in spec.options:
-            takers = [s.name for s in STRATEGIES.values() if option[0] in s.options]
+        if option[0] not in spec.option:
+            takers = [s.name for s in specs() if option[0] in s.option]
             raise InputError(f"{flag} applies to {', '.join(takers)}, not to {args.strategy}")
         options[option[0]] = option[1]
     if args.forecast_der_scale is not None and not spec.uses_forecast:
-        takers = [s.name for s in STRATEGIES.values() if s.uses_forecast]
+        takers = [s.name for s in specs() if s.uses_forecast]
         raise InputError(f"--forecast-der-scale applies to {', '.join(takers)}, not to {args.strategy}")
     return options
 
 
 def run(args: argparse.Namespace) -> int:
     from opfbench.io import load_network
+    from opfbench.registry import run_strategy
     from opfbench.scenario import Scenario
 
-    options = _options(args)
+    (label,) = strategy_labels([args.strategy], args)
+    options = _options(args, label)
     net = load_network(case_spec(args.case, args))
     scenario = Scenario.snapshot(net, args.load_scale, args.der_scale, args.forecast_der_scale)
-    result = run_strategy(args.strategy, scenario, args.k, **options)
+    result = run_strategy(label, scenario, args.k, **options)
     out = result.snapshot_json(0)
     if args.json:
         print_json(out)

@@ -1,6 +1,6 @@
-"""`opfbench table [CASE]`: the local rules' loss table on one operating point — no action,
-LLMA and LFMA (every local rule the registry lists) for the paper's reserve coefficients
-k, without and with a forecast (Algorithm 3).
+"""`opfbench table [CASE]`: the local rules' loss table on one operating point — every local
+rule the registry lists (no action, LLMA, LFMA, the grid codes' rules) at its defaults, for
+the paper's reserve coefficients k, without and with a forecast (Algorithm 3).
 
 Forecast rule: P^F = min(factor · P^C, P̄) per DER (factor 1.2 = a +20 % forecast), with
 P^C = der_scale · P̄. The rules and their options come from the registry.
@@ -13,7 +13,7 @@ from typing import TYPE_CHECKING, Sequence
 
 from opfbench.capability import PAPER_KS
 from opfbench.commands.common import fraction, print_json, share
-from opfbench.registry import LOCAL_RULES, STRATEGIES, run_strategy
+from opfbench.registry import run_strategy, specs
 
 if TYPE_CHECKING:
     import pandas as pd
@@ -70,9 +70,10 @@ def loss_table(
     rows = []
     for forecast, scenario in scenarios.items():
         for k in ks:
-            for name in LOCAL_RULES:
-                options = {"safe": safe} if "safe" in STRATEGIES[name].options else {}
-                res = run_strategy(name, scenario, k, **options)
+            for spec in local_rules():
+                name = spec.name
+                options = {"safe": safe} if "safe" in spec.option else {}
+                res = run_strategy(name, scenario, k, None, **options)
                 rows.append(
                     {
                         "forecast": forecast,
@@ -87,12 +88,17 @@ def loss_table(
     return pd.DataFrame(rows)
 
 
+def local_rules() -> list:
+    """Every registered local rule, in registry order."""
+    return [s for s in specs() if s.kind == "local"]
+
+
 def format_table(table: "pd.DataFrame") -> str:
     """Losses (kW) as k × strategy, one block per forecast setting, plus the largest
     excursion over the physical capability (MVAr) and any status other than ok."""
     blocks = []
     for forecast, part in table.groupby("forecast", sort=True):
-        wide = part.pivot(index="k", columns="strategy", values="losses_kw")[list(LOCAL_RULES)]
+        wide = part.pivot(index="k", columns="strategy", values="losses_kw")[[s.name for s in local_rules()]]
         wide["max excursion MVAr"] = part.groupby("k")["excursion_mvar"].max()
         title = "with forecast (Algorithm 3)" if forecast else "without forecast"
         blocks.append(f"{title} — losses kW\n{wide.to_string(float_format=lambda v: f'{v:.3f}')}")

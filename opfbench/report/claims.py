@@ -1,5 +1,9 @@
 """The paper's claims, each with a verdict computed from our tables — never typed in.
 
+The claims are about the paper's configurations — no action (`registry.BASELINE`), LLMA
+and LFMA (`registry.PAPER_RULES`), its OPF (`REFERENCE_OPTIMUM`, `PAPER_OPF`) — and look
+only at those rows: other rules in the run (the grid codes', plugins) never change a verdict.
+
 `claims(inputs)` returns one `Claim` per claim: the paper's figure, ours, and a verdict
 "holds" / "does not hold" / "not comparable" with the reason (a missing input makes a
 claim "not comparable" and names the command that produces it).
@@ -13,6 +17,7 @@ from typing import Callable
 import numpy as np
 import pandas as pd
 
+from opfbench.registry import BASELINE, PAPER_OPF, PAPER_RULES, REFERENCE_OPTIMUM
 from opfbench.report import paper, tables
 from opfbench.report.inputs import Inputs
 
@@ -54,28 +59,36 @@ def _complete(table: pd.DataFrame) -> tuple[pd.DataFrame, str]:
     return full, (f"; {left_out} configuration(s) left out: a step without a converged power flow" if left_out else "")
 
 
+LLMA, LFMA = PAPER_RULES
+
+
 def _where(index: tuple) -> str:
     case, mode, k = index
     return f"{case}, night {mode}, k={k:g}"
 
 
+def _ordered(e: pd.DataFrame) -> pd.Series:
+    """Per row of an energy pivot: LFMA < LLMA < no action, strictly."""
+    return (e[LFMA] < e[LLMA] - TOL_KWH) & (e[LLMA] < e[BASELINE] - TOL_KWH)
+
+
 def ranking(inputs: Inputs) -> Claim:
     claim = "LFMA < LLMA < no action at every k"
     na, ll, lf = (
-        paper.NIGHT_TABLE["connected"]["no-action"][1],
-        paper.NIGHT_TABLE["connected"]["llma"][1],
-        paper.NIGHT_TABLE["connected"]["lfma"][1],
+        paper.NIGHT_TABLE["connected"][BASELINE][1],
+        paper.NIGHT_TABLE["connected"][LLMA][1],
+        paper.NIGHT_TABLE["connected"][LFMA][1],
     )
     figure = f"LFMA {lf} < LLMA {ll} < no action {na} kWh (night connected)"
     if inputs.summary is None:
         return _missing(claim, figure, inputs, "summary.csv")
-    e = _energy(inputs.summary, ["no-action", "llma", "lfma"])
+    e = _energy(inputs.summary, [BASELINE, LLMA, LFMA])
     if e.empty or e.shape[1] < 3:
-        return Claim(claim, figure, "—", NA, "the run has not all of no-action, llma and lfma")
+        return Claim(claim, figure, "—", NA, f"the run has not all of {BASELINE}, {LLMA} and {LFMA}")
     e, left_out = _complete(e)
     if e.empty:
         return Claim(claim, figure, "—", NA, "no configuration has an energy for all three" + left_out)
-    ok = (e["lfma"] < e["llma"] - TOL_KWH) & (e["llma"] < e["no-action"] - TOL_KWH)
+    ok = _ordered(e)
     ours = f"ordered in {int(ok.sum())} of {len(ok)} (case, night mode, k) configurations{left_out}"
     if ok.all():
         return Claim(claim, figure, ours, HOLDS, "strict order in every configuration of the run")
@@ -86,21 +99,21 @@ def ranking(inputs: Inputs) -> Claim:
         figure,
         ours,
         FAILS,
-        f"not ordered at {_where(first)}: LFMA {w['lfma']:.2f}, LLMA {w['llma']:.2f}, no action {w['no-action']:.2f} kWh",
+        f"not ordered at {_where(first)}: LFMA {w[LFMA]:.2f}, LLMA {w[LLMA]:.2f}, no action {w[BASELINE]:.2f} kWh",
     )
 
 
 def ranking_per_case(summary: pd.DataFrame) -> pd.DataFrame:
     """The ranking claim (LFMA < LLMA < no action) checked per case over its (night mode, k)
     configurations, forecast off: how many are ordered, and the verdict of that case."""
-    e = _energy(summary, ["no-action", "llma", "lfma"]).dropna()
+    e = _energy(summary, [BASELINE, LLMA, LFMA]).dropna()
     rows = []
     for case in dict.fromkeys(summary["case"]):
         sub = e[e.index.get_level_values("case") == case] if len(e) else e
         if sub.empty or sub.shape[1] < 3:
             rows.append({"case": case, "ordered": 0, "configurations": 0, "verdict": NA, "first exception": ""})
             continue
-        ok = (sub["lfma"] < sub["llma"] - TOL_KWH) & (sub["llma"] < sub["no-action"] - TOL_KWH)
+        ok = _ordered(sub)
         first = "" if ok.all() else _where(sub.index[~ok][0])
         rows.append(
             {
@@ -120,7 +133,7 @@ def forecast_savings(inputs: Inputs) -> Claim:
     if inputs.summary is None:
         return _missing(claim, figure, inputs, "summary.csv")
     s = inputs.summary
-    aware = s[(s["forecast"] != "off") & s["strategy"].isin(["llma", "lfma"])].dropna(subset=["savings_pct"])
+    aware = s[(s["forecast"] != "off") & s["strategy"].isin(PAPER_RULES)].dropna(subset=["savings_pct"])
     if aware.empty:
         return Claim(claim, figure, "—", NA, "the run has no forecast-aware (forecast ≠ off) LLMA/LFMA configuration")
     best = aware.loc[aware["savings_pct"].idxmax()]
@@ -147,13 +160,13 @@ def night_connected(inputs: Inputs) -> Claim:
     lo, hi = paper.NIGHT_SAVINGS_PCT
     own = [
         100 * (1 - paper.NIGHT_TABLE["connected"][s][1] / paper.NIGHT_TABLE["disconnected"][s][1])
-        for s in ("llma", "lfma", "acopf")
+        for s in (*PAPER_RULES, REFERENCE_OPTIMUM)
     ]
     figure = f"{lo:g}–{hi:g} % (its own table: {min(own):.1f}–{max(own):.1f} %)"
     if inputs.summary is None:
         return _missing(claim, figure, inputs, "summary.csv")
     e = _off(inputs.summary)
-    e = e[e["strategy"].isin(["llma", "lfma", "acopf"])].pivot_table(
+    e = e[e["strategy"].isin([*PAPER_RULES, REFERENCE_OPTIMUM])].pivot_table(
         index=["case", "strategy", "k"], columns="night_mode", values="energy_kwh", aggfunc="first"
     )
     if not {"connected", "disconnected"} <= set(e.columns):
@@ -173,20 +186,20 @@ def night_connected(inputs: Inputs) -> Claim:
 
 def _beats(inputs: Inputs, opf: str, claim: str) -> Claim:
     figure = (
-        f"LFMA {paper.NIGHT_TABLE['connected']['lfma'][1]} < OPF {paper.NIGHT_TABLE['connected']['acopf'][1]} kWh "
-        f"(connected), {paper.NIGHT_TABLE['disconnected']['lfma'][1]} < {paper.NIGHT_TABLE['disconnected']['acopf'][1]}"
-        " (disconnected)"
+        f"LFMA {paper.NIGHT_TABLE['connected'][LFMA][1]} < OPF {paper.NIGHT_TABLE['connected'][REFERENCE_OPTIMUM][1]} kWh "
+        f"(connected), {paper.NIGHT_TABLE['disconnected'][LFMA][1]} < "
+        f"{paper.NIGHT_TABLE['disconnected'][REFERENCE_OPTIMUM][1]} (disconnected)"
     )
     if inputs.summary is None:
         return _missing(claim, figure, inputs, "summary.csv")
-    e = _energy(inputs.summary, ["lfma", opf])
+    e = _energy(inputs.summary, [LFMA, opf])
     if e.shape[1] < 2:
-        return Claim(claim, figure, "—", NA, f"the run has not both lfma and {opf}")
+        return Claim(claim, figure, "—", NA, f"the run has not both {LFMA} and {opf}")
     e, left_out = _complete(e)
     if e.empty:
-        return Claim(claim, figure, "—", NA, f"no configuration has an energy for both lfma and {opf}" + left_out)
-    wins = e["lfma"] < e[opf] - TOL_KWH
-    diff = 100 * (e["lfma"] / e[opf] - 1)
+        return Claim(claim, figure, "—", NA, f"no configuration has an energy for both {LFMA} and {opf}" + left_out)
+    wins = e[LFMA] < e[opf] - TOL_KWH
+    diff = 100 * (e[LFMA] / e[opf] - 1)
     ours = (
         f"LFMA lower in {int(wins.sum())} of {len(wins)} configurations (LFMA vs {opf}: {diff.min():+.1f} … "
         f"{diff.max():+.1f} %){left_out}"
@@ -199,18 +212,18 @@ def _beats(inputs: Inputs, opf: str, claim: str) -> Claim:
         ours,
         FAILS,
         f"{opf} uses less or equal energy in {int((~wins).sum())} configuration(s)"
-        + ("; a converged OPF under the same limits cannot lose to a feasible local rule" if opf == "acopf" else ""),
+        + ("; a converged OPF under the same limits cannot lose to a feasible local rule" if opf == REFERENCE_OPTIMUM else ""),
     )
 
 
 def lfma_vs_opf(inputs: Inputs) -> Claim:
-    return _beats(inputs, "acopf", "LFMA beats the centralized OPF (our AC OPF: fallback chain, slack may export)")
+    return _beats(inputs, REFERENCE_OPTIMUM, "LFMA beats the centralized OPF (our AC OPF: fallback chain, slack may export)")
 
 
 def lfma_vs_paper_opf(inputs: Inputs) -> Claim:
     return _beats(
         inputs,
-        "acopf-paper",
+        PAPER_OPF,
         "LFMA beats the centralized OPF under the paper's setup (acopf-paper: slack may not export, failure → no action)",
     )
 
@@ -266,7 +279,7 @@ def larger_k_faster(inputs: Inputs) -> Claim:
     rec = _recovery(inputs)
     if rec is None:
         return _missing(claim, figure, inputs, "fault.parquet")
-    rec = rec[rec["strategy"] != "no-action"].dropna(subset=["recovery_ms"])
+    rec = rec[rec["strategy"].isin([*PAPER_RULES, REFERENCE_OPTIMUM])].dropna(subset=["recovery_ms"])
     groups = [
         g.sort_values("k")["recovery_ms"].to_numpy()
         for _, g in rec.groupby(["case", "fault_bus", "strategy", "forecast", "variant"])
@@ -287,7 +300,7 @@ def voltage_band(inputs: Inputs) -> Claim:
     figure = f"[{lo:g}, {hi:g}] p.u. throughout"
     if inputs.summary is None:
         return _missing(claim, figure, inputs, "summary.csv")
-    s = inputs.summary[inputs.summary["strategy"].isin(["llma", "lfma"])]
+    s = inputs.summary[inputs.summary["strategy"].isin(PAPER_RULES)]
     if s.empty:
         return Claim(claim, figure, "—", NA, "the run has no llma/lfma configuration")
     # voltages are over the steps with a converged power flow; a diverged step has none
@@ -312,8 +325,7 @@ CLAIMS: tuple[Callable[[Inputs], Claim], ...] = (
     lfma_vs_opf,
     lfma_vs_paper_opf,
     best_forecaster,
-    lambda inp: recovery_added(inp, "llma"),
-    lambda inp: recovery_added(inp, "lfma"),
+    *(lambda inp, rule=rule: recovery_added(inp, rule) for rule in PAPER_RULES),
     larger_k_faster,
     voltage_band,
 )

@@ -22,7 +22,7 @@ import pyarrow.parquet as pq
 
 import opfbench
 from opfbench.errors import InputError
-from opfbench.registry import FORMULATIONS
+from opfbench.registry import is_formulation
 from opfbench.report.sources import check_given, report_sources
 from opfbench.report.tables import REFERENCE_NIGHT
 from opfbench.study.store import SCHEMA
@@ -361,8 +361,12 @@ def _steps(path: Path, summary: pd.DataFrame | None, command: str) -> pd.DataFra
     """The per-step rows the report uses — every formulation's (convergence tables) and the
     reference setting's (plots) — with only the columns it uses."""
     reference = _reference_filter(summary)
-    filters = None if reference is None else [[("strategy", "in", list(FORMULATIONS))], reference]
-    return _filtered(path, STEP_KINDS, filters, command, keys=(*_KEYS, "time", "status"))
+    keys = (*_KEYS, "time", "status")
+    if reference is None or summary is None:
+        return _filtered(path, STEP_KINDS, None, command, keys=keys)
+    formulations = [s for s in dict.fromkeys(summary["strategy"].astype(str)) if is_formulation(s)]
+    filters = [[("strategy", "in", formulations)], reference] if formulations else [reference]
+    return _filtered(path, STEP_KINDS, filters, command, keys=keys)
 
 
 def _summary(path: Path, command: str) -> pd.DataFrame | None:

@@ -18,6 +18,7 @@ import plotly.graph_objects as go
 import plotly.io as pio
 from plotly.subplots import make_subplots
 
+from opfbench.registry import BASELINE
 from opfbench.report.inputs import TRACE_BUS
 from opfbench.report.tables import REFERENCE_NIGHT, order
 
@@ -140,7 +141,7 @@ def der_q_day(der_q: pd.DataFrame) -> list[Plot]:
     out = []
     for i, case in enumerate(_cases(der_q)):
         sub, k = _reference(der_q[der_q["case"] == case])
-        strategies = [s for s in order(sub[["strategy"]].drop_duplicates())["strategy"] if s != "no-action"]
+        strategies = [s for s in order(sub[["strategy"]].drop_duplicates())["strategy"] if s != BASELINE]
         if not strategies:
             continue
         buses = sorted(sub["bus"].unique())
@@ -218,6 +219,20 @@ def voltage_envelope(steps: pd.DataFrame, limits: dict[str, tuple[float, float]]
     return out
 
 
+def _lines_over_k(fig: go.Figure, frame: pd.DataFrame, x: str, y: str, hover_columns: list[str], hover: str) -> None:
+    """One trace per strategy of `frame` (registry order), its points ordered by k."""
+    for strategy, grp in order(frame).groupby("strategy", sort=False):
+        grp = grp.sort_values("k")
+        fig.add_scatter(
+            x=grp[x],
+            y=grp[y],
+            mode="lines+markers",
+            name=escape(strategy),
+            customdata=grp[hover_columns].to_numpy(),
+            hovertemplate=hover,
+        )
+
+
 def gap_vs_k(summary: pd.DataFrame) -> list[Plot]:
     out = []
     for i, case in enumerate(_cases(summary)):
@@ -226,16 +241,7 @@ def gap_vs_k(summary: pd.DataFrame) -> list[Plot]:
         if sub.empty:
             continue
         fig = _figure()
-        for strategy, grp in order(sub).groupby("strategy", sort=False):
-            grp = grp.sort_values("k")
-            fig.add_scatter(
-                x=grp["k"],
-                y=grp["gap_pct"],
-                mode="lines+markers",
-                name=escape(strategy),
-                customdata=grp["gap_kwh"],
-                hovertemplate="k=%{x}<br>gap %{y:.2f} %<br>%{customdata:.2f} kWh",
-            )
+        _lines_over_k(fig, sub, "k", "gap_pct", ["gap_kwh"], "k=%{x}<br>gap %{y:.2f} %<br>%{customdata[0]:.2f} kWh")
         out.append(
             plot_json(
                 f"gap-{i}",
@@ -243,6 +249,32 @@ def gap_vs_k(summary: pd.DataFrame) -> list[Plot]:
                 fig,
                 "reserve coefficient k",
                 "gap to the bound (%)",
+            )
+        )
+    return out
+
+
+def share_vs_violations(board: pd.DataFrame) -> list[Plot]:
+    """Per case: each strategy's share of the AC OPF's loss reduction against its minutes
+    outside the voltage limits, one point per k (a `tables.leaderboard`)."""
+    out: list[Plot] = []
+    if "voltage_violation_min" not in board or board.empty:
+        return out
+    for i, case in enumerate(_cases(board)):
+        sub = board[board["case"] == case].dropna(subset=["opf_share_pct", "voltage_violation_min"])
+        if sub.empty:
+            continue
+        fig = _figure()
+        hover = "k=%{customdata[0]}<br>%{y:.1f} % of the OPF's reduction<br>%{x:.0f} min outside<br>%{customdata[1]:.2f} kWh"
+        _lines_over_k(fig, sub, "voltage_violation_min", "opf_share_pct", ["k", "energy_kwh"], hover)
+        out.append(
+            plot_json(
+                f"share-violations-{i}",
+                f"{case}: share of the AC OPF's loss reduction vs minutes outside the voltage limits "
+                "(one point per k, night connected, forecast off)",
+                fig,
+                "minutes outside the voltage limits",
+                "share of the AC OPF's loss reduction (%)",
             )
         )
     return out

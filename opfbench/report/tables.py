@@ -10,7 +10,7 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 
-from opfbench.registry import FORMULATIONS, LOCAL_RULES, STRATEGIES
+from opfbench.registry import BASELINE, PAPER_OPF, PAPER_RULES, REFERENCE_OPTIMUM, describe, is_formulation, is_relaxation, rank
 from opfbench.report import paper
 from opfbench.result import STATUSES
 
@@ -36,12 +36,12 @@ def diverged(summary: pd.DataFrame) -> pd.DataFrame:
 
 
 def order(frame: pd.DataFrame) -> pd.DataFrame:
-    """Rows in the registry's strategy order, then case, k, night mode, forecast."""
-    known = list(LOCAL_RULES + FORMULATIONS)
-    rank = {name: i for i, name in enumerate(known)}
+    """Rows in the registry's strategy order (a strategy's configurations by label, unknown
+    strategies last), then case, k, night mode, forecast."""
     keys = [c for c in ("case", "strategy", "k", "night_mode", "forecast") if c in frame.columns]
-    out = frame.assign(_rank=frame["strategy"].map(lambda s: rank.get(s, len(known)))) if "strategy" in frame else frame
+    out = frame.assign(_rank=frame["strategy"].map(rank)) if "strategy" in frame else frame
     by = [c if c != "strategy" else "_rank" for c in keys]
+    by = [*by[: by.index("_rank") + 1], "strategy", *by[by.index("_rank") + 1 :]] if "_rank" in by else by
     out = out.sort_values(by, kind="stable") if by else out
     return out.drop(columns="_rank", errors="ignore").reset_index(drop=True)
 
@@ -70,7 +70,8 @@ def energy_pivot(summary: pd.DataFrame, night_mode: str = REFERENCE_NIGHT, value
 
 def formulation_steps(steps: pd.DataFrame) -> pd.DataFrame:
     """Rows of strategies that call a solver (registered formulations, or any with an IPOPT/solver status)."""
-    solver = steps["strategy"].isin(FORMULATIONS) | (steps["solver_status"].fillna("") != "")
+    labels = steps["strategy"].astype(str)
+    solver = labels.map(is_formulation).astype(bool) | (steps["solver_status"].fillna("") != "")
     return steps[solver]
 
 
@@ -90,15 +91,12 @@ def convergence(steps: pd.DataFrame) -> pd.DataFrame:
     out = counts.copy()
     out.insert(0, "steps", total)
     out["not ok %"] = 100.0 * (total - counts["ok"]) / total
-    ac = sub["strategy"] != "socp"  # who certified the AC OPF's ok steps
-    for solver in ("socp", "ipopt"):
+    ac = ~sub["strategy"].astype(str).map(is_relaxation).astype(bool)  # who certified the AC OPF's ok steps
+    relaxation = out.index.get_level_values("strategy").map(is_relaxation).astype(bool)
+    for solver in ("socp", "ipopt"):  # `certified_by` values
         picked = sub[ac & (sub["status"] == "ok") & (sub["certified_by"] == solver)]
         out[f"ok, certified by {solver}"] = (
-            picked.groupby(["case", "strategy", "k"])
-            .size()
-            .reindex(out.index, fill_value=0)
-            .where(out.index.get_level_values("strategy") != "socp")
-            .astype("Int64")
+            picked.groupby(["case", "strategy", "k"]).size().reindex(out.index, fill_value=0).where(~relaxation).astype("Int64")
         )
     return order(out.reset_index())
 
@@ -135,18 +133,18 @@ def solver_stats(steps: pd.DataFrame) -> pd.DataFrame:
 
 
 def paper_setup(summary: pd.DataFrame, steps: pd.DataFrame | None) -> pd.DataFrame:
-    """The paper's OPF setup (acopf-paper) beside our AC OPF and LFMA, per case × k × night
-    mode (forecast off): energy kWh, and acopf-paper's failed steps by cause."""
-    sub = summary[(summary["forecast"] == "off") & summary["strategy"].isin(["lfma", "acopf", "acopf-paper"])]
-    if not (sub["strategy"] == "acopf-paper").any():
+    """The paper's OPF setup (`registry.PAPER_OPF`) beside our AC OPF and LFMA, per case × k
+    × night mode (forecast off): energy kWh, and the paper setup's failed steps by cause."""
+    sub = summary[(summary["forecast"] == "off") & summary["strategy"].isin([PAPER_RULES[-1], REFERENCE_OPTIMUM, PAPER_OPF])]
+    if not (sub["strategy"] == PAPER_OPF).any():
         return pd.DataFrame()
     out = sub.pivot_table(index=["case", "night_mode", "k"], columns="strategy", values="energy_kwh", aggfunc="first")
     out.columns = [f"{c} kWh" for c in out.columns]
     if steps is not None:
-        paper_steps = steps[(steps["strategy"] == "acopf-paper") & (steps["forecast"] == "off")]
+        paper_steps = steps[(steps["strategy"] == PAPER_OPF) & (steps["forecast"] == "off")]
         causes = pd.crosstab([paper_steps["case"], paper_steps["night_mode"], paper_steps["k"]], paper_steps["status"])
         for status in ("infeasible", "solver-failed", "fallback-no-action"):
-            out[f"acopf-paper {status}"] = causes[status] if status in causes else 0
+            out[f"{PAPER_OPF} {status}"] = causes[status] if status in causes else 0
     return out.reset_index()
 
 
@@ -213,10 +211,8 @@ def voltage(summary: pd.DataFrame) -> pd.DataFrame:
 
 def excursions(summary: pd.DataFrame) -> pd.DataFrame:
     """Algorithm 3 (forecast on): steps whose setpoint exceeds the capability at P^C, and the largest excess."""
-    sub = summary[
-        (summary["forecast"] != "off")
-        & summary["strategy"].map(lambda s: STRATEGIES[s].uses_forecast if s in STRATEGIES else True)
-    ]
+    reads = summary["strategy"].astype(str).map(lambda s: describe(s) is None or describe(s).uses_forecast)  # type: ignore[union-attr]
+    sub = summary[(summary["forecast"] != "off") & reads.astype(bool)]
     return order(sub[CONFIG + ["steps", "excursion_steps", "max_excursion_mvar"]])
 
 
@@ -248,7 +244,7 @@ def recovery(fault: pd.DataFrame) -> pd.DataFrame:
     (same case, fault bus, k, forecast, variant)."""
     keys = ["case", "fault_bus", "strategy", "k", "forecast", "variant"]
     sub = fault[fault["faulted"].astype(bool)][keys + ["recovery_ms", "status", "vmin_pu", "margin_pu"]]
-    base = sub[sub["strategy"] == "no-action"].set_index(["case", "fault_bus", "k", "forecast", "variant"])["recovery_ms"]
+    base = sub[sub["strategy"] == BASELINE].set_index(["case", "fault_bus", "k", "forecast", "variant"])["recovery_ms"]
     out = sub.join(base.rename("no_action_ms"), on=["case", "fault_bus", "k", "forecast", "variant"])
     out["added_ms"] = out["recovery_ms"] - out["no_action_ms"]
     return order(out.drop(columns="no_action_ms"))
@@ -285,10 +281,11 @@ def convergence_summary(summary: pd.DataFrame) -> pd.DataFrame:
     and the share of steps whose point is a certified AC optimum (by the SOCP or by IPOPT;
     NaN for socp, whose point is the bound's, not certified) — from the summary, without
     the per-step table."""
-    sub = summary[(summary["forecast"] == "off") & summary["strategy"].isin(["acopf", "acopf-paper", "socp"])]
+    sub = summary[(summary["forecast"] == "off") & summary["strategy"].astype(str).map(is_formulation).astype(bool)]
     g = sub.assign(certified=sub["certified_share"] * sub["steps"]).groupby(["case", "strategy", "k"], sort=False)
     out = g.agg(steps=("steps", "sum"), not_ok_steps=("not_ok_steps", "sum"), certified=("certified", "sum")).reset_index()
-    out["certified optimal %"] = np.where(out["strategy"] == "socp", np.nan, 100.0 * out.pop("certified") / out["steps"])
+    relaxation = out["strategy"].astype(str).map(is_relaxation).astype(bool)
+    out["certified optimal %"] = np.where(relaxation, np.nan, 100.0 * out.pop("certified") / out["steps"])
     return order(out)
 
 
@@ -297,38 +294,65 @@ def wall_times(summary: pd.DataFrame) -> pd.DataFrame:
     return order(summary[CONFIG + ["steps", "wall_s", "solver_s"]])
 
 
-OPF_REFERENCE = "acopf"
-"""The optimum a leaderboard measures every strategy against."""
+LEADERBOARD_COLUMNS = [
+    "case",
+    "k",
+    "strategy",
+    "energy_kwh",
+    "avg_loss_kw",
+    "savings_pct",
+    "opf_share_pct",
+    "voltage_violation_min",
+    "max_violation_pu",
+    "voltage_violation_steps",
+    "not_settled_steps",
+    "not_ok_steps",
+    "recovery_added_ms",
+]
 
 
-def leaderboard(summary: pd.DataFrame, night_mode: str = REFERENCE_NIGHT) -> pd.DataFrame:
-    """Per case × k (forecast off, one night mode), every strategy other than no action by
-    its share of the AC OPF's loss reduction, (E_no-action − E)/(E_no-action − E_acopf) in %
-    (— where the OPF reduces nothing), with its energy, voltage violations and not-ok steps;
-    ranked per case and k, best first."""
+def _recovery_added(rec: pd.DataFrame | None) -> dict[tuple, float]:
+    """(case, strategy, k) → mean recovery time added over no action (ms) at the faulted bus,
+    forecast off, the reference model variant (or the first), over the fault buses."""
+    if rec is None or rec.empty:
+        return {}
+    variants = sorted(rec["variant"].unique())
+    sub = rec[(rec["forecast"] == "off") & (rec["variant"] == ("reference" if "reference" in variants else variants[0]))]
+    mean = sub.groupby(["case", "strategy", "k"])["added_ms"].mean()
+    return {(c, s, float(k)): float(v) for (c, s, k), v in mean.items()}
+
+
+def leaderboard(summary: pd.DataFrame, night_mode: str = REFERENCE_NIGHT, recovery: pd.DataFrame | None = None) -> pd.DataFrame:
+    """Per case × k (forecast off, one night mode), every rule and formulation other than
+    the baseline by its share of the AC OPF's loss reduction,
+    (E_no-action − E)/(E_no-action − E_acopf) in % (NaN where the OPF reduces nothing), with
+    its energy and average losses, minutes outside the case's voltage limits and the worst
+    excursion beyond them (p.u.), not-settled and not-ok steps, and — given a fault study's
+    `recovery` table — the recovery time it adds over no action (mean over the fault
+    buses, ms); ranked per case and k, lowest energy first. A summary written before a
+    column existed gives NaN there."""
     sub = summary[(summary["forecast"] == "off") & (summary["night_mode"] == night_mode)]
+    added = _recovery_added(recovery)
     rows = []
     for (case, k), grp in sub.groupby(["case", "k"], sort=False):
-        ref = grp.loc[grp["strategy"] == OPF_REFERENCE, "energy_kwh"]
+        ref = grp.loc[grp["strategy"] == REFERENCE_OPTIMUM, "energy_kwh"]
         na = grp["no_action_kwh"].iloc[0]
         reduction = na - float(ref.iloc[0]) if len(ref) else np.nan
-        for r in grp[grp["strategy"] != "no-action"].itertuples(index=False):
-            share = 100 * (na - r.energy_kwh) / reduction if reduction > TOL_KWH else np.nan
+        for r in grp[grp["strategy"] != BASELINE].to_dict(orient="records"):
+            share = 100 * (na - r["energy_kwh"]) / reduction if reduction > TOL_KWH else np.nan
             rows.append(
-                {
+                {c: r.get(c, np.nan) for c in LEADERBOARD_COLUMNS}
+                | {
                     "case": case,
                     "k": k,
-                    "strategy": r.strategy,
-                    "energy_kwh": r.energy_kwh,
-                    "savings_pct": r.savings_pct,
                     "opf_share_pct": share,
-                    "voltage_violation_steps": r.voltage_violation_steps,
-                    "not_ok_steps": r.not_ok_steps,
+                    "recovery_added_ms": added.get((case, r["strategy"], float(k)), np.nan),
                 }
             )
-    columns = ["case", "k", "strategy", "energy_kwh", "savings_pct", "opf_share_pct", "voltage_violation_steps", "not_ok_steps"]
-    out = pd.DataFrame(rows, columns=columns)
+    out = pd.DataFrame(rows, columns=LEADERBOARD_COLUMNS)
     if out.empty:
         return out
-    out["rank"] = out.groupby(["case", "k"])["energy_kwh"].rank(method="min").astype(int)
+    if recovery is None or recovery.empty:
+        out = out.drop(columns="recovery_added_ms")
+    out["rank"] = out.groupby(["case", "k"])["energy_kwh"].rank(method="min").astype("Int64")  # none without an energy
     return out.sort_values(["case", "k", "rank"], kind="stable").reset_index(drop=True)

@@ -1,9 +1,9 @@
-"""Local reactive-power meters: what a DER can measure at its own bus, and nothing else.
+"""Local meters: what a DER can measure at its own bus, and nothing else.
 
-Each DER bus has a meter on every in-service line touching it, reading the reactive
-power that *leaves the bus into that line*, at the bus's own end of the line (MVAr).
-From these readings alone — no topology — LFMA step 1 picks the upstream line as the
-one with the largest |Q| in the no-action state, and later splits the readings into
+Each DER bus has a meter on every in-service line touching it, reading the power that
+*leaves the bus into that line*, at the bus's own end of the line (MW + jMVAr). From the
+reactive readings alone — no topology — LFMA step 1 picks the upstream line as the one
+with the largest |Q| in the no-action state, and later splits the readings into
 
     Q_up = −(reading on the upstream line)      positive = importing from upstream,
     Q_do = Σ readings on the other lines         positive = exporting downstream.
@@ -46,14 +46,18 @@ class LocalMeters:
         at_from = valid & (net.f[branch] == net.der_bus[:, None])
         return cls(net, branch, at_from, valid)
 
-    def outflow_q(self, pf: PowerFlowResult) -> np.ndarray:
-        """(S, n_der, m) MVAr leaving each DER bus into each incident line; 0 in padding
-        and in snapshots whose flow did not converge (there is nothing to measure)."""
-        sf = np.atleast_2d(pf.sf_mva.imag)
-        st = np.atleast_2d(pf.st_mva.imag)
-        q = np.where(self.at_from, sf[:, self.branch], st[:, self.branch])
+    def outflow(self, pf: PowerFlowResult) -> np.ndarray:
+        """(S, n_der, m) complex MVA leaving each DER bus into each incident line (P + jQ);
+        0 in padding and in snapshots whose flow did not converge (nothing to measure)."""
+        sf = np.atleast_2d(pf.sf_mva)
+        st = np.atleast_2d(pf.st_mva)
+        s = np.where(self.at_from, sf[:, self.branch], st[:, self.branch])
         conv = np.atleast_1d(pf.converged)[:, None, None]
-        return np.where(self.valid & conv, q, 0.0)
+        return np.where(self.valid & conv, s, 0.0)
+
+    def outflow_q(self, pf: PowerFlowResult) -> np.ndarray:
+        """(S, n_der, m) MVAr: the reactive part of `outflow`."""
+        return self.outflow(pf).imag
 
     def detect_upstream(self, outflow: np.ndarray) -> np.ndarray:
         """(S, n_der) meter position of the line with the largest |Q| (LFMA step 1).

@@ -19,7 +19,7 @@ from opfbench.capability import PAPER_KS, check_reserve
 from opfbench.errors import InputError
 from opfbench.forecasting.names import MODEL_NAMES
 from opfbench.formulations.options import ACOPF_SOLVERS, check_option
-from opfbench.registry import STRATEGY_NAMES, get_strategy
+from opfbench.registry import DEFAULT_RUN, StrategySpec, configuration, specs
 from opfbench.study.price import DEFAULT_CURRENCY, DEFAULT_PRICE_PER_KWH, DEFAULT_PRICE_SOURCE
 
 NIGHT_MODES = ("connected", "disconnected", "connected-q")
@@ -58,17 +58,24 @@ class StudyConfig:
     "oracle" (P^F = the next step's actual output) or a forecasting model's name whose PV
     forecasts `opfbench forecast --dataset pv --out DIR` wrote to `forecast_dir`.
     A forecast other than "off" runs only the strategies that read one (the registry's
-    `uses_forecast`: Algorithm 3's rules); the others would repeat their "off" rows.
+    `uses_forecast`: every local rule passes through Algorithm 3's limit); the others would
+    repeat their "off" rows; `forecast_strategies`, where given, narrows that to some of
+    the strategies (`opfbench run`'s default grid: the paper's Algorithm 3 rules).
     `chunk`: the length of one task's slice of the period (6h/day/week/month, local time;
     "auto": 6h for periods of up to two days, so the paper day's tasks spread over the
     workers, month otherwise), fixed by the config and never by the number of workers. `detail`: also write the long
     tables of per-DER Q and per-bus V (None: per-DER Q alone for periods of ≤ 2 days, which
     the report plots); `detail_tables` the names resolved from it (`with_period`). Price fields only label the report.
     `acopf_solver`: "auto" (the SOCP certifies the AC optimum where it can, IPOPT solves the
-    rest) or "ipopt" (IPOPT on every step: the solver's own outcomes, as the paper asks)."""
+    rest) or "ipopt" (IPOPT on every step: the solver's own outcomes, as the paper asks) —
+    the run-level setting of every option that declares it (`registry.Option.setting`).
+    `strategies` are configuration labels (`NAME:key=value,…`), kept canonical
+    (`registry.configuration`); `plugins` and `plugin_digests` (derived, not given) name
+    the plugins those strategies come from and their sources' sha256, so a changed plugin
+    is another configuration."""
 
     cases: tuple[str, ...] = ("paper33",)
-    strategies: tuple[str, ...] = STRATEGY_NAMES
+    strategies: tuple[str, ...] = DEFAULT_RUN
     ks: tuple[float, ...] = PAPER_KS
     night_modes: tuple[str, ...] = NIGHT_MODES
     night: str = DEFAULT_NIGHT
@@ -83,12 +90,26 @@ class StudyConfig:
     price_per_kwh: float = DEFAULT_PRICE_PER_KWH
     currency: str = DEFAULT_CURRENCY
     price_source: str = DEFAULT_PRICE_SOURCE
+    forecast_strategies: tuple[str, ...] | None = None
+    plugins: tuple[str, ...] = ()
+    plugin_digests: tuple[str, ...] = ()
     notes: tuple[str, ...] = field(default=(), compare=False)
 
     def __post_init__(self) -> None:
-        for name in self.strategies:
-            if name not in STRATEGY_NAMES:
-                raise InputError(f"unknown strategy {name!r}; choose from {', '.join(STRATEGY_NAMES)}")
+        from opfbench.plugins import load
+
+        labels = tuple(configuration(label).label for label in self.strategies)
+        object.__setattr__(self, "strategies", labels)
+        if self.forecast_strategies is not None:
+            chosen = tuple(dict.fromkeys(configuration(label).label for label in self.forecast_strategies))
+            stray = [label for label in chosen if label not in labels]
+            if stray:
+                raise InputError(f"forecast strategies {', '.join(stray)} are not among the run's strategies")
+            object.__setattr__(self, "forecast_strategies", chosen)
+        sources = tuple(dict.fromkeys(s.source for s in map(_spec, labels) if s.source != "opfbench"))
+        loaded = [load(ref) for ref in sources]
+        object.__setattr__(self, "plugins", tuple(p.ref for p in loaded))
+        object.__setattr__(self, "plugin_digests", tuple(p.digest for p in loaded))
         for mode in self.night_modes:
             if mode not in NIGHT_MODES:
                 raise InputError(f"unknown night mode {mode!r}; choose from {', '.join(NIGHT_MODES)}")
@@ -110,7 +131,7 @@ class StudyConfig:
         if not (self.cases and self.strategies and self.ks and self.night_modes and self.forecast):
             raise InputError("nothing to run: give at least one case, strategy, k, night mode and forecast")
         if not any(self.strategies_for(source) for source in self.forecast):
-            readers = [s for s in STRATEGY_NAMES if get_strategy(s).uses_forecast]
+            readers = [s.name for s in specs() if s.uses_forecast]
             raise InputError(
                 f"nothing to run: only the strategies that read a forecast ({', '.join(readers)}) run under "
                 f"forecast {', '.join(self.forecast)}, and the grid has none of them"
@@ -118,8 +139,11 @@ class StudyConfig:
 
     @classmethod
     def build(cls, **fields) -> "StudyConfig":
-        """A config with duplicated grid values dropped; `notes` say what was dropped."""
+        """A config with duplicated grid values dropped (strategies compared by their canonical
+        labels); `notes` say what was dropped."""
         notes: list[str] = []
+        if "strategies" in fields:
+            fields["strategies"] = [configuration(label).label for label in fields["strategies"]]
         for key, label in (
             ("cases", "cases"),
             ("strategies", "strategies"),
@@ -134,8 +158,16 @@ class StudyConfig:
 
     def strategies_for(self, forecast: str) -> tuple[str, ...]:
         """The strategies a forecast source runs: all with "off"; under a forecast only those
-        the registry says read one (`uses_forecast`) — any other would repeat its "off" rows."""
-        return tuple(s for s in self.strategies if forecast == "off" or get_strategy(s).uses_forecast)
+        the registry says read one (`uses_forecast`) — any other would repeat its "off" rows —
+        and, where `forecast_strategies` is given, only those of it."""
+        if forecast == "off":
+            return self.strategies
+        chosen = self.strategies if self.forecast_strategies is None else self.forecast_strategies
+        return tuple(s for s in self.strategies if s in chosen and _spec(s).uses_forecast)
+
+    def settings(self) -> dict[str, str]:
+        """The run-level settings options may take their defaults from (`Option.setting`)."""
+        return {"acopf_solver": self.acopf_solver}
 
     def as_dict(self) -> dict:
         """The manifest's `config` (JSON-ready)."""
@@ -155,3 +187,7 @@ class StudyConfig:
         tables = DETAIL_TABLES if self.detail else ("der_q",) if self.detail is None and short else ()
         chunk = ("6h" if short else "month") if self.chunk == "auto" else self.chunk
         return replace(self, step_minutes=step_minutes, detail_tables=tables, chunk=chunk)
+
+
+def _spec(label: str) -> StrategySpec:
+    return configuration(label).spec

@@ -11,7 +11,7 @@ from pathlib import Path
 import pandas as pd
 
 from opfbench.io import load_network
-from opfbench.registry import FORMULATIONS
+from opfbench.registry import configuration
 from opfbench.study.config import StudyConfig
 from opfbench.study.execution import STOPPED, execute
 from opfbench.study.periods import Period
@@ -45,12 +45,12 @@ def prepare(config: StudyConfig) -> tuple[StudyConfig, Period, list[Task]]:
     config = replace(config.with_period(period.step_h * 60, period.step_h * len(period.index)), notes=config.notes + cases.notes)
     models = [s for s in config.forecast if s not in ("off", "oracle") and config.strategies_for(s)]
     check_model_forecasts(config.forecast_dir, models, period)  # a missing or incomplete forecast file: here, not in a worker
+    running = {label for source in config.forecast for label in config.strategies_for(source)}
     for case in config.cases:
         net = load_network(case)
-        if any(s in FORMULATIONS for s in config.strategies) and "off" in config.forecast:
-            from opfbench.formulations.problem import check_supported
-
-            check_supported(net)
+        for label in config.strategies:
+            if label in running:
+                configuration(label).spec.check_network(net)
     return config, period, plan_tasks(config, period)
 
 

@@ -9,7 +9,8 @@ import numpy as np
 import pandas as pd
 
 from opfbench.errors import InputError
-from opfbench.result import OK, StrategyResult
+from opfbench.registry import BASELINE, configuration, describe
+from opfbench.result import NOT_SETTLED, OK, StrategyResult
 from opfbench.study.config import DETAIL_TABLES
 
 KEYS = ["case", "strategy", "k", "night_mode", "forecast"]
@@ -37,9 +38,17 @@ STEP_COLUMNS = [
 DETAIL_COLUMNS = {"der_q": [*KEYS, "time", "bus", "kind", "q_mvar"], "bus_v": [*KEYS, "time", "bus", "v_pu"]}
 VIOLATION_PU = 1e-6  # a step violates the voltage limits beyond this
 EXCURSION_MVAR = 1e-9  # a step's setpoint exceeds the physical capability beyond this
-#: Which strategies carry the SOCP bound with the slack allowed to export (contract:
-#: lower_bound_kwh), in order of preference.
-BOUND_FROM = ("socp", "acopf")
+
+
+def extra_columns(labels: tuple[str, ...]) -> tuple[str, ...]:
+    """The extra per-step columns the strategies of `labels` declare (`StrategySpec.columns`),
+    each once, in the order they first appear."""
+    return tuple(dict.fromkeys(c for label in labels for c in configuration(label).spec.columns))
+
+
+def step_columns(extra: tuple[str, ...] = ()) -> list[str]:
+    """The per-step table's columns: STEP_COLUMNS, then the strategies' extra ones."""
+    return [*STEP_COLUMNS, *extra]
 
 
 def _certified_by(res: StrategyResult) -> np.ndarray:
@@ -53,9 +62,17 @@ Columns = dict[str, np.ndarray | str | float | int | bool]  # name → the part'
 
 
 def step_rows(
-    case: str, night_mode: str, forecast: str, time: pd.DatetimeIndex, step_h: float, night: np.ndarray, res: StrategyResult
+    case: str,
+    night_mode: str,
+    forecast: str,
+    time: pd.DatetimeIndex,
+    step_h: float,
+    night: np.ndarray,
+    res: StrategyResult,
+    extra_columns: tuple[str, ...] = (),
 ) -> Columns:
-    """The columns of one row per step of `res` (see the contract), for `stack`."""
+    """The columns of one row per step of `res` (see the contract), for `stack`; the
+    `extra_columns` from `res.extra` (NaN where this strategy has none)."""
     n = res.n_snapshots
     nan = np.full(n, np.nan)
     extra = res.extra
@@ -85,7 +102,7 @@ def step_rows(
         "certified_by": _certified_by(res).astype(str),
         "fallback": "" if local else np.asarray(extra["fallback"], dtype=str),
         "solver_status": "" if local else np.asarray(extra["solver_status"], dtype=str),
-    }
+    } | {name: np.asarray(extra.get(name, nan), dtype=float) for name in extra_columns}
 
 
 def detail_rows(
@@ -158,7 +175,9 @@ def partial_summary(steps: pd.DataFrame) -> pd.DataFrame:
         lb_energy=steps.lower_bound_kw * steps.step_h,
         lb_missing=steps.lower_bound_kw.isna().astype(np.int64),
         not_ok=(steps.status != OK).astype(np.int64),
+        not_settled=(steps.status == NOT_SETTLED).astype(np.int64),
         vv=(steps.voltage_violation_pu > VIOLATION_PU).astype(np.int64),
+        vv_h=steps.step_h.where(steps.voltage_violation_pu > VIOLATION_PU, 0.0),
         exc=(steps.excursion_mvar > EXCURSION_MVAR).astype(np.int64),
         solver_known=steps.solver_ms.notna().astype(np.int64),
         certified=(steps.certified_by != "").astype(np.int64),
@@ -172,7 +191,10 @@ def partial_summary(steps: pd.DataFrame) -> pd.DataFrame:
             "measured_hours": g.measured_h.sum(),
             "energy_kwh": g.energy.sum(),
             "not_ok_steps": g.not_ok.sum(),
+            "not_settled_steps": g.not_settled.sum(),
             "voltage_violation_steps": g.vv.sum(),
+            "voltage_violation_h": g.vv_h.sum(),
+            "max_violation_pu": g.voltage_violation_pu.max(),
             "vmin_pu": g.vmin_pu.min(),
             "vmax_pu": g.vmax_pu.max(),
             "max_excursion_mvar": g.excursion_mvar.max(),
@@ -194,7 +216,10 @@ PARTIAL_COLUMNS = (
     "measured_hours",
     "energy_kwh",
     "not_ok_steps",
+    "not_settled_steps",
     "voltage_violation_steps",
+    "voltage_violation_h",
+    "max_violation_pu",
     "vmin_pu",
     "vmax_pu",
     "max_excursion_mvar",
@@ -216,10 +241,13 @@ def summarize(partials: list[pd.DataFrame], order: list[tuple]) -> pd.DataFrame:
     no loss or voltage figure: pf_diverged_steps counts them, pf_converged_steps the
     others — the steps avg_loss_kw, vmin_pu, vmax_pu and voltage_violation_steps are
     over; energy_kwh (the period's) is NaN unless every step has a figure, and so are the
-    savings and gaps built on it. no_action_kwh: no action's energy for the same case, k
-    and night mode with forecast off; lower_bound_kwh: the SOCP bound (slack may export)
-    over the same steps, from the socp rows (else the acopf rows), NaN unless every step
-    has one."""
+    savings and gaps built on it. no_action_kwh: the baseline's (`registry.BASELINE`)
+    energy for the same case, k and night mode with forecast off; lower_bound_kwh: the
+    certified bound over the same steps from the strategy at its default options with the
+    lowest `bound_rank` (the SOCP, slack may export, else the AC OPF's record of it), NaN
+    unless every step has one. voltage_violation_min: minutes of steps outside the case's
+    voltage limits, max_violation_pu the worst excursion beyond them; not_settled_steps:
+    steps where a closed-loop rule did not settle."""
     p = pd.concat(partials, ignore_index=True)
     missing = [c for c in PARTIAL_COLUMNS if c not in p.columns]
     if missing:  # a checkpoint of an older opfbench: its rows do not mean what this version's do
@@ -236,7 +264,9 @@ def summarize(partials: list[pd.DataFrame], order: list[tuple]) -> pd.DataFrame:
             "measured_hours",
             "energy_kwh",
             "not_ok_steps",
+            "not_settled_steps",
             "voltage_violation_steps",
+            "voltage_violation_h",
             "excursion_steps",
             "lower_bound_kwh",
             "lb_missing",
@@ -246,19 +276,24 @@ def summarize(partials: list[pd.DataFrame], order: list[tuple]) -> pd.DataFrame:
             "certified",
         ]
     ].sum()
-    out = sums.join(g.vmin_pu.min()).join(g.vmax_pu.max()).join(g.max_excursion_mvar.max())
+    out = sums.join(g.vmin_pu.min()).join(g.vmax_pu.max()).join(g.max_excursion_mvar.max()).join(g.max_violation_pu.max())
     out = out.reindex(pd.MultiIndex.from_tuples(order, names=KEYS)).reset_index()
     out["pf_diverged_steps"] = out.steps - out.pf_converged_steps
     out["avg_loss_kw"] = (out.energy_kwh / out.measured_hours).where(out.pf_converged_steps > 0)
     out["energy_kwh"] = out.energy_kwh.where(out.pf_diverged_steps == 0)  # a period's energy needs every step's
     out["solver_s"] = out.solver_s.where(out.solver_known > 0)
     out["certified_share"] = out.certified / out.steps
-    base = out[(out.strategy == "no-action") & (out.forecast == "off")].set_index(["case", "k", "night_mode"]).energy_kwh
+    out["voltage_violation_min"] = 60.0 * out.pop("voltage_violation_h")
+    base = out[(out.strategy == BASELINE) & (out.forecast == "off")].set_index(["case", "k", "night_mode"]).energy_kwh
     out["no_action_kwh"] = pd.MultiIndex.from_frame(out[["case", "k", "night_mode"]]).map(base.to_dict().get).astype(float)
     out["savings_pct"] = 100 * (1 - out.energy_kwh / out.no_action_kwh)
-    bound = out[out.strategy.isin(BOUND_FROM) & (out.lb_missing == 0)].copy()
-    bound["rank"] = bound.strategy.map(BOUND_FROM.index)
-    bound = bound.sort_values("rank").drop_duplicates(["case", "k", "night_mode"]).set_index(["case", "k", "night_mode"])
+    bound = out.assign(rank=out.strategy.map(_bound_rank))
+    bound = bound[bound["rank"].notna() & (bound.lb_missing == 0)]
+    bound = (
+        bound.sort_values("rank", kind="stable")
+        .drop_duplicates(["case", "k", "night_mode"])
+        .set_index(["case", "k", "night_mode"])
+    )
     out["lower_bound_kwh"] = (
         pd.MultiIndex.from_frame(out[["case", "k", "night_mode"]]).map(bound.lower_bound_kwh.to_dict().get).astype(float)
     )
@@ -272,7 +307,10 @@ def summarize(partials: list[pd.DataFrame], order: list[tuple]) -> pd.DataFrame:
         "no_action_kwh",
         "savings_pct",
         "not_ok_steps",
+        "not_settled_steps",
         "voltage_violation_steps",
+        "voltage_violation_min",
+        "max_violation_pu",
         "vmin_pu",
         "vmax_pu",
         "max_excursion_mvar",
@@ -286,5 +324,19 @@ def summarize(partials: list[pd.DataFrame], order: list[tuple]) -> pd.DataFrame:
         "pf_converged_steps",
         "pf_diverged_steps",
     ]
-    ints = ["steps", "not_ok_steps", "voltage_violation_steps", "excursion_steps", "pf_converged_steps", "pf_diverged_steps"]
+    ints = [
+        "steps",
+        "not_ok_steps",
+        "not_settled_steps",
+        "voltage_violation_steps",
+        "excursion_steps",
+        "pf_converged_steps",
+        "pf_diverged_steps",
+    ]
     return out[KEYS + cols].astype({c: np.int64 for c in ints})
+
+
+def _bound_rank(label: str) -> float:
+    """The `bound_rank` of a label that is a strategy at its default options (NaN: none)."""
+    spec = describe(label)
+    return float(spec.bound_rank) if spec is not None and spec.bound_rank is not None and label == spec.name else np.nan

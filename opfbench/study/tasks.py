@@ -21,13 +21,23 @@ import numpy as np
 import pandas as pd
 from threadpoolctl import threadpool_limits
 
-from opfbench.registry import get_strategy, run_strategy
+from opfbench.plugins import PluginSource, ensure, loaded
+from opfbench.registry import run_strategy
 from opfbench.result import StrategyResult
 from opfbench.scenario import Scenario
 from opfbench.study.config import StudyConfig
 from opfbench.study.periods import Period
 from opfbench.study.scenarios import chunk_scenario
-from opfbench.study.tables import DETAIL_COLUMNS, STEP_COLUMNS, Columns, detail_rows, partial_summary, stack, step_rows
+from opfbench.study.tables import (
+    DETAIL_COLUMNS,
+    Columns,
+    detail_rows,
+    extra_columns,
+    partial_summary,
+    stack,
+    step_columns,
+    step_rows,
+)
 
 
 @dataclass(frozen=True)
@@ -54,7 +64,9 @@ class Task:
 @dataclass(frozen=True)
 class TaskInput:
     """Everything a worker needs: the task, its profiles (the chunk plus, when the
-    period goes on, the next step), the night mask on those rows, the step."""
+    period goes on, the next step), the night mask on those rows, the step, the run-level
+    settings of the strategies' options (`StudyConfig.settings`), the extra step columns
+    of the run's strategies and the plugins they come from (loaded in the worker first)."""
 
     task: Task
     profiles: pd.DataFrame
@@ -63,7 +75,9 @@ class TaskInput:
     step_h: float
     forecast_dir: str
     detail: tuple[str, ...]  # the long tables to write (`tables.DETAIL_TABLES`)
-    acopf_solver: str = "auto"
+    settings: tuple[tuple[str, str], ...] = ()
+    columns: tuple[str, ...] = ()
+    plugins: tuple[PluginSource, ...] = ()
 
 
 @dataclass
@@ -114,7 +128,9 @@ def task_input(task: Task, config: StudyConfig, period: Period) -> TaskInput:
         period.step_h,
         config.forecast_dir,
         config.detail_tables,
-        config.acopf_solver,
+        tuple(config.settings().items()),
+        extra_columns(config.strategies),
+        loaded(config.plugins),
     )
 
 
@@ -125,6 +141,8 @@ def run_task(inp: TaskInput) -> TaskOutput:
 
     start = now()
     t = inp.task
+    ensure(inp.plugins)
+    settings = dict(inp.settings)
     with threadpool_limits(1):
         step = pd.Timedelta(hours=inp.step_h)
         time, night = inp.profiles.index[: inp.n_steps], inp.night[: inp.n_steps]
@@ -136,18 +154,15 @@ def run_task(inp: TaskInput) -> TaskOutput:
             same = next((results for earlier, results in ran if earlier.same_data(scenario)), None)
             results = {}
             for name in t.strategies:
-                takes_solver = "solver" in get_strategy(name).options  # the AC OPF entries
                 res = results[name] = (
-                    replace(same[name], wall_ms=0.0)
-                    if same is not None
-                    else run_strategy(name, scenario, t.k, **({"solver": inp.acopf_solver} if takes_solver else {}))
+                    replace(same[name], wall_ms=0.0) if same is not None else run_strategy(name, scenario, t.k, settings)
                 )
-                steps.append(step_rows(t.case, mode, t.forecast, time, inp.step_h, night, res))
+                steps.append(step_rows(t.case, mode, t.forecast, time, inp.step_h, night, res, inp.columns))
                 for table, columns in detail_rows(t.case, mode, t.forecast, time, res, inp.detail).items():
                     detail[table].append(columns)
             if same is None:
                 ran.append((scenario, results))
-        table = stack(steps, STEP_COLUMNS, time.tz)
+        table = stack(steps, step_columns(inp.columns), time.tz)
     return TaskOutput(
         t,
         table,

@@ -1,5 +1,6 @@
-"""No action, LLMA (Algorithm 1) and LFMA (Algorithm 2) on the AC model, with Algorithm 3
-(forecast-aware limits) whenever the scenario carries a forecast P^F.
+"""The paper's rules on the local-rule engine (`opfbench.strategies.engine`): no action,
+LLMA (Algorithm 1) and LFMA (Algorithm 2), with Algorithm 3 (forecast-aware limits)
+whenever the scenario carries a forecast P^F.
 
 All S snapshots of a scenario are processed together: every power flow — the grid's
 answer after each LFMA step and the final evaluation — is one `solve_pf_batch` call.
@@ -10,8 +11,9 @@ lines (see `opfbench.strategies.meters`). Each DER is assumed alone at its bus: 
 at one bus would each measure, and each compensate, the same load.
 
 Power flows counted per snapshot (`StrategyResult.power_flows`): no action 1 and LLMA 1
-(the evaluation of the setpoints); LFMA 4 (the no-action state of step 1 and the answers
-to steps 2, 3 and 4 — the last one is the evaluation of the final setpoints).
+(the evaluation of the setpoints: open-loop rules of the engine); LFMA 4 (the no-action
+state of step 1 and the answers to steps 2, 3 and 4 — the last one is the evaluation of
+the final setpoints).
 """
 
 from __future__ import annotations
@@ -21,11 +23,12 @@ from dataclasses import dataclass
 import numpy as np
 
 from opfbench.capability import check_reserve
-from opfbench.powerflow import PowerFlowResult, solve_pf_batch
+from opfbench.powerflow import PowerFlowResult
 from opfbench.result import StrategyResult
 from opfbench.scenario import Scenario
+from opfbench.strategies.engine import Grid, run_rule
 from opfbench.strategies.limits import clip, reactive_limit
-from opfbench.strategies.meters import LocalMeters
+from opfbench.strategies.rules import Measurements, Rule
 from opfbench.timing import elapsed_ms, now
 
 # What LFMA step 4 did at each DER (LfmaTrace.rule).
@@ -36,18 +39,25 @@ BACK_TO_LLMA = 3  # Q_up and Q_do both changed sign (or Q_do hit zero): Q^F = Q^
 STOPPED = 4  # a power flow of this snapshot diverged earlier: setpoint frozen
 
 
-def _evaluate(name: str, k: float, scenario: Scenario, q_mvar: np.ndarray, t0: float) -> StrategyResult:
-    """One batched power flow at the final setpoints, timed with the rule itself."""
-    pf = solve_pf_batch(scenario.net, scenario.injections(q_mvar))
-    return StrategyResult.from_setpoints(name, k, scenario, q_mvar, elapsed_ms(t0), power_flows=1, pf=pf)
+def no_action_target(m: Measurements) -> np.ndarray:
+    """No action: every DER at Q = 0 MVAr."""
+    return np.zeros(m.shape)
+
+
+def llma_target(m: Measurements) -> np.ndarray:
+    """Algorithm 1, (S, n_der) MVAr: the reactive load at the DER's own bus (the engine
+    clips it to ±L: Q^H = min(Q_load, L) for the usual positive load)."""
+    return m.load_q_mvar
+
+
+NO_ACTION = Rule("no-action", no_action_target, frozenset())
+LLMA = Rule("llma", llma_target, frozenset({"load"}))
 
 
 def no_action(scenario: Scenario, k: float = 0.0) -> StrategyResult:
-    """Every DER at Q = 0 MVAr (k is validated and recorded, and otherwise unused)."""
-    t0 = now()
-    k = check_reserve(k)
-    q = np.zeros(scenario.der_p_mw.shape)
-    return _evaluate("no-action", k, scenario, q, t0)
+    """Every DER at Q = 0 MVAr (k is validated and recorded; the limits of a zero target
+    change nothing)."""
+    return run_rule("no-action", NO_ACTION, scenario, k, {})
 
 
 def llma_setpoints(scenario: Scenario, limit_mvar: np.ndarray) -> np.ndarray:
@@ -57,10 +67,7 @@ def llma_setpoints(scenario: Scenario, limit_mvar: np.ndarray) -> np.ndarray:
 
 def llma(scenario: Scenario, k: float = 0.0, safe: bool = False) -> StrategyResult:
     """LLMA (Algorithm 1) with the bound L of `reactive_limit` (reserve k, forecast, safe)."""
-    t0 = now()
-    k = check_reserve(k)
-    q = llma_setpoints(scenario, reactive_limit(scenario, k, safe))
-    return _evaluate("llma", k, scenario, q, t0)
+    return run_rule("llma", LLMA, scenario, k, {}, safe=safe)
 
 
 @dataclass(frozen=True, eq=False)
@@ -122,22 +129,18 @@ def lfma_step4(
 def lfma_trace(scenario: Scenario, k: float = 0.0, safe: bool = False) -> LfmaTrace:
     """Run Algorithm 2 step by step; each step is answered by one batched power flow."""
     net = scenario.net
-    meters = LocalMeters.of(net)
+    grid = Grid(scenario)
+    meters = grid.meters
     limit = reactive_limit(scenario, k, safe)
     q_load = scenario.load_q_at_der_mvar()
     branch_node = ~net.is_leaf[net.der_bus]  # (n_der,): more than one incident line
-    diverged = np.zeros(scenario.n_snapshots, dtype=np.int64)
-    flows: list[PowerFlowResult] = []
 
     def answer(q: np.ndarray) -> np.ndarray:
-        """Apply setpoints q, solve the grid, record divergence, return the meter readings."""
-        pf = solve_pf_batch(net, scenario.injections(q), v0=flows[-1].v if flows else None)
-        flows.append(pf)
-        diverged[(diverged == 0) & ~np.asarray(pf.converged)] = len(flows)
-        return meters.outflow_q(pf)
+        """Apply setpoints q, let the grid answer, return the reactive meter readings."""
+        return meters.outflow_q(grid.answer(q))
 
     def running() -> np.ndarray:
-        return (diverged == 0)[:, None]
+        return (grid.diverged == 0)[:, None]
 
     # Step 1: no action; each bus takes the line with the largest |Q| as upstream.
     q_none = np.zeros_like(limit)
@@ -150,9 +153,9 @@ def lfma_trace(scenario: Scenario, k: float = 0.0, safe: bool = False) -> LfmaTr
     q_i = np.where(running() & branch_node, clip(q_load + q_up_h, limit), q_h)
     q_up_i, q_do_i = meters.split(answer(q_i), position)
     # Step 4: where Q_up changed sign, subtract |Q_up^I| or return to LLMA.
-    q_f, rule = lfma_step4(q_h, q_i, q_up_h, q_up_i, q_do_h, q_do_i, limit, diverged == 0, branch_node)
+    q_f, rule = lfma_step4(q_h, q_i, q_up_h, q_up_i, q_do_h, q_do_i, limit, grid.diverged == 0, branch_node)
     answer(q_f)
-    return LfmaTrace(limit, q_h, q_i, q_f, q_up_h, q_up_i, q_do_h, q_do_i, upstream, rule, tuple(flows), diverged)
+    return LfmaTrace(limit, q_h, q_i, q_f, q_up_h, q_up_i, q_do_h, q_do_i, upstream, rule, tuple(grid.flows), grid.diverged)
 
 
 def upstream_disagreements(scenario: Scenario, trace: LfmaTrace) -> np.ndarray:

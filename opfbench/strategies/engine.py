@@ -1,0 +1,220 @@
+"""The one engine of local rules: each DER measures at its own bus, sets its Q, and the grid
+answers (a batched AC power flow over all S snapshots at once).
+
+A local rule is a function `target(m, **options) -> (S, n_der)` of the `Measurements`
+`m` — own-bus |V|, own active power P^C and forecast P^F, own-bus load P and Q, the power
+on its incident lines (LFMA's meters) — giving each DER's Q target in MVAr, positive =
+injected. Every target passes through the same limits as LLMA's and LFMA's:
+Q = clip(target, ±L), L = (1 − k)·Qmax with the DER's capability (PV, DFIG or generic
+inverter, "Q at night" where the night mode gives it) and Algorithm 3's forecast-aware
+limit when the scenario carries a forecast (`opfbench.strategies.limits`).
+
+Open loop: a rule that reads neither |V| nor line flows — quantities its own Q changes —
+is evaluated once, and one power flow gives its operating point.
+
+Closed loop: a rule that reads |V| or flows is solved for its steady state, the
+quasi-static point an inverter settles to within a time step (the standards' response
+times of 1–10 s ≪ 1-min steps), by a damped fixed-point iteration over batched power
+flows, as OpenDSS's InvControl does it (`Change_deltaQ_factor`):
+
+    Q_{n+1} = Q_n + α_n·(clip(target(m(Q_n)), ±L) − Q_n),
+
+starting from the no-action state Q_0 = 0 with α = 0.5 per DER, adapted from the ratio of
+the DER bus's successive voltage changes |ΔV_n| / |ΔV_{n−1}|: above 0.8 α falls by 0.1,
+above 0.6 by 0.05 (while α > 0.2); below 0.2 it rises by 0.1, below 0.4 by 0.05 (while
+α < 0.9). A snapshot has settled when the largest change the rule still asks for,
+max|clip(target) − Q_n|, is ≤ `tol_q_mvar` and the largest bus-voltage change of the last
+step is ≤ `tol_v_pu`; it then stops iterating (only the unsettled ones are solved again).
+One that has not settled after `max_steps` steps keeps its last iterate — a converged
+operating point, so it has figures — with status "not-settled" and its residual recorded.
+
+Statuses beyond "ok": "pf-diverged" (a flow did not converge: no figures), "not-settled",
+"rule-non-finite" (the rule gave NaN or inf for some DER: no setpoint, no figures).
+`StrategyResult.power_flows` counts every flow a snapshot needed, including the one that
+evaluates the final setpoints; extra `residual_mvar` (S,): the last max|clip(target) − Q|.
+
+Each DER is assumed alone at its bus: two units at one bus would measure the same load.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from opfbench.capability import check_reserve
+from opfbench.powerflow import PowerFlowResult, solve_pf_batch
+from opfbench.result import NOT_SETTLED, OK, RULE_NON_FINITE, StrategyResult
+from opfbench.scenario import Scenario
+from opfbench.strategies.limits import clip, reactive_limit
+from opfbench.strategies.meters import LocalMeters
+from opfbench.strategies.rules import DEFAULT_SETTLING, RESIDUAL, Measurements, Rule, Settling, targets
+from opfbench.timing import elapsed_ms, now
+
+
+@dataclass(frozen=True, eq=False)
+class _Plant:
+    """What the rows of one scenario give every rule without a power flow."""
+
+    scenario: Scenario
+    meters: LocalMeters
+    s_rated: np.ndarray
+    p_rated: np.ndarray
+    kinds: np.ndarray
+    fixed: dict[str, np.ndarray]  # "p_mw", "p_forecast_mw", "load_p_mw", "load_q_mvar", each (S, n_der)
+
+    @classmethod
+    def of(cls, scenario: Scenario, reads: frozenset[str]) -> "_Plant":
+        net = scenario.net
+        fixed = {}
+        if "p" in reads:
+            fixed["p_mw"] = scenario.der_p_mw
+        if "p_forecast" in reads:
+            pf = scenario.der_p_forecast_mw
+            fixed["p_forecast_mw"] = scenario.der_p_mw if pf is None else pf
+        if "load" in reads:
+            fixed["load_p_mw"] = scenario.load_p_at_der_mw()
+            fixed["load_q_mvar"] = scenario.load_q_at_der_mvar()
+        return cls(scenario, LocalMeters.of(net), net.der_s_mva, net.der_rating_mw, np.asarray(net.der_kinds, dtype=str), fixed)
+
+    def measure(self, reads: frozenset[str], rows: np.ndarray, pf: PowerFlowResult | None) -> Measurements:
+        """The measurements of `rows`; `pf` the flow of exactly those rows (closed loop)."""
+        every = rows.size == self.scenario.n_snapshots  # all rows in order: no copies
+        values = {key: arr if every else arr[rows] for key, arr in self.fixed.items()}
+        if pf is not None and "v" in reads:
+            values["v_pu"] = np.abs(pf.v[:, self.scenario.net.der_bus])
+        if pf is not None and "flows" in reads:
+            values["line_mva"] = self.meters.outflow(pf)
+        return Measurements(reads, values, rows.size, self.s_rated, self.p_rated, self.kinds, self.meters.valid)
+
+
+class Grid:
+    """The network answering setpoints on every snapshot (measure → set → the grid
+    answers): each `answer` is one batched power flow, warm-started from the previous
+    answer. `flows` keeps every answer; `diverged` (S,) the first answer whose flow did not
+    converge (1, 2, …), 0 while none did."""
+
+    def __init__(self, scenario: Scenario) -> None:
+        self.scenario = scenario
+        self.meters = LocalMeters.of(scenario.net)
+        self.flows: list[PowerFlowResult] = []
+        self.diverged = np.zeros(scenario.n_snapshots, dtype=np.int64)
+
+    def answer(self, q_mvar: np.ndarray) -> PowerFlowResult:
+        """The grid's answer to setpoints q_mvar (S, n_der)."""
+        pf = solve_pf_batch(self.scenario.net, self.scenario.injections(q_mvar), v0=self.flows[-1].v if self.flows else None)
+        self.flows.append(pf)
+        self.diverged[(self.diverged == 0) & ~np.asarray(pf.converged)] = len(self.flows)
+        return pf
+
+
+def run_rule(
+    label: str, rule: Rule, scenario: Scenario, k: float, options: dict, safe: bool = False, settling: Settling = DEFAULT_SETTLING
+) -> StrategyResult:
+    """Run `rule` on every snapshot of `scenario` at reserve k (see the module docstring);
+    `options` go to the rule's target, `safe` caps Algorithm 3's limit at the physical
+    capability. The result is named `label`."""
+    t0 = now()
+    k = check_reserve(k)
+    limit = reactive_limit(scenario, k, safe)
+    plant = _Plant.of(scenario, rule.reads)
+    if rule.closed_loop:
+        return _settle(label, rule, options, plant, k, limit, settling, t0)
+    n = scenario.n_snapshots
+    target = targets(rule, plant.measure(rule.reads, np.arange(n), None), options, n)
+    finite = np.isfinite(target).all(axis=1)
+    q = clip(np.where(finite[:, None], target, 0.0), limit)
+    pf = solve_pf_batch(scenario.net, scenario.injections(q))
+    res = StrategyResult.from_setpoints(label, k, scenario, q, elapsed_ms(t0), power_flows=1, pf=pf)
+    return _no_setpoint(res, ~finite)
+
+
+def _no_setpoint(res: StrategyResult, bad: np.ndarray) -> StrategyResult:
+    """Snapshots where the rule gave no finite target: status "rule-non-finite", Q and
+    figures NaN."""
+    if bad.any():
+        res.q_mvar[bad] = np.nan
+        res.losses_kw[bad] = np.nan
+        res.vm[bad] = np.nan
+        res.excursion_mvar[bad] = np.nan
+        res.status[bad] = RULE_NON_FINITE
+    return res
+
+
+def adapt_step_factor(alpha: np.ndarray, dv: np.ndarray, dv_old: np.ndarray) -> np.ndarray:
+    """OpenDSS InvControl's `Change_deltaQ_factor`, element-wise: the new step factors from
+    this step's and the previous step's voltage changes (dv_old < 0: no previous step)."""
+    known = dv_old >= 0
+    down = alpha > 0.2
+    up = alpha < 0.9
+    change = np.select(
+        [
+            known & (dv > 0.8 * dv_old) & down,
+            known & (dv > 0.6 * dv_old) & down,
+            known & (dv < 0.2 * dv_old) & up,
+            known & (dv < 0.4 * dv_old) & up,
+        ],
+        [-0.1, -0.05, 0.1, 0.05],
+        0.0,
+    )
+    return alpha + change
+
+
+def _settle(
+    label: str, rule: Rule, options: dict, plant: _Plant, k: float, limit: np.ndarray, s: Settling, t0: float
+) -> StrategyResult:
+    """The closed-loop steady state of every snapshot (module docstring)."""
+    scenario = plant.scenario
+    net = scenario.net
+    n_snap, n_der = limit.shape
+    place = np.zeros((n_der, net.n_bus))
+    place[np.arange(n_der), net.der_bus] = 1.0  # DER → bus
+    base = scenario.injections(np.zeros((n_snap, n_der)))
+    first = solve_pf_batch(net, base)  # the no-action state Q_0 = 0
+    v = np.array(first.v)
+    converged = np.array(first.converged, dtype=bool)
+    q = np.zeros((n_snap, n_der))
+    flows = np.ones(n_snap, dtype=np.int64)
+    residual = np.full(n_snap, np.nan)
+    status = np.full(n_snap, OK, dtype=object)
+    alpha = np.full((n_snap, n_der), float(s.step_factor))
+    dv_old = np.full((n_snap, n_der), -1.0)
+    vm_prev = np.full((n_snap, net.n_bus), np.nan)
+    rows = np.flatnonzero(converged)  # a diverged no-action flow: nothing measured (pf-diverged)
+    step = 0
+    while rows.size:
+        pf = PowerFlowResult(net, v[rows], np.ones(rows.size, dtype=bool), flows[rows])
+        vm = np.abs(pf.v)
+        target = targets(rule, plant.measure(rule.reads, rows, pf), options, rows.size)
+        finite = np.isfinite(target).all(axis=1)
+        wanted = clip(np.where(finite[:, None], target, 0.0), limit[rows])
+        dq = np.abs(wanted - q[rows]).max(axis=1, initial=0.0)
+        dv_bus = np.abs(vm - vm_prev[rows])
+        dv = dv_bus.max(axis=1, initial=0.0) if step else np.zeros(rows.size)
+        residual[rows] = dq
+        status[rows[~finite]] = RULE_NON_FINITE
+        going = finite & ~((dq <= s.tol_q_mvar) & (dv <= s.tol_v_pu))
+        if step == s.max_steps:
+            status[rows[going]] = NOT_SETTLED
+            break
+        if s.adaptive and step:
+            dv_der = dv_bus[:, net.der_bus]
+            alpha[rows] = adapt_step_factor(alpha[rows], dv_der, dv_old[rows])
+            dv_old[rows] = dv_der
+        rows, wanted = rows[going], wanted[going]
+        if not rows.size:
+            break
+        q[rows] = q[rows] + alpha[rows] * (wanted - q[rows])
+        answer = solve_pf_batch(net, base[rows] + 1j * (q[rows] @ place), v0=v[rows])
+        vm_prev[rows] = np.abs(v[rows])
+        v[rows] = answer.v
+        flows[rows] += 1
+        ok = np.asarray(answer.converged, dtype=bool)
+        converged[rows] = ok
+        rows = rows[ok]  # a diverged flow stops the snapshot: pf-diverged, no figures
+        step += 1
+    final = PowerFlowResult(net, v, converged, flows)
+    res = StrategyResult.from_setpoints(
+        label, k, scenario, q, elapsed_ms(t0), power_flows=flows, pf=final, status=status, extra={RESIDUAL: residual}
+    )
+    return _no_setpoint(res, status == RULE_NON_FINITE)

@@ -1,0 +1,133 @@
+"""What a local rule is: a function of the DER's own measurements (`Measurements`) giving
+its Q target, and what it reads (`Rule.reads`); the engine that runs rules is
+`opfbench.strategies.engine`. Light to import (numpy only): the registry and the CLI use it.
+
+Units: |V| p.u.; P in MW, Q in MVAr, positive = injected by the DER (loads: positive =
+consumed; lines: positive = leaving the DER's bus into the line).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Callable
+
+import numpy as np
+
+from opfbench.errors import InputError
+
+#: What a rule may read (`Rule.reads`): own-bus |V|, own P^C, own forecast P^F, own-bus
+#: load, the power on the incident lines.
+READS = ("v", "p", "p_forecast", "load", "flows")
+#: Measured quantities the DER's own Q changes: a rule reading one is closed-loop.
+FEEDBACK = frozenset({"v", "flows"})
+RESIDUAL = "residual_mvar"
+
+
+@dataclass(frozen=True)
+class Settling:
+    """The closed-loop iteration's parameters: at most `max_steps` damped steps; settled at
+    max|ΔQ| ≤ tol_q_mvar (MVAr) and max|ΔV| ≤ tol_v_pu (p.u.); step factor α starting at
+    `step_factor`, adapted (OpenDSS InvControl) when `adaptive`, else fixed (1 = undamped)."""
+
+    max_steps: int = 100
+    tol_v_pu: float = 1e-7
+    tol_q_mvar: float = 1e-7
+    step_factor: float = 0.5
+    adaptive: bool = True
+
+
+DEFAULT_SETTLING = Settling()
+
+
+class Measurements:
+    """What every DER measures at its own bus, for the rows (snapshots) being evaluated.
+    Arrays are (S, n_der) unless noted; only what the rule declares it reads is there
+    (reading anything else is an InputError naming it).
+
+    v_pu ("v"): own-bus |V|, p.u. · p_mw ("p"): own active power P^C, MW · p_forecast_mw
+    ("p_forecast"): forecast P^F, MW (P^C where the scenario has none) · load_p_mw,
+    load_q_mvar ("load"): own-bus load, MW / MVAr, positive = consumed · line_mva ("flows"):
+    (S, n_der, m) complex MVA leaving the bus into each incident line (P + jQ; 0 in
+    padding, see `line_valid` (n_der, m)). Always there: shape (S, n_der), s_rated_mva
+    (n_der,) nameplate S̄, p_rated_mw (n_der,) rating P̄, kinds (n_der,) DER kinds.
+    """
+
+    def __init__(
+        self,
+        reads: frozenset[str],
+        values: dict[str, np.ndarray],
+        n_rows: int,
+        s_rated_mva: np.ndarray,
+        p_rated_mw: np.ndarray,
+        kinds: np.ndarray,
+        line_valid: np.ndarray,
+    ) -> None:
+        self.reads = reads
+        self.shape = (n_rows, len(s_rated_mva))
+        self._values = values
+        self.s_rated_mva = s_rated_mva
+        self.p_rated_mw = p_rated_mw
+        self.kinds = kinds
+        self.line_valid = line_valid
+
+    def _get(self, read: str, field: str) -> np.ndarray:
+        if read not in self.reads:
+            raise InputError(f"the rule reads {field} but does not declare {read!r} in what it reads ({', '.join(READS)})")
+        return self._values[field]
+
+    @property
+    def v_pu(self) -> np.ndarray:
+        return self._get("v", "v_pu")
+
+    @property
+    def p_mw(self) -> np.ndarray:
+        return self._get("p", "p_mw")
+
+    @property
+    def p_forecast_mw(self) -> np.ndarray:
+        return self._get("p_forecast", "p_forecast_mw")
+
+    @property
+    def load_p_mw(self) -> np.ndarray:
+        return self._get("load", "load_p_mw")
+
+    @property
+    def load_q_mvar(self) -> np.ndarray:
+        return self._get("load", "load_q_mvar")
+
+    @property
+    def line_mva(self) -> np.ndarray:
+        return self._get("flows", "line_mva")
+
+
+Target = Callable[..., np.ndarray]
+
+
+@dataclass(frozen=True)
+class Rule:
+    """A local rule: `target(m, **options)` → (S, n_der) Q target in MVAr (positive =
+    injected), reading `reads` ⊆ READS; `name` labels its messages."""
+
+    name: str
+    target: Target
+    reads: frozenset[str]
+
+    @property
+    def closed_loop(self) -> bool:
+        return bool(self.reads & FEEDBACK)
+
+
+def targets(rule: Rule, m: Measurements, options: dict, n_rows: int) -> np.ndarray:
+    """The rule's targets (rows, n_der) MVAr; InputError naming the rule for an exception,
+    a non-numeric answer or a wrong shape (non-finite values are the caller's to handle)."""
+    n_der = m.shape[1]
+    try:
+        raw = rule.target(m, **options)
+        out = np.asarray(raw, dtype=float)
+    except InputError:
+        raise
+    except Exception as exc:  # a rule's own bug: named, never a traceback
+        raise InputError(f"rule {rule.name!r} failed: {type(exc).__name__}: {exc}") from exc
+    if out.shape != (n_rows, n_der):
+        raise InputError(f"rule {rule.name!r} returned shape {out.shape}; it must return (S, n_der) = ({n_rows}, {n_der})")
+    return out
