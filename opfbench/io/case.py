@@ -89,6 +89,13 @@ class Case:
     load_index: np.ndarray | None = None
     der_index: np.ndarray | None = None
 
+    def __post_init__(self) -> None:
+        """The stored operating point and the source rows are read-only: a case is cached
+        and shared (`opfbench.io.load_case`), so a caller's write would reach every other."""
+        for arr in (*(self.stored or ()), self.load_index, self.der_index):
+            if isinstance(arr, np.ndarray):
+                arr.setflags(write=False)
+
     @property
     def name(self) -> str:
         return self.network.name

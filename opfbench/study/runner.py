@@ -18,7 +18,7 @@ from opfbench.registry import configuration
 from opfbench.study.config import LABEL_FIELDS, StudyConfig
 from opfbench.study.engine import EngineRun, TaskOutput, run_family
 from opfbench.study.periods import Period
-from opfbench.study.scenarios import study_period
+from opfbench.study.scenarios import check_model_forecasts, study_period
 from opfbench.study.tables import DETAIL_COLUMNS, KEYS, PARTIAL_COLUMNS, extra_columns, step_columns, summarize
 from opfbench.study.tasks import RunTask, TaskInput, plan_tasks, task_input
 
@@ -150,11 +150,7 @@ def prepare(config: StudyConfig) -> RunFamily:
     period, cases = study_period(config.cases, config.forecast, config.period, config.night, config.step_minutes)
     config = replace(config.with_period(period.step_h * 60, period.step_h * len(period.index)), notes=config.notes + cases.notes)
     models = [s for s in config.forecast if s not in ("off", "oracle") and config.strategies_for(s)]
-    if models:  # a missing or incomplete forecast file is refused here, not in a worker
-        from opfbench.forecasting.outputs import load_forecast
-
-        for model in models:
-            load_forecast(config.forecast_dir, "pv", model)
+    check_model_forecasts(config.forecast_dir, models, period)  # a missing or incomplete forecast file: here, not in a worker
     running = {label for source in config.forecast for label in config.strategies_for(source)}
     data = {}
     for case in config.cases:
