@@ -32,7 +32,7 @@ def no_run(monkeypatch):
     def fail(*args, **kwargs):
         raise AssertionError("a task ran before the input was refused")
 
-    monkeypatch.setattr("opfbench.study.execution.run_task", fail)
+    monkeypatch.setattr("opfbench.study.tasks.run_task", fail)
 
 
 @pytest.mark.parametrize(

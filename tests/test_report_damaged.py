@@ -112,7 +112,7 @@ DAMAGE = {
     ),
     "unknown schema version": (
         lambda run: _manifest(run, lambda m: m.update(schema=99)),
-        "manifest.json: schema 99 is not one this opfbench reads (1..1; a newer one wrote it?)",
+        "manifest.json: schema 99 is not one this opfbench reads (1..2; a newer one wrote it?)",
     ),
     "no schema": (
         lambda run: _manifest(run, lambda m: m.pop("schema")),
@@ -312,7 +312,7 @@ def test_run_refuses_a_damaged_report_input_before_its_work(capsys, tmp_path, mo
     def fail(*args, **kwargs):
         raise AssertionError("a task ran before the input was refused")
 
-    monkeypatch.setattr("opfbench.study.execution.run_task", fail)
+    monkeypatch.setattr("opfbench.study.tasks.run_task", fail)
     fault = write_fault(tmp_path / "fault")
     _truncate(fault / "fault.parquet")
     argv = ["run", "--period", "2016-06-28T10:00..2016-06-28T10:10", "--strategies", "no-action", "--workers", "1"]

@@ -242,7 +242,8 @@ def test_resume_refuse_fresh(tmp_path, capsys):
     assert main([*SMALL, "--out", out]) == 0  # everything kept
     assert "(0 run now, 2 kept)" in capsys.readouterr().out
     # nothing left to run: no scheduler is contacted (this address answers nothing)
-    assert main([*SMALL, "--out", out, "--scheduler", "tcp://127.0.0.1:9"]) == 0
+    on_cluster = [a for a in SMALL if a not in ("--workers", "1")]  # --workers and --scheduler exclude each other
+    assert main([*on_cluster, "--out", out, "--scheduler", "tcp://127.0.0.1:9"]) == 0
     assert "(0 run now, 2 kept)" in capsys.readouterr().out
     pd.testing.assert_frame_equal(first, pd.read_parquet(tmp_path / "run" / "steps.parquet"))
     assert main([*SMALL, "--k", "0.2", "--out", out]) == 2
@@ -333,12 +334,12 @@ def test_the_default_grid_runs_a_forecast_only_where_a_strategy_reads_it():
     with forecast off: every built-in strategy; 30 with the oracle: the paper's Algorithm 3
     rules, `DEFAULT_FORECAST`); without that choice every strategy the registry says reads a
     forecast runs under the oracle too, and no other."""
-    _, _, tasks = prepare(StudyConfig(forecast_strategies=DEFAULT_FORECAST))
+    tasks = prepare(StudyConfig(forecast_strategies=DEFAULT_FORECAST)).tasks
     assert {t.strategies for t in tasks if t.forecast == "oracle"} == {DEFAULT_FORECAST}
     assert {t.strategies for t in tasks if t.forecast == "off"} == {DEFAULT_RUN}
     configurations = {(t.case, s, t.k, m, t.forecast) for t in tasks for s in t.strategies for m in t.night_modes}
     assert len(configurations) == 195 and len(tasks) == 2 * 5 * 4
-    _, _, every = prepare(StudyConfig())
+    every = prepare(StudyConfig()).tasks
     readers = {name for name in DEFAULT_RUN if get_strategy(name).uses_forecast}
     assert {t.strategies for t in every if t.forecast == "oracle"} == {tuple(s for s in DEFAULT_RUN if s in readers)}
     assert BASELINE not in readers and {"llma", "lfma", "volt-var", "cosphi-p"} <= readers
@@ -397,9 +398,11 @@ def test_a_night_mode_with_the_same_scenario_takes_the_results_of_the_first(tmp_
 
 
 def test_auto_chunk_is_six_hours_on_short_periods_and_a_month_otherwise():
-    day, _, tasks = prepare(StudyConfig(strategies=("no-action",), ks=(0.0,), night_modes=("connected",), forecast=("off",)))
+    family = prepare(StudyConfig(strategies=("no-action",), ks=(0.0,), night_modes=("connected",), forecast=("off",)))
+    day, tasks = family.config, family.tasks
     assert day.chunk == "6h" and [t.start[11:16] for t in tasks] == ["00:00", "06:00", "12:00", "18:00"]
-    year, _, tasks = prepare(
+    family = prepare(
         StudyConfig(strategies=("no-action",), ks=(0.0,), night_modes=("connected",), forecast=("off",), period="year")
     )
+    year, tasks = family.config, family.tasks
     assert year.chunk == "month" and len(tasks) == 12

@@ -5,6 +5,7 @@ the upstream grid's short-circuit data and notes on how it was read."""
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 import pandas as pd
@@ -98,3 +99,18 @@ class Case:
     @property
     def name(self) -> str:
         return self.network.name
+
+    @cached_property
+    def data_sha256(self) -> str:
+        """Hash of the case's data (`opfbench.digests`): network, stored operating point,
+        time series, short-circuit data — everything but the spec that names it."""
+        from opfbench.digests import digest
+
+        series = self.series
+        profiles = None
+        if series is not None:
+            index = (series.index.asi8, str(series.index.tz))
+            profiles = {name: getattr(series, name) for name in series.__dataclass_fields__ if name != "index"} | {"index": index}
+        return digest(
+            [self.network, self.stored, profiles, self.short_circuit, list(self.notes), self.load_index, self.der_index]
+        )

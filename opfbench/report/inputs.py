@@ -1,5 +1,5 @@
-"""Read the files a run, a forecast run and a fault study wrote (see the file contracts:
-run folder, forecast folder, fault folder). Every input is optional: a missing one is
+"""Read the files a run, a forecast run and a fault study wrote (docs/CONTRACTS.md: run
+folder, forecast folder, fault folder). Every input is optional: a missing one is
 None plus the command that produces it, so its report section can say so. A damaged
 one — not UTF-8, not JSON, not an object, a JSON name given twice, a truncated or empty
 parquet file, a folder where the file belongs, a column missing or of the wrong kind, a
@@ -377,7 +377,8 @@ def _summary(path: Path, command: str) -> pd.DataFrame | None:
         return None
     try:
         text = path.read_bytes().decode("utf-8")
-        summary = pd.read_csv(io.StringIO(text), dtype={"case": str, "strategy": str, "night_mode": str, "forecast": str})
+        keys = {"case": str, "strategy": str, "night_mode": str, "forecast": str}
+        summary = pd.read_csv(io.StringIO(text), dtype=keys, float_precision="round_trip")  # k exactly as written
     except OSError as exc:
         raise InputError(f"{path}: cannot read it ({exc.strerror})") from None
     except UnicodeDecodeError as exc:
