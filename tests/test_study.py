@@ -302,22 +302,30 @@ def test_whole_day_every_strategy_at_k0(tmp_path):
 @pytest.mark.slow
 def test_whole_default_grid(tmp_path):
     """The main job's full grid (`opfbench run` defaults): every step solved, orderings hold."""
-    run = run_study(StudyConfig(), tmp_path, workers=os.cpu_count() or 1, quiet=True)
+    config = StudyConfig(forecast_strategies=DEFAULT_FORECAST)
+    run = run_study(config, tmp_path, workers=os.cpu_count() or 1, quiet=True)
     table = pd.read_parquet(run.out / "steps.parquet")
     assert (table.status == "ok").all()
     _check_day(table[table.forecast == "off"])
-    assert table.groupby(CONFIG_KEYS).ngroups == 6 * 5 * 3 + 2 * 5 * 3  # forecast off; oracle: LLMA, LFMA
+    assert table.groupby(CONFIG_KEYS).ngroups == len(DEFAULT_RUN) * 5 * 3 + len(DEFAULT_FORECAST) * 5 * 3
     # Nothing under a forecast repeats. What does is by definition or by the day's data: no
-    # action at every k and Q capability (10 · 9 / 2 + 5 · 4 / 2 pairs), and the paper's OPF
+    # action at every k and Q capability (10 · 9 / 2 + 5 · 4 / 2 pairs); the paper's OPF
     # setup, which equals the AC OPF on this day (the slack never exports and the fast path
-    # certifies every step, so neither the slack rule nor the paper's failure rule acts).
+    # certifies every step, so neither the slack rule nor the paper's failure rule acts); and
+    # a rule at two k whose reduced limit binds nowhere on the day, or whose target at night
+    # is 0 so the "Q at night" capability changes nothing (the same strategy and forecast,
+    # connected and connected-q alike).
     paper_setup = {
         (("paper33", "acopf", k, mode, "off"), ("paper33", "acopf-paper", k, mode, "off"))
         for k in PAPER_KS
         for mode in ("connected", "connected-q", "disconnected")
     }
-    assert _repeated_configurations(table) == _no_action_repeats(table) | paper_setup
-    assert len(_no_action_repeats(table)) == 55
+    repeats = _repeated_configurations(table) - _no_action_repeats(table) - paper_setup
+    assert len(_no_action_repeats(table)) == 55 and _no_action_repeats(table) <= _repeated_configurations(table)
+    assert paper_setup <= _repeated_configurations(table)
+    night = lambda key: "connected" if key[3] == "connected-q" else key[3]  # noqa: E731
+    for a, b in repeats:
+        assert a[4] == b[4] == "off" and (a[0], a[1], night(a)) == (b[0], b[1], night(b)), (a, b)
 
 
 def test_the_repeat_check_finds_a_repeated_configuration(day_run):
