@@ -71,9 +71,14 @@ def _timed_cpu(out: Path, *args: str) -> tuple[float, float]:
     process and its workers: on a machine shared with other jobs the wall time waits for
     them, the CPU time does not)."""
     start, cpu = now(), _children_cpu_s()
-    subprocess.run(
-        [sys.executable, "-m", "opfbench", "run", "--quiet", "--out", str(out), *args], check=True, stdout=subprocess.DEVNULL
+    done = subprocess.run(
+        [sys.executable, "-m", "opfbench", "run", "--quiet", "--out", str(out), *args],
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.PIPE,
+        text=True,
     )
+    if done.returncode:  # the run's own message, not only its exit code
+        raise RuntimeError(f"opfbench run {' '.join(args)} failed ({done.returncode}):\n{done.stderr}")
     return elapsed_ms(start) / 1e3, _children_cpu_s() - cpu
 
 
