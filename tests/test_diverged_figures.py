@@ -118,10 +118,15 @@ def test_a_partly_diverged_run_averages_over_the_converged_steps(tmp_path, capsy
 def test_an_infeasible_step_carries_no_bound_above_its_losses(paper33):
     # surplus PV the slack may not export: the relaxation "burns" it (bound ≈ the surplus),
     # the point applied is no action, which exports — it is outside the problem the bound is for
-    res = run_strategy("acopf-paper", Scenario.snapshot(paper33, 0.1, 1.0), 0.0)
+    # (solver "ipopt" solves every step's relaxation; by default the interval bounds prove
+    # the step infeasible first and the relaxation is not solved there)
+    res = run_strategy("acopf-paper", Scenario.snapshot(paper33, 0.1, 1.0), 0.0, solver="ipopt")
     assert res.status[0] == "infeasible" and not res.extra["ac_feasible"][0]
     assert np.isnan(res.lower_bound_kw[0]) and res.snapshot_json()["lower_bound_kw"] is None
     assert res.extra["relaxation_bound_kw"][0] > res.losses_kw[0]  # the relaxation's value, kept as a diagnostic
+    proven = run_strategy("acopf-paper", Scenario.snapshot(paper33, 0.1, 1.0), 0.0)
+    assert proven.status[0] == "infeasible" and proven.losses_kw[0] == res.losses_kw[0]
+    assert proven.snapshot_json()["lower_bound_kw"] is None and proven.snapshot_json()["relaxation_bound_kw"] is None
     ok = run_strategy("acopf", Scenario.snapshot(paper33, 0.1, 1.0), 0.0)  # the slack may export: feasible
     assert ok.status[0] == "ok" and ok.lower_bound_kw[0] <= ok.losses_kw[0] * (1 + 1e-6)
 

@@ -15,6 +15,7 @@ from opfbench.cli import main
 from opfbench.errors import InputError
 from opfbench.formulations import policy
 from opfbench.formulations.acopf import run_acopf
+from opfbench.formulations.infeasibility import SLACK_MUST_EXPORT, VOLTAGES_OUT_OF_REACH
 from opfbench.formulations.models import polar_ac
 from opfbench.formulations.models.polar_ac import AcOpf, build_acopf
 from opfbench.formulations.problem import VOLTAGE_TOLERANCE, snapshot_data
@@ -73,21 +74,29 @@ def test_unknown_fallback_policy_is_refused(paper33):
 @pytest.mark.parametrize("policy", ["chain", "paper"])
 def test_voltage_band_too_tight_is_infeasible(paper33, policy):
     tight = paper33.with_changes(vmin=np.full(paper33.n_bus, 0.99), vmax=np.full(paper33.n_bus, 1.0))
-    res = run_acopf(Scenario.snapshot(tight, 1.2, 0.5), 0.0, fallback=policy)
+    scenario = Scenario.snapshot(tight, 1.2, 0.5)
+    res = run_acopf(scenario, 0.0, fallback=policy)
     assert res.status[0] == "infeasible"
     assert res.extra["fallback"][0] == "no-action"
-    assert res.extra["socp_status"][0] == "PrimalInfeasible"  # the relaxation proves it
-    assert "Infeasible" in res.extra["solver_status"][0]
+    # the interval bounds prove it before the relaxation is solved (`infeasibility`)
+    assert res.extra["solver_status"][0] == VOLTAGES_OUT_OF_REACH and res.extra["socp_status"][0] == ""
     assert np.all(res.q_mvar == 0) and np.isfinite(res.losses_kw[0])  # no action's losses, labelled
     assert not res.extra["ac_feasible"][0]
+    ipopt = run_acopf(scenario, 0.0, fallback=policy, solver="ipopt")  # every step solved: the relaxation proves it too
+    assert ipopt.status[0] == "infeasible" and ipopt.extra["socp_status"][0] == "PrimalInfeasible"
+    assert "Infeasible" in ipopt.extra["solver_status"][0]
+    np.testing.assert_array_equal(ipopt.losses_kw, res.losses_kw)
 
 
 def test_reverse_flow_without_slack_export_is_infeasible(paper33):
     scenario = Scenario.snapshot(paper33, 0.2, 1.0)
-    res = run_acopf(scenario, 0.0, slack_export=False)
+    proven = run_acopf(scenario, 0.0, slack_export=False)  # the interval bounds prove it (`infeasibility`)
+    assert proven.status[0] == "infeasible" and proven.extra["solver_status"][0] == SLACK_MUST_EXPORT
+    res = run_acopf(scenario, 0.0, slack_export=False, solver="ipopt")
     assert res.status[0] == "infeasible"
     assert res.extra["fallback"][0] == "no-action"
     assert not res.extra["ac_feasible"][0]
+    np.testing.assert_array_equal(proven.losses_kw, res.losses_kw)
     # The relaxation is feasible but only by inventing losses (not exact): its bound
     # says the surplus must be burnt, its setpoints still export. The bound holds for
     # points meeting the limits, and no action (the point applied) does not: the result

@@ -8,9 +8,11 @@ import numpy as np
 import pytest
 
 from opfbench.errors import InputError, NetworkError
+from opfbench.formulations import acopf as acopf_module
 from opfbench.formulations import relaxation as relaxation_module
 from opfbench.formulations.acopf import run_acopf
 from opfbench.formulations.cache import EXACT_KEY_BYTES, PER_THREAD, SolveCache, per_thread
+from opfbench.formulations.infeasibility import VOLTAGES_OUT_OF_REACH
 from opfbench.formulations.models.polar_ac import ac_opf
 from opfbench.formulations.models.soc import SocpRelaxation, data_vector
 from opfbench.formulations.policy import CERTIFY_RTOL
@@ -193,15 +195,21 @@ def test_per_thread_cache_keeps_the_most_recent_objects():
     assert per_thread(net, "probe-0", object) is not first  # dropped, built afresh
 
 
-def test_an_infeasible_relaxation_settles_the_step_without_ipopt():
-    """Twice the nominal load and no Q (k = 1) pull paper33 below 0.9 p.u.: the SOCP proves
-    the AC OPF infeasible, so the fast path records it without IPOPT; IPOPT agrees."""
+def test_an_infeasible_relaxation_settles_the_step_without_ipopt(monkeypatch):
+    """Twice the nominal load and no Q (k = 1) pull paper33 below 0.9 p.u.: the interval
+    bounds prove the AC OPF infeasible before the relaxation is solved, and without them
+    the SOCP does; either way the fast path records it without IPOPT; IPOPT agrees."""
     net = load_network("paper33")
     scenario = Scenario(net, np.array([1.0, 2.0, 3.0]), np.zeros((3, len(net.ders))))
     fast = run_acopf(scenario, 1.0)
     assert list(fast.status) == ["ok", "infeasible", "infeasible"]
-    assert list(fast.extra["solver_status"][1:]) == ["PrimalInfeasible"] * 2
-    assert np.all(fast.extra["iterations"][1:] == 0) and np.all(fast.q_mvar[1:] == 0)
+    assert list(fast.extra["solver_status"][1:]) == [VOLTAGES_OUT_OF_REACH] * 2
+    monkeypatch.setattr(acopf_module, "proven_infeasible", lambda problem, data: np.full(data.n_snapshots, "", dtype=object))
+    by_socp = run_acopf(scenario, 1.0)
+    assert list(by_socp.extra["solver_status"][1:]) == ["PrimalInfeasible"] * 2
+    for res in (fast, by_socp):
+        assert list(res.status) == list(fast.status) and np.array_equal(res.losses_kw, fast.losses_kw)
+        assert np.all(res.extra["iterations"][1:] == 0) and np.all(res.q_mvar[1:] == 0)
     ipopt = run_acopf(Scenario(net, scenario.load_scale, scenario.der_p_mw), 1.0, solver="ipopt")
     assert list(ipopt.status) == list(fast.status) and np.all(ipopt.extra["iterations"][1:] > 0)
 

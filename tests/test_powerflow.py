@@ -123,3 +123,32 @@ def test_case_with_pv_bus_and_tap_matches_pandapower(tmp_path):
     assert abs(ours.losses_kw - losses) < 1e-3
     assert ours.vm[net.index_of(400)] == pytest.approx(1.05)
     assert solve_pf_batch(net, np.array([bus_injections(net)] * 2)).converged.all()
+
+
+def test_a_cold_batched_flow_answers_the_same_input_from_the_memo(paper33):
+    """The same injections on the same network give the very same (read-only) result; an
+    input differing in one value, another network object or a warm start is solved anew;
+    a batch too large for the memo is not kept."""
+    from opfbench.powerflow.memo import FlowMemo, forget_flows
+
+    rng = np.random.default_rng(4)
+    s = np.stack([bus_injections(paper33, load_scale=x) for x in rng.uniform(0.3, 1.2, 6)])
+    first = solve_pf_batch(paper33, s)
+    again = solve_pf_batch(paper33, s.copy())
+    assert again is first and not first.v.flags.writeable and not first.converged.flags.writeable
+    with pytest.raises(ValueError):
+        first.v[0, 0] = 0
+    changed = s.copy()
+    changed[3, 5] += 1e-12
+    other = solve_pf_batch(paper33, changed)
+    assert other is not first and not np.array_equal(other.v[3], first.v[3])
+    np.testing.assert_array_equal(other.v[[0, 1, 2, 4, 5]], first.v[[0, 1, 2, 4, 5]])
+    twin = load_network("paper33-meshed")  # another network object: never its answer
+    assert solve_pf_batch(twin, s) is not first
+    assert solve_pf_batch(paper33, s, v0=first.v) is not first
+    forget_flows()  # a fresh solve gives the same figures bit for bit
+    fresh = solve_pf_batch(paper33, s)
+    assert fresh is not first and np.array_equal(fresh.v, first.v)
+    small = FlowMemo(limit_bytes=4 * s.nbytes)
+    small.put(paper33, "o", np.ascontiguousarray(s), first)
+    assert small.get(paper33, "o", np.ascontiguousarray(s)) is None and small.used == 0

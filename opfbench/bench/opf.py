@@ -52,6 +52,7 @@ from opfbench.formulations.relaxation import build_socp, forget_solves
 from opfbench.io import load_case, load_network
 from opfbench.network import Network
 from opfbench.powerflow import solve_pf_batch
+from opfbench.powerflow.memo import forget_flows
 from opfbench.registry import run_strategy
 from opfbench.scenario import Scenario
 from opfbench.timing import elapsed_ms, now
@@ -164,8 +165,9 @@ def bench_paper_day(case: str = "paper33", k: float = 0.0, repeats: int = 3) -> 
     day = paper_day_scenario(case)
     n = day.n_snapshots
 
-    def fresh() -> Scenario:  # a new Scenario object and no solves kept by data: nothing shared
+    def fresh() -> Scenario:  # a new Scenario object and no solves or flows kept by data: nothing shared
         forget_solves()
+        forget_flows()
         return Scenario(day.net, day.load_scale, day.der_p_mw)
 
     def step_ms(strategy: str, scenario: Scenario, **options):
@@ -223,6 +225,7 @@ def bench_mv(code: str = MV_CASE, k: float = 0.0, repeats: int = 3, peer_every: 
 
     def fresh() -> Scenario:
         forget_solves()
+        forget_flows()
         return Scenario.from_series(day.net, load_p, load_q, der_p)
 
     def step_ms(strategy: str):

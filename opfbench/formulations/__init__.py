@@ -13,6 +13,9 @@ PowerModels keeps formulations, problems and solvers apart. Data flows down this
 - `cache`: per-thread solver objects and the solve cache keyed on the data.
 - `relaxation`: the relaxation of a network (model chosen by topology) and its solves on
   every snapshot, shared by data.
+- `infeasibility`: sound proofs that the AC OPF of a snapshot has no feasible point
+  (interval bounds on the exact branch flows of a radial feeder): the slack must export,
+  a voltage limit out of reach — what the relaxation cannot show.
 - `policy`: the certified fast path and the failure policies (chain, paper) that settle
   each snapshot of the AC OPF.
 - `results`: answers → the one result record (`StrategyResult`), AC-evaluated.

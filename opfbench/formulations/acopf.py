@@ -2,9 +2,10 @@
 of a scenario, with the certified fast path through the SOCP relaxation and a recorded
 failure policy (`policy`).
 
-With `solver="auto"` (default) the relaxation (`relaxation.socp_solves`, shared by data
-with the `socp` strategy) settles what it can — certified optima, proven infeasibility —
-and IPOPT solves only the other snapshots; `solver="ipopt"` solves every snapshot with
+With `solver="auto"` (default) the interval bounds (`infeasibility`) and the relaxation
+(`relaxation.socp_solves`, shared by data with the `socp` strategy; not solved where the
+bounds prove infeasibility) settle what they can — certified optima, proven
+infeasibility — and IPOPT solves only the other snapshots; `solver="ipopt"` solves every snapshot with
 IPOPT (the paper's question is how often a nonlinear OPF solver fails: `opfbench run
 --acopf-solver ipopt` answers it for `acopf` and `acopf-paper`). Either way the
 relaxation's optimum is the result's `lower_bound_kw`, which certifies the optimality gap
@@ -15,6 +16,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from opfbench.formulations.infeasibility import proven_infeasible
 from opfbench.formulations.options import ACOPF_SOLVERS, FALLBACKS, AcopfSolver, Fallback, check_option
 from opfbench.formulations.policy import IpoptPolicy, fast_path, merge_flows
 from opfbench.formulations.problem import OpfProblem, snapshot_data
@@ -37,13 +39,16 @@ def run_acopf(
     """AC OPF on every snapshot of `scenario` with reserve k (see the module docstring).
 
     Returns the setpoints evaluated by the AC power flow, with status per snapshot and
-    lower_bound_kw from the SOCP relaxation (NaN where it was not solved). extra (per
-    snapshot): certified_by ("socp" | "ipopt" | "" where neither certified the point),
-    solver_status (IPOPT's return status of each attempt, "a → b"; Clarabel's where
-    certified by the SOCP), iterations (IPOPT's, summed over attempts; 0 where certified
+    lower_bound_kw from the SOCP relaxation (NaN where it was not solved, or where the
+    point is not feasible). extra (per snapshot): certified_by ("socp" | "ipopt" | ""
+    where neither certified the point), solver_status (IPOPT's return status of each
+    attempt, "a → b"; Clarabel's where certified by the SOCP; the bounds' reason where
+    they prove infeasibility, `infeasibility.SLACK_MUST_EXPORT` or
+    `VOLTAGES_OUT_OF_REACH`), iterations (IPOPT's, summed over attempts; 0 where certified
     by the SOCP), solve_ms (the certifying solver's time: IPOPT's summed over attempts,
     or the SOCP solve's), warm_start, objective_kw (the OPF's own losses, NaN unless
-    certified), fallback, relaxation_gap / socp_status / socp_ms (the relaxation solve),
+    certified), fallback, relaxation_gap / socp_status / socp_ms (the relaxation solve;
+    NaN / "" / 0 where not solved),
     ac_feasible (the reported point meets every limit).
     """
     check_option("AC OPF failure policy", fallback, FALLBACKS)
@@ -52,9 +57,14 @@ def run_acopf(
     net = scenario.net
     data = snapshot_data(scenario, k)
     problem = OpfProblem.of(net, slack_export)
-    solves = socp_solves(scenario, k, slack_export, data=data)
+    fast = None
+    if solver == "auto":
+        proofs = proven_infeasible(problem, data)
+        solves = socp_solves(scenario, k, slack_export, data=data, skip=proofs != "")
+        fast = fast_path(scenario, problem, data, solves, proofs)
+    else:
+        solves = socp_solves(scenario, k, slack_export, data=data)
     n = data.n_snapshots
-    fast = fast_path(scenario, problem, data, solves) if solver == "auto" else None
     policy = IpoptPolicy(data, problem, fallback, solves)
     settled = []
     for i in range(n):

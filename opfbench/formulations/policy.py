@@ -2,10 +2,15 @@
 policy (`options.FALLBACKS`), every decision recorded.
 
 Fast path (`fast_path`): the SOCP relaxation's setpoints of every snapshot, evaluated by
-ONE batched AC power flow. Where the relaxation is infeasible the AC OPF is too; where
-its setpoints are AC-feasible (`OpfProblem.feasible`) and their AC losses lie within
-CERTIFY_RTOL (relative) of the relaxation's bound — a lower bound on every AC-feasible
-point's losses — they are the AC optimum up to that tolerance (certified by "socp").
+ONE batched AC power flow. Where the relaxation is infeasible the AC OPF is too, and so
+it is where the interval bounds on the exact branch flows prove it
+(`infeasibility.proven_infeasible`, computed first: then the relaxation is not solved
+there; a voltage limit out of reach, or the slack must export
+where it may not; the solver_status says which — the relaxation cannot show these: it may
+burn power in losses no AC point has); where its setpoints are AC-feasible
+(`OpfProblem.feasible`) and their AC losses lie within CERTIFY_RTOL (relative) of the
+relaxation's bound — a lower bound on every AC-feasible point's losses — they are the AC
+optimum up to that tolerance (certified by "socp").
 
 IPOPT's snapshots (`IpoptPolicy.settle`, warm-started from its last success):
 
@@ -16,7 +21,7 @@ IPOPT's snapshots (`IpoptPolicy.settle`, warm-started from its last success):
 
 When no point is found feasible, the setpoints are those of no action (fallback
 "no-action", its AC losses reported) and the status is "infeasible" if IPOPT reported
-infeasibility or the SOCP relaxation is infeasible (which proves it), "solver-failed"
+infeasibility or the SOCP relaxation or the bounds prove it, "solver-failed"
 otherwise.
 """
 
@@ -43,8 +48,8 @@ CERTIFY_RTOL = 1e-6  # fast path: AC losses of the SOCP point ≤ bound·(1 + th
 class Settled:
     """How one snapshot was settled: its setpoints (p.u.), status, where the point comes
     from (`results.FROM_*`), the IPOPT attempts, the relaxation's solve, the power flows
-    the policy used to check points, who certified it, and its losses where certified by
-    the SOCP (kW)."""
+    the policy used to check points, who certified it, its losses where certified by
+    the SOCP (kW), and the bounds' proof of its infeasibility (`infeasibility`; "" if none)."""
 
     q_pu: np.ndarray
     status: str
@@ -54,6 +59,7 @@ class Settled:
     power_flows: int
     certified_by: str
     objective_kw: float = np.nan
+    proof: str = ""
 
     @property
     def accepted(self) -> IpoptSolve | None:
@@ -64,10 +70,14 @@ class Settled:
         acc = self.accepted
         socp = self.socp.diagnostics()
         by_socp = self.certified_by == CERTIFIED_BY_SOCP
+        if self.proof:
+            solver_status = self.proof
+        elif by_socp or not self.attempts:
+            solver_status = socp["solver_status"]
+        else:
+            solver_status = " → ".join(a.status for a in self.attempts)
         return {
-            "solver_status": socp["solver_status"]
-            if by_socp or not self.attempts
-            else " → ".join(a.status for a in self.attempts),
+            "solver_status": solver_status,
             "iterations": sum(a.iterations for a in self.attempts),
             "solve_ms": socp["solve_ms"] if by_socp else sum(a.solve_ms for a in self.attempts),
             "warm_start": bool(self.attempts and self.attempts[0].warm),
@@ -82,24 +92,30 @@ class Settled:
 
 @dataclass(frozen=True)
 class FastPath:
-    """The SOCP setpoints of every snapshot, AC-evaluated by one batched power flow."""
+    """The SOCP setpoints of every snapshot, AC-evaluated by one batched power flow, and
+    the bounds' proof of infeasibility of each snapshot."""
 
     q_pu: np.ndarray  # (S, n_der); zeros where the relaxation was not solved
     pf: PowerFlowResult
     certified: np.ndarray  # (S,) bool
+    proofs: np.ndarray  # (S,) str: `infeasibility.proven_infeasible`
 
     def settled(self, i: int, socp: SocpSolve) -> Settled | None:
         """Snapshot i settled without IPOPT — certified, or proven infeasible by the
-        relaxation (then no action) — else None."""
+        relaxation or the bounds (then no action) — else None."""
         if self.certified[i]:
             return Settled(self.q_pu[i], OK, FROM_SOLVER, [], socp, 0, CERTIFIED_BY_SOCP, float(self.pf.losses_kw[i]))
-        if socp.infeasible:
-            return Settled(np.zeros_like(self.q_pu[i]), INFEASIBLE, FROM_NO_ACTION, [], socp, 1, "")
+        if socp.infeasible or self.proofs[i]:
+            proof = "" if socp.infeasible else self.proofs[i]
+            return Settled(np.zeros_like(self.q_pu[i]), INFEASIBLE, FROM_NO_ACTION, [], socp, 1, "", proof=proof)
         return None
 
 
-def fast_path(scenario: Scenario, problem: OpfProblem, data: SnapshotData, solves: tuple[SocpSolve, ...]) -> FastPath:
-    """The fast path's evaluation of every snapshot (module docstring)."""
+def fast_path(
+    scenario: Scenario, problem: OpfProblem, data: SnapshotData, solves: tuple[SocpSolve, ...], proofs: np.ndarray
+) -> FastPath:
+    """The fast path's evaluation of every snapshot (module docstring); `proofs`: the
+    snapshots' `infeasibility.proven_infeasible` (their relaxation need not be solved)."""
     net = scenario.net
     n_der = len(net.ders)
     optimal = np.array([s.optimal for s in solves], dtype=bool)
@@ -108,7 +124,7 @@ def fast_path(scenario: Scenario, problem: OpfProblem, data: SnapshotData, solve
     bound = np.array([s.lower_bound_kw for s in solves])
     with np.errstate(invalid="ignore"):
         close = np.abs(pf.losses_kw - bound) <= CERTIFY_RTOL * np.abs(bound)
-    return FastPath(q_pu, pf, optimal & problem.feasible(pf, data.s_fixed) & close)
+    return FastPath(q_pu, pf, optimal & problem.feasible(pf, data.s_fixed) & close, proofs)
 
 
 def merge_flows(fast: PowerFlowResult, rest: PowerFlowResult, rows: np.ndarray) -> PowerFlowResult:

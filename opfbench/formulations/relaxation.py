@@ -21,6 +21,8 @@ exports at the unrestricted optimum, or its solve failed) are solved again.
 
 from __future__ import annotations
 
+import numpy as np
+
 from opfbench.formulations.cache import SolveCache, per_thread
 from opfbench.formulations.models.distflow import DistFlowSocp
 from opfbench.formulations.models.jabr import JabrSocp
@@ -68,9 +70,17 @@ def _restricted(unrestricted: SocpSolve) -> SocpSolve | None:
     return None
 
 
-def relaxed_solves(net: Network, data: SnapshotData, slack_export: bool = True) -> tuple[SocpSolve, ...]:
+def relaxed_solves(
+    net: Network, data: SnapshotData, slack_export: bool = True, skip: np.ndarray | None = None
+) -> tuple[SocpSolve, ...]:
     """The relaxation of `net` solved on every snapshot of `data`, shared by data as the
-    module docstring says."""
+    module docstring says; snapshots marked in `skip` (S,) bool are neither solved nor
+    looked up (`SocpSolve.not_solved`), so a caller's result does not depend on what the
+    cache holds."""
+    if skip is not None and skip.any():
+        keep = np.flatnonzero(~skip)
+        part = iter(relaxed_solves(net, SnapshotData(data.s_fixed[keep], data.q_limit[keep]), slack_export) if keep.size else ())
+        return tuple(SocpSolve.not_solved() if skipped else next(part) for skipped in skip)
     unrestricted = None if slack_export else relaxed_solves(net, data, True)
     thetas = data_vector(data.s_fixed, data.q_limit)
     keys = _cache.keys(net, ("socp", bool(slack_export)), thetas)
@@ -89,8 +99,12 @@ def relaxed_solves(net: Network, data: SnapshotData, slack_export: bool = True) 
 
 
 def socp_solves(
-    scenario: Scenario, k: float, slack_export: bool = True, data: SnapshotData | None = None
+    scenario: Scenario,
+    k: float,
+    slack_export: bool = True,
+    data: SnapshotData | None = None,
+    skip: np.ndarray | None = None,
 ) -> tuple[SocpSolve, ...]:
     """`relaxed_solves` on the snapshots of `scenario` with reserve k; `data`: the scenario's
-    `snapshot_data(scenario, k)` when the caller has it."""
-    return relaxed_solves(scenario.net, snapshot_data(scenario, k) if data is None else data, slack_export)
+    `snapshot_data(scenario, k)` when the caller has it; `skip`: snapshots not to solve."""
+    return relaxed_solves(scenario.net, snapshot_data(scenario, k) if data is None else data, slack_export, skip)

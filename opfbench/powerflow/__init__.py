@@ -42,6 +42,7 @@ from opfbench.powerflow.common import (
     uses_sparse,
 )
 from opfbench.powerflow.dense import DenseNewton, DenseZbus
+from opfbench.powerflow.memo import flow_memo
 from opfbench.powerflow.sparse import SparseNewton, SparseZbus
 
 __all__ = [
@@ -205,10 +206,20 @@ def solve_pf_batch(
     `iterations`. A snapshot counts as solved when its fixed-point update is below `tol`
     p.u. *and* its P/Q mismatch is below `MISMATCH_CHECK` p.u.; the others (and every
     snapshot of a network with PV buses) are solved by Newton–Raphson individually and
-    carry NR's verdict and iteration count.
+    carry NR's verdict and iteration count. Without `v0` the answer to an input this
+    thread solved recently is that same (read-only) result (`memo.FlowMemo`).
     """
     sparse = uses_sparse(net) if sparse is None else sparse
-    s = check_injections(net, np.atleast_2d(s_mw)) / net.base_mva
+    s = np.ascontiguousarray(check_injections(net, np.atleast_2d(s_mw)) / net.base_mva, dtype=complex)
+    if v0 is None:
+        options = (tol, max_iter, sparse)
+        known = flow_memo().get(net, options, s)
+        return known if known is not None else flow_memo().put(net, options, s, _batch(net, s, None, tol, max_iter, sparse))
+    return _batch(net, s, v0, tol, max_iter, sparse)
+
+
+def _batch(net: Network, s: np.ndarray, v0: np.ndarray | None, tol: float, max_iter: int, sparse: bool) -> PowerFlowResult:
+    """`solve_pf_batch` on injections `s` (S, n_bus) p.u."""
     n_snap = s.shape[0]
     if net.pv_buses.size:
         results = [solve_pf(net, row * net.base_mva, sparse=sparse) for row in s]

@@ -19,6 +19,8 @@ Cone residual (`relaxation_gap`): v_i·ℓ − P² − Q², squared apparent pow
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import cvxpy as cp
 import numpy as np
 
@@ -28,21 +30,35 @@ from opfbench.formulations.problem import incidence
 from opfbench.network import Network
 
 
-class DistFlowSocp(SocpRelaxation):
-    """Branch-flow (DistFlow) relaxation for radial feeders; see the module docstring."""
+@dataclass(frozen=True, eq=False)
+class RadialBranches:
+    """A radial feeder's in-service branches as DistFlow writes them: one per non-slack bus
+    `child` (BFS order), from its `parent` through `branch`, series r + jx (p.u.); a tap τ
+    scales the voltage of the branch's from end by 1/τ² (`parent_scale`, `child_scale`:
+    1/τ² on the end that is the from end, else 1; all 1 without taps, `tapped` False);
+    the π model's line charging b/2 and shunt conductance g/2 as bus shunts `charging`,
+    `conductance` (n_bus,) p.u. at 1 p.u., from ends scaled by 1/τ² (module docstring)."""
 
-    model = "distflow"
+    child: np.ndarray
+    parent: np.ndarray
+    branch: np.ndarray
+    r: np.ndarray
+    x: np.ndarray
+    tapped: bool
+    parent_scale: np.ndarray
+    child_scale: np.ndarray
+    charging: np.ndarray
+    conductance: np.ndarray
 
-    def _network_model(self) -> tuple[cp.Expression, cp.Expression, cp.Expression, list[cp.Constraint]]:
-        net = self.net
+    @classmethod
+    def of(cls, net: Network) -> "RadialBranches":
+        """The branches of `net`; NetworkError on a meshed feeder."""
         if net.meshed:
             raise NetworkError(f"{net.name}: DistFlow needs a radial feeder; this one is meshed (use the Jabr model)")
         on = np.flatnonzero(net.status)
         child = net.bfs_order[net.bfs_order != net.slack]
         parent, branch = net.parent[child], net.parent_branch[child]
         n, m = net.n_bus, child.size
-        at_child, at_parent = incidence(child, n), incidence(parent, n)
-        r, x = net.r[branch], net.x[branch]
         tapped = bool((net.tap[on] != 1.0).any())
         from_scale = 1.0 / net.tap[on] ** 2 if tapped else 1.0  # the from end's shunts see v/τ²
         charging = np.zeros(n)  # π-model line charging as bus shunts, b/2 at each end
@@ -52,19 +68,36 @@ class DistFlowSocp(SocpRelaxation):
         if net.g[on].any():
             np.add.at(conductance, net.f[on], net.g[on] / 2 * from_scale)
             np.add.at(conductance, net.t[on], net.g[on] / 2)
+        if tapped:  # v/τ² at the from end of each branch (parent or child side)
+            at_tap = 1.0 / net.tap[branch] ** 2
+            from_is_parent = net.f[branch] == parent
+            parent_scale, child_scale = np.where(from_is_parent, at_tap, 1.0), np.where(from_is_parent, 1.0, at_tap)
+        else:
+            parent_scale = child_scale = np.ones(m)
+        return cls(child, parent, branch, net.r[branch], net.x[branch], tapped, parent_scale, child_scale, charging, conductance)
+
+
+class DistFlowSocp(SocpRelaxation):
+    """Branch-flow (DistFlow) relaxation for radial feeders; see the module docstring."""
+
+    model = "distflow"
+
+    def _network_model(self) -> tuple[cp.Expression, cp.Expression, cp.Expression, list[cp.Constraint]]:
+        net = self.net
+        br = RadialBranches.of(net)
+        child, parent, r, x = br.child, br.parent, br.r, br.x
+        charging, conductance = br.charging, br.conductance
+        n, m = net.n_bus, child.size
+        at_child, at_parent = incidence(child, n), incidence(parent, n)
         self.p_br = cp.Variable(m, name="p_branch")
         self.q_br = cp.Variable(m, name="q_branch")
         self.l_br = cp.Variable(m, name="l_branch")  # |I|² p.u.²
         v, p_br, q_br, l_br = self.v, self.p_br, self.q_br, self.l_br
         v_parent, v_child = v[parent], v[child]
-        if tapped:  # v/τ² at the from end of each branch (parent or child side)
-            at_tap = 1.0 / net.tap[branch] ** 2
-            from_is_parent = net.f[branch] == parent
-            self._parent_scale = np.where(from_is_parent, at_tap, 1.0)
-            v_parent = cp.multiply(self._parent_scale, v_parent)
-            v_child = cp.multiply(np.where(from_is_parent, 1.0, at_tap), v_child)
-        else:
-            self._parent_scale = np.ones(m)
+        if br.tapped:
+            v_parent = cp.multiply(br.parent_scale, v_parent)
+            v_child = cp.multiply(br.child_scale, v_child)
+        self._parent_scale = br.parent_scale
         inv_s = 1 / branch_scale(net)[child]  # the cone's per-branch scale: α = 1 / inv_s²
         l_scaled = cp.multiply(inv_s**2, l_br)  # ℓ/α
         shunt_p = cp.multiply(self.problem.gsh + conductance, v) if conductance.any() else cp.multiply(self.problem.gsh, v)

@@ -33,13 +33,14 @@ from opfbench.formulations.solvers.clarabel_adapter import ParametricConeProgram
 from opfbench.network import Network
 from opfbench.timing import elapsed_ms, now
 
+NOT_SOLVED = "not solved"  # a SocpSolve's outcome where the caller skipped the snapshot
 Reader = Callable[[cp.Variable], np.ndarray]  # a variable's values in stacked solutions, (S, size)
 
 
 @dataclass(frozen=True)
 class SocpSolve:
     """One snapshot's relaxation solve. outcome: "optimal" | "infeasible" (certified by
-    Clarabel) | "failed"; solver_status: Clarabel's own status; solve_ms: wall time of
+    Clarabel) | "failed" | "not solved" (`not_solved`: a caller had no use for it); solver_status: Clarabel's own status; solve_ms: wall time of
     Clarabel's data updates and solves; iterations: the answering Clarabel solve's; solves:
     every Clarabel solve the answer took (`clarabel_adapter.ConeSolve`); slack_p_pu: the
     slack bus's active injection at the optimum (p.u., positive = import from the upstream
@@ -55,6 +56,11 @@ class SocpSolve:
     iterations: int
     solves: int
     slack_p_pu: float = np.nan
+
+    @classmethod
+    def not_solved(cls) -> "SocpSolve":
+        """The record of a snapshot left unsolved (no status, no time, NaN figures)."""
+        return cls(NOT_SOLVED, "", np.nan, None, np.nan, 0.0, 0, 0)
 
     @property
     def optimal(self) -> bool:
