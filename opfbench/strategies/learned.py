@@ -72,6 +72,7 @@ RHO = 0.9  # the default contraction factor of the slope bound
 KNOTS = 5  # learned-vv's default number of knots
 GRID_PU = 0.0025  # learned-1547's breakpoint grid, p.u. of voltage
 MAX_GRID = 161  # at most this many breakpoint candidates per DER (the grid widens beyond)
+TOLERANCE = 1e-10  # Clarabel's gap and feasibility tolerances for the fits
 RIDGE = 1e-9  # × the Gram matrix's mean diagonal: makes unidentifiable coefficients 0
 MIN_LIMIT_SHARE = 1e-3  # a step is used for a DER where its limit exceeds this share of S̄
 #: The k and night mode the optimum is fitted at: the DER's whole capability (k = 0), PV
@@ -132,7 +133,7 @@ def _block_lsq(gram: np.ndarray, rhs: np.ndarray, constraints: Callable[[Any], l
     theta = cp.Variable((n, k))
     flat = cp.reshape(theta, (n * k,), order="C")
     problem = cp.Problem(cp.Minimize(cp.sum_squares(a @ flat - target.reshape(-1))), constraints(theta))
-    problem.solve(solver=cp.CLARABEL)
+    problem.solve(solver=cp.CLARABEL, tol_gap_abs=TOLERANCE, tol_gap_rel=TOLERANCE, tol_feas=TOLERANCE)
     if problem.status not in ("optimal", "optimal_inaccurate") or theta.value is None:
         raise InputError(f"the learned rule's least-squares fit failed (Clarabel: {problem.status})")
     return np.asarray(theta.value)
