@@ -51,7 +51,7 @@ def test_affine_recovers_a_linear_rule_inside_its_bound():
     s = np.array([0.5, 1.0, 2.0])
     x = _random_features(rng, 400, s)
     truth = AffineRule()
-    truth.coef_ = np.array([[0.3, -0.2, -0.4, 0.5], [1.1, 0.1, -1.2, -0.3], [-0.5, 0.0, 0.6, 0.2]])
+    truth.coef_ = np.array([[0.3, -0.2, -0.4, 0.5], [1.1, 0.1, -1.2, -0.3], [0.5, 0.0, -0.6, 0.2]])
     y = truth.predict(x)
     fitted = AffineRule().fit(x, y, np.full(3, 10.0), np.ones(y.shape, dtype=bool))
     np.testing.assert_allclose(fitted.coef_, truth.coef_, atol=1e-6)
@@ -59,6 +59,10 @@ def test_affine_recovers_a_linear_rule_inside_its_bound():
     bound = np.array([0.1, 0.1, 0.1])
     tight = AffineRule().fit(x, y, bound, np.ones(y.shape, dtype=bool))
     assert np.all(tight.v_slope() <= bound * (1 + 1e-9)) and np.allclose(tight.v_slope(), bound, rtol=1e-6)
+    # the droop sign: a rule whose Q rose with its own voltage is not fitted (c ≤ 0)
+    rising = AffineRule()
+    rising.coef_ = truth.coef_ * np.array([1, 1, -1, 1])
+    assert np.all(AffineRule().fit(x, rising.predict(x), np.full(3, 10.0), np.ones(y.shape, dtype=bool)).coef_[:, 2] <= 0)
 
 
 def test_voltvar_recovers_a_monotone_curve_on_its_knots():

@@ -8,7 +8,8 @@ like every rule's, and a rule of |V| is solved for its closed-loop steady state.
 Families (Q positive = injected; q = Q/S̄ in p.u. of the DER's nameplate S̄):
 
 - `learned-affine` (`AffineRule`): a linear decision rule
-  q = a + b·P/S̄ + c·|V| + d·Q_load/S̄ per DER.
+  q = a + b·P/S̄ + c·|V| + d·Q_load/S̄ per DER, with c ≤ 0 (the droop sign, as the curves
+  below: Q does not rise with the DER's own voltage).
 - `learned-vv` (`VoltVarRule`): a monotone non-increasing piecewise-linear q(|V|) per DER,
   flat beyond its end knots — an optimized Volt-VAR curve. Its knots are fixed at
   quantiles of the DER's training voltages (`knots` of them, evenly spaced in
@@ -34,7 +35,12 @@ no load gives no information on d). Every family obeys the **slope bound**
 (`opfbench.strategies.sensitivity`, which derives it): the undamped closed-loop iteration
 is then a contraction with factor ρ (option `rho`, default RHO) on the model it was fitted
 on. The limits are not part of the fit: they are applied at evaluation, the same clip as
-every rule's.
+every rule's. Every family is also non-increasing in |V| (c ≤ 0): with X's entries positive
+(injecting Q raises every voltage) the eigenvalues of diag(c)·X then lie in [−ρ, 0], and
+the engine's damped iteration settles at a rate of about ½ per step; a rule whose Q rose
+with its own voltage would be positive feedback, converging at rate ρ — 150 steps for
+1e-7 at ρ = 0.9, beyond the engine's 100 (measured on 1-MV-rural: 69 of 102 unconstrained
+affine fits had c > 0 and 32 of 1 344 test steps did not settle; with c ≤ 0, none).
 
 End to end (`rounds=N`): N rounds of fit → closed-loop evaluation on the training period
 → refit with the voltages the rule itself produced in closed loop (the distribution it
@@ -183,7 +189,7 @@ class LearnedRule:
 
 
 class AffineRule(LearnedRule):
-    """q = a + b·P/S̄ + c·|V| + d·Q_load/S̄ per DER; `coef_` (n_der, 4) [a, b, c, d]."""
+    """q = a + b·P/S̄ + c·|V| + d·Q_load/S̄ per DER, c ≤ 0; `coef_` (n_der, 4) [a, b, c, d]."""
 
     name = "learned-affine"
     reads = ("v", "p", "load")
@@ -194,7 +200,6 @@ class AffineRule(LearnedRule):
         self.coef_ = np.zeros((0, 4))
 
     def fit(self, x: Features, q_mvar: np.ndarray, slope_max: np.ndarray, use: np.ndarray) -> "AffineRule":
-        import cvxpy as cp
 
         s = x.s_rated_mva
         # |V| centred on 1 p.u. for conditioning: θ = [a + c, b, c, d]
@@ -204,8 +209,8 @@ class AffineRule(LearnedRule):
         gram = np.einsum("sik,sil->ikl", z, z)
         rhs = np.einsum("sik,si->ik", z, y)
         c_max = slope_max / s
-        theta = _block_lsq(gram, rhs, lambda t: [cp.abs(t[:, 2]) <= c_max])
-        theta[:, 2] = np.clip(theta[:, 2], -c_max, c_max)  # the solver's tolerance, not a change of the fit
+        theta = _block_lsq(gram, rhs, lambda t: [t[:, 2] <= 0, t[:, 2] >= -c_max])
+        theta[:, 2] = np.clip(theta[:, 2], -c_max, 0.0)  # the solver's tolerance, not a change of the fit
         self.coef_ = np.column_stack([theta[:, 0] - theta[:, 2], theta[:, 1], theta[:, 2], theta[:, 3]])
         self.s_rated_mva_ = np.asarray(s, dtype=float)
         return self
