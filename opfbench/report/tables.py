@@ -406,4 +406,4 @@ def how_close(summary: pd.DataFrame, train: pd.DataFrame | None = None, model_of
     for column in LOCAL_COLUMNS:
         if column not in out:
             out[column] = np.nan
-    return order(out[LOCAL_COLUMNS])
+    return order(out[LOCAL_COLUMNS]).sort_values(["case", "k"], kind="stable").reset_index(drop=True)

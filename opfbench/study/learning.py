@@ -89,6 +89,12 @@ def check_learned(labels: tuple[str, ...], cases: tuple[str, ...], period: Perio
     """Every learned configuration's training period apart from the test period, and a
     params file fitted on the cases it runs on (their models' DERs); InputError otherwise."""
     test = test_window(period)
+    trained = sorted({lc.train for lc in learned_configs(labels) if lc.train})
+    if len(trained) > 1:
+        raise InputError(
+            f"the learned configurations of a run share one training period (the report's training column); got "
+            f"{', '.join(trained)}: run them separately"
+        )
     for lc in learned_configs(labels):
         if lc.train:
             check_disjoint(lc.label, train_window(lc.train, lc.label), test, period.label)
@@ -99,20 +105,23 @@ def check_learned(labels: tuple[str, ...], cases: tuple[str, ...], period: Perio
             params.check_network(load_network(model_case(case)), lc.params)
 
 
-def training_scenario(case: str, train: str, night: str) -> tuple[Period, Scenario]:
+def training_scenario(case: str, train: str, night: str, step_minutes: float | None = None) -> tuple[Period, Scenario]:
     """The training period and snapshots of the case `case` (its own spec; `model_case`
-    gives a perturbed case's model) over `train`: PV connected at night, no forecast."""
+    gives a perturbed case's model) over `train` (at `step_minutes`, default the case's
+    own step): PV connected at night, no forecast."""
     from opfbench.study.scenarios import chunk_scenario, study_period
 
-    period, _ = study_period((case,), ("off",), train, night, None)
+    period, _ = study_period((case,), ("off",), train, night, step_minutes)
     step = pd.Timedelta(hours=period.step_h)
     return period, chunk_scenario(case, TRAIN_NIGHT, "off", period.profiles, period.night, len(period.index), step, "")
 
 
-def training_set(case: str, train: str, night: str, q_mvar: np.ndarray, ok: np.ndarray) -> TrainingSet:
+def training_set(
+    case: str, train: str, night: str, q_mvar: np.ndarray, ok: np.ndarray, step_minutes: float | None = None
+) -> TrainingSet:
     """The training set of `case` over `train` with the optimum `q_mvar` (S, n_der) and its
     certified steps `ok` (S,)."""
-    period, scenario = training_scenario(case, train, night)
+    period, scenario = training_scenario(case, train, night, step_minutes)
     if q_mvar.shape != scenario.der_p_mw.shape or ok.shape != (scenario.n_snapshots,):
         raise InputError(
             f"{case}: the optimum over {train} has shape {q_mvar.shape}; the training period has "

@@ -14,11 +14,14 @@ from opfbench.io import load_network
 from opfbench.registry import configuration
 from opfbench.study.config import StudyConfig
 from opfbench.study.execution import STOPPED, execute
+from opfbench.study.fitted import Fitted
+from opfbench.study.learning import check_learned
 from opfbench.study.periods import Period
 from opfbench.study.progress import Progress
 from opfbench.study.scenarios import study_period
 from opfbench.study.store import RunStore
 from opfbench.study.tasks import Task, TaskOutput, plan_tasks, task_input
+from opfbench.study.training import train
 from opfbench.timing import elapsed_ms, now
 
 
@@ -67,13 +70,26 @@ def run_study(
     fresh: bool = False,
     quiet: bool = False,
     command: list[str] | None = None,
+    fitted: tuple[Fitted, ...] | None = None,
 ) -> StudyRun:
     """Run `config` into the folder `out` (resuming finished tasks). KeyboardInterrupt
-    propagates after the finished tasks are saved; `StudyRun.kept` counts them then."""
+    propagates after the finished tasks are saved; `StudyRun.kept` counts them then.
+    Learned configurations are trained first (`study.training`, nested run folders in
+    `out`) unless `fitted` gives their fitted rules (a nested run's)."""
     say = (lambda msg: None) if quiet else (lambda msg: print(msg, file=sys.stderr, flush=True))
     start = now()
     store = RunStore(out, say)
     config, period, tasks = prepare(config)
+    if fitted is None:
+        check_learned(config.strategies, config.cases, period)
+
+        def nested(sub: StudyConfig, folder: Path, rules: tuple[Fitted, ...]) -> StudyRun:
+            return run_study(
+                sub, folder, workers=workers, scheduler=scheduler, fresh=fresh, quiet=quiet, command=command, fitted=rules
+            )
+
+        fitted = train(config, store.out, nested)
+    config = replace(config, fitted=fitted)
     for note in config.notes:
         say(note)
     run = StudyRun(store.out, config, period, tasks)

@@ -22,10 +22,12 @@ import pandas as pd
 from threadpoolctl import threadpool_limits
 
 from opfbench.plugins import PluginSource, ensure, loaded
-from opfbench.registry import run_strategy
+from opfbench.registry import configuration, run_strategy
 from opfbench.result import StrategyResult
 from opfbench.scenario import Scenario
+from opfbench.strategies.learned import install
 from opfbench.study.config import StudyConfig
+from opfbench.study.fitted import Fitted
 from opfbench.study.periods import Period
 from opfbench.study.scenarios import chunk_scenario
 from opfbench.study.tables import (
@@ -66,7 +68,8 @@ class TaskInput:
     """Everything a worker needs: the task, its profiles (the chunk plus, when the
     period goes on, the next step), the night mask on those rows, the step, the run-level
     settings of the strategies' options (`StudyConfig.settings`), the extra step columns
-    of the run's strategies and the plugins they come from (loaded in the worker first)."""
+    of the run's strategies, the plugins they come from (loaded in the worker first) and
+    the fitted rules of the task's case (installed in the worker first)."""
 
     task: Task
     profiles: pd.DataFrame
@@ -78,6 +81,7 @@ class TaskInput:
     settings: tuple[tuple[str, str], ...] = ()
     columns: tuple[str, ...] = ()
     plugins: tuple[PluginSource, ...] = ()
+    fitted: tuple[Fitted, ...] = ()
 
 
 @dataclass
@@ -131,7 +135,15 @@ def task_input(task: Task, config: StudyConfig, period: Period) -> TaskInput:
         tuple(config.settings().items()),
         extra_columns(config.strategies),
         loaded(config.plugins),
+        tuple(f for f in config.fitted if f.case == task.case),
     )
+
+
+def fitted_options(fitted: tuple[Fitted, ...]) -> dict[str, dict[str, str]]:
+    """Install the fitted rules (under their references) and return, per label fitted by
+    the run (`train=`), the options that make it run with them."""
+    install({f.ref: f.parsed() for f in fitted})
+    return {f.label: {"train": "", "params": f.ref} for f in fitted if configuration(f.label).options()["train"]}
 
 
 def run_task(inp: TaskInput) -> TaskOutput:
@@ -142,6 +154,7 @@ def run_task(inp: TaskInput) -> TaskOutput:
     start = now()
     t = inp.task
     ensure(inp.plugins)
+    overrides = fitted_options(inp.fitted)
     settings = dict(inp.settings)
     with threadpool_limits(1):
         step = pd.Timedelta(hours=inp.step_h)
@@ -155,7 +168,9 @@ def run_task(inp: TaskInput) -> TaskOutput:
             results = {}
             for name in t.strategies:
                 res = results[name] = (
-                    replace(same[name], wall_ms=0.0) if same is not None else run_strategy(name, scenario, t.k, settings)
+                    replace(same[name], wall_ms=0.0)
+                    if same is not None
+                    else run_strategy(name, scenario, t.k, settings, **overrides.get(name, {}))
                 )
                 steps.append(step_rows(t.case, mode, t.forecast, time, inp.step_h, night, res, inp.columns))
                 for table, columns in detail_rows(t.case, mode, t.forecast, time, res, inp.detail).items():
