@@ -278,6 +278,12 @@ class StrategySpec:
         """Fitted to the reference optimum: its parameters come from `train` or `params`."""
         return self.fit is not None
 
+    def fitted_options(self, ref: str) -> dict[str, OptionValue]:
+        """The options that run a learned configuration with the fitted parameters `ref`:
+        params=ref, and the fit's own options (train, rho, …) at their defaults — the fit
+        used them; the engine's options stay the label's."""
+        return {o.name: o.default for o in self.options if o.name not in _ENGINE} | {"params": ref}
+
     def fit_rule(self, training: Any, options: Mapping[str, OptionValue]) -> Any:
         """A learned strategy's fitted parameters for `training` (`fit`)."""
         assert self.fit is not None, f"{self.name} is not a learned strategy"

@@ -143,7 +143,8 @@ def fitted_options(fitted: tuple[Fitted, ...]) -> dict[str, dict[str, str]]:
     """Install the fitted rules (under their references) and return, per label fitted by
     the run (`train=`), the options that make it run with them."""
     install({f.ref: f.parsed() for f in fitted})
-    return {f.label: {"train": "", "params": f.ref} for f in fitted if configuration(f.label).options()["train"]}
+    configs = {f.label: configuration(f.label) for f in fitted}
+    return {f.label: configs[f.label].spec.fitted_options(f.ref) for f in fitted if configs[f.label].options()["train"]}
 
 
 def run_task(inp: TaskInput) -> TaskOutput:
