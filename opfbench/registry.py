@@ -430,6 +430,22 @@ def _builtin() -> tuple[StrategySpec, ...]:
     std = "opfbench.strategies.standards"
     paper = "opfbench.strategies.paper"
     learned = "opfbench.strategies.learned"
+
+    def learned_rule(name: str, summary: str, family: str, reads: tuple[str, ...], *extra: Option) -> StrategySpec:
+        """A learned family (`strategies.learned`): slope-bounded, closed loop."""
+        return StrategySpec(
+            name,
+            "local",
+            summary + " (slope-bounded), closed loop",
+            rule=f"{learned}:{family}_target",
+            reads=reads,
+            options=(*LEARNED_OPTIONS, *extra, *closed_loop),
+            uses_forecast=True,
+            check=f"{learned}:check_{family}",
+            columns=CLOSED_LOOP_COLUMNS,
+            fit=f"{learned}:fit_configuration",
+        )
+
     check = "opfbench.formulations.problem:check_supported"
     return (
         StrategySpec("no-action", "local", "every DER at Q = 0", rule=f"{paper}:no_action_target"),
@@ -517,45 +533,24 @@ def _builtin() -> tuple[StrategySpec, ...]:
             check=f"{std}:check_q_u",
             columns=CLOSED_LOOP_COLUMNS,
         ),
-        StrategySpec(
+        learned_rule(
             "learned-affine",
-            "local",
-            "learned linear decision rule Q/S̄ = a + b·P/S̄ + c·|V| + d·Q_load/S̄ per DER, fitted to the AC OPF (slope-bounded), closed loop",
-            rule=f"{learned}:affine_target",
-            reads=("v", "p", "load"),
-            options=(*LEARNED_OPTIONS, *closed_loop),
-            uses_forecast=True,
-            check=f"{learned}:check_affine",
-            columns=CLOSED_LOOP_COLUMNS,
-            fit=f"{learned}:fit_configuration",
+            "learned linear decision rule Q/S̄ = a + b·P/S̄ + c·|V| + d·Q_load/S̄ per DER (c ≤ 0), fitted to the AC OPF",
+            "affine",
+            ("v", "p", "load"),
         ),
-        StrategySpec(
+        learned_rule(
             "learned-vv",
-            "local",
-            "learned Volt-VAR: monotone piecewise-linear Q(|V|) per DER, knots at training-voltage quantiles, fitted to the AC OPF, closed loop",
-            rule=f"{learned}:vv_target",
-            reads=("v",),
-            options=(
-                *LEARNED_OPTIONS,
-                Option("knots", KNOTS, "knots of the curve, at quantiles of the DER's training voltages"),
-                *closed_loop,
-            ),
-            uses_forecast=True,
-            check=f"{learned}:check_vv",
-            columns=CLOSED_LOOP_COLUMNS,
-            fit=f"{learned}:fit_configuration",
+            "learned Volt-VAR: monotone piecewise-linear Q(|V|) per DER, knots at training-voltage quantiles, fitted to the AC OPF",
+            "vv",
+            ("v",),
+            Option("knots", KNOTS, "knots of the curve, at quantiles of the DER's training voltages"),
         ),
-        StrategySpec(
+        learned_rule(
             "learned-1547",
-            "local",
-            "learned IEEE 1547 Volt-VAR: the four-point shape with per-DER points fitted to the AC OPF, closed loop",
-            rule=f"{learned}:ieee1547_target",
-            reads=("v",),
-            options=(*LEARNED_OPTIONS, *closed_loop),
-            uses_forecast=True,
-            check=f"{learned}:check_1547",
-            columns=CLOSED_LOOP_COLUMNS,
-            fit=f"{learned}:fit_configuration",
+            "learned IEEE 1547 Volt-VAR: the four-point shape with per-DER points fitted to the AC OPF",
+            "ieee1547",
+            ("v",),
         ),
         StrategySpec(
             "acopf",

@@ -733,7 +733,7 @@ def check_vv(options: dict) -> None:
     check_options(VoltVarRule.name, options)
 
 
-def check_1547(options: dict) -> None:
+def check_ieee1547(options: dict) -> None:
     check_options(Ieee1547Rule.name, options)
 
 
