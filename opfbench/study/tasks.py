@@ -139,7 +139,7 @@ def task_input(task: Task, config: StudyConfig, period: Period) -> TaskInput:
     )
 
 
-def fitted_options(fitted: tuple[Fitted, ...]) -> dict[str, dict[str, str]]:
+def fitted_options(fitted: tuple[Fitted, ...]) -> dict[str, dict[str, object]]:
     """Install the fitted rules (under their references) and return, per label fitted by
     the run (`train=`), the options that make it run with them."""
     install({f.ref: f.parsed() for f in fitted})
