@@ -22,7 +22,7 @@ import pandas as pd
 from threadpoolctl import threadpool_limits
 
 from opfbench.plugins import PluginSource, ensure, loaded
-from opfbench.registry import configuration, run_strategy
+from opfbench.registry import OptionValue, configuration, run_strategy
 from opfbench.result import StrategyResult
 from opfbench.scenario import Scenario
 from opfbench.strategies.learned import install
@@ -139,7 +139,7 @@ def task_input(task: Task, config: StudyConfig, period: Period) -> TaskInput:
     )
 
 
-def fitted_options(fitted: tuple[Fitted, ...]) -> dict[str, dict[str, object]]:
+def fitted_options(fitted: tuple[Fitted, ...]) -> dict[str, dict[str, OptionValue]]:
     """Install the fitted rules (under their references) and return, per label fitted by
     the run (`train=`), the options that make it run with them."""
     install({f.ref: f.parsed() for f in fitted})
