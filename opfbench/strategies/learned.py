@@ -8,7 +8,7 @@ like every rule's, and a rule of |V| is solved for its closed-loop steady state.
 Families (Q positive = injected; q = Q/S̄ in p.u. of the DER's nameplate S̄):
 
 - `learned-affine` (`AffineRule`): a linear decision rule
-  q = a + b·P/S̄ + c·|V| + d·Q_load/S̄ per DER, with c ≤ 0 (the droop sign, as the curves
+  q = a + b·P/S̄ + c·|V| + d·Q_load/S̄ per DER, with c ≤ 0 (Volt-VAR's sign, as the curves
   below: Q does not rise with the DER's own voltage).
 - `learned-vv` (`VoltVarRule`): a monotone non-increasing piecewise-linear q(|V|) per DER,
   flat beyond its end knots — an optimized Volt-VAR curve. Its knots are fixed at
