@@ -10,6 +10,7 @@ import json
 
 import numpy as np
 import pandas as pd
+import pytest
 
 from opfbench.cli import main
 from opfbench.registry import run_strategy
@@ -86,3 +87,27 @@ def test_fitted_rules_reach_workers_that_cannot_read_the_run_folder(dask_cluster
     a = pd.read_parquet(local / "steps.parquet").drop(columns=timing)
     b = pd.read_parquet(remote / "steps.parquet").drop(columns=timing)
     pd.testing.assert_frame_equal(a, b, check_exact=True)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("case", ["paper33", "simbench:1-LV-rural3--0-sw"])
+def test_a_month_of_training_and_a_week_of_test(case, tmp_path):
+    """Every family trained on January and tested on a week of February, nominal and
+    perturbed grid: all settle, none leaves its limits, each reduces the losses."""
+    train = "2016-01-01..2016-02-01"
+    labels = [f"{family}:train={train}" for family in ("learned-affine", "learned-vv", "learned-1547")]
+    out = tmp_path / "run"
+    argv = ["run", "--case", case, f"{case}?line-z=1.2", "--strategies", "no-action", *labels, "acopf"]
+    assert (
+        main(
+            [*argv, "--period", "2016-02-01..2016-02-08", "--k", "0", "0.4", "--night-modes", "connected"]
+            + ["--forecast", "off", "--quiet", "--workers", "2", "--out", str(out)]
+        )
+        == 0
+    )
+    summary = pd.read_csv(out / "summary.csv")
+    learned = summary[summary["strategy"].isin(labels)]
+    assert len(learned) == 2 * 2 * 3 and (learned["not_settled_steps"] == 0).all() and (learned["not_ok_steps"] == 0).all()
+    assert (learned["excursion_steps"] == 0).all() and (learned["energy_kwh"] < learned["no_action_kwh"]).all()
+    train_summary = pd.read_csv(out / "train" / "summary.csv")
+    assert set(labels) <= set(train_summary["strategy"]) and (train_summary["not_settled_steps"] == 0).all()
