@@ -64,6 +64,9 @@ def check_reserve(k: float) -> float:
     or a number outside the range)."""
     if np.ndim(k) != 0:
         raise InputError(f"reserve coefficient k must be one number, got shape {np.shape(k)}")
+    real = isinstance(k, (int, float, np.integer, np.floating)) or (isinstance(k, np.ndarray) and k.dtype.kind in "iuf")
+    if isinstance(k, (bool, np.bool_)) or not real:
+        raise InputError(f"reserve coefficient k must be a number in [0, 1], got {k!r}")
     value = float(k)
     if not (math.isfinite(value) and 0.0 <= value <= 1.0):
         raise InputError(f"reserve coefficient k must lie in [0, 1], got {k}")

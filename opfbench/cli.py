@@ -26,11 +26,23 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = build_parser()
+    """Run the command line; Ctrl-C anywhere stops with exit code 130 and one line (what a
+    study kept, `opfbench.errors.Stopped`)."""
+    command = "opfbench"
     try:
-        args = parser.parse_args(argv)
-    except SystemExit as exc:  # argparse already printed its message
-        return 0 if exc.code == 0 else 2
+        parser = build_parser()
+        try:
+            args = parser.parse_args(argv)
+        except SystemExit as exc:  # argparse already printed its message
+            return 0 if exc.code == 0 else 2
+        command = f"opfbench {args.command}"
+        return _run(args)
+    except KeyboardInterrupt as exc:
+        print(f"\n{command}: stopped" + (f"; {exc}" if str(exc) else " (Ctrl-C)"), file=sys.stderr, flush=True)
+        return 130
+
+
+def _run(args: argparse.Namespace) -> int:
     try:
         return int(args.func(args) or 0)
     except OpfbenchError as exc:

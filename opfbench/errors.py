@@ -20,3 +20,8 @@ class InputError(OpfbenchError, ValueError):
 
 class DataError(OpfbenchError):
     """A data file or series is unusable (gaps left after cleaning, non-monotonic time, ...)."""
+
+
+class Stopped(KeyboardInterrupt):
+    """Ctrl-C, after the work done so far is saved; the message says what was kept (the
+    CLI prints it on one line and exits with 130)."""

@@ -52,10 +52,7 @@ class Scenario:
     load_q_mvar: np.ndarray | None = None
 
     def __post_init__(self) -> None:
-        if not isinstance(self.net, Network):
-            raise InputError(
-                f"scenario: net must be a Network (e.g. opfbench.io.load_network('paper33')), got {type(self.net).__name__}"
-            )
+        _check_net(self.net)
         n_der = len(self.net.ders)
         if self.load_scale is None:
             n_snap = self._check_loads()
@@ -73,6 +70,7 @@ class Scenario:
                 raise InputError(f"scenario: load_scale must be ≥ 0, got {ls.min()} at index {int(np.argmin(ls))}")
             object.__setattr__(self, "load_scale", _frozen(ls))
             n_snap = ls.shape[0]
+        self._check_total_load()
         p = _der_array("der_p_mw", self.der_p_mw, n_snap, n_der)
         _check_finite("der_p_mw", p)
         self._check_range("der_p_mw", p)
@@ -114,6 +112,20 @@ class Scenario:
         for label, arr in arrays.items():
             object.__setattr__(self, label, _frozen(arr))
         return arrays["load_p_mw"].shape[0]
+
+    def _check_total_load(self) -> None:
+        """Each snapshot's total load (Σ|P| + Σ|Q|) is a finite number of MW: every load
+        finite does not make their sum (or load_scale × the nominal loads) finite."""
+        with np.errstate(over="ignore", invalid="ignore"):
+            if self.load_scale is None:
+                assert self.load_p_mw is not None and self.load_q_mvar is not None
+                total = np.abs(self.load_p_mw).sum(axis=1) + np.abs(self.load_q_mvar).sum(axis=1)
+            else:
+                total = self.load_scale * (np.abs(self.net.load_p_mw).sum() + np.abs(self.net.load_q_mvar).sum())
+        if not np.isfinite(total).all():
+            s = int(np.flatnonzero(~np.isfinite(total))[0])
+            scale = "" if self.load_scale is None else f" (load_scale {self.load_scale[s]:g} × the nominal loads)"
+            raise InputError(f"scenario: the total load of snapshot {s}{scale} is not a finite number of MW")
 
     @property
     def per_load(self) -> bool:
@@ -161,6 +173,7 @@ class Scenario:
         cls, net: Network, load_scale: float = 1.0, der_scale: float = 0.8, forecast_der_scale: float | None = None
     ) -> "Scenario":
         """One snapshot: every DER at `der_scale` × rating (and optionally a forecast)."""
+        _check_net(net)
         for label, value in (("der_scale", der_scale), ("forecast_der_scale", forecast_der_scale)):
             if value is not None and not 0 <= value <= 1:
                 raise InputError(f"{label} is a fraction of rating and must lie in [0, 1], got {value}")
@@ -249,11 +262,13 @@ class Scenario:
         load = _real_array("load_pu", load_pu)
         if load.ndim != 1:
             raise InputError(f"scenario: load_pu must be a 1-D profile (S,), got shape {load.shape}")
+        _check_finite("load_pu", load)
 
         def profile(label: str, value: np.ndarray) -> np.ndarray:
             arr = _real_array(label, value)
             if arr.shape != load.shape:
                 raise InputError(f"scenario: {label} must have the shape of load_pu {load.shape}, got {arr.shape}")
+            _check_finite(label, arr)
             return arr
 
         def der_mw(pv: np.ndarray, wind: np.ndarray, prefix: str = "") -> np.ndarray:
@@ -304,6 +319,11 @@ class Scenario:
         if self.pv_night_q is None or not self.pv_night_q.any():
             return qmax(kinds, p, rating, s_rated)
         return qmax(kinds, p, rating, s_rated, night_q=self.pv_night_q[:, None] & net.der_solar[None, :])
+
+
+def _check_net(net: object) -> None:
+    if not isinstance(net, Network):
+        raise InputError(f"scenario: net must be a Network (e.g. opfbench.io.load_network('paper33')), got {type(net).__name__}")
 
 
 def _real_array(label: str, value: object) -> np.ndarray:

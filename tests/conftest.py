@@ -19,11 +19,11 @@ def paper33() -> Network:
     return load_network("paper33")
 
 
-@pytest.fixture
-def dask_cluster(tmp_path) -> Iterator[str]:
+@pytest.fixture(scope="session")
+def dask_cluster(tmp_path_factory) -> Iterator[str]:
     """The address of a real Dask cluster on localhost: a scheduler and two single-threaded
-    workers, each its own process (log in `tmp_path / "dask.log"`)."""
-    with _dask_cluster(tmp_path / "dask.log") as address:
+    workers, each its own process (log in a temporary `dask.log`), shared by the tests."""
+    with _dask_cluster(tmp_path_factory.mktemp("dask") / "dask.log") as address:
         yield address
 
 

@@ -107,6 +107,11 @@ BAD_VALUES = {
     ),
     "Python-only number 1_00": (with_entry(TINY_CASE, "bus", 2, 3, "1_00"), "column 3: non-numeric entry '1_00'"),
     "Arabic-Indic digits": (with_entry(TINY_CASE, "bus", 2, 3, "١٠٠"), "column 3: non-numeric entry '١٠٠'"),
+    "a transposed matrix": (
+        TINY_CASE.replace("];\nmpc.gen", "]';\nmpc.gen", 1),
+        'mpc.bus = [...] is followed by "\';"; a matrix',
+    ),
+    "a matrix times a number": (TINY_CASE.replace("];\nmpc.branch", "] * 1e3;\nmpc.branch", 1), "is followed by '* 1e3;'"),
     "a matrix defined twice": (
         TINY_CASE.replace(
             "mpc.gencost = [", "mpc.bus = [\n\t9\t1\t0\t0\t0\t0\t1\t1\t0\t12.66\t1\t1.1\t0.9;\n];\nmpc.gencost = ["
@@ -382,6 +387,21 @@ def test_scenario_refuses_complex_and_non_numeric(net):
         Scenario(net, [1.0, 1.0], [[0.3] * 5, [0.3] * 4])
 
 
+def test_scenario_loads_must_add_up_to_a_finite_number(capsys, net):
+    with pytest.raises(InputError, match=r"total load of snapshot 1 \(load_scale 1e\+308 × the nominal loads\) is not a finite"):
+        Scenario(net, [1.0, 1e308], np.zeros((2, 5)))
+    huge = np.full((1, net.n_load), 1e307)  # each finite, their sum not
+    with pytest.raises(InputError, match="total load of snapshot 0 is not a finite number of MW"):
+        Scenario.from_series(net, huge, np.zeros_like(huge), np.zeros((1, 5)))
+    with pytest.raises(InputError, match="scenario: net must be a Network .*, got NoneType"):
+        Scenario.snapshot(None)
+    code, err = _cli(capsys, ["pf", "paper33", "--load-scale", "1e308", "--json"])  # printed an overflow warning
+    assert code == 2 and err == (
+        "opfbench pf: error: scenario: the total load of snapshot 0 (load_scale 1e+308 × the nominal loads) is not a "
+        "finite number of MW\n"
+    )
+
+
 def test_scenario_copies_its_inputs(net):
     load, p = np.ones(2), np.full((2, 5), 0.3)
     scenario = Scenario(net, load, p)
@@ -521,3 +541,18 @@ def test_cli_pf_and_forecast_files_do_not_import_torch_statsmodels_matplotlib():
     )
     proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
     assert proc.stdout.strip() == "[] [] [] 0", proc.stderr
+
+
+def test_api_numbers_of_the_wrong_kind_or_domain(net):
+    from opfbench.capability import check_reserve
+    from opfbench.study.periods import resolve_period
+
+    for k in ("0.5", True, None):
+        with pytest.raises(InputError, match="reserve coefficient k must be a number in"):
+            check_reserve(k)  # type: ignore[arg-type]
+    assert check_reserve(np.float32(0.5)) == 0.5 and check_reserve(np.array(0.25)) == 0.25
+    for step in (0.0, -5, True, float("nan")):  # 0 read as "not given": the period's own step
+        with pytest.raises(InputError, match="--step-minutes must be a finite number of minutes > 0"):
+            resolve_period("paper-day", "sun", step)
+    with pytest.raises(InputError, match=r"scenario: pv_pu has NaN or inf at index \(1,\)"):
+        Scenario.from_profiles(net, np.ones(3), np.array([0.1, np.nan, 0.1]), np.zeros(3))

@@ -11,7 +11,7 @@ import pytest
 
 from opfbench.cli import main
 from opfbench.dynamics.params import ModelParams
-from opfbench.dynamics.study import case_source, operating_point
+from opfbench.dynamics.point import case_source, operating_point
 from opfbench.errors import InputError
 from opfbench.io import load_case
 

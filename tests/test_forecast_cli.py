@@ -7,37 +7,25 @@ contract, not the forecast quality)."""
 from __future__ import annotations
 
 import json
-from dataclasses import replace
 
 import numpy as np
 import pandas as pd
 import pytest
 
 import opfbench.cli as cli
-from opfbench.forecasting import models
-from opfbench.forecasting.datasets import pv_dataset, wind_dataset
+from opfbench.forecasting.datasets import wind_dataset
 from opfbench.forecasting.experiment import run_comparison
-from opfbench.forecasting.models import MODEL_NAMES, settings_for
+from opfbench.forecasting.models import MODEL_NAMES
 from opfbench.forecasting.outputs import load_forecast
-from tests.support.forecast_synthetic import synthetic_pv_minute, synthetic_wind_hourly
+from tests.support.forecast_synthetic import synthetic_wind_hourly, tiny_settings, use_tiny_synthetic
 
 TIMINGS = ("fit_s", "predict_s")
-
-
-def tiny_settings(dataset: str, quick: bool = True):
-    """The quick settings, cut to one epoch of 64 windows and one ARIMA order fitted on 300 samples."""
-    return replace(settings_for(dataset, quick), epochs=1, windows_per_epoch=64, arima_orders=((1, 0, 0),), arima_fit_samples=300)
 
 
 @pytest.fixture
 def run_cli(monkeypatch, capsys):
     """Run `opfbench forecast ...` on synthetic data; returns (exit code, stdout, stderr)."""
-    synthetic = {
-        "pv": lambda: pv_dataset(synthetic_pv_minute(days=6)),
-        "wind": lambda: wind_dataset(synthetic_wind_hourly(days=60)),
-    }
-    monkeypatch.setattr("opfbench.forecasting.datasets.forecast_dataset", lambda name: synthetic[name]())
-    monkeypatch.setattr(models, "settings_for", tiny_settings)
+    use_tiny_synthetic(monkeypatch)
 
     def run(*argv: str) -> tuple[int, str, str]:
         code = cli.main(["forecast", *argv])

@@ -32,7 +32,7 @@ def no_run(monkeypatch):
     def fail(*args, **kwargs):
         raise AssertionError("a task ran before the input was refused")
 
-    monkeypatch.setattr("opfbench.study.execution.run_task", fail)
+    monkeypatch.setattr("opfbench.study.tasks.run_task", fail)
 
 
 @pytest.mark.parametrize(
@@ -188,3 +188,16 @@ def test_a_forecast_beyond_the_plant_is_refused_not_clipped(tmp_path):
     with pytest.raises(DataError, match=r"line 3: '20.0' is outside the plant's range \[0, 10\] kW"):
         load_forecast(folder, "pv", "lstm")
     assert load_forecast(_forecast_folder(tmp_path, [1.0, 10.0, 3.0], 10.0), "pv", "lstm").max() == 10.0
+
+
+def test_a_forecast_missing_a_later_chunks_daylight_is_refused_before_any_task(capsys, tmp_path, no_run):
+    from opfbench.data import load_pv_minute
+
+    pv = load_pv_minute()["pv_ac_kw"].loc["2016-06-28 03:00":"2016-06-28 12:00"]  # UTC: covers the first two chunks only
+    frame = pv.to_frame("actual").assign(lstm=pv)
+    frame.index = frame.index.strftime("%Y-%m-%dT%H:%M:%S%z").rename("timestamp")
+    frame.to_csv(tmp_path / "forecast_pv.csv")
+    argv = ["run", "--strategies", "llma", "--k", "0", "--night-modes", "connected", "--forecast", "lstm"]
+    code, err = _cli(capsys, [*argv, "--forecast-dir", str(tmp_path), "--workers", "1", "--out", str(tmp_path / "run")])
+    assert code == 2 and err.count("\n") == 1, err
+    assert f"forecast 'lstm' in {tmp_path} has no value for" in err and "first 2016-06-28 12:01:00+00:00" in err, err

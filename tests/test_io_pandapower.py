@@ -4,11 +4,14 @@ refuses, with the table and index named; `.json` files through `load_case`."""
 
 from __future__ import annotations
 
+import copy
 import json
+import re
 import warnings
 
 import numpy as np
 import pandapower as pp
+import pandas as pd
 import pytest
 
 from opfbench.cli import main
@@ -157,12 +160,80 @@ def test_unmappable_elements_are_refused(change, message):
         from_pandapower(net, "meshed")
 
 
+@pytest.fixture(scope="module")
+def meshed() -> pp.pandapowerNet:
+    """`_meshed()` built once; each test changes its own deep copy."""
+    return _meshed()
+
+
+def _cell(table: str, column: str, value: object, row: int = 0):
+    def change(n):
+        n[table][column] = n[table].get(column, pd.Series(np.nan, index=n[table].index)).astype(object)
+        n[table].loc[n[table].index[row], column] = value
+
+    return change
+
+
+@pytest.mark.parametrize(
+    "change, message",
+    [  # a value pandapower's power flow needs is never replaced by a default
+        (_cell("load", "p_mw", np.nan), "table 'load' index 0: p_mw is empty; pandapower's power flow needs a number"),
+        (_cell("load", "q_mvar", "lots", 1), "table 'load' index 1: q_mvar is 'lots', not a finite number"),
+        (_cell("load", "scaling", np.inf), "table 'load' index 0: scaling is inf, not a finite number"),
+        (_cell("load", "p_mw", True), "table 'load' index 0: p_mw is True, not a finite number"),
+        (_cell("load", "in_service", "no"), "table 'load' index 0: in_service is 'no', not true or false"),
+        (_cell("load", "bus", 99), "table 'load' index 0: bus 99 is not a bus of table 'bus'"),
+        (_cell("line", "r_ohm_per_km", np.nan), "table 'line' index 0: r_ohm_per_km is empty"),
+        (_cell("line", "length_km", -1.0), "table 'line' index 0: length_km is -1; it must be > 0"),
+        (_cell("line", "parallel", 0), "table 'line' index 0: parallel is 0; it must be > 0"),
+        (_cell("line", "to_bus", 7, 1), "table 'line' index 1: to_bus 7 is not a bus of table 'bus'"),
+        (_cell("trafo", "vkr_percent", np.nan), "table 'trafo' index 0: vkr_percent is empty"),
+        (_cell("trafo", "sn_mva", 0.0), "table 'trafo' index 0: sn_mva is 0; it must be > 0"),
+        (_cell("trafo", "tap_pos", "up", 1), "table 'trafo' index 1: tap_pos is 'up', not a finite number"),
+        (_cell("sgen", "p_mw", np.nan), "table 'sgen' index 0: p_mw is empty"),
+        (_cell("bus", "vn_kv", 0.0, 2), "table 'bus' index 2: vn_kv is 0; it must be > 0"),
+        (_cell("bus", "max_vm_pu", "high", 2), "table 'bus' index 2: max_vm_pu is 'high', not a finite number"),
+        (_cell("ext_grid", "vm_pu", np.nan), "table 'ext_grid' index 0: vm_pu is empty"),
+        (lambda n: n.load.drop(columns="q_mvar", inplace=True), "table 'load' has no column 'q_mvar'"),
+        (lambda n: n.__setitem__("sn_mva", 0.0), "the net's sn_mva is 0.0; it must be a positive number"),
+    ],
+)
+def test_values_pandapower_needs_are_refused_not_defaulted(meshed, change, message):
+    net = copy.deepcopy(meshed)
+    change(net)
+    with pytest.raises(CaseFormatError, match=re.escape(f"meshed: {message}")):
+        from_pandapower(net, "meshed")
+
+
+def test_optional_values_left_empty_keep_pandapowers_defaults(meshed):
+    net = copy.deepcopy(meshed)
+    for table, column in (("sgen", "max_p_mw"), ("sgen", "sn_mva"), ("bus", "min_vm_pu"), ("trafo", "tap_step_percent")):
+        net[table][column] = np.nan
+    converted = from_pandapower(net, "meshed").network
+    assert converted.der_rating_mw[0] == 4.0 and converted.vmin.min() == 0.9
+
+
+def test_text_in_a_number_column_of_a_json_file_exit_2(tmp_path, capsys, meshed):
+    path = tmp_path / "grid.json"
+    pp.to_json(meshed, str(path))
+    outer = json.loads(path.read_text())
+    load = json.loads(outer["_object"]["load"]["_object"])
+    load["data"][0][load["columns"].index("p_mw")] = "lots"  # pandapower reads it back as text
+    outer["_object"]["load"]["_object"] = json.dumps(load)
+    path.write_text(json.dumps(outer))
+    assert main(["pf", str(path)]) == 2
+    assert capsys.readouterr().err == f"opfbench pf: error: {path}: table 'load' index 0: p_mw is 'lots', not a finite number\n"
+
+
 def test_json_file_through_load_case(tmp_path):
     path = tmp_path / "grid.json"
     pp.to_json(_radial(), str(path))
     case = load_case(str(path))
     assert case.network.name == "grid" and len(case.network.ders) == 3 and case.series is None
     assert case.stored is not None and case.short_circuit == (300.0, 0.2)
+    for arr in (*case.stored, case.load_index, case.der_index):  # the cached case is shared: read-only
+        with pytest.raises(ValueError, match="read-only"):
+            arr[0] = 0
     assert load_case(f"{path}?der-pf=0.95").network.der_s_mva[0] == pytest.approx(0.04 / 0.95)
 
 

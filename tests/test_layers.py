@@ -18,7 +18,18 @@ PACKAGE = Path(__file__).resolve().parents[1] / "opfbench"
 
 # lowest first: (layer, the modules and packages in it)
 LAYERS: tuple[tuple[str, tuple[str, ...]], ...] = (
-    ("foundation", ("opfbench", "opfbench.errors", "opfbench.jsonio", "opfbench.timing", "opfbench.folders")),
+    (
+        "foundation",
+        (
+            "opfbench",
+            "opfbench.errors",
+            "opfbench.jsonio",
+            "opfbench.parquetio",
+            "opfbench.digests",
+            "opfbench.timing",
+            "opfbench.folders",
+        ),
+    ),
     ("network", ("opfbench.network", "opfbench.capability")),
     ("cases", ("opfbench.io", "opfbench.cases")),
     ("powerflow", ("opfbench.powerflow",)),

@@ -20,10 +20,12 @@ TRAIN = "2016-03-01..2016-03-02"
 TEST = "2016-03-02T00:00..2016-03-02T06:00"
 AFFINE, IEEE = f"learned-affine:train={TRAIN}", f"learned-1547:train={TRAIN},rounds=1"  # rounds: the end-to-end fit
 PERTURBED = "paper33?line-z=1.2"
-ARGS = ["--period", TEST, "--k", "0", "--night-modes", "connected", "--forecast", "off", "--quiet", "--workers", "1"]
+ARGS = ["--period", TEST, "--k", "0", "--night-modes", "connected", "--forecast", "off", "--quiet"]
 
 
-def _run(out, cases=("paper33", PERTURBED), strategies=("no-action", "volt-var", AFFINE, IEEE, "acopf"), extra=()) -> int:
+def _run(
+    out, cases=("paper33", PERTURBED), strategies=("no-action", "volt-var", AFFINE, IEEE, "acopf"), extra=("--workers", "1")
+) -> int:
     return main(["run", "--case", *cases, "--strategies", *strategies, *ARGS, *extra, "--out", str(out)])
 
 
@@ -71,7 +73,7 @@ def test_run_trains_on_the_model_and_tests_out_of_sample(tmp_path):
 
 def test_a_run_refuses_leaks_before_any_work(tmp_path, capsys):
     out = tmp_path / "run"
-    assert _run(out, extra=("--period", "2016-03-01T12:00..2016-03-01T18:00")) == 2
+    assert _run(out, extra=("--period", "2016-03-01T12:00..2016-03-01T18:00", "--workers", "1")) == 2
     assert "overlaps the test period" in capsys.readouterr().err and not (out / "train").exists()
     two = (AFFINE, "learned-vv:train=2016-02-01..2016-02-02")
     assert _run(out, strategies=("no-action", *two)) == 2

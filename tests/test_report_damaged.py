@@ -6,6 +6,7 @@ checks before its work)."""
 from __future__ import annotations
 
 import json
+import re
 import shutil
 from pathlib import Path
 
@@ -95,7 +96,7 @@ DAMAGE = {
     ),
     "price as text": (
         lambda run: _manifest(run, lambda m: m["config"].update(price_per_kwh="cheap")),
-        "manifest.json: config.price_per_kwh is 'cheap', expected a number",
+        "manifest.json: config.price_per_kwh is 'cheap', expected a finite number ≥ 0",
     ),
     "negative price": (
         lambda run: _manifest(run, lambda m: m["config"].update(price_per_kwh=-1)),
@@ -111,7 +112,7 @@ DAMAGE = {
     ),
     "unknown schema version": (
         lambda run: _manifest(run, lambda m: m.update(schema=99)),
-        "manifest.json: schema 99 is not one this opfbench reads (1..1; a newer one wrote it?)",
+        "manifest.json: schema 99 is not one this opfbench reads (1..2; a newer one wrote it?)",
     ),
     "no schema": (
         lambda run: _manifest(run, lambda m: m.pop("schema")),
@@ -120,7 +121,55 @@ DAMAGE = {
     "schema true": (lambda run: _manifest(run, lambda m: m.update(schema=True)), "manifest.json: schema True is not one"),
     "ks as text": (
         lambda run: _manifest(run, lambda m: m["config"].update(ks=["a"])),
-        "manifest.json: config.ks is ['a'], expected a list of numbers",
+        "manifest.json: config.ks is ['a'], expected a list of numbers in [0, 1]",
+    ),
+    "ks Infinity": (
+        lambda run: (run / "manifest.json").write_text(
+            re.sub(r'"ks": \[[^]]*\]', '"ks": [0.0, Infinity]', (run / "manifest.json").read_text())
+        ),
+        "manifest.json: config.ks is [0.0, inf], expected a list of numbers in [0, 1]",
+    ),
+    "k 1.5": (
+        lambda run: _manifest(run, lambda m: m["config"].update(ks=[0.0, 1.5])),
+        "config.ks is [0.0, 1.5], expected a list of numbers in [0, 1]",
+    ),
+    "currency empty": (
+        lambda run: _manifest(run, lambda m: m["config"].update(currency=" ")),
+        "manifest.json: config.currency is ' ', expected a printable label",
+    ),
+    "a name twice in one object": (
+        lambda run: (run / "manifest.json").write_text((run / "manifest.json").read_text().replace("{", '{"schema": 9, ', 1)),
+        "manifest.json: not valid JSON (the name 'schema' appears twice in one object)",
+    ),
+    "no config": (lambda run: _manifest(run, lambda m: m.pop("config")), "manifest.json: no config: not the manifest of a run"),
+    "a fault study's manifest": (
+        lambda run: _manifest(run, lambda m: m["config"].pop("period")),
+        "manifest.json: no config.period: not the manifest of a run",
+    ),
+    "manifest.json a folder": (
+        lambda run: ((run / "manifest.json").unlink(), (run / "manifest.json").mkdir()),
+        "manifest.json: is not a file (a folder?)",
+    ),
+    "steps.parquet a folder": (
+        lambda run: ((run / "steps.parquet").unlink(), (run / "steps.parquet").mkdir()),
+        "steps.parquet: is not a file (a folder?)",
+    ),
+    "steps k 7": (lambda run: _steps(run, lambda t: t.assign(k=7.0)), "steps.parquet: column 'k' holds 7 outside [0, 1]"),
+    "steps losses inf": (
+        lambda run: _steps(run, lambda t: t.assign(losses_kw=float("inf"))),
+        "steps.parquet: column 'losses_kw' holds inf (",
+    ),
+    "steps without a status": (
+        lambda run: _steps(run, lambda t: t.assign(status=t.status.where(t.index % 5 != 0, None))),
+        "row(s) have no status",
+    ),
+    "steps time without a zone": (
+        lambda run: _steps(run, lambda t: t.assign(time=t.time.dt.tz_localize(None))),
+        "steps.parquet: column 'time' is time without a time zone, expected time",
+    ),
+    "der_q q_mvar -inf": (
+        lambda run: (pd.read_parquet(run / "der_q.parquet").assign(q_mvar=-float("inf"))).to_parquet(run / "der_q.parquet"),
+        "der_q.parquet: column 'q_mvar' holds -inf",
     ),
     "a case entry as text": (
         lambda run: _manifest(run, lambda m: m.update(cases={"paper33": "big"})),
@@ -156,7 +205,7 @@ DAMAGE = {
     "summary without a case": (lambda run: _summary(run, lambda t: t.assign(case=None)), "row(s) have no case"),
     "summary infinite energy": (
         lambda run: _summary(run, lambda t: t.assign(energy_kwh=float("inf"))),
-        "summary.csv: column 'energy_kwh' holds an infinite value",
+        "summary.csv: column 'energy_kwh' holds inf (",
     ),
     "summary negative count": (
         lambda run: _summary(run, lambda t: t.assign(steps=-5)),
@@ -182,9 +231,10 @@ def test_damaged_run_folder_exit_2_naming_the_file(capsys, run_dir, label):
     [
         ("nope", "forecast_pv.json: not valid JSON"),
         ('{"metrics": {"arima": 5}}', "forecast_pv.json: metrics['arima'] is 5, expected an object of numbers"),
-        ('{"metrics": {"arima": {"mse_scaled": "low"}}}', "metrics['arima']['mse_scaled'] is 'low', expected a number"),
+        ('{"metrics": {"arima": {"mse_scaled": "low"}}}', "metrics['arima']['mse_scaled'] is 'low', expected a finite number"),
         ('{"metrics": [1]}', "forecast_pv.json: metrics is [1], expected an object of models"),
         ("[]", "forecast_pv.json: holds a JSON list, not an object"),
+        ('{"metrics": {"lstm": {"mape_pct": Infinity}}}', "metrics['lstm']['mape_pct'] is inf, expected a finite number"),
     ],
 )
 def test_bad_forecast_json_exit_2(capsys, tmp_path, run_dir, text, message):
@@ -218,10 +268,23 @@ def test_a_folder_given_for_another_input_is_refused(capsys, run_dir, option, me
     assert code == 2 and f"{option} {run_dir} {message}" in err, err
 
 
+@pytest.mark.parametrize("folder", ["empty", "fault"])
+def test_a_folder_without_a_run_is_refused(capsys, tmp_path, folder):
+    target = write_fault(tmp_path / "fault") if folder == "fault" else tmp_path / "empty"
+    target.mkdir(exist_ok=True)
+    code = main(["report", str(target), "--out", str(tmp_path / "r.html")])
+    err = capsys.readouterr().err
+    message = "holds no run (no manifest.json)" if folder == "empty" else "manifest.json: no config: not the manifest of a run"
+    assert code == 2 and message in err and not (tmp_path / "r.html").exists(), err
+
+
 def test_report_out_must_be_a_file(capsys, tmp_path, run_dir):
     code = main(["report", str(run_dir), "--out", str(tmp_path)])
     err = capsys.readouterr().err
     assert code == 2 and f"--out {tmp_path} is a folder; give the report's file name" in err, err
+    code = main(["report", str(run_dir), "--out", f"{tmp_path}/new/"])  # not yet a folder: pathlib drops the slash
+    err = capsys.readouterr().err
+    assert code == 2 and f"argument --out: '{tmp_path}/new/' names a folder" in err and not (tmp_path / "new").exists()
     blocker = tmp_path / "file"
     blocker.write_text("")
     code = main(["report", str(run_dir), "--out", str(blocker / "report.html")])
@@ -249,7 +312,7 @@ def test_run_refuses_a_damaged_report_input_before_its_work(capsys, tmp_path, mo
     def fail(*args, **kwargs):
         raise AssertionError("a task ran before the input was refused")
 
-    monkeypatch.setattr("opfbench.study.execution.run_task", fail)
+    monkeypatch.setattr("opfbench.study.tasks.run_task", fail)
     fault = write_fault(tmp_path / "fault")
     _truncate(fault / "fault.parquet")
     argv = ["run", "--period", "2016-06-28T10:00..2016-06-28T10:10", "--strategies", "no-action", "--workers", "1"]

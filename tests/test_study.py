@@ -242,7 +242,8 @@ def test_resume_refuse_fresh(tmp_path, capsys):
     assert main([*SMALL, "--out", out]) == 0  # everything kept
     assert "(0 run now, 2 kept)" in capsys.readouterr().out
     # nothing left to run: no scheduler is contacted (this address answers nothing)
-    assert main([*SMALL, "--out", out, "--scheduler", "tcp://127.0.0.1:9"]) == 0
+    on_cluster = [a for a in SMALL if a not in ("--workers", "1")]  # --workers and --scheduler exclude each other
+    assert main([*on_cluster, "--out", out, "--scheduler", "tcp://127.0.0.1:9"]) == 0
     assert "(0 run now, 2 kept)" in capsys.readouterr().out
     pd.testing.assert_frame_equal(first, pd.read_parquet(tmp_path / "run" / "steps.parquet"))
     assert main([*SMALL, "--k", "0.2", "--out", out]) == 2
@@ -301,22 +302,30 @@ def test_whole_day_every_strategy_at_k0(tmp_path):
 @pytest.mark.slow
 def test_whole_default_grid(tmp_path):
     """The main job's full grid (`opfbench run` defaults): every step solved, orderings hold."""
-    run = run_study(StudyConfig(), tmp_path, workers=os.cpu_count() or 1, quiet=True)
+    config = StudyConfig(forecast_strategies=DEFAULT_FORECAST)
+    run = run_study(config, tmp_path, workers=os.cpu_count() or 1, quiet=True)
     table = pd.read_parquet(run.out / "steps.parquet")
     assert (table.status == "ok").all()
     _check_day(table[table.forecast == "off"])
-    assert table.groupby(CONFIG_KEYS).ngroups == 6 * 5 * 3 + 2 * 5 * 3  # forecast off; oracle: LLMA, LFMA
+    assert table.groupby(CONFIG_KEYS).ngroups == len(DEFAULT_RUN) * 5 * 3 + len(DEFAULT_FORECAST) * 5 * 3
     # Nothing under a forecast repeats. What does is by definition or by the day's data: no
-    # action at every k and Q capability (10 · 9 / 2 + 5 · 4 / 2 pairs), and the paper's OPF
+    # action at every k and Q capability (10 · 9 / 2 + 5 · 4 / 2 pairs); the paper's OPF
     # setup, which equals the AC OPF on this day (the slack never exports and the fast path
-    # certifies every step, so neither the slack rule nor the paper's failure rule acts).
+    # certifies every step, so neither the slack rule nor the paper's failure rule acts); and
+    # a rule at two k whose reduced limit binds nowhere on the day, or whose target at night
+    # is 0 so the "Q at night" capability changes nothing (the same strategy and forecast,
+    # connected and connected-q alike).
     paper_setup = {
         (("paper33", "acopf", k, mode, "off"), ("paper33", "acopf-paper", k, mode, "off"))
         for k in PAPER_KS
         for mode in ("connected", "connected-q", "disconnected")
     }
-    assert _repeated_configurations(table) == _no_action_repeats(table) | paper_setup
-    assert len(_no_action_repeats(table)) == 55
+    repeats = _repeated_configurations(table) - _no_action_repeats(table) - paper_setup
+    assert len(_no_action_repeats(table)) == 55 and _no_action_repeats(table) <= _repeated_configurations(table)
+    assert paper_setup <= _repeated_configurations(table)
+    night = lambda key: "connected" if key[3] == "connected-q" else key[3]  # noqa: E731
+    for a, b in repeats:
+        assert a[4] == b[4] == "off" and (a[0], a[1], night(a)) == (b[0], b[1], night(b)), (a, b)
 
 
 def test_the_repeat_check_finds_a_repeated_configuration(day_run):
@@ -333,12 +342,12 @@ def test_the_default_grid_runs_a_forecast_only_where_a_strategy_reads_it():
     with forecast off: every built-in strategy; 30 with the oracle: the paper's Algorithm 3
     rules, `DEFAULT_FORECAST`); without that choice every strategy the registry says reads a
     forecast runs under the oracle too, and no other."""
-    _, _, tasks = prepare(StudyConfig(forecast_strategies=DEFAULT_FORECAST))
+    tasks = prepare(StudyConfig(forecast_strategies=DEFAULT_FORECAST)).tasks
     assert {t.strategies for t in tasks if t.forecast == "oracle"} == {DEFAULT_FORECAST}
     assert {t.strategies for t in tasks if t.forecast == "off"} == {DEFAULT_RUN}
     configurations = {(t.case, s, t.k, m, t.forecast) for t in tasks for s in t.strategies for m in t.night_modes}
     assert len(configurations) == 195 and len(tasks) == 2 * 5 * 4
-    _, _, every = prepare(StudyConfig())
+    every = prepare(StudyConfig()).tasks
     readers = {name for name in DEFAULT_RUN if get_strategy(name).uses_forecast}
     assert {t.strategies for t in every if t.forecast == "oracle"} == {tuple(s for s in DEFAULT_RUN if s in readers)}
     assert BASELINE not in readers and {"llma", "lfma", "volt-var", "cosphi-p"} <= readers
@@ -397,9 +406,11 @@ def test_a_night_mode_with_the_same_scenario_takes_the_results_of_the_first(tmp_
 
 
 def test_auto_chunk_is_six_hours_on_short_periods_and_a_month_otherwise():
-    day, _, tasks = prepare(StudyConfig(strategies=("no-action",), ks=(0.0,), night_modes=("connected",), forecast=("off",)))
+    family = prepare(StudyConfig(strategies=("no-action",), ks=(0.0,), night_modes=("connected",), forecast=("off",)))
+    day, tasks = family.config, family.tasks
     assert day.chunk == "6h" and [t.start[11:16] for t in tasks] == ["00:00", "06:00", "12:00", "18:00"]
-    year, _, tasks = prepare(
+    family = prepare(
         StudyConfig(strategies=("no-action",), ks=(0.0,), night_modes=("connected",), forecast=("off",), period="year")
     )
+    year, tasks = family.config, family.tasks
     assert year.chunk == "month" and len(tasks) == 12

@@ -63,7 +63,7 @@ def run_strategy_energy(scenario, name: str) -> float:
 
 
 def test_night_modes_and_oracle_on_the_solar_units():
-    period = prepare(StudyConfig(cases=(SPEC,), period=DAWN, strategies=("llma",)))[1]
+    period = prepare(StudyConfig(cases=(SPEC,), period=DAWN, strategies=("llma",))).period
     profiles, night = period.profiles, period.night
     case = load_case(SPEC)
     own = Scenario.of_case(case, period.index)
@@ -92,7 +92,8 @@ def test_refused_before_any_work(fields, message):
 
 
 def test_mixed_cases_at_a_common_step():
-    config, period, tasks = prepare(StudyConfig(cases=("paper33", SPEC), strategies=("llma",), step_minutes=15))
+    family = prepare(StudyConfig(cases=("paper33", SPEC), strategies=("llma",), step_minutes=15))
+    period, tasks = family.period, family.tasks
     assert len(period.index) == 96 and {t.case for t in tasks} == {"paper33", SPEC}
 
 

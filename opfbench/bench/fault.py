@@ -15,23 +15,25 @@ import os
 
 from opfbench.dynamics.model import build_model
 from opfbench.dynamics.params import FaultParams, ModelParams
+from opfbench.dynamics.point import operating_point
 from opfbench.dynamics.simulate import simulate
-from opfbench.dynamics.study import StudyConfig, operating_point, run_study
-from opfbench.io import load_network
+from opfbench.dynamics.study import FaultConfig, run_fault_study
+from opfbench.io import load_case
 from opfbench.registry import run_strategy
 from opfbench.timing import best_ms
 
 
 def run() -> dict:
-    net = load_network("paper33")
+    case = load_case("paper33")
+    net = case.network
     point = operating_point(net)
     model = build_model(point.scenario, run_strategy("lfma", point.scenario, 0.0).q_mvar[0], ModelParams())
     fault = FaultParams(bus=27)
     simulate(model, fault)  # compile (or load numba's cache)
     sim_ms, sim = best_ms(lambda: simulate(model, fault), 5)
     workers = min(2, os.cpu_count() or 1)
-    config = StudyConfig("paper33", tuple(int(b) for b in net.bus_ids), forecasts=("off", "oracle"), workers=workers)
-    _, timings = run_study(config, point)
+    config = FaultConfig("paper33", tuple(int(b) for b in net.bus_ids), forecasts=("off", "oracle"))
+    timings = run_fault_study(config, case, workers=workers, quiet=True).timings
     from opfbench.dynamics.andes_ref import MILD_FAULT, andes_available, mild_fault_comparison
 
     andes_ms = mild_fault_comparison()["andes_sim_ms"] if andes_available() else None

@@ -13,6 +13,7 @@ __all__ = [
     "CASE_HELP",
     "STRATEGY_HELP",
     "add_case_options",
+    "add_execution_options",
     "add_operating_point",
     "add_plugin_option",
     "case_spec",
@@ -23,6 +24,7 @@ __all__ = [
     "print_json",
     "share",
     "strategy_labels",
+    "workers",
 ]
 
 CASE_HELP = (
@@ -112,6 +114,40 @@ def case_spec(case: str, args: argparse.Namespace) -> str:
     if not opts:
         return case
     return case + ("&" if "?" in case else "?") + "&".join(opts)
+
+
+def workers(text: str) -> int:
+    """argparse type: local worker processes, a whole number from 1 to this machine's
+    cores (more only slow each other down; a Dask cluster via --scheduler has more)."""
+    from opfbench.study.execution import cores
+
+    try:
+        n = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"not a whole number: {text!r}") from None
+    if n < 1:
+        raise argparse.ArgumentTypeError(f"must be ≥ 1, got {n}")
+    if n > cores():
+        raise argparse.ArgumentTypeError(
+            f"{n} worker processes on {cores()} cores; give at most {cores()} (or --scheduler for a Dask cluster)"
+        )
+    return n
+
+
+def add_execution_options(parser: argparse.ArgumentParser, default_workers: int | None = None) -> None:
+    """How a study runs (`opfbench.study.engine`): --workers (default `default_workers`,
+    None: every core) or --scheduler (not both), --fresh, --quiet."""
+    where = parser.add_mutually_exclusive_group()
+    default = "every core" if default_workers is None else str(default_workers)
+    where.add_argument(
+        "--workers",
+        type=workers,
+        default=default_workers,
+        help=f"local worker processes (default: {default}; never more than tasks to run; 1 runs in this process)",
+    )
+    where.add_argument("--scheduler", default=None, help="run on an existing Dask cluster, e.g. tcp://HOST:8786")
+    parser.add_argument("--fresh", action="store_true", help="discard a previous run of another configuration in --out")
+    parser.add_argument("--quiet", action="store_true", help="no progress output")
 
 
 def add_plugin_option(parser: argparse.ArgumentParser) -> None:

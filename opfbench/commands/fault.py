@@ -9,13 +9,12 @@ import sys
 from dataclasses import replace
 from typing import TYPE_CHECKING
 
-import numpy as np
-
 from opfbench.capability import PAPER_KS
 from opfbench.commands.common import (
     CASE_HELP,
     STRATEGY_HELP,
     add_case_options,
+    add_execution_options,
     add_plugin_option,
     case_spec,
     fraction,
@@ -84,21 +83,27 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--variants",
         nargs="+",
-        default=["reference"],
+        default=None,
         help="model variants key=value[,key=value] (emf=held, source=0.1, motors=0.3, inertia=H, "
-        "torque=constant, active=ramp, emf-pu=E) or 'reference'",
+        "torque=constant, active=ramp, emf-pu=E; each key once) or 'reference' (default: reference)",
     )
     p.add_argument("--sensitivity", action="store_true", help="run the sensitivity variants: " + " ".join(SENSITIVITY_VARIANTS))
     p.add_argument("--t-end", type=number, default=3.0, help="simulated time, s (default 3)")
     p.add_argument("--step-ms", type=number, default=1.0, help="fixed step, ms (default 1)")
-    p.add_argument("--workers", type=int, default=1, help="processes (default 1)")
-    p.add_argument("--out", type=path, default=None, help="write fault.parquet, traces.parquet, manifest.json here")
+    add_execution_options(p, default_workers=1)  # a local cluster's start-up outweighs a small study's work
+    p.add_argument(
+        "--out",
+        type=path,
+        default=None,
+        help="the study's folder: fault.parquet, traces.parquet, manifest.json and its checkpoints (tasks/), "
+        "resumable (default: a temporary folder, removed afterwards)",
+    )
     p.add_argument("--json", action="store_true", help="print a list, one record per simulation")
     p.set_defaults(func=run)
 
 
 def _params(args: argparse.Namespace, case: Case) -> ModelParams:
-    from opfbench.dynamics.study import case_source
+    from opfbench.dynamics.point import case_source
 
     base = ModelParams() if args.source_impedance is not None else case_source(case, ModelParams())
     impedance = base.source.impedance_pu if args.source_impedance is None else args.source_impedance
@@ -110,8 +115,25 @@ def _params(args: argparse.Namespace, case: Case) -> ModelParams:
     return params
 
 
+def _buses(args: argparse.Namespace, net) -> tuple[int, ...]:
+    if args.fault_bus == ["all"]:
+        return tuple(int(b) for b in net.bus_ids)
+    try:
+        return tuple(int(b) for b in args.fault_bus)
+    except ValueError:
+        raise InputError(f"--fault-bus takes bus numbers or 'all', got {' '.join(args.fault_bus)}") from None
+
+
+def _variants(args: argparse.Namespace) -> tuple[str, ...]:
+    """--sensitivity's variants, then those of --variants not among them (default: reference)."""
+    given = tuple(args.variants or (() if args.sensitivity else ("reference",)))
+    if not args.sensitivity:
+        return given
+    return SENSITIVITY_VARIANTS + tuple(v for v in given if v not in SENSITIVITY_VARIANTS)
+
+
 def run(args: argparse.Namespace) -> int:
-    from opfbench.dynamics.study import StudyConfig, operating_point, run_study, write_study  # numba: only when a study runs
+    from opfbench.dynamics.study import FaultConfig, run_fault_study  # numba: only when a study runs
     from opfbench.io import load_case
 
     case = load_case(case_spec(args.case, args))
@@ -124,43 +146,53 @@ def run(args: argparse.Namespace) -> int:
         raise InputError(f"--step-ms must be > 0, got {args.step_ms:g}")
     if args.time is not None and (args.load_scale != 1.0 or args.der_scale != 0.8):
         raise InputError("--time takes loads and DER output from the paper day: drop --load-scale/--der-scale")
-    if args.fault_bus == ["all"]:
-        buses = tuple(int(b) for b in net.bus_ids)
-    else:
-        try:
-            buses = tuple(int(b) for b in args.fault_bus)
-        except ValueError:
-            raise InputError(f"--fault-bus takes bus numbers or 'all', got {' '.join(args.fault_bus)}") from None
-    variants = tuple(dict.fromkeys((SENSITIVITY_VARIANTS if args.sensitivity else ()) + tuple(args.variants)))
     fault = FaultParams(
         bus=0, impedance_pu=args.fault_impedance, duration_s=args.duration_ms / 1e3, t_end_s=args.t_end, step_s=args.step_ms / 1e3
     )
-    config = StudyConfig(
-        case.spec,
-        buses,
-        tuple(strategy_labels(args.strategies, args)),
-        tuple(args.k),
-        tuple(args.forecast),
-        variants,
-        _params(args, case),
-        fault,
-        args.workers,
+    config = FaultConfig.build(
+        case=case.spec,
+        fault_buses=_buses(args, net),
+        strategies=strategy_labels(args.strategies, args),
+        ks=args.k,
+        forecasts=args.forecast,
+        variants=_variants(args),
+        params=_params(args, case),
+        fault=fault,
+        load_scale=args.load_scale,
+        der_scale=args.der_scale,
+        time=args.time,
     )
-    config.check(net)
-    point = operating_point(net, args.load_scale, args.der_scale, args.time, case)
-    records, timings = run_study(config, point, progress=None if args.json else print)
-    if args.out is not None:
-        write_study(args.out, records, config, point, timings, ["opfbench", "fault", *sys.argv[2:]])
+    config.check(net)  # before any work
+    try:
+        study = run_fault_study(
+            config,
+            case,
+            args.out,
+            workers=args.workers,
+            scheduler=args.scheduler,
+            fresh=args.fresh,
+            quiet=args.quiet or args.json,
+            command=["opfbench", "fault", *sys.argv[2:]],
+        )
+    except MemoryError:
+        raise InputError(
+            "out of memory: the study's simulations and traces do not fit in this machine's memory; lengthen the step "
+            "(--step-ms), shorten the simulated time (--t-end), or fault fewer buses (--fault-bus) in fewer variants"
+        ) from None
     if args.json:
-        print_json([r.as_json(net.bus_ids) for r in records])
+        from opfbench.dynamics.study import simulation_records
+
+        print_json(simulation_records(study.table, net.bus_ids))
         return 0
-    _print_table(records, net, point.label, timings)
+    _print_table(study.table, net, study.family.point.label, study.timings)
     if args.out is not None:
         print(f"wrote {args.out}/fault.parquet, traces.parquet, manifest.json")
     return 0
 
 
-def _print_table(records, net, label: str, timings: dict) -> None:
+def _print_table(table, net, label: str, timings: dict) -> None:
+    from opfbench.dynamics.recovery import recovery_table
+
     print(f"{net.name} · {label} · {timings['simulations']} simulations in {timings['study_s']:.1f} s")
     print(
         f"{'variant':<12} {'fault':>5} {'strategy':<10} {'k':>4} {'fc':<6} {'status':<13} "
@@ -170,12 +202,9 @@ def _print_table(records, net, label: str, timings: dict) -> None:
         "(recovery: ms from inception until |V| ≥ 0.9 p.u. for good, nan = not recovered; margin: min |V| − 0.9 "
         "p.u. over the last 100 ms at the slowest bus)"
     )
-    for r in records:
-        i = net.index_of(r.fault_bus)
-        rec = np.where(np.isnan(r.recovery_ms), np.inf, r.recovery_ms)  # not recovered = slowest
-        worst = int(np.argmax(rec))
+    for r in recovery_table(table).itertuples(index=False):
         print(
-            f"{r.variant:<12} {r.fault_bus:>5} {r.strategy:<10} {r.k:>4.1f} {r.forecast:<6} {r.status:<13} "
-            f"{r.recovery_ms[i]:>12.1f} {r.recovery_ms[worst]:>10.1f} {int(net.bus_ids[worst]):>6} "
-            f"{r.margin_pu[worst]:>8.4f} {r.motors_stalled:>7}"
+            f"{r.variant:<12} {r.fault_bus:>5} {r.strategy:<10} {r.k:>4.1f} {r.forecast:<6} {r.feeder_status:<13} "
+            f"{r.recovery_ms:>12.1f} {r.feeder_recovery_ms:>10.1f} {r.slowest_bus:>6} {r.slowest_margin_pu:>8.4f} "
+            f"{r.motors_stalled:>7}"
         )

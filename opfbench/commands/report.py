@@ -35,7 +35,7 @@ def register(sub: argparse._SubParsersAction) -> None:
         "(default reports/year when it holds one, else the committed "
         "docs/year summary)",
     )
-    p.add_argument("--out", type=path, help="report file (default RUN_DIR/report.html)")
+    p.add_argument("--out", type=file_path, help="report file (default RUN_DIR/report.html)")
     p.add_argument(
         "--price",
         type=fraction,
@@ -44,12 +44,22 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.set_defaults(func=run)
 
 
+def file_path(text: str) -> Path:
+    """argparse type: a file's path (`path`), not one that ends with a separator — pathlib
+    would drop it and write a file where the user named a folder."""
+    if text.endswith((os.sep, "/")):
+        raise argparse.ArgumentTypeError(f"{text!r} names a folder; give the report's file name, e.g. {text}report.html")
+    return path(text)
+
+
 def run(args: argparse.Namespace) -> int:
     from opfbench.report import write_report
-    from opfbench.report.sources import check_given, report_sources
+    from opfbench.report.sources import check_given, holds_run, report_sources
 
     if not args.run_dir.is_dir():
         raise InputError(f"run folder {args.run_dir} does not exist; write it with `opfbench run --out {args.run_dir}`")
+    if not holds_run(args.run_dir):
+        raise InputError(f"{args.run_dir} holds no run (no manifest.json); write one with `opfbench run --out {args.run_dir}`")
     for name in ("forecast_dir", "fault_dir", "year_dir"):
         folder = getattr(args, name)
         if folder is not None and not folder.is_dir():

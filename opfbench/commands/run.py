@@ -1,11 +1,10 @@
 """`opfbench run`: the study — every case × strategy × k × night mode × forecast over a
 period — split into tasks, run on every core (Dask) or a Dask cluster, resumable, writing
-the run folder (manifest, tasks/, steps.parquet, summary.csv; see the run-folder contract)."""
+the run folder (manifest, tasks/, steps.parquet, summary.csv; docs/CONTRACTS.md)."""
 
 from __future__ import annotations
 
 import argparse
-import os
 import sys
 from pathlib import Path
 from typing import TYPE_CHECKING
@@ -14,6 +13,7 @@ from opfbench.capability import PAPER_KS
 from opfbench.commands.common import (
     STRATEGY_HELP,
     add_case_options,
+    add_execution_options,
     add_plugin_option,
     case_spec,
     fraction,
@@ -39,16 +39,6 @@ def suite_cases(suite: str | None) -> list[str]:
     from opfbench.io.simbench import SUITE
 
     return [f"simbench:{code}" for code in SUITE]
-
-
-def _workers(text: str) -> int:
-    try:
-        n = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"not a whole number: {text!r}") from None
-    if n < 1:
-        raise argparse.ArgumentTypeError(f"must be ≥ 1, got {n}")
-    return n
 
 
 def _minutes(text: str) -> float:
@@ -152,13 +142,7 @@ def register(sub: argparse._SubParsersAction) -> None:
         help="also write the long tables of per-DER Q and per-bus V (default: per-DER Q only, and only "
         "for periods of ≤ 2 days: the report plots it)",
     )
-    p.add_argument(
-        "--workers",
-        type=_workers,
-        default=os.cpu_count() or 1,
-        help="local worker processes (default: every core; 1 runs in this process)",
-    )
-    p.add_argument("--scheduler", default=None, help="run on an existing Dask cluster, e.g. tcp://HOST:8786")
+    add_execution_options(p)
     p.add_argument(
         "--price",
         type=fraction,
@@ -167,8 +151,6 @@ def register(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument("--currency", default=DEFAULT_CURRENCY)
     p.add_argument("--out", type=path, default=Path("reports/run"), help="run folder (default reports/run)")
-    p.add_argument("--fresh", action="store_true", help="discard a previous run of another configuration in --out")
-    p.add_argument("--quiet", action="store_true", help="no progress output")
     p.add_argument("--json", action="store_true", help="print the summary as JSON")
     p.set_defaults(func=run)
 
@@ -186,7 +168,6 @@ def run(args: argparse.Namespace) -> int:
     from opfbench.report.inputs import checked_sources
     from opfbench.report.sources import holds_forecasts
     from opfbench.study.runner import run_study
-    from opfbench.study.store import finished_tasks
 
     forecast_dir = Path(args.forecast_dir)  # the report's forecast section only when it holds a forecast run
     checked_sources(forecast_dir if holds_forecasts(forecast_dir) else None, args.fault_dir, args.year_dir)  # before any work
@@ -208,22 +189,15 @@ def run(args: argparse.Namespace) -> int:
         currency=args.currency,
         price_source=source,
     )
-    try:
-        result = run_study(
-            config,
-            args.out,
-            workers=args.workers,
-            scheduler=args.scheduler,
-            fresh=args.fresh,
-            quiet=args.quiet,
-            command=["opfbench", *sys.argv[1:]],
-        )
-    except KeyboardInterrupt:
-        print(
-            f"\nopfbench run: stopped; {finished_tasks(args.out)} tasks kept in {args.out}; rerun the same command to resume",
-            file=sys.stderr,
-        )
-        return 130
+    result = run_study(
+        config,
+        args.out,
+        workers=args.workers,
+        scheduler=args.scheduler,
+        fresh=args.fresh,
+        quiet=args.quiet,
+        command=["opfbench", *sys.argv[1:]],
+    )
     return finish_run(result, args)
 
 

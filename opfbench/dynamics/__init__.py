@@ -5,5 +5,7 @@ bus × strategy × k × forecast.
 
 Modules: params (model parameters, variants), motor (motor steady state), model (the
 dynamic model started from the AC power flow), kernel (numba inner loop, RK4),
-simulate (one fault run and its measures), study (the study grid, tables, files).
+simulate (one fault run and its measures), point (the operating point and upstream
+source), study (the study grid as a task family of `opfbench.study.engine`, its tables
+and files), recovery (recovery per simulation and against no action).
 """

@@ -148,6 +148,18 @@ def with_source_bus(net: Network, z_source: complex, emf_pu: float) -> Network:
     )
 
 
+def check_modelled(net: Network) -> None:
+    """Refuse what the dynamic model does not model: voltage-controlled (PV) buses — their
+    generators would need a voltage regulator and machine model; it holds every generator
+    at a fixed current."""
+    if net.pv_buses.size:
+        ids = ", ".join(str(b) for b in net.bus_ids[net.pv_buses])
+        raise NetworkError(
+            f"{net.name}: the fault model does not model voltage-controlled (PV) buses ({ids}); "
+            "make them PQ buses (type 1) with fixed P and Q"
+        )
+
+
 def prefault_flow(
     scenario: Scenario, q_mvar: np.ndarray, params: ModelParams, emf_pu: float | None = None
 ) -> tuple[np.ndarray, complex]:

@@ -30,6 +30,8 @@ InverterControl = Literal["grid-code", "constant-current"]
 C = TypeVar("C", bound=str)
 NOMINAL_HZ = 50.0
 RECOVERY_PU = 0.9  # the recovery threshold |V| ≥ 0.9 p.u.
+#: A bus's (and a simulation's, its worst bus's) outcome.
+RECOVERED, NOT_RECOVERED, DIVERGED = "recovered", "not-recovered", "diverged"
 
 
 @dataclass(frozen=True)
@@ -137,15 +139,25 @@ class ModelParams:
 
     def with_variant(self, spec: str) -> "ModelParams":
         """Apply a variant label "key=value[,key=value]" (keys: emf, source, emf-pu,
-        motors, inertia, torque, active); "reference" changes nothing."""
+        motors, inertia, torque, active; each once, emf and emf-pu not together: both set
+        the EMF); "reference" changes nothing."""
         if spec == "reference":
             return self
         out = self
+        seen: list[str] = []
         for item in spec.split(","):
             key, sep, value = item.partition("=")
+            key = key.strip()
             if not sep:
                 raise InputError(f"variant {spec!r}: expected key=value items, got {item!r}")
-            out = _apply(out, key.strip(), value.strip(), spec)
+            if key in seen:
+                raise InputError(f"variant {spec!r}: {key} is given twice; give each key once")
+            if {key, *seen} >= {"emf", "emf-pu"}:
+                raise InputError(
+                    f"variant {spec!r}: emf and emf-pu both set the source EMF; give one (emf=held|reset, or emf-pu=E)"
+                )
+            seen.append(key)
+            out = _apply(out, key, value.strip(), spec)
         out.check()
         return out
 

@@ -5,6 +5,7 @@ motors stalled."""
 from __future__ import annotations
 
 import math
+import os
 from dataclasses import dataclass
 
 import numpy as np
@@ -18,8 +19,6 @@ from opfbench.timing import elapsed_ms, now
 
 TRACE_EVERY_S = 0.005  # traces: one sample per 5 ms
 MARGIN_WINDOW_S = 0.100  # voltage margin: the last 100 ms
-
-RECOVERED, NOT_RECOVERED, DIVERGED = "recovered", "not-recovered", "diverged"
 
 
 @dataclass(frozen=True, eq=False)
@@ -106,7 +105,23 @@ def check_fault(net: Network, params: ModelParams, fault: FaultParams) -> int:
         raise InputError(
             f"simulation end {fault.t_end_s} s must lie after the fault clears ({fault.t_on_s + fault.duration_s} s)"
         )
+    steps = sum(math.ceil(length / fault.step_s - 1e-9) for length, _ in segments(fault))
+    need = 8.0 * (steps + 1) * (net.n_bus + 1)  # the time and every bus's |V| at every step, float64
+    if need > MEMORY_SHARE * physical_memory():
+        raise InputError(
+            f"a simulation of {fault.t_end_s:g} s at a {fault.step_s * 1e3:g}-ms step is {steps:.3g} steps, and it keeps "
+            f"|V| of {net.n_bus} buses at every step ({need / 1e9:.3g} GB, more than {MEMORY_SHARE:.0%} of this machine's "
+            f"{physical_memory() / 1e9:.3g} GB): lengthen the step (--step-ms) or shorten the simulated time (--t-end)"
+        )
     return net.index_of(fault.bus)
+
+
+MEMORY_SHARE = 0.25  # the most of the machine's memory one simulation's samples may take (workers run several)
+
+
+def physical_memory() -> float:
+    """This machine's memory, bytes."""
+    return float(os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES"))
 
 
 def segments(fault: FaultParams) -> list[tuple[float, bool]]:

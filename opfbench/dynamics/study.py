@@ -1,108 +1,102 @@
-"""The fault ride-through study: fault buses × strategies × k × forecast × model
-variants, run on one operating point, and its tables and files (CONTRACTS.md, fault
-folder): `fault.parquet` (one row per simulation × bus), `traces.parquet` (|V| and Q at
-the DER buses and the fault bus, 5-ms samples) and `manifest.json`.
+"""The fault ride-through study as a task family of the study engine (`study.engine`):
+fault buses × strategies × k × forecast × model variants on one operating point, with
+the engine's checkpoints, resume, lock, Dask and progress. Its folder (docs/CONTRACTS.md,
+fault folder): `fault.parquet` (one row per simulation × bus), `traces.parquet` (|V| and
+Q at the DER buses and the fault bus, 5-ms samples), `manifest.json`, `tasks/`.
 
-Pre-fault setpoints come from the registered strategies (`registry.run_strategy`) on the
-same operating point; identical setpoints (no action at every k, a strategy whose k does
-not bind) are simulated once and recorded for each configuration.
+Planning runs the strategies (opaque configuration labels, through the registry) on the
+operating point for their pre-fault setpoints; identical setpoints of one model variant
+(no action at every k, a strategy whose k does not bind) make one task — one dynamic
+model, every fault bus simulated on it — whose rows are recorded for each configuration.
 """
 
 from __future__ import annotations
 
-import io
-import os
-import platform
-from concurrent.futures import ProcessPoolExecutor
 from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
+from typing import Callable
 
 import numpy as np
 import pandas as pd
+import pyarrow as pa
+from threadpoolctl import threadpool_limits
 
 from opfbench.capability import PAPER_KS, check_reserve
-from opfbench.dynamics.model import DynamicModel, build_model, prefault_flow
-from opfbench.dynamics.params import FORECASTS, FaultParams, ModelParams
-from opfbench.dynamics.simulate import DIVERGED, NOT_RECOVERED, RECOVERED, Simulation, check_fault, simulate
+from opfbench.digests import digest
+from opfbench.dynamics.model import build_model, check_modelled, prefault_flow
+from opfbench.dynamics.params import DIVERGED, FORECASTS, NOT_RECOVERED, RECOVERED, RECOVERY_PU, FaultParams, ModelParams
+from opfbench.dynamics.point import OperatingPoint, operating_point
+from opfbench.dynamics.recovery import recovery_table
+from opfbench.dynamics.simulate import MARGIN_WINDOW_S, TRACE_EVERY_S, Simulation, check_fault, simulate
 from opfbench.errors import InputError
 from opfbench.io import Case
-from opfbench.jsonio import write_atomic, write_json
 from opfbench.network import Network
-from opfbench.registry import get_strategy, run_strategy
+from opfbench.parquetio import ParquetStream, arrow_table, write_parquet
+from opfbench.registry import DEFAULT_FAULT, get_strategy, run_strategy
 from opfbench.scenario import Scenario
+from opfbench.study.config import check_something_to_run, strategies_for, unique_grid
+from opfbench.study.engine import EngineRun, Task, TaskOutput, run_family
 from opfbench.timing import elapsed_ms, now
 
-
-@dataclass(frozen=True)
-class OperatingPoint:
-    """The pre-fault snapshot: `scenario` (forecast P^F = the oracle's, used only by
-    forecast-aware strategies with forecast "oracle") and how it was chosen."""
-
-    scenario: Scenario
-    label: str
-
-
-def operating_point(
-    net: Network, load_scale: float = 1.0, der_scale: float = 0.8, time: str | None = None, case: Case | None = None
-) -> OperatingPoint:
-    """Nominal loads × load_scale with every DER at der_scale × rating (the oracle
-    forecast of a snapshot is the snapshot itself), or the paper day's minute `time`
-    ("HH:MM", local time) with the next minute as the oracle forecast — or, for a `case`
-    with its own time series, the step of its profiles at `time` (local date and time,
-    e.g. 2016-11-08T12:00) with the next step as the oracle forecast."""
-    if time is not None and case is not None and case.series is not None:
-        from opfbench.study.periods import local_time
-
-        when = local_time(time, "--time")
-        series = case.series
-        row = series.index.get_indexer([when])[0]
-        if row < 0:
-            raise InputError(
-                f"--time {time!r} is not a step of {case.spec}'s profiles ({series.index[0]} .. {series.index[-1]}, every {series.step})"
-            )
-        load_p, load_q, der_p = series.rows(series.index[[row, min(row + 1, len(series.index) - 1)]])
-        sc = Scenario.from_series(net, load_p[:1], load_q[:1], der_p[:1], der_p[1:])
-        return OperatingPoint(sc, f"{case.spec} profiles at {when.isoformat()}")
-    if time is None:
-        sc = Scenario.snapshot(net, load_scale, der_scale, forecast_der_scale=der_scale)
-        return OperatingPoint(sc, f"load {load_scale:g} × nominal, DER at {der_scale:g} × rating")
-    from opfbench.data import paper_day
-
-    day = paper_day()
-    hits = np.flatnonzero(day.index.strftime("%H:%M") == time)
-    if hits.size == 0:
-        raise InputError(f"--time must be HH:MM within the paper day (00:00..23:59), got {time!r}")
-    i = int(hits[0])
-    j = min(i + 1, len(day) - 1)
-    sc = Scenario.from_profiles(
-        net,
-        day["load"].to_numpy()[i : i + 1],
-        day["pv"].to_numpy()[i : i + 1],
-        day["wind"].to_numpy()[i : i + 1],
-        day["pv"].to_numpy()[j : j + 1],
-        day["wind"].to_numpy()[j : j + 1],
-    )
-    return OperatingPoint(sc, f"paper day {day.index[i].isoformat()}")
+FAULT_OUTPUTS = ("fault.parquet", "traces.parquet")
+FAULT_COLUMNS = [
+    "case",
+    "fault_bus",
+    "strategy",
+    "k",
+    "forecast",
+    "variant",
+    "source_impedance_pu",
+    "emf",
+    "motor_share",
+    "bus",
+    "recovery_ms",
+    "status",
+    "vmin_pu",
+    "margin_pu",
+    "motors_stalled",
+    "sim_ms",
+    "der_bus",
+    "faulted",
+]
+TRACE_COLUMNS = ["case", "fault_bus", "strategy", "k", "forecast", "variant", "bus", "t_s", "v_pu", "q_mvar"]
+#: A task's tables: per bus of each fault, and the traces.
+TASK_COLUMNS = {
+    "measures": ["fault_bus", *FAULT_COLUMNS[FAULT_COLUMNS.index("bus") :]],
+    "traces": ["bus", "t_s", "v_pu", "q_mvar", "fault_bus"],
+}
 
 
 @dataclass(frozen=True)
-class StudyConfig:
-    """What to run. `fault_buses` external bus numbers; `variants` labels understood by
-    `ModelParams.with_variant` applied on top of `params`; `fault` the template (its bus
-    is replaced by each fault bus)."""
+class FaultConfig:
+    """What to run. `fault_buses` external bus numbers; `strategies` configuration labels
+    the registry runs; `variants` labels understood by `ModelParams.with_variant`, applied
+    on top of `params`; `fault` the template (its bus is replaced by each fault bus);
+    `load_scale`, `der_scale`, `time` choose the operating point (`operating_point`)."""
 
     case: str
     fault_buses: tuple[int, ...]
-    strategies: tuple[str, ...] = ("no-action", "llma", "lfma", "acopf")
+    strategies: tuple[str, ...] = DEFAULT_FAULT
     ks: tuple[float, ...] = PAPER_KS
     forecasts: tuple[str, ...] = ("off",)
     variants: tuple[str, ...] = ("reference",)
     params: ModelParams = field(default_factory=ModelParams)
     fault: FaultParams = field(default_factory=lambda: FaultParams(bus=0))
-    workers: int = 1
+    load_scale: float = 1.0
+    der_scale: float = 0.8
+    time: str | None = None
+    notes: tuple[str, ...] = field(default=(), compare=False)
+
+    @classmethod
+    def build(cls, **fields) -> "FaultConfig":
+        """A config with repeated grid values dropped; `notes` say what was dropped."""
+        labels = {"fault_buses": "fault buses", "strategies": "strategies", "ks": "k values", "forecasts": "forecasts"}
+        unique, notes = unique_grid(fields, labels | {"variants": "variants"})
+        return cls(**unique, notes=notes)
 
     def check(self, net: Network) -> dict[str, ModelParams]:
         """Validate everything before any work starts; return the params of each variant."""
+        check_modelled(net)
         known = set(int(b) for b in net.bus_ids)
         bad = [b for b in self.fault_buses if b not in known]
         if bad:
@@ -114,8 +108,7 @@ class StudyConfig:
         for fc in self.forecasts:
             if fc not in FORECASTS:
                 raise InputError(f"unknown forecast {fc!r}; choose from {', '.join(FORECASTS)}")
-        if self.workers < 1:
-            raise InputError(f"workers must be ≥ 1, got {self.workers}")
+        check_something_to_run(self.strategies, self.forecasts)
         self.params.check()
         variants = {label: self.params.with_variant(label) for label in self.variants}
         for params in variants.values():
@@ -123,53 +116,191 @@ class StudyConfig:
                 check_fault(net, params, replace(self.fault, bus=b))
         return variants
 
+    def as_dict(self) -> dict:
+        """The manifest's `config` (JSON-ready)."""
+        fault = asdict(self.fault)
+        fault.pop("bus")
+        return {
+            "case": self.case,
+            "fault_buses": list(self.fault_buses),
+            "strategies": list(self.strategies),
+            "ks": list(self.ks),
+            "forecasts": list(self.forecasts),
+            "variants": list(self.variants),
+            "model": self.params.as_dict(),
+            "fault": fault,
+            "load_scale": self.load_scale,
+            "der_scale": self.der_scale,
+            "time": self.time,
+        }
+
+    def digest(self) -> str:
+        return digest(self.as_dict())[:16]
+
 
 @dataclass(frozen=True)
-class SimRecord:
-    """One simulation: per-bus arrays (length n_bus, internal order) and its traces."""
+class FaultTask(Task):
+    """One dynamic model — a model variant at one set of DER setpoints `q_mvar` (MVAr) on
+    the operating point — with every fault bus simulated on it. `emf_pu` the source EMF
+    it is built with (None: re-set to the slack's scheduled voltage)."""
 
-    fault_bus: int
+    label: str
+    case: str
+    data_sha256: str
+    point_sha256: str
+    variant: str
+    params: ModelParams
+    emf_pu: float | None
+    q_mvar: tuple[float, ...]
+    fault: FaultParams
+    fault_buses: tuple[int, ...]
+
+    def definition(self) -> dict:
+        fault = asdict(self.fault)
+        fault.pop("bus")
+        return {
+            "case": self.case,
+            "data_sha256": self.data_sha256,
+            "operating_point_sha256": self.point_sha256,
+            "variant": self.variant,
+            "model": self.params.as_dict(),
+            "emf_pu": self.emf_pu,
+            "q_mvar": list(self.q_mvar),
+            "fault": fault,
+            "fault_buses": list(self.fault_buses),
+        }
+
+
+@dataclass(frozen=True)
+class FaultJob:
+    """A task's input: the task and the operating point without forecast."""
+
+    task: FaultTask
+    scenario: Scenario
+
+
+@dataclass(frozen=True)
+class Configuration:
+    """One simulated configuration: a strategy at k under a forecast in a model variant,
+    and the task (index) whose model it runs on."""
+
+    variant: str
+    params: ModelParams
     strategy: str
     k: float
     forecast: str
-    variant: str
-    params: ModelParams
-    ok: bool
-    recovery_ms: np.ndarray
-    vmin_pu: np.ndarray
-    margin_pu: np.ndarray
-    motors_stalled: int
-    sim_ms: float
-    trace: pd.DataFrame
+    task: int
 
-    def bus_status(self) -> np.ndarray:
-        if not self.ok:
-            return np.full(len(self.recovery_ms), DIVERGED, dtype=object)
-        return np.where(np.isnan(self.recovery_ms), NOT_RECOVERED, RECOVERED).astype(object)
+
+def _setpoints(config: FaultConfig, point: OperatingPoint) -> dict[tuple[str, float, str], np.ndarray]:
+    """Every configuration's pre-fault DER setpoints (MVAr), by (strategy, k, forecast);
+    a strategy runs under a forecast only if the registry says it reads one."""
+    out = {}
+    for fc in config.forecasts:
+        sc = point.scenario if fc == "oracle" else point.scenario.without_forecast()
+        for name in strategies_for(config.strategies, fc):
+            for k in config.ks:
+                res = run_strategy(name, sc, k)
+                if res.status[0] not in ("ok",) and not str(res.status[0]).startswith("fallback"):
+                    raise InputError(f"strategy {name} at k = {k:g} gave status {res.status[0]} on this operating point")
+                out[name, k, fc] = res.q_mvar[0]
+    return out
+
+
+@dataclass
+class FaultFamily:
+    """The fault study's tasks and configurations (see the module docstring)."""
+
+    config: FaultConfig
+    case: Case
+    point: OperatingPoint
+    variants: dict[str, ModelParams]
+    tasks: list[FaultTask]
+    configurations: list[Configuration]
+    kind: str = "fault"
+    tables: tuple[str, ...] = ("measures", "traces")
+    outputs: tuple[str, ...] = FAULT_OUTPUTS
+    label_fields: tuple[str, ...] = ()
 
     @property
-    def status(self) -> str:
-        st = self.bus_status()
-        return DIVERGED if not self.ok else (NOT_RECOVERED if (st == NOT_RECOVERED).any() else RECOVERED)
+    def notes(self) -> tuple[str, ...]:
+        return self.config.notes
 
-    def as_json(self, bus_ids: np.ndarray) -> dict:
-        """The `--json` record: fault_bus, strategy, k, forecast, status, recovery_ms and
-        vmin per bus, motors_stalled, sim_ms (plus variant and the voltage margin)."""
-        ids = [str(int(b)) for b in bus_ids]
-        rec = [None if np.isnan(r) else round(float(r), 3) for r in self.recovery_ms]
+    def manifest(self) -> dict:
         return {
-            "fault_bus": self.fault_bus,
-            "strategy": self.strategy,
-            "k": self.k,
-            "forecast": self.forecast,
-            "variant": self.variant,
-            "status": self.status,
-            "recovery_ms": dict(zip(ids, rec, strict=True)),
-            "vmin": dict(zip(ids, np.round(self.vmin_pu, 6).tolist(), strict=True)),
-            "margin_pu": dict(zip(ids, np.round(self.margin_pu, 6).tolist(), strict=True)),
-            "motors_stalled": self.motors_stalled,
-            "sim_ms": round(self.sim_ms, 3),
+            "case": self.config.case,
+            "operating_point": self.point.label,
+            "config": self.config.as_dict(),
+            "config_digest": self.config.digest(),
+            "data_sha256": {f"case {self.config.case}": self.case.data_sha256, "operating point": self.point.data_sha256},
+            "model": self.config.params.as_dict(),
+            "variants": {label: params.as_dict() for label, params in self.variants.items()},
+            "fault": self.config.as_dict()["fault"],
+            "integrator": {
+                "method": "classical Runge–Kutta (RK4), fixed step",
+                "step_s": self.config.fault.step_s,
+                "network": "current injection, fixed point over the DER buses to 1e-12 p.u.",
+            },
+            "recovery": {"threshold_pu": RECOVERY_PU, "margin_window_s": MARGIN_WINDOW_S, "trace_step_s": TRACE_EVERY_S},
+            "files": {
+                "fault.parquet": "one row per (simulation, bus)",
+                "traces.parquet": "|V| and Q at the DER buses and the fault bus, 5-ms samples",
+            },
         }
+
+    def columns(self, table: str) -> list[str]:
+        return TASK_COLUMNS[table]
+
+    def job(self, task: FaultTask) -> FaultJob:
+        return FaultJob(task, self.point.scenario.without_forecast())
+
+    def runner(self) -> Callable[[FaultJob], TaskOutput]:
+        return simulate_task
+
+    def assembler(self, out: Path) -> "FaultAssembler":
+        return FaultAssembler(out, self)
+
+    def timings(self, wall_s: float) -> dict:
+        n = len(self.tasks)
+        return {"study_s": wall_s, "simulations": n * len(self.config.fault_buses), "models": n}
+
+
+def plan(config: FaultConfig, case: Case) -> FaultFamily:
+    """Check the config, choose the operating point, run the strategies for their
+    setpoints and make one task per distinct model of each variant."""
+    net = case.network
+    variants = config.check(net)
+    point = operating_point(net, config.load_scale, config.der_scale, config.time, case)
+    with threadpool_limits(1):
+        setpoints = _setpoints(config, point)
+    sc_off = point.scenario.without_forecast()
+    tasks: list[FaultTask] = []
+    configurations = []
+    for label, params in variants.items():
+        emf = params.source.emf_pu if params.source.emf == "given" else None
+        if params.source.emf == "held":
+            emf = float(abs(prefault_flow(sc_off, np.zeros(len(net.ders)), params)[1]))
+        unique: dict[bytes, int] = {}
+        for (name, k, fc), q in setpoints.items():
+            key = np.round(q, 12).tobytes()
+            if key not in unique:
+                unique[key] = len(tasks)
+                tasks.append(
+                    FaultTask(
+                        f"{label}_{name}_k{k:g}_{fc}",
+                        config.case,
+                        case.data_sha256,
+                        point.data_sha256,
+                        label,
+                        params,
+                        emf,
+                        tuple(float(v) for v in q),
+                        config.fault,
+                        config.fault_buses,
+                    )
+                )
+            configurations.append(Configuration(label, params, name, float(k), fc, unique[key]))
+    return FaultFamily(config, case, point, variants, tasks, configurations)
 
 
 def _trace(sim: Simulation) -> pd.DataFrame:
@@ -184,203 +315,176 @@ def _trace(sim: Simulation) -> pd.DataFrame:
     return pd.concat(parts, ignore_index=True)
 
 
-def _simulate_model(job: tuple) -> list[tuple[int, bool, np.ndarray, np.ndarray, np.ndarray, int, float, pd.DataFrame]]:
-    """Worker: every fault of one model → per-fault measures (picklable)."""
-    model, faults = job
+def _measures(sim: Simulation, fault_bus: int) -> pd.DataFrame:
+    """One row per bus: recovery, status, lowest |V|, margin (and the simulation's motors
+    stalled and wall time)."""
+    net = sim.model.net
+    recovery = sim.recovery_ms()
+    if sim.ok:
+        status = np.where(np.isnan(recovery), NOT_RECOVERED, RECOVERED).astype(object)
+    else:
+        status = np.full(len(recovery), DIVERGED, dtype=object)
+    ids = net.bus_ids.astype(np.int64)
+    return pd.DataFrame(
+        {
+            "fault_bus": np.full(len(ids), fault_bus, dtype=np.int64),
+            "bus": ids,
+            "recovery_ms": recovery,
+            "status": status,
+            "vmin_pu": sim.vmin(),
+            "margin_pu": sim.margin_pu(),
+            "motors_stalled": np.full(len(ids), sim.motors_stalled(), dtype=np.int64),
+            "sim_ms": np.full(len(ids), sim.sim_ms),
+            "der_bus": np.isin(np.arange(len(ids)), net.der_bus),
+            "faulted": ids == fault_bus,
+        },
+        columns=TASK_COLUMNS["measures"],
+    )
+
+
+def simulate_task(job: FaultJob) -> TaskOutput:
+    """Build the task's model and simulate every fault bus on it (single-threaded BLAS,
+    so results are bit-identical wherever it runs)."""
+    start = now()
+    t = job.task
+    measures, traces = [], []
+    with threadpool_limits(1):
+        model = build_model(job.scenario, np.array(t.q_mvar), t.params, t.emf_pu)
+        for bus in t.fault_buses:
+            sim = simulate(model, replace(t.fault, bus=bus))
+            measures.append(_measures(sim, bus))
+            traces.append(_trace(sim).assign(fault_bus=bus)[TASK_COLUMNS["traces"]])
+    tables = {"measures": pd.concat(measures, ignore_index=True), "traces": pd.concat(traces, ignore_index=True)}
+    return TaskOutput(t, tables, elapsed_ms(start) / 1e3)
+
+
+class FaultAssembler:
+    """fault.parquet and traces.parquet, one configuration after another in planned order
+    as their tasks arrive (a task's tables kept until its last configuration is written):
+    the traces streamed as arrow tables in batches of TRACE_BATCH rows, the fault table
+    written on commit (after the traces)."""
+
+    def __init__(self, out: Path, family: FaultFamily):
+        self.out, self.family = out, family
+        self.traces = ParquetStream(out / "traces.parquet")
+        self.batch: list[pa.Table] = []
+        self.rows: list[pa.Table] = []
+        self.tables: dict[int, dict[str, pa.Table]] = {}
+        self.left = np.bincount([c.task for c in family.configurations], minlength=len(family.tasks))
+        self.index = {t.id: i for i, t in enumerate(family.tasks)}
+        self.next = 0
+
+    def add(self, task: FaultTask, tables: dict[str, pa.Table]) -> None:
+        self.tables[self.index[task.id]] = tables
+        configurations = self.family.configurations
+        while self.next < len(configurations) and configurations[self.next].task in self.tables:
+            self._write(configurations[self.next])
+            self.next += 1
+
+    def _write(self, c: Configuration) -> None:
+        tables = self.tables[c.task]
+        src = c.params.source
+        label: dict[str, str | float] = {"case": self.family.config.case, "strategy": c.strategy, "k": c.k}
+        label |= {"forecast": c.forecast, "variant": c.variant}
+        model: dict[str, str | float] = {"source_impedance_pu": src.impedance_pu, "emf": str(src.emf)}
+        model["motor_share"] = c.params.motors.share
+        self.rows.append(_labelled(tables["measures"], label | model, FAULT_COLUMNS))
+        self.batch.append(_labelled(tables["traces"], label, TRACE_COLUMNS))
+        if sum(t.num_rows for t in self.batch) >= TRACE_BATCH:
+            self._flush()
+        self.left[c.task] -= 1
+        if not self.left[c.task]:
+            del self.tables[c.task]
+
+    def _flush(self) -> None:
+        if self.batch:
+            self.traces.write(pa.concat_tables(self.batch))
+            self.batch = []
+
+    def commit(self) -> pd.DataFrame:
+        table = arrow_table(pa.concat_tables(self.rows)).replace_schema_metadata(None)
+        self._flush()
+        self.traces.commit()
+        write_parquet(self.out / "fault.parquet", table)
+        return table.to_pandas()
+
+    def abort(self) -> None:
+        self.traces.abort()
+
+
+TRACE_BATCH = 1 << 17  # rows of traces.parquet written at once (one row group)
+
+
+def _labelled(table: pa.Table, values: dict[str, str | float], columns: list[str]) -> pa.Table:
+    """`table` with `columns`: its own, and each of `values` repeated on every row (text
+    dictionary-encoded, written as plain text; numbers as float64)."""
+    n = table.num_rows
+
+    def repeated(value: str | float) -> pa.Array:
+        if isinstance(value, str):
+            return pa.DictionaryArray.from_arrays(pa.array(np.zeros(n, dtype=np.int32)), pa.array([value]))
+        return pa.array(np.full(n, value, dtype=np.float64))
+
+    return pa.table({name: repeated(values[name]) if name in values else table.column(name) for name in columns})
+
+
+@dataclass
+class FaultStudy:
+    """A finished fault study: its folder (None: none kept), family (config, operating
+    point, tasks), the fault table and the engine's record."""
+
+    out: Path | None
+    family: FaultFamily
+    table: pd.DataFrame
+    run: EngineRun
+
+    @property
+    def timings(self) -> dict:
+        return self.family.timings(self.run.wall_s)
+
+
+def run_fault_study(
+    config: FaultConfig,
+    case: Case,
+    out: Path | None = None,
+    *,
+    workers: int | None = 1,
+    scheduler: str | None = None,
+    fresh: bool = False,
+    quiet: bool = False,
+    command: list[str] | None = None,
+) -> FaultStudy:
+    """Run the study on the engine into `out` (None: a temporary folder), resuming its
+    finished tasks; see `study.engine.run_family` for the rest."""
+    run = run_family(
+        lambda: plan(config, case), out, workers=workers, scheduler=scheduler, fresh=fresh, quiet=quiet, command=command
+    )
+    return FaultStudy(out and run.out, run.family, run.result, run)
+
+
+def simulation_records(table: pd.DataFrame, bus_ids: np.ndarray) -> list[dict]:
+    """The `--json` records, one per simulation of a fault table (in its order): fault_bus,
+    strategy, k, forecast, variant, status (`recovery_table`'s feeder_status),
+    recovery_ms, vmin and margin_pu per bus (by bus number), motors_stalled, sim_ms."""
+    ids = [str(int(b)) for b in bus_ids]
+    n = len(ids)
     out = []
-    for fault in faults:
-        sim = simulate(model, fault)
+    for start, summary in zip(range(0, len(table), n), recovery_table(table).itertuples(index=False), strict=True):
+        rows = table.iloc[start : start + n]
+        rec = [None if np.isnan(r) else round(float(r), 3) for r in rows["recovery_ms"].to_numpy()]
         out.append(
-            (fault.bus, sim.ok, sim.recovery_ms(), sim.vmin(), sim.margin_pu(), sim.motors_stalled(), sim.sim_ms, _trace(sim))
+            {
+                "fault_bus": int(summary.fault_bus),
+                "strategy": summary.strategy,
+                "k": float(summary.k),
+                "forecast": summary.forecast,
+                "variant": summary.variant,
+                "status": summary.feeder_status,
+                "recovery_ms": dict(zip(ids, rec, strict=True)),
+                "vmin": dict(zip(ids, np.round(rows["vmin_pu"].to_numpy(), 6).tolist(), strict=True)),
+                "margin_pu": dict(zip(ids, np.round(rows["margin_pu"].to_numpy(), 6).tolist(), strict=True)),
+                "motors_stalled": int(summary.motors_stalled),
+                "sim_ms": round(float(rows["sim_ms"].iloc[0]), 3),
+            }
         )
     return out
-
-
-def run_study(config: StudyConfig, point: OperatingPoint, progress=None) -> tuple[list[SimRecord], dict]:
-    """Run the study; returns the records and the timings {"study_s", "simulations", "models"}."""
-    net = point.scenario.net
-    variants = config.check(net)
-    start = now()
-    faults = [replace(config.fault, bus=b) for b in config.fault_buses]
-    setpoints: dict[tuple[str, float, str], np.ndarray] = {}
-    for fc in config.forecasts:
-        sc = point.scenario if fc == "oracle" else point.scenario.without_forecast()
-        for name in config.strategies:
-            if fc != "off" and not get_strategy(name).uses_forecast:
-                continue
-            for k in config.ks:
-                res = run_strategy(name, sc, k)
-                if res.status[0] not in ("ok",) and not str(res.status[0]).startswith("fallback"):
-                    raise InputError(f"strategy {name} at k = {k:g} gave status {res.status[0]} on this operating point")
-                setpoints[name, k, fc] = res.q_mvar[0]
-    sc_off = point.scenario.without_forecast()
-    jobs: list[tuple[DynamicModel, list[FaultParams]]] = []
-    keys = []
-    for label, params in variants.items():
-        emf = params.source.emf_pu if params.source.emf == "given" else None
-        if params.source.emf == "held":
-            emf = abs(prefault_flow(sc_off, np.zeros(len(net.ders)), params)[1])
-        unique: dict[bytes, int] = {}
-        for (name, k, fc), q in setpoints.items():
-            key = np.round(q, 12).tobytes()
-            if key not in unique:
-                unique[key] = len(jobs)
-                jobs.append((build_model(sc_off, q, params, emf), faults))
-            keys.append((label, params, name, k, fc, unique[key]))
-    if progress:
-        progress(f"{len(jobs)} distinct models × {len(faults)} fault buses")
-    if config.workers > 1 and len(jobs) > 1:
-        with ProcessPoolExecutor(config.workers) as pool:
-            results = list(pool.map(_simulate_model, jobs))
-    else:
-        results = [_simulate_model(j) for j in jobs]
-    records = []
-    for label, params, name, k, fc, j in keys:
-        for bus, ok, rec, vmin, margin, stalled, ms, trace in results[j]:
-            records.append(SimRecord(bus, name, float(k), fc, label, params, ok, rec, vmin, margin, stalled, ms, trace))
-    return records, {"study_s": elapsed_ms(start) / 1e3, "simulations": len(jobs) * len(faults), "models": len(jobs)}
-
-
-def fault_table(records: list[SimRecord], net: Network, case: str) -> pd.DataFrame:
-    """The `fault.parquet` table: one row per (simulation, bus)."""
-    der = set(int(b) for b in net.bus_ids[net.der_bus])
-    rows = []
-    for r in records:
-        src = r.params.source
-        base = {
-            "case": case,
-            "fault_bus": r.fault_bus,
-            "strategy": r.strategy,
-            "k": r.k,
-            "forecast": r.forecast,
-            "variant": r.variant,
-            "source_impedance_pu": src.impedance_pu,
-            "emf": src.emf,
-            "motor_share": r.params.motors.share,
-        }
-        status = r.bus_status()
-        for i, b in enumerate(net.bus_ids):
-            rows.append(
-                base
-                | {
-                    "bus": int(b),
-                    "recovery_ms": r.recovery_ms[i],
-                    "status": status[i],
-                    "vmin_pu": r.vmin_pu[i],
-                    "margin_pu": r.margin_pu[i],
-                    "motors_stalled": r.motors_stalled,
-                    "sim_ms": r.sim_ms,
-                    "der_bus": int(b) in der,
-                    "faulted": int(b) == r.fault_bus,
-                }
-            )
-    return pd.DataFrame(rows)
-
-
-def trace_table(records: list[SimRecord], case: str) -> pd.DataFrame:
-    """The `traces.parquet` table (long): case, fault_bus, strategy, k, forecast, variant,
-    bus, t_s, v_pu, q_mvar."""
-    parts = [
-        r.trace.assign(case=case, fault_bus=r.fault_bus, strategy=r.strategy, k=r.k, forecast=r.forecast, variant=r.variant)
-        for r in records
-    ]
-    cols = ["case", "fault_bus", "strategy", "k", "forecast", "variant", "bus", "t_s", "v_pu", "q_mvar"]
-    return pd.concat(parts, ignore_index=True)[cols] if parts else pd.DataFrame(columns=cols)
-
-
-def _write_parquet(path: Path, df: pd.DataFrame) -> None:
-    buf = io.BytesIO()
-    df.to_parquet(buf, index=False)
-    write_atomic(path, buf.getvalue())
-
-
-def write_study(
-    out: Path, records: list[SimRecord], config: StudyConfig, point: OperatingPoint, timings: dict, command: list[str]
-) -> list[Path]:
-    """Write fault.parquet, traces.parquet and manifest.json into `out`."""
-    import numba
-    import scipy
-
-    from opfbench import __version__
-
-    out.mkdir(parents=True, exist_ok=True)
-    net = point.scenario.net
-    _write_parquet(out / "fault.parquet", fault_table(records, net, config.case))
-    _write_parquet(out / "traces.parquet", trace_table(records, config.case))
-    fault = asdict(config.fault)
-    fault.pop("bus")
-    manifest = {
-        "schema": 1,
-        "opfbench_version": __version__,
-        "command": command,
-        "created_utc": pd.Timestamp.now(tz="UTC").isoformat(),
-        "case": config.case,
-        "operating_point": point.label,
-        "config": {
-            "fault_buses": list(config.fault_buses),
-            "strategies": list(config.strategies),
-            "ks": list(config.ks),
-            "forecasts": list(config.forecasts),
-            "variants": list(config.variants),
-        },
-        "model": config.params.as_dict(),
-        "variants": {label: config.params.with_variant(label).as_dict() for label in config.variants},
-        "fault": fault,
-        "integrator": {
-            "method": "classical Runge–Kutta (RK4), fixed step",
-            "step_s": config.fault.step_s,
-            "network": "current injection, fixed point over the DER buses to 1e-12 p.u.",
-        },
-        "recovery": {"threshold_pu": 0.9, "margin_window_s": 0.1, "trace_step_s": 0.005},
-        "timings": timings,
-        "versions": {
-            "python": platform.python_version(),
-            "numpy": np.__version__,
-            "scipy": scipy.__version__,
-            "pandas": pd.__version__,
-            "numba": numba.__version__,
-        },
-        "machine": {"cores": os.cpu_count(), "platform": platform.platform()},
-        "files": {
-            "fault.parquet": "one row per (simulation, bus)",
-            "traces.parquet": "|V| and Q at the DER buses and the fault bus, 5-ms samples",
-        },
-    }
-    write_json(out / "manifest.json", manifest)
-    return [out / "fault.parquet", out / "traces.parquet", out / "manifest.json"]
-
-
-def recovery_summary(table: pd.DataFrame) -> pd.DataFrame:
-    """One row per (variant, fault_bus, strategy, k, forecast) of a `fault.parquet` table:
-    recovery at the fault bus and the feeder's recovery (the slowest bus), that bus's
-    voltage margin, and both recoveries minus no action's in the same variant and fault
-    (ms; positive = slower than no action)."""
-    keys = ["variant", "fault_bus", "strategy", "k", "forecast"]
-    t = table.assign(rec=table["recovery_ms"].fillna(np.inf))
-    worst = t.loc[t.groupby(keys, sort=False)["rec"].idxmax(), keys + ["bus", "recovery_ms", "margin_pu"]]
-    worst = worst.rename(columns={"bus": "slowest_bus", "recovery_ms": "feeder_recovery_ms", "margin_pu": "slowest_margin_pu"})
-    at_fault = table.loc[table["faulted"], keys + ["recovery_ms", "vmin_pu", "motors_stalled"]]
-    out = at_fault.rename(columns={"recovery_ms": "fault_bus_recovery_ms", "vmin_pu": "fault_bus_vmin_pu"})
-    out = out.merge(worst, on=keys)
-    base = (
-        out[out["strategy"] == "no-action"]
-        .groupby(["variant", "fault_bus"])[["fault_bus_recovery_ms", "feeder_recovery_ms"]]
-        .first()
-    )
-    base.columns = ["na_fault", "na_feeder"]
-    out = out.join(base, on=["variant", "fault_bus"])
-    out["delta_fault_bus_ms"] = out["fault_bus_recovery_ms"] - out.pop("na_fault")
-    out["delta_feeder_ms"] = out["feeder_recovery_ms"] - out.pop("na_feeder")
-    return out.reset_index(drop=True)
-
-
-def case_source(case: Case, params: ModelParams) -> ModelParams:
-    """`params` with the upstream source of `case`'s short-circuit data, where it has some:
-    |Z| = base_mva / S″k (p.u. on the case base, the Thevenin impedance of the upstream grid
-    at rated voltage, IEC 60909 with c = 1), split by its R/X ratio."""
-    if case.short_circuit is None:
-        return params
-    s_sc, rx = case.short_circuit
-    z = case.network.base_mva / s_sc
-    x = z / np.hypot(1.0, rx)
-    return replace(params, source=replace(params.source, impedance_pu=float(x), resistance_pu=float(rx * x)))

@@ -5,6 +5,7 @@ the upstream grid's short-circuit data and notes on how it was read."""
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 import pandas as pd
@@ -88,6 +89,28 @@ class Case:
     load_index: np.ndarray | None = None
     der_index: np.ndarray | None = None
 
+    def __post_init__(self) -> None:
+        """The stored operating point and the source rows are read-only: a case is cached
+        and shared (`opfbench.io.load_case`), so a caller's write would reach every other."""
+        for arr in (*(self.stored or ()), self.load_index, self.der_index):
+            if isinstance(arr, np.ndarray):
+                arr.setflags(write=False)
+
     @property
     def name(self) -> str:
         return self.network.name
+
+    @cached_property
+    def data_sha256(self) -> str:
+        """Hash of the case's data (`opfbench.digests`): network, stored operating point,
+        time series, short-circuit data — everything but the spec that names it."""
+        from opfbench.digests import digest
+
+        series = self.series
+        profiles = None
+        if series is not None:
+            index = (series.index.asi8, str(series.index.tz))
+            profiles = {name: getattr(series, name) for name in series.__dataclass_fields__ if name != "index"} | {"index": index}
+        return digest(
+            [self.network, self.stored, profiles, self.short_circuit, list(self.notes), self.load_index, self.der_index]
+        )

@@ -134,7 +134,11 @@ def read_matpower(path: str | Path) -> MatpowerCase:
                     raise CaseFormatError(f"{name}: mpc.{key} opened at line {lineno} is never closed with '];'")
                 lineno, rest = lines[i]
                 i += 1
-            before = rest.split("]", 1)[0]
+            before, after = rest.split("]", 1)
+            if after.strip() not in ("", ";"):  # e.g. ]' (transposed) or ] * 1e3: not data, and not to be guessed
+                raise CaseFormatError(
+                    f"{name}, line {lineno}: mpc.{key} = [...] is followed by {after.strip()!r}; a matrix ends with '];'"
+                )
             if before.strip():
                 body.append((lineno, before))
             matrices[key] = _parse_matrix(name, key, body)

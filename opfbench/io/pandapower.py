@@ -110,24 +110,116 @@ class Converted:
     notes: tuple[str, ...]
 
 
-def _col(table: pd.DataFrame, name: str, default: float) -> np.ndarray:
-    """A numeric column as floats, NaN (and a missing column) replaced by `default`."""
-    if name not in table:
-        return np.full(len(table), default, dtype=float)
-    return pd.to_numeric(table[name], errors="coerce").fillna(default).to_numpy(dtype=float)
+_REQUIRED = None
+"""`_Table.num`'s `empty`/`absent` for a value pandapower needs: an empty cell or a missing
+column is refused, never replaced by a guess."""
 
 
-def _flag(table: pd.DataFrame, name: str, default: bool) -> np.ndarray:
-    if name not in table:
-        return np.full(len(table), default, dtype=bool)
-    return table[name].astype(object).where(table[name].notna(), default).astype(bool).to_numpy()
+@dataclass(frozen=True)
+class _Table:
+    """A pandapower element table read strictly: a cell that is not a finite number (text,
+    true/false, ±inf) is refused with table, index, column and value named; an empty (NaN)
+    cell or a missing column takes a default only where pandapower itself has one (an
+    optional column such as max_p_mw or tap_pos), and is refused where pandapower needs the
+    value (a load's p_mw, a line's length); bus references must name a row of 'bus';
+    true/false columns hold true/false (or 0/1), not text."""
+
+    frame: pd.DataFrame
+    name: str
+    label: str
+
+    @classmethod
+    def of(cls, pnet, name: str, label: str, in_service: bool = True) -> "_Table":
+        """The table `name` of `pnet` (only its in-service rows with `in_service`)."""
+        frame = pnet[name] if name in pnet else pd.DataFrame()
+        table = cls(frame, name, label)
+        return table.rows(table.flag("in_service", True)) if in_service and len(frame) else table
+
+    def __len__(self) -> int:
+        return len(self.frame)
+
+    @property
+    def index(self) -> pd.Index:
+        return self.frame.index
+
+    def rows(self, mask: np.ndarray) -> "_Table":
+        return _Table(self.frame[mask], self.name, self.label)
+
+    def error(self, row: object, problem: str) -> CaseFormatError:
+        return CaseFormatError(f"{self.label}: table '{self.name}' index {row}: {problem}")
+
+    def num(self, column: str, empty: float | None = _REQUIRED, absent: float | None = _REQUIRED) -> np.ndarray:
+        """The column as floats; `empty`: the value of an empty cell (None: refused);
+        `absent`: the value of every row when the column is missing (None: refused)."""
+        if column not in self.frame:
+            if absent is None and len(self.frame):
+                raise CaseFormatError(f"{self.label}: table '{self.name}' has no column {column!r}")
+            return np.full(len(self.frame), np.nan if absent is None else absent, dtype=float)
+        raw = self.frame[column]
+        if pd.api.types.is_bool_dtype(raw):
+            is_bool = np.ones(len(raw), dtype=bool)
+        elif raw.dtype == object:
+            is_bool = raw.map(lambda v: isinstance(v, (bool, np.bool_))).to_numpy(dtype=bool)
+        else:
+            is_bool = np.zeros(len(raw), dtype=bool)
+        values = pd.to_numeric(raw.where(~is_bool), errors="coerce").to_numpy(dtype=float)
+        blank = raw.isna().to_numpy()
+        bad = (~blank & ~np.isfinite(values)) | is_bool
+        if bad.any():
+            i = int(np.flatnonzero(bad)[0])
+            raise self.error(self.frame.index[i], f"{column} is {raw.iloc[i]!r}, not a finite number")
+        if blank.any():
+            if empty is None:
+                i = int(np.flatnonzero(blank)[0])
+                raise self.error(self.frame.index[i], f"{column} is empty; pandapower's power flow needs a number there")
+            values[blank] = empty
+        return values
+
+    def positive(self, column: str, empty: float | None = _REQUIRED, absent: float | None = _REQUIRED) -> np.ndarray:
+        """`num` of a quantity that must be > 0 (a length, a rating, a voltage); a NaN
+        `empty`/`absent` default passes (an optional value not given)."""
+        values = self.num(column, empty, absent)
+        bad = values <= 0
+        if bad.any():
+            i = int(np.flatnonzero(bad)[0])
+            raise self.error(self.frame.index[i], f"{column} is {values[i]:g}; it must be > 0")
+        return values
+
+    def flag(self, column: str, default: bool) -> np.ndarray:
+        """A true/false column (`default` where empty or missing)."""
+        if column not in self.frame:
+            return np.full(len(self.frame), default, dtype=bool)
+        raw = self.frame[column]
+        ok = raw.map(_is_flag).to_numpy(dtype=bool)
+        if not ok.all():
+            i = int(np.flatnonzero(~ok)[0])
+            raise self.error(self.frame.index[i], f"{column} is {raw.iloc[i]!r}, not true or false")
+        return raw.astype(object).where(raw.notna(), default).astype(bool).to_numpy()
+
+    def buses(self, column: str, bus_index: pd.Index) -> np.ndarray:
+        """A column of bus references (pandapower bus indices), each a row of 'bus'."""
+        values = self.num(column)
+        known = np.isin(values, bus_index.to_numpy(dtype=float))
+        if not known.all():
+            i = int(np.flatnonzero(~known)[0])
+            raise self.error(self.frame.index[i], f"{column} {values[i]:g} is not a bus of table 'bus'")
+        return values.astype(np.int64)
+
+
+def _is_flag(value: object) -> bool:
+    """A true/false cell: a bool, 0 or 1, or empty."""
+    if isinstance(value, (bool, np.bool_)):
+        return True
+    if isinstance(value, (int, float, np.number)):
+        return value in (0, 1) or math.isnan(value)
+    return value is None or value is pd.NA
 
 
 def _refuse_unmapped(pnet, label: str) -> None:
     for table, reason in REFUSED_TABLES.items():
         df = pnet.get(table) if hasattr(pnet, "get") else None
         if isinstance(df, pd.DataFrame) and len(df):
-            active = df.index[_flag(df, "in_service", True)] if "in_service" in df else df.index
+            active = _Table.of(pnet, table, label).index
             if len(active):
                 more = f" (and {len(active) - 1} more)" if len(active) > 1 else ""
                 raise CaseFormatError(f"{label}: table '{table}' index {active[0]}{more}: {reason}")
@@ -182,44 +274,80 @@ class _Branches:
             getattr(self, name).extend(np.atleast_1d(value).tolist())
 
 
-def _open_ends(pnet, et: str, table: pd.DataFrame, ends: tuple[str, str]) -> tuple[np.ndarray, np.ndarray]:
-    """(open at the first end, open at the second) per row: an open switch of type `et`
-    between the element and that end's bus, or that bus out of service."""
-    sw = pnet.switch
-    sw = sw[(sw.et == et) & ~_flag(sw, "closed", True)]
-    in_service_bus = pnet.bus.in_service.astype(bool)
-    pairs = set(zip(sw.element.astype(int), sw.bus.astype(int), strict=True))
-    out = []
-    for end in ends:
-        bus = table[end].to_numpy()
-        opened = np.array([(int(i), int(bb)) in pairs for i, bb in zip(table.index, bus, strict=True)], dtype=bool)
-        opened |= ~in_service_bus.reindex(bus).fillna(False).to_numpy(dtype=bool)
-        out.append(opened)
-    return out[0], out[1]
+@dataclass(frozen=True)
+class _Grid:
+    """What every element table is read against: the buses (each with a positive nominal
+    voltage vn_kv, and whether it is in service) and the switches."""
+
+    label: str
+    sn_mva: float
+    f_hz: float
+    vn_kv: pd.Series
+    on: pd.Series
+    switches: _Table
+
+    @classmethod
+    def of(cls, pnet, label: str) -> "_Grid":
+        bus = _Table.of(pnet, "bus", label, in_service=False)
+        vn = pd.Series(bus.positive("vn_kv"), index=bus.index)
+        on = pd.Series(bus.flag("in_service", True), index=bus.index)
+        switches = _Table.of(pnet, "switch", label, in_service=False)
+        if len(switches):
+            kinds = switches.frame["et"].astype(object)
+            bad = ~kinds.isin(["b", "l", "t", "t3"]).to_numpy()
+            if bad.any():
+                i = int(np.flatnonzero(bad)[0])
+                raise switches.error(switches.index[i], f"et is {kinds.iloc[i]!r}; a switch's et is b, l, t or t3")
+            switches.buses("bus", bus.index)
+            switches.rows((kinds == "b").to_numpy()).buses("element", bus.index)
+        sn, f_hz = (
+            float(pnet[key]) if isinstance(pnet[key], (int, float, np.number)) else math.nan for key in ("sn_mva", "f_hz")
+        )
+        for key, value in (("sn_mva", sn), ("f_hz", f_hz)):
+            if not (math.isfinite(value) and value > 0):
+                raise CaseFormatError(f"{label}: the net's {key} is {pnet[key]!r}; it must be a positive number")
+        return cls(label, sn, f_hz, vn, on, switches)
+
+    def open_ends(self, et: str, table: _Table, ends: tuple[str, str]) -> tuple[np.ndarray, ...]:
+        """(bus at the first end, at the second, open at the first, open at the second) per
+        row of `table`: its bus references, and whether an open switch of type `et` lies
+        between the element and that end's bus, or that bus is out of service."""
+        sw = self.switches
+        pairs: set[tuple[int, int]] = set()
+        if len(sw):
+            sw = sw.rows((sw.frame["et"] == et).to_numpy() & ~sw.flag("closed", True))
+            pairs = set(zip(sw.num("element").astype(int), sw.num("bus").astype(int), strict=True))
+        buses, opened = [], []
+        for end in ends:
+            bus = table.buses(end, self.vn_kv.index)
+            buses.append(bus)
+            at = np.array([(int(i), int(bb)) in pairs for i, bb in zip(table.index, bus, strict=True)], dtype=bool)
+            opened.append(at | ~self.on.reindex(bus).to_numpy(dtype=bool))
+        return buses[0], buses[1], opened[0], opened[1]
 
 
-def _lines(pnet, br: _Branches, label: str) -> None:
-    line = pnet.line[_flag(pnet.line, "in_service", True)]
+def _lines(grid: _Grid, pnet, br: _Branches) -> None:
+    line = _Table.of(pnet, "line", grid.label)
     if not len(line):
         return
-    vn = pnet.bus.vn_kv.astype(float)
-    kv_f = vn.reindex(line.from_bus).to_numpy()
-    z_base = kv_f**2 / pnet.sn_mva
-    length, par = _col(line, "length_km", 0.0), _col(line, "parallel", 1.0)
-    r = _col(line, "r_ohm_per_km", 0.0) * length / z_base / par
-    x = _col(line, "x_ohm_per_km", 0.0) * length / z_base / par
-    b = 2 * pnet.f_hz * math.pi * _col(line, "c_nf_per_km", 0.0) * 1e-9 * z_base * length * par
-    g = _col(line, "g_us_per_km", 0.0) * 1e-6 * z_base * length * par
-    open_f, open_t = _open_ends(pnet, "l", line, ("from_bus", "to_bus"))
-    f = np.where(open_f, -1, line.from_bus.to_numpy(dtype=np.int64))
-    t = np.where(open_t, -1, line.to_bus.to_numpy(dtype=np.int64))
-    br.add(f, t, r, x, b, g, np.ones(len(line)), np.zeros(len(line)), kv_f, vn.reindex(line.to_bus).to_numpy())
+    fb, tb, open_f, open_t = grid.open_ends("l", line, ("from_bus", "to_bus"))
+    kv_f = grid.vn_kv.reindex(fb).to_numpy()
+    z_base = kv_f**2 / grid.sn_mva
+    length, par = line.positive("length_km"), line.positive("parallel", absent=1.0)
+    r = line.num("r_ohm_per_km") * length / z_base / par
+    x = line.num("x_ohm_per_km") * length / z_base / par
+    b = 2 * grid.f_hz * math.pi * line.num("c_nf_per_km") * 1e-9 * z_base * length * par
+    g = line.num("g_us_per_km", empty=0.0, absent=0.0) * 1e-6 * z_base * length * par
+    f = np.where(open_f, -1, fb)
+    t = np.where(open_t, -1, tb)
+    br.add(f, t, r, x, b, g, np.ones(len(line)), np.zeros(len(line)), kv_f, grid.vn_kv.reindex(tb).to_numpy())
 
 
-def _tap_changer(trafo: pd.DataFrame, label: str) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def _tap_changer(table: _Table) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(vn_hv, vn_lv, extra shift in degrees) after the tap changers, as pandapower 3.x's
     `_calc_tap_from_dataframe` without characteristic tables."""
-    vnh, vnl = _col(trafo, "vn_hv_kv", np.nan), _col(trafo, "vn_lv_kv", np.nan)
+    trafo, label = table.frame, table.label
+    vnh, vnl = table.positive("vn_hv_kv"), table.positive("vn_lv_kv")
     shift = np.zeros(len(trafo))
     raw = trafo["tap_changer_type"] if "tap_changer_type" in trafo else pd.Series(None, index=trafo.index, dtype=object)
     kind = raw.astype(object).where(raw.notna(), "").astype(str).str.strip()
@@ -229,7 +357,7 @@ def _tap_changer(trafo: pd.DataFrame, label: str) -> tuple[np.ndarray, np.ndarra
             raise CaseFormatError(
                 f"{label}: table 'trafo' index {trafo.index[second][0]}: a second tap changer (tap2_*) is not modelled"
             )
-    tabular = _flag(trafo, "tap_dependency_table", False) | (kind.to_numpy() == "Tabular")
+    tabular = table.flag("tap_dependency_table", False) | (kind.to_numpy() == "Tabular")
     if tabular.any():
         i = trafo.index[tabular][0]
         raise CaseFormatError(f"{label}: table 'trafo' index {i}: tabular tap changers (characteristic tables) are not modelled")
@@ -237,9 +365,9 @@ def _tap_changer(trafo: pd.DataFrame, label: str) -> tuple[np.ndarray, np.ndarra
     if unknown.any():
         i = trafo.index[unknown][0]
         raise CaseFormatError(f"{label}: table 'trafo' index {i}: unknown tap_changer_type {kind[i]!r}")
-    diff = _col(trafo, "tap_pos", np.nan) - _col(trafo, "tap_neutral", np.nan)
-    diff = np.nan_to_num(diff, nan=0.0)
-    step_pct, step_deg = _col(trafo, "tap_step_percent", 0.0), _col(trafo, "tap_step_degree", 0.0)
+    optional = {"empty": math.nan, "absent": math.nan}  # no tap changer
+    diff = np.nan_to_num(table.num("tap_pos", **optional) - table.num("tap_neutral", **optional), nan=0.0)
+    step_pct, step_deg = (table.num(c, empty=0.0, absent=0.0) for c in ("tap_step_percent", "tap_step_degree"))
     side = trafo["tap_side"].astype(str).to_numpy() if "tap_side" in trafo else np.full(len(trafo), "hv")
     ratio_type = kind.isin(["Ratio", "Symmetrical"]).to_numpy()
     ideal = (kind == "Ideal").to_numpy()
@@ -260,45 +388,38 @@ def _tap_changer(trafo: pd.DataFrame, label: str) -> tuple[np.ndarray, np.ndarra
     return vnh, vnl, shift
 
 
-def _trafos(pnet, br: _Branches, label: str) -> None:
-    trafo = pnet.trafo[_flag(pnet.trafo, "in_service", True)]
-    if not len(trafo):
+def _trafos(grid: _Grid, pnet, br: _Branches) -> None:
+    table = _Table.of(pnet, "trafo", grid.label)
+    if not len(table):
         return
     for col in ("leakage_resistance_ratio_hv", "leakage_reactance_ratio_hv"):
-        ratio = _col(trafo, col, 0.5)
+        ratio = table.num(col, empty=0.5, absent=0.5)
         if np.any(ratio != 0.5):
-            i = trafo.index[ratio != 0.5][0]
-            raise CaseFormatError(f"{label}: table 'trafo' index {i}: {col} ≠ 0.5 (an asymmetric T model) is not modelled")
-    vn = pnet.bus.vn_kv.astype(float)
-    vn_hv_bus, vn_lv_bus = vn.reindex(trafo.hv_bus).to_numpy(), vn.reindex(trafo.lv_bus).to_numpy()
-    vnh, vnl, tap_shift = _tap_changer(trafo, label)
-    sn, par = _col(trafo, "sn_mva", np.nan), _col(trafo, "parallel", 1.0)
-    vk, vkr = _col(trafo, "vk_percent", np.nan), _col(trafo, "vkr_percent", 0.0)
-    bad = ~np.isfinite(sn * vk * vnh * vnl) | (sn <= 0) | (vk <= 0)
-    if bad.any():
-        i = trafo.index[bad][0]
-        raise CaseFormatError(
-            f"{label}: table 'trafo' index {i}: sn_mva, vk_percent, vn_hv_kv and vn_lv_kv must be positive numbers"
-        )
-    z_ref = (vnl / vn_lv_bus) ** 2 * pnet.sn_mva  # referred to the LV side's tap-adjusted voltage
+            i = table.index[ratio != 0.5][0]
+            raise table.error(i, f"{col} ≠ 0.5 (an asymmetric T model) is not modelled")
+    hv, lv, open_f, open_t = grid.open_ends("t", table, ("hv_bus", "lv_bus"))
+    vn_hv_bus, vn_lv_bus = grid.vn_kv.reindex(hv).to_numpy(), grid.vn_kv.reindex(lv).to_numpy()
+    vnh, vnl, tap_shift = _tap_changer(table)
+    sn, par = table.positive("sn_mva"), table.positive("parallel", absent=1.0)
+    vk, vkr = table.positive("vk_percent"), table.num("vkr_percent")
+    z_ref = (vnl / vn_lv_bus) ** 2 * grid.sn_mva  # referred to the LV side's tap-adjusted voltage
     z = vk / 100 / sn * z_ref
     r = vkr / 100 / sn * z_ref
     x = np.sign(z) * np.sqrt(z**2 - r**2)
     r, x = r / par, x / par
     # magnetizing branch (pandapower's `_calc_y_from_dataframe`), p.u. on the LV bus base:
     # rated at the table's vn_lv_kv, referred through the tap-adjusted LV voltage
-    vn_lv_rated = _col(trafo, "vn_lv_kv", np.nan)
-    pfe_mw = _col(trafo, "pfe_kw", 0.0) * 1e-3
-    ym_mva = _col(trafo, "i0_percent", 0.0) / 100 * sn
+    vn_lv_rated = table.positive("vn_lv_kv")
+    pfe_mw = table.num("pfe_kw") * 1e-3
+    ym_mva = table.num("i0_percent") / 100 * sn
     b_mva = -np.sqrt(np.maximum(ym_mva**2 - pfe_mw**2, 0.0))
-    scale = (vn_lv_bus**2 / pnet.sn_mva) * par / vn_lv_rated**2 / (vnl / vn_lv_rated) ** 2
+    scale = (vn_lv_bus**2 / grid.sn_mva) * par / vn_lv_rated**2 / (vnl / vn_lv_rated) ** 2
     g_pu, b_pu = pfe_mw * scale, b_mva * scale
     r, x, g_pu, b_pu = _wye_delta(r, x, g_pu, b_pu)
     ratio = (vnh / vnl) / (vn_hv_bus / vn_lv_bus)
-    shift = _col(trafo, "shift_degree", 0.0) + tap_shift
-    open_f, open_t = _open_ends(pnet, "t", trafo, ("hv_bus", "lv_bus"))
-    f = np.where(open_f, -1, trafo.hv_bus.to_numpy(dtype=np.int64))
-    t = np.where(open_t, -1, trafo.lv_bus.to_numpy(dtype=np.int64))
+    shift = table.num("shift_degree", absent=0.0) + tap_shift
+    f = np.where(open_f, -1, hv)
+    t = np.where(open_t, -1, lv)
     br.add(f, t, r, x, b_pu, g_pu, ratio, shift, vn_hv_bus, vn_lv_bus)
 
 
@@ -333,9 +454,10 @@ def from_pandapower(pnet, name: str, der_pf: float = DEFAULT_DER_PF, label: str 
         raise CaseFormatError(f"{label}: der_pf must lie in (0, 1], got {der_pf}")
     _refuse_unmapped(pnet, label)
     notes: list[str] = []
-    bus = pnet.bus
-    on_bus = bus.index[_flag(bus, "in_service", True)].to_numpy(dtype=int)
-    ext = pnet.ext_grid[_flag(pnet.ext_grid, "in_service", True)]
+    grid = _Grid.of(pnet, label)
+    bus = _Table.of(pnet, "bus", label, in_service=False)
+    on_bus = bus.index[grid.on.to_numpy()].to_numpy(dtype=int)
+    ext = _Table.of(pnet, "ext_grid", label)
     if len(ext) != 1:
         raise CaseFormatError(
             f"{label}: needs exactly one in-service external grid (table 'ext_grid'), found {len(ext)}"
@@ -344,14 +466,13 @@ def from_pandapower(pnet, name: str, der_pf: float = DEFAULT_DER_PF, label: str 
 
     fuse = _Fuse(bus.index.to_numpy(dtype=int))
     br = _Branches.empty()
-    sw = pnet.switch
-    bb = sw[(sw.et == "b") & _flag(sw, "closed", True)] if len(sw) else sw
-    z_sw = _col(bb, "z_ohm", 0.0) if len(bb) else np.zeros(0)
-    for (_, row), z in zip(bb.iterrows(), z_sw, strict=True):
-        a, e = int(row.bus), int(row.element)
+    sw = grid.switches
+    bb = sw.rows((sw.frame["et"] == "b").to_numpy() & sw.flag("closed", True)) if len(sw) else sw
+    ends = zip(bb.num("bus").astype(int), bb.num("element").astype(int), bb.num("z_ohm", absent=0.0), strict=True)
+    for a, e, z in ends if len(bb) else ():
         if z > 0:  # an impedance branch (pandapower's switch_rx_ratio)
-            kv_a = float(bus.vn_kv[a])
-            zpu = z / (kv_a**2 / pnet.sn_mva)
+            kv_a = float(grid.vn_kv[a])
+            zpu = z / (kv_a**2 / grid.sn_mva)
             br.add(
                 a,
                 e,
@@ -362,12 +483,12 @@ def from_pandapower(pnet, name: str, der_pf: float = DEFAULT_DER_PF, label: str 
                 1.0,
                 0.0,
                 kv_a,
-                float(bus.vn_kv[e]),
+                float(grid.vn_kv[e]),
             )
         else:
             fuse.join(a, e)
-    _lines(pnet, br, label)
-    _trafos(pnet, br, label)
+    _lines(grid, pnet, br)
+    _trafos(grid, pnet, br)
 
     f = np.array([fuse.find(v) if v >= 0 else -1 for v in br.f], dtype=int)
     t = np.array([fuse.find(v) if v >= 0 else -1 for v in br.t], dtype=int)
@@ -406,10 +527,11 @@ def from_pandapower(pnet, name: str, der_pf: float = DEFAULT_DER_PF, label: str 
 
     ids = np.array(reps + list(range(int(bus.index.max()) + 1, next_id)), dtype=int)
     pos = {int(v): k for k, v in enumerate(ids)}
-    slack_pp = fuse.find(int(ext.bus.iloc[0]))
+    ext_bus = int(ext.buses("bus", bus.index)[0])
+    slack_pp = fuse.find(ext_bus)
     if slack_pp not in pos:
-        raise CaseFormatError(f"{label}: the external grid's bus {int(ext.bus.iloc[0])} is out of service")
-    kv = np.concatenate([bus.vn_kv.reindex(reps).to_numpy(dtype=float), np.array(aux_kv, dtype=float)])
+        raise CaseFormatError(f"{label}: the external grid's bus {ext_bus} is out of service")
+    kv = np.concatenate([grid.vn_kv.reindex(reps).to_numpy(dtype=float), np.array(aux_kv, dtype=float)])
     reachable = _reachable(len(ids), np.array([pos[v] for v in f]), np.array([pos[v] for v in t]), pos[slack_pp])
     if not reachable.all():
         lost = ids[~reachable]
@@ -425,8 +547,8 @@ def from_pandapower(pnet, name: str, der_pf: float = DEFAULT_DER_PF, label: str 
     bus_of = {int(b_): int(renum[pos[fuse.find(int(b_))]]) for b_ in on_bus if renum[pos[fuse.find(int(b_))]] >= 0}
     ids, kv = ids[keep_bus], kv[keep_bus]
     n = ids.size
-    lo = pd.Series(_col(bus, "min_vm_pu", DEFAULT_VMIN), index=bus.index)
-    hi = pd.Series(_col(bus, "max_vm_pu", DEFAULT_VMAX), index=bus.index)
+    lo = pd.Series(bus.num("min_vm_pu", empty=DEFAULT_VMIN, absent=DEFAULT_VMIN), index=bus.index)
+    hi = pd.Series(bus.num("max_vm_pu", empty=DEFAULT_VMAX, absent=DEFAULT_VMAX), index=bus.index)
     vmin, vmax = np.full(n, -np.inf), np.full(n, np.inf)
     for b_, member in bus_of.items():  # a fused bus takes the tightest limits of its members
         vmin[member], vmax[member] = max(vmin[member], lo[b_]), min(vmax[member], hi[b_])
@@ -435,7 +557,7 @@ def from_pandapower(pnet, name: str, der_pf: float = DEFAULT_DER_PF, label: str 
         vmin[aux], vmax[aux] = vmin[j], vmax[j]
 
     # loads
-    load = pnet.load[_flag(pnet.load, "in_service", True)]
+    load = _Table.of(pnet, "load", label)
     zip_cols = [
         c
         for c in (
@@ -446,36 +568,34 @@ def from_pandapower(pnet, name: str, der_pf: float = DEFAULT_DER_PF, label: str 
             "const_z_q_percent",
             "const_i_q_percent",
         )
-        if c in load
+        if c in load.frame
     ]
     for col in zip_cols:
-        bad = _col(load, col, 0.0) != 0
+        bad = load.num(col, empty=0.0) != 0
         if bad.any():
-            raise CaseFormatError(
-                f"{label}: table 'load' index {load.index[bad][0]}: {col} ≠ 0 (a voltage-dependent load) is not modelled; loads are constant power"
+            raise load.error(
+                load.index[bad][0], f"{col} ≠ 0 (a voltage-dependent load) is not modelled; loads are constant power"
             )
-    load_at = np.array([bus_of.get(int(v), -1) for v in load.bus], dtype=int)
-    lscale = _col(load, "scaling", 1.0)
-    lp, lq = _col(load, "p_mw", 0.0) * lscale, _col(load, "q_mvar", 0.0) * lscale
+    load_at = np.array([bus_of.get(int(v), -1) for v in load.buses("bus", bus.index)], dtype=int)
+    lscale = load.num("scaling", absent=1.0)
+    lp, lq = load.num("p_mw") * lscale, load.num("q_mvar") * lscale
     dropped_loads = int((load_at < 0).sum())
     keep_load = load_at >= 0
     load_index = load.index.to_numpy()[keep_load]
     load_bus, lp, lq = load_at[keep_load], lp[keep_load], lq[keep_load]
 
     # static generators → DER
-    sgen = pnet.sgen[_flag(pnet.sgen, "in_service", True)]
-    sg_at = np.array([bus_of.get(int(v), -1) for v in sgen.bus], dtype=int)
-    sscale = _col(sgen, "scaling", 1.0)
-    sp, sq = _col(sgen, "p_mw", 0.0) * sscale, _col(sgen, "q_mvar", 0.0) * sscale
-    rating = np.maximum(sp, _col(sgen, "max_p_mw", 0.0))
+    sgen = _Table.of(pnet, "sgen", label)
+    sg_at = np.array([bus_of.get(int(v), -1) for v in sgen.buses("bus", bus.index)], dtype=int)
+    sscale = sgen.num("scaling", absent=1.0)
+    sp, sq = sgen.num("p_mw") * sscale, sgen.num("q_mvar", absent=0.0) * sscale
+    rating = np.maximum(sp, sgen.num("max_p_mw", empty=0.0, absent=0.0))  # max_p_mw: an OPF limit, often not given
     bad = (rating <= 0) & (sg_at >= 0)
     if bad.any():
         i = sgen.index[bad][0]
-        raise CaseFormatError(
-            f"{label}: table 'sgen' index {i}: no positive rating (p_mw·scaling and max_p_mw ≤ 0): it cannot be a DER"
-        )
-    s_rated = np.maximum(_col(sgen, "sn_mva", 0.0), rating / der_pf)
-    types = sgen["type"].tolist() if "type" in sgen else [None] * len(sgen)
+        raise sgen.error(i, "no positive rating (p_mw·scaling and max_p_mw ≤ 0): it cannot be a DER")
+    s_rated = np.maximum(sgen.num("sn_mva", empty=0.0, absent=0.0), rating / der_pf)
+    types = sgen.frame["type"].tolist() if "type" in sgen.frame else [None] * len(sgen)
     keep_sg = sg_at >= 0
     dropped_sgens = int((~keep_sg).sum())
     ders = tuple(
@@ -489,18 +609,19 @@ def from_pandapower(pnet, name: str, der_pf: float = DEFAULT_DER_PF, label: str 
 
     # shunts
     gs, bs = np.zeros(n), np.zeros(n)
-    shunt = pnet.shunt[_flag(pnet.shunt, "in_service", True)] if len(pnet.shunt) else pnet.shunt
+    shunt = _Table.of(pnet, "shunt", label)
     if len(shunt):
-        if _flag(shunt, "step_dependency_table", False).any():
-            i = shunt.index[_flag(shunt, "step_dependency_table", False)][0]
-            raise CaseFormatError(f"{label}: table 'shunt' index {i}: shunt characteristic tables are not modelled")
-        at = np.array([bus_of.get(int(v), -1) for v in shunt.bus], dtype=int)
-        vbus = bus.vn_kv.reindex(shunt.bus).to_numpy(dtype=float)
-        vsh = np.where(np.isfinite(_col(shunt, "vn_kv", np.nan)), _col(shunt, "vn_kv", np.nan), vbus)
-        factor = _col(shunt, "step", 1.0) * (vbus / vsh) ** 2
+        tables = shunt.flag("step_dependency_table", False)
+        if tables.any():
+            raise shunt.error(shunt.index[tables][0], "shunt characteristic tables are not modelled")
+        shunt_bus = shunt.buses("bus", bus.index)
+        at = np.array([bus_of.get(int(v), -1) for v in shunt_bus], dtype=int)
+        vbus = grid.vn_kv.reindex(shunt_bus).to_numpy(dtype=float)
+        vsh = shunt.positive("vn_kv", empty=math.nan, absent=math.nan)  # not given: the bus's
+        factor = shunt.num("step", absent=1.0) * (vbus / np.where(np.isfinite(vsh), vsh, vbus)) ** 2
         ok = at >= 0
-        np.add.at(gs, at[ok], (_col(shunt, "p_mw", 0.0) * factor)[ok])
-        np.add.at(bs, at[ok], -(_col(shunt, "q_mvar", 0.0) * factor)[ok])
+        np.add.at(gs, at[ok], (shunt.num("p_mw", absent=0.0) * factor)[ok])
+        np.add.at(bs, at[ok], -(shunt.num("q_mvar") * factor)[ok])
 
     bus_p, bus_q = np.zeros(n), np.zeros(n)
     np.add.at(bus_p, load_bus, lp)
@@ -508,16 +629,14 @@ def from_pandapower(pnet, name: str, der_pf: float = DEFAULT_DER_PF, label: str 
     slack = int(renum[pos[slack_pp]])
     btype = np.ones(n, dtype=int)
     btype[slack] = 3
-    va = float(ext.va_degree.iloc[0]) if "va_degree" in ext else 0.0
-    if np.isfinite(va) and va != 0:
+    va = float(ext.num("va_degree", empty=0.0, absent=0.0)[0])
+    if va != 0:
         notes.append(f"the external grid's angle {va:g}° only rotates every bus angle; angles are reported relative to it")
-    vm = float(ext.vm_pu.iloc[0])
-    if not (np.isfinite(vm) and vm > 0):
-        raise CaseFormatError(f"{label}: table 'ext_grid' index {ext.index[0]}: vm_pu must be a positive number, got {vm}")
+    vm = float(ext.positive("vm_pu")[0])
     try:
         network = Network(
             name=name,
-            base_mva=float(pnet.sn_mva),
+            base_mva=grid.sn_mva,
             bus_ids=ids,
             bus_type=btype,
             base_kv=kv,
@@ -544,7 +663,7 @@ def from_pandapower(pnet, name: str, der_pf: float = DEFAULT_DER_PF, label: str 
     except NetworkError as exc:
         raise CaseFormatError(f"{label}: {exc}") from None
     sc = None
-    s_sc, rx = _col(ext, "s_sc_max_mva", np.nan)[0], _col(ext, "rx_max", np.nan)[0]
+    s_sc, rx = (float(ext.num(c, empty=math.nan, absent=math.nan)[0]) for c in ("s_sc_max_mva", "rx_max"))
     if np.isfinite(s_sc) and s_sc > 0:
         sc = (float(s_sc), float(rx) if np.isfinite(rx) else 0.0)
     return Converted(

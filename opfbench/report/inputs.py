@@ -1,10 +1,11 @@
-"""Read the files a run, a forecast run and a fault study wrote (see the file contracts:
-run folder, forecast folder, fault folder). Every input is optional: a missing one is
+"""Read the files a run, a forecast run and a fault study wrote (docs/CONTRACTS.md: run
+folder, forecast folder, fault folder). Every input is optional: a missing one is
 None plus the command that produces it, so its report section can say so. A damaged
-one — not UTF-8, not JSON, not an object, a truncated or empty parquet file, a column
-missing or of the wrong kind, a manifest field of the wrong type or an unknown schema
-version — is an `InputError` naming the file and what is wrong, before anything is
-drawn."""
+one — not UTF-8, not JSON, not an object, a JSON name given twice, a truncated or empty
+parquet file, a folder where the file belongs, a column missing or of the wrong kind, a
+number outside its domain (±inf, a k outside [0, 1]), a manifest field of the wrong kind
+or an unknown schema version — is an `InputError` naming the file and what is wrong,
+before anything is drawn."""
 
 from __future__ import annotations
 
@@ -57,7 +58,7 @@ class Inputs:
     year_manifest: dict | None = None
     year_dir: Path | None = None
     train_summary: pd.DataFrame | None = None  # train/summary.csv: the rules over the training period
-    learned: dict[str, str] = field(default_factory=dict)  # learned/<file>.json -> what it holds, one line
+    learned: dict[str, str] = field(default_factory=dict)  # the run's learned/<file>.json -> what it holds, one line
     missing: dict[str, str] = field(default_factory=dict)  # input name -> how to produce it
 
     def models(self) -> dict[str, str]:
@@ -134,16 +135,30 @@ SUMMARY_COUNTS = (
 )
 """Columns of summary.csv that count steps: whole numbers ≥ 0."""
 SUMMARY_OPTIONAL_NUMBERS = ("pf_converged_steps", "pf_diverged_steps")
+
+
+def _number(value: object) -> bool:
+    """A finite JSON number (true/false is none; NaN and Infinity are not JSON)."""
+    return isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value)
+
+
+def _label(value: object) -> bool:
+    return isinstance(value, str) and bool(value.strip()) and value.isprintable()
+
+
 _JSON_KINDS = {
-    "a list": (list,),
-    "a list of text": (list,),
-    "a list of numbers": (list,),
-    "an object": (dict,),
-    "text": (str,),
-    "a number": (int, float),
-    "a whole number": (int,),
+    "a list": lambda v: isinstance(v, list),
+    "a list of text": lambda v: isinstance(v, list) and all(isinstance(i, str) for i in v),
+    "a list of numbers in [0, 1]": lambda v: isinstance(v, list) and all(_number(i) and 0 <= i <= 1 for i in v),
+    "an object": lambda v: isinstance(v, dict),
+    "text": lambda v: isinstance(v, str),
+    "a printable label": _label,
+    "a number": _number,
+    "a number > 0": lambda v: _number(v) and v > 0,
+    "a finite number ≥ 0": lambda v: _number(v) and v >= 0,
+    "a whole number ≥ 0": lambda v: _number(v) and isinstance(v, int) and v >= 0,
 }
-_ITEMS = {"a list of text": (str,), "a list of numbers": (int, float)}
+"""JSON kinds (with their domain) of the manifest fields the report reads."""
 MANIFEST_FIELDS = {
     "command": "a list",
     "config": "an object",
@@ -156,46 +171,67 @@ MANIFEST_FIELDS = {
     "timings": "an object",
     "config.cases": "a list of text",
     "config.strategies": "a list of text",
-    "config.ks": "a list of numbers",
+    "config.ks": "a list of numbers in [0, 1]",
     "config.night_modes": "a list of text",
     "config.forecast": "a list of text",
     "config.night": "text",
     "config.period": "text",
-    "config.step_minutes": "a number",
+    "config.step_minutes": "a number > 0",
     "config.acopf_solver": "text",
-    "config.price_per_kwh": "a number",
-    "config.currency": "text",
+    "config.price_per_kwh": "a finite number ≥ 0",
+    "config.currency": "a printable label",
     "config.price_source": "text",
-    "timings.wall_s": "a number",
-    "timings.workers": "a whole number",
-    "timings.peak_rss_mb": "a number",
-    "timings.worker_peak_rss_mb": "a number",
+    "timings.wall_s": "a finite number ≥ 0",
+    "timings.workers": "a whole number ≥ 0",
+    "timings.peak_rss_mb": "a finite number ≥ 0",
+    "timings.worker_peak_rss_mb": "a finite number ≥ 0",
 }
-"""The manifest fields the report reads and their JSON types (null allowed; a field may be absent)."""
+"""The manifest fields the report reads and their JSON kinds (null allowed; a field may be
+absent, except `MANIFEST_REQUIRED`)."""
+MANIFEST_REQUIRED = ("config", "config.period")
+"""What every run's manifest holds (a fault study's manifest has a config, but no period)."""
 
 
-CASE_FIELDS = {"buses": "a whole number", "ders": "a list", "vmin_pu": "a number", "vmax_pu": "a number"}
+CASE_FIELDS = {"buses": "a whole number ≥ 0", "ders": "a list", "vmin_pu": "a number", "vmax_pu": "a number"}
 """The fields of a manifest's cases.<name> the report reads, and their JSON types."""
 
 
 def _is_kind(value: object, expected: str) -> bool:
-    """`value` is of the JSON kind `expected` (a key of `_JSON_KINDS`; true/false is no number)."""
-    if isinstance(value, bool) or not isinstance(value, _JSON_KINDS[expected]):
-        return False
-    items = _ITEMS.get(expected)
-    return items is None or (isinstance(value, list) and all(isinstance(v, items) and not isinstance(v, bool) for v in value))
+    """`value` is of the JSON kind `expected` (a key of `_JSON_KINDS`)."""
+    return bool(_JSON_KINDS[expected](value))
 
 
 def _damaged(path: Path, problem: str, command: str) -> InputError:
     return InputError(f"{path}: {problem}; rebuild it with `{command}`")
 
 
+def _present(path: Path, command: str) -> bool:
+    """Whether the input `path` exists — as a file: a folder (or anything else) in its
+    place is damage, not absence."""
+    if not path.exists():
+        return False
+    if not path.is_file():
+        raise _damaged(path, "is not a file (a folder?)", command)
+    return True
+
+
+def _unique_keys(pairs: list[tuple[str, object]]) -> dict:
+    """A JSON object's members; a name given twice is refused (JSON readers disagree on
+    which value wins)."""
+    out = dict(pairs)
+    if len(out) < len(pairs):
+        seen: set[str] = set()
+        twice = next(k for k, _ in pairs if k in seen or seen.add(k))  # type: ignore[func-returns-value]
+        raise ValueError(f"the name {twice!r} appears twice in one object")
+    return out
+
+
 def _json(path: Path, command: str) -> dict | None:
     """The JSON object in `path`, None when the file is absent."""
-    if not path.is_file():
+    if not _present(path, command):
         return None
     try:
-        data = json.loads(path.read_bytes().decode("utf-8"))
+        data = json.loads(path.read_bytes().decode("utf-8"), object_pairs_hook=_unique_keys)
     except OSError as exc:
         raise InputError(f"{path}: cannot read it ({exc.strerror})") from None
     except UnicodeDecodeError as exc:
@@ -224,6 +260,8 @@ def _manifest(path: Path, command: str) -> dict | None:
         for parent in parents:
             node = node.get(parent) if isinstance(node, dict) else None
         value = node.get(name) if isinstance(node, dict) else None
+        if value is None and key in MANIFEST_REQUIRED:
+            raise _damaged(path, f"no {key}: not the manifest of a run", command)
         if value is not None and not _is_kind(value, expected):
             raise _damaged(path, f"{key} is {value!r}, expected {expected}", command)
     for case, info in (m.get("cases") or {}).items():
@@ -235,9 +273,6 @@ def _manifest(path: Path, command: str) -> dict | None:
         for key, value, expected in fields:
             if value is not None and not _is_kind(value, expected):
                 raise _damaged(path, f"{key} is {value!r}, expected {expected}", command)
-    price = (m.get("config") or {}).get("price_per_kwh")
-    if price is not None and not (math.isfinite(price) and price >= 0):
-        raise _damaged(path, f"config.price_per_kwh is {price!r}, expected a finite number ≥ 0", command)
     return m
 
 
@@ -252,7 +287,9 @@ def _kind(t: pa.DataType) -> str:
         return NUMBER
     if pa.types.is_null(t):
         return NULL
-    return TIME if pa.types.is_timestamp(t) else str(t)
+    if pa.types.is_timestamp(t):
+        return TIME if t.tz is not None else "time without a time zone"
+    return str(t)
 
 
 TRACE_BUS = 27  # the fault traces plotted: at the paper's DFIG
@@ -279,8 +316,9 @@ def _filtered(
     fit in memory) with the columns of `kinds` (every column with `every_column`), text as
     arrow strings; None when the file is absent, holds no row or no row matches.
     InputError when it is not a readable parquet file, lacks a column of `kinds` or has it
-    of another kind, or a row read has no value in one of the `keys` columns."""
-    if not path.is_file():
+    of another kind, or a row read has no value in one of the `keys` columns, or a number
+    read is outside its domain (`_check_numbers`)."""
+    if not _present(path, command):
         return None
     try:
         if pq.ParquetFile(path).metadata.num_rows == 0:
@@ -300,11 +338,29 @@ def _filtered(
     for key in keys:
         if table.column(key).null_count:
             raise _damaged(path, f"{table.column(key).null_count} row(s) have no {key}", command)
+    _check_numbers(path, {name: table.column(name).to_numpy(zero_copy_only=False) for name, kind in kinds.items()
+                          if kind == NUMBER and name in table.column_names}, command)  # fmt: skip
     table = table.cast(
         pa.schema([pa.field(f.name, pa.string()) if f.name in text else f for f in table.schema], metadata=table.schema.metadata)
     )
     frame = table.to_pandas(types_mapper={pa.string(): pd.StringDtype("pyarrow")}.get)
     return frame if len(frame) else None
+
+
+DOMAINS = {"k": (0.0, 1.0)}
+"""Columns whose numbers have a domain narrower than finite (k: a reserve coefficient)."""
+
+
+def _check_numbers(path: Path, columns: dict[str, np.ndarray], command: str) -> None:
+    """Numbers a report shows are finite (NaN is "no figure", ±inf is damage) and inside
+    their `DOMAINS`."""
+    for name, values in columns.items():
+        values = np.asarray(values, dtype=float)
+        low, high = DOMAINS.get(name, (-np.inf, np.inf))
+        bad = np.isinf(values) | (values < low) | (values > high)
+        if bad.any():
+            where = f" outside [{low:g}, {high:g}]" if name in DOMAINS else ""
+            raise _damaged(path, f"column {name!r} holds {values[bad][0]:g}{where} ({int(bad.sum())} row(s))", command)
 
 
 def _reference_filter(summary: pd.DataFrame | None) -> list | None:
@@ -319,21 +375,24 @@ def _steps(path: Path, summary: pd.DataFrame | None, command: str) -> pd.DataFra
     """The per-step rows the report uses — every formulation's (convergence tables) and the
     reference setting's (plots) — with only the columns it uses."""
     reference = _reference_filter(summary)
+    keys = (*_KEYS, "time", "status")
     if reference is None or summary is None:
-        return _filtered(path, STEP_KINDS, None, command, keys=(*_KEYS, "time"))
+        return _filtered(path, STEP_KINDS, None, command, keys=keys)
     formulations = [s for s in dict.fromkeys(summary["strategy"].astype(str)) if is_formulation(s)]
     filters = [[("strategy", "in", formulations)], reference] if formulations else [reference]
-    return _filtered(path, STEP_KINDS, filters, command, keys=(*_KEYS, "time"))
+    return _filtered(path, STEP_KINDS, filters, command, keys=keys)
 
 
 def _summary(path: Path, command: str) -> pd.DataFrame | None:
     """summary.csv (None when absent or without rows); InputError unless UTF-8 CSV text
-    with the columns the report uses, numbers where numbers belong."""
-    if not path.is_file():
+    with the columns the report uses, numbers where numbers belong (finite, within
+    `DOMAINS`)."""
+    if not _present(path, command):
         return None
     try:
         text = path.read_bytes().decode("utf-8")
-        summary = pd.read_csv(io.StringIO(text), dtype={"case": str, "strategy": str, "night_mode": str, "forecast": str})
+        keys = {"case": str, "strategy": str, "night_mode": str, "forecast": str}
+        summary = pd.read_csv(io.StringIO(text), dtype=keys, float_precision="round_trip")  # k exactly as written
     except OSError as exc:
         raise InputError(f"{path}: cannot read it ({exc.strerror})") from None
     except UnicodeDecodeError as exc:
@@ -350,8 +409,7 @@ def _summary(path: Path, command: str) -> pd.DataFrame | None:
         if not pd.api.types.is_numeric_dtype(column) or pd.api.types.is_bool_dtype(column):
             bad = next((v for v in column if not _is_number(v)), column.iloc[0])
             raise _damaged(path, f"column {name!r} holds {bad!r}, not a number", command)
-        if np.isinf(column).any():
-            raise _damaged(path, f"column {name!r} holds an infinite value", command)
+        _check_numbers(path, {name: column.to_numpy()}, command)
         if name in SUMMARY_COUNTS and not ((column >= 0) & (column == np.round(column))).all():
             bad = column[~((column >= 0) & (column == np.round(column)))].iloc[0]
             raise _damaged(path, f"column {name!r} holds {bad:g}, not a count of steps", command)
@@ -387,8 +445,8 @@ def _forecast_json(path: Path, command: str) -> dict | None:
             raise _damaged(path, f"metrics[{model!r}] is {values!r}, expected an object of numbers", command)
         for key in FORECAST_METRICS:
             value = values.get(key)
-            if value is not None and (isinstance(value, bool) or not isinstance(value, (int, float))):
-                raise _damaged(path, f"metrics[{model!r}][{key!r}] is {value!r}, expected a number", command)
+            if value is not None and not _number(value):
+                raise _damaged(path, f"metrics[{model!r}][{key!r}] is {value!r}, expected a finite number", command)
     return data
 
 
@@ -415,8 +473,10 @@ def load_inputs(
     if inp.der_q is None:  # the report plots the DER setpoints (the per-bus |V| table it does not read)
         inp.missing["der_q.parquet"] = DETAIL_COMMAND.format(dir=run)
     inp.train_summary = _summary(run / "train" / "summary.csv", command)
-    for path in sorted((run / "learned").glob("*.json")):
-        inp.learned[f"learned/{path.name}"] = _learned_line(path, command)
+    fitted = (inp.manifest or {}).get("config", {}).get("fitted") or []
+    for ref in sorted({str(f.get("ref")) for f in fitted if isinstance(f, dict)}):
+        if ref.startswith("learned/"):  # the run's own fits (a params= file given lies elsewhere)
+            inp.learned[ref] = _learned_line(run / ref, command)
     _load_sources(inp, forecast_dir, fault_dir, year_dir)
     return inp
 
@@ -441,7 +501,8 @@ def _load_sources(
     """The forecast, fault and year-run inputs into `inp`."""
     inp.forecast_dir = Path(forecast_dir) if forecast_dir is not None else DOCS_FORECAST
     for dataset in ("pv", "wind"):
-        data = _forecast_json(inp.forecast_dir / f"forecast_{dataset}.json", FORECAST_COMMAND)
+        path = inp.forecast_dir / f"forecast_{dataset}.json"
+        data = _forecast_json(path, f"opfbench forecast --dataset {dataset} --out {inp.forecast_dir}")
         if data is not None:
             inp.forecast[dataset] = data
     if not inp.forecast:

@@ -18,6 +18,12 @@ DEFAULT_FAULT_DIR = Path("reports/fault")
 DEFAULT_YEAR_DIR = Path("reports/year")
 
 
+def holds_run(folder: Path) -> bool:
+    """A run folder: `opfbench run` writes its manifest before any task (a damaged one is
+    the report inputs' to name)."""
+    return (folder / "manifest.json").exists()
+
+
 def holds_forecasts(folder: Path) -> bool:
     return any((folder / f"forecast_{d}.json").is_file() for d in ("pv", "wind"))
 

@@ -10,6 +10,8 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 
+from opfbench.dynamics.recovery import KEYS as RECOVERY_KEYS
+from opfbench.dynamics.recovery import recovery_table
 from opfbench.registry import BASELINE, PAPER_OPF, PAPER_RULES, REFERENCE_OPTIMUM, describe, is_formulation, is_relaxation, rank
 from opfbench.report import paper
 from opfbench.result import STATUSES
@@ -241,13 +243,9 @@ def forecast_metrics(forecast: dict[str, dict]) -> pd.DataFrame:
 
 def recovery(fault: pd.DataFrame) -> pd.DataFrame:
     """Recovery time at the faulted bus per simulation, and the time added vs no action
-    (same case, fault bus, k, forecast, variant)."""
-    keys = ["case", "fault_bus", "strategy", "k", "forecast", "variant"]
-    sub = fault[fault["faulted"].astype(bool)][keys + ["recovery_ms", "status", "vmin_pu", "margin_pu"]]
-    base = sub[sub["strategy"] == BASELINE].set_index(["case", "fault_bus", "k", "forecast", "variant"])["recovery_ms"]
-    out = sub.join(base.rename("no_action_ms"), on=["case", "fault_bus", "k", "forecast", "variant"])
-    out["added_ms"] = out["recovery_ms"] - out["no_action_ms"]
-    return order(out.drop(columns="no_action_ms"))
+    (`dynamics.recovery.recovery_table`)."""
+    rec = recovery_table(fault)
+    return order(rec[RECOVERY_KEYS + ["recovery_ms", "status", "vmin_pu", "margin_pu", "added_ms"]])
 
 
 def recovery_pivot(rec: pd.DataFrame, variant: str = "reference") -> pd.DataFrame:

@@ -1,6 +1,7 @@
-"""The study runner: the grid {case} × {strategy} × {k} × {night mode} × {forecast} over a
-period, split into tasks (configuration × chunk of steps), run in process or on Dask,
-checkpointed in a run folder (resumable) → per-step table + summary (`opfbench run`).
+"""The one study engine (`engine`: a task family's tasks → checkpoint store → in process
+or Dask → tables; `opfbench run` and `opfbench fault` both use it) and the run's study:
+the grid {case} × {strategy} × {k} × {night mode} × {forecast} over a period, split into
+tasks (configuration × chunk of steps) → per-step table + summary (`opfbench run`).
 Not to be confused with `opfbench.bench`, the speed benchmarks."""
 
 from opfbench.study.config import NIGHT_MODES, StudyConfig

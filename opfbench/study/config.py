@@ -44,12 +44,45 @@ def check_night(night: str) -> str:
     return night
 
 
-def _unique(label: str, values: tuple, notes: list[str]) -> tuple:
-    out = tuple(dict.fromkeys(values))
-    if len(out) < len(values):
-        dropped = [v for i, v in enumerate(values) if v in values[:i]]
-        notes.append(f"note: duplicated {label} dropped: {', '.join(str(v) for v in dropped)}")
-    return out
+def unique_grid(fields: dict, labels: dict[str, str]) -> tuple[dict, tuple[str, ...]]:
+    """`fields` with the grid values of each key of `labels` as a tuple without repeats
+    (first kept; k values as floats, strategies compared by their canonical labels,
+    `registry.configuration`), and notes naming what was dropped, by label."""
+    out, notes = dict(fields), []
+    for key, label in labels.items():
+        if key not in fields:
+            continue
+        values: tuple = tuple(fields[key])
+        if key == "ks":
+            values = tuple(float(v) for v in values)
+        elif key == "strategies":
+            values = tuple(configuration(str(v)).label for v in values)
+        out[key] = tuple(dict.fromkeys(values))
+        if len(out[key]) < len(values):
+            dropped = [v for i, v in enumerate(values) if v in values[:i]]
+            notes.append(f"note: duplicated {label} dropped: {', '.join(str(v) for v in dropped)}")
+    return out, tuple(notes)
+
+
+def strategies_for(strategies: tuple[str, ...], forecast: str, chosen: tuple[str, ...] | None = None) -> tuple[str, ...]:
+    """The strategies (configuration labels) a forecast source runs: all with "off"; under a
+    forecast only those the registry says read one (`uses_forecast`) — any other would
+    repeat its "off" rows — and, where `chosen` is given, only those of it."""
+    if forecast == "off":
+        return strategies
+    return tuple(s for s in strategies if (chosen is None or s in chosen) and _spec(s).uses_forecast)
+
+
+def check_something_to_run(
+    strategies: tuple[str, ...], forecasts: tuple[str, ...], chosen: tuple[str, ...] | None = None
+) -> None:
+    """InputError when no strategy runs under any of the forecasts (`strategies_for`)."""
+    if not any(strategies_for(strategies, source, chosen) for source in forecasts):
+        readers = [s.name for s in specs() if s.uses_forecast]
+        raise InputError(
+            f"nothing to run: only the strategies that read a forecast ({', '.join(readers)}) run under "
+            f"forecast {', '.join(forecasts)}, and the grid has none of them"
+        )
 
 
 @dataclass(frozen=True)
@@ -136,40 +169,20 @@ class StudyConfig:
         check_option("AC OPF solver", self.acopf_solver, ACOPF_SOLVERS)
         if not (self.cases and self.strategies and self.ks and self.night_modes and self.forecast):
             raise InputError("nothing to run: give at least one case, strategy, k, night mode and forecast")
-        if not any(self.strategies_for(source) for source in self.forecast):
-            readers = [s.name for s in specs() if s.uses_forecast]
-            raise InputError(
-                f"nothing to run: only the strategies that read a forecast ({', '.join(readers)}) run under "
-                f"forecast {', '.join(self.forecast)}, and the grid has none of them"
-            )
+        check_something_to_run(self.strategies, self.forecast, self.forecast_strategies)
 
     @classmethod
     def build(cls, **fields) -> "StudyConfig":
         """A config with duplicated grid values dropped (strategies compared by their canonical
         labels); `notes` say what was dropped."""
-        notes: list[str] = []
-        if "strategies" in fields:
-            fields["strategies"] = [configuration(label).label for label in fields["strategies"]]
-        for key, label in (
-            ("cases", "cases"),
-            ("strategies", "strategies"),
-            ("ks", "k values"),
-            ("night_modes", "night modes"),
-            ("forecast", "forecast sources"),
-        ):
-            if key in fields:
-                values = tuple(float(v) for v in fields[key]) if key == "ks" else tuple(fields[key])
-                fields[key] = _unique(label, values, notes)
-        return cls(**fields, notes=tuple(notes))
+        labels = {"cases": "cases", "strategies": "strategies", "ks": "k values", "night_modes": "night modes"}
+        unique, notes = unique_grid(fields, labels | {"forecast": "forecast sources"})
+        return cls(**unique, notes=notes)
 
     def strategies_for(self, forecast: str) -> tuple[str, ...]:
-        """The strategies a forecast source runs: all with "off"; under a forecast only those
-        the registry says read one (`uses_forecast`) — any other would repeat its "off" rows —
-        and, where `forecast_strategies` is given, only those of it."""
-        if forecast == "off":
-            return self.strategies
-        chosen = self.strategies if self.forecast_strategies is None else self.forecast_strategies
-        return tuple(s for s in self.strategies if s in chosen and _spec(s).uses_forecast)
+        """The strategies a forecast source runs (`strategies_for`, narrowed to
+        `forecast_strategies` where given)."""
+        return strategies_for(self.strategies, forecast, self.forecast_strategies)
 
     def settings(self) -> dict[str, str]:
         """The run-level settings options may take their defaults from (`Option.setting`)."""
@@ -183,8 +196,9 @@ class StudyConfig:
         return {key: list(v) if isinstance(v, tuple) else v for key, v in out.items()}
 
     def digest(self) -> str:
-        """Hash of everything that changes results (not the price labels)."""
-        body = {k: v for k, v in self.as_dict().items() if k not in LABEL_FIELDS}
+        """Hash of everything that changes results (not the price labels, nor the fitted
+        rules: they follow from the rest, and each task's definition holds its case's)."""
+        body = {k: v for k, v in self.as_dict().items() if k not in (*LABEL_FIELDS, "fitted")}
         return hashlib.sha256(json.dumps(body, sort_keys=True).encode()).hexdigest()[:16]
 
     def with_period(self, step_minutes: float, hours: float) -> "StudyConfig":

@@ -1,30 +1,41 @@
-"""Running tasks: in this process (`workers=1`), on a local Dask cluster of worker
-processes (`workers=N`, one thread each) or on an existing Dask cluster (`scheduler`
-address). Results come back to this process, which writes each finished task to the run
-folder as it arrives — workers need no access to the folder.
+"""Running a family's tasks: in this process (one worker), on a local Dask cluster of
+worker processes (`workers=N`, one thread each) or on an existing Dask cluster
+(`scheduler` address, checked before any work). Results come back to this process, which
+writes each finished task to the folder as it arrives — workers need no access to it.
 
 Ctrl-C: CasADi/IPOPT installs its own SIGINT handler while it solves and swallows the
-signal, so in-process runs block SIGINT in the main thread and wait for it in a watcher
+signal, so in-process work blocks SIGINT in the main thread and waits for it in a watcher
 thread (`signal.sigwait`), which stops the process at once (exit code 130) — every
 finished task is already on disk (each written atomically), the running one is dropped.
-With Dask the solves run in other processes and the interrupt stops the wait at once; the
-local cluster is shut down and KeyboardInterrupt propagates.
+With Dask the tasks run in other processes, which never see the signal (the local
+cluster's worker processes start with SIGINT blocked, so a terminal's Ctrl-C reaches this
+process alone); here Ctrl-C only raises a flag the wait for results looks at every 50 ms,
+so it stops the wait at once — the local cluster is shut down and KeyboardInterrupt
+propagates from there, never from inside a library's callback.
 """
 
 from __future__ import annotations
 
 import contextlib
+import logging
+import os
 import signal
+import socket
 import threading
 import warnings
-from typing import Callable
+from typing import Any, Callable, Iterator
 
-from opfbench.study.tasks import TaskInput, TaskOutput, run_task
+from opfbench.errors import InputError
 
-Save = Callable[[TaskOutput], None]
-
+Save = Callable[[Any], None]
 
 STOPPED = 130  # exit code after Ctrl-C (128 + SIGINT)
+CONNECT_S = 10  # seconds to reach a scheduler
+POLL_S = 0.05  # seconds between looks for finished tasks and Ctrl-C while a cluster works
+#: SILENT_LOGS: the local cluster logs only what is critical. A task's error reaches this
+#: process through its future; what the workers would log besides is noise here — e.g. a
+#: worker still busy when Ctrl-C shuts the scheduler down logs a traceback ("Failed to
+#: communicate with scheduler during heartbeat").
 #: The local cluster's workers:
 #: - with glibc's default heap trimming: Dask's MALLOC_TRIM_THRESHOLD_=65536 (it returns
 #:   freed memory to the OS at once) made the tasks slower than in this process; the
@@ -40,9 +51,54 @@ LOCAL_CLUSTER_CONFIG = {
 }
 
 
+def cores() -> int:
+    """The cores this process may run on."""
+    return len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count() or 1
+
+
+def worker_count(asked: int | None, tasks: int, scheduler: str | None, note: Callable[[str], None]) -> int:
+    """Local workers for `tasks` tasks: `asked` (None: one per core), never more than the
+    tasks (a note says so when more were asked); 1 with a scheduler (its workers run them)."""
+    if scheduler is not None:
+        return 1
+    n = cores() if asked is None else asked
+    if tasks and n > tasks:
+        if asked is not None:
+            note(f"note: {tasks} task(s) to run: {tasks} worker(s), not {asked}")
+        n = tasks
+    return max(n, 1)
+
+
+def scheduler_endpoint(address: str) -> tuple[str, int]:
+    """(host, port) of a Dask scheduler address (tcp:// or tls:// HOST:PORT; a bare
+    HOST:PORT is tcp); InputError for anything else."""
+    scheme, _, location = address.rpartition("://")
+    host, _, port = location.rpartition(":")
+    host = host.strip("[]")
+    if (scheme or "tcp") not in ("tcp", "tls") or not host or not port.isdigit() or not 0 < int(port) < 65536:
+        raise InputError(
+            f"--scheduler {address!r} is not a Dask scheduler address; give tcp://HOST:PORT (e.g. tcp://10.0.0.5:8786)"
+        )
+    return host, int(port)
+
+
+def check_scheduler(address: str) -> None:
+    """InputError unless something answers at the scheduler `address` within CONNECT_S
+    seconds (`scheduler_endpoint`)."""
+    host, port = scheduler_endpoint(address)
+    try:
+        socket.create_connection((host, port), timeout=CONNECT_S).close()
+    except OSError as exc:
+        reason = exc.strerror or type(exc).__name__
+        raise InputError(f"--scheduler {address}: no Dask scheduler answers there ({reason})") from None
+
+
 class _SigintWatcher:
     """Inside the block SIGINT is blocked in this (main) thread and a daemon thread waits
-    for it (`signal.sigwait`) and calls `on_stop`, which must end the process."""
+    for it (`signal.sigwait`) and calls `on_stop`, which must end the process. A SIGINT
+    the kernel hands to another thread that does not block it (threads started before the
+    block, e.g. BLAS's) runs Python's handler in the main thread: it passes the signal on
+    to the watcher."""
 
     def __init__(self, on_stop: Callable[[], None]):
         self.on_stop, self.armed = on_stop, True
@@ -52,22 +108,52 @@ class _SigintWatcher:
         if self.armed:
             self.on_stop()
 
+    def _pass_on(self, signum: int, frame: object) -> None:
+        if self.thread.ident is not None:
+            signal.pthread_kill(self.thread.ident, signal.SIGINT)
+
     def __enter__(self) -> "_SigintWatcher":
         signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
         self.thread = threading.Thread(target=self._wait, daemon=True, name="opfbench-sigint")
         self.thread.start()
+        self.handler = signal.signal(signal.SIGINT, self._pass_on)
         return self
 
     def __exit__(self, *exc) -> None:
         self.armed = False
+        signal.signal(signal.SIGINT, self.handler)
         if self.thread.ident is not None:  # started in __enter__
             signal.pthread_kill(self.thread.ident, signal.SIGINT)  # wakes the watcher, which ends
         self.thread.join(5)
         signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})
 
 
-def run_in_process(inputs: list[TaskInput], save: Save, on_stop: Callable[[], None]) -> None:
-    """Run the tasks here, one after another; Ctrl-C calls `on_stop` from a watcher thread
+def stop_on_ctrl_c(on_stop: Callable[[], None]) -> contextlib.AbstractContextManager:
+    """Inside the block Ctrl-C calls `on_stop` (which must end the process) from a watcher
+    thread, whatever the main thread is running (IPOPT swallows the signal); outside the
+    main thread, nothing."""
+    main = threading.current_thread() is threading.main_thread()
+    return _SigintWatcher(on_stop) if main else contextlib.nullcontext()
+
+
+@contextlib.contextmanager
+def _sigint_blocked() -> Iterator[None]:
+    """SIGINT blocked in this thread inside the block: threads and processes started here
+    inherit the mask (a local cluster's event loop and its worker processes). The
+    multiprocessing resource tracker is started first: starting it unblocks SIGINT in the
+    thread that does (the cluster's event loop, else)."""
+    from multiprocessing import resource_tracker
+
+    resource_tracker.ensure_running()
+    previous = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
+    try:
+        yield
+    finally:
+        signal.pthread_sigmask(signal.SIG_SETMASK, previous)
+
+
+def run_in_process(jobs: list[tuple[Any, Any]], runner: Callable, save: Save, on_stop: Callable[[], None]) -> None:
+    """Run the jobs here, one after another; Ctrl-C calls `on_stop` from a watcher thread
     (`on_stop` must end the process, e.g. with os._exit) once no task is being written."""
     saving = threading.Lock()
 
@@ -75,48 +161,81 @@ def run_in_process(inputs: list[TaskInput], save: Save, on_stop: Callable[[], No
         with saving:
             on_stop()
 
-    main = threading.current_thread() is threading.main_thread()
-    with _SigintWatcher(stop) if main else contextlib.nullcontext():
-        for inp in inputs:
-            result = run_task(inp)
+    with stop_on_ctrl_c(stop):
+        for _, job in jobs:
+            result = runner(job)
             with saving:
                 save(result)
+
+
+@contextlib.contextmanager
+def _ctrl_c_requests() -> Iterator[threading.Event]:
+    """Inside the block Ctrl-C only sets the event it yields (the main thread's SIGINT
+    handler), so it never lands as a KeyboardInterrupt inside some library's callback,
+    where Python would print and ignore it; the caller checks the event where stopping is
+    safe."""
+    pressed = threading.Event()
+    if threading.current_thread() is not threading.main_thread():
+        yield pressed
+        return
+    previous = signal.signal(signal.SIGINT, lambda signum, frame: pressed.set())
+    try:
+        yield pressed
+    finally:
+        signal.signal(signal.SIGINT, previous)
 
 
 def _done() -> None:
     """Nothing left to wait for."""
 
 
-def run_dask(inputs: list[TaskInput], save: Save, workers: int, scheduler: str | None) -> Callable[[], None]:
-    """Run `inputs` on Dask. Returns a function that waits until the local cluster (if one
+def run_dask(
+    jobs: list[tuple[Any, Any]], runner: Callable, save: Save, workers: int, scheduler: str | None
+) -> Callable[[], None]:
+    """Run the jobs on Dask. Returns a function that waits until the local cluster (if one
     was started) has shut down: it shuts down in the background after the last result,
-    while the caller assembles the tables; on an error or Ctrl-C it is shut
-    down before this returns."""
+    while the caller assembles the tables; on an error or Ctrl-C it is shut down before
+    this returns."""
     import dask
     from dask.distributed import Client, LocalCluster, as_completed
 
-    if scheduler:
-        cluster, client = None, Client(scheduler, timeout="30s")
-    else:
-        with warnings.catch_warnings(), dask.config.set(LOCAL_CLUSTER_CONFIG):
-            # its small HTTP server (health checks) moves off a busy port
-            warnings.filterwarnings("ignore", message="Port .* is already in use")
-            cluster = LocalCluster(
-                n_workers=workers, threads_per_worker=1, processes=True, dashboard_address=None, silence_logs=40
-            )
-        client = Client(cluster)
-    try:
-        futures = [
-            client.submit(run_task, inp, pure=False, priority=-i, key=f"task-{inp.task.id}-{i}") for i, inp in enumerate(inputs)
-        ]
-        for future in as_completed(futures):
-            save(future.result())
-            future.release()
-    except BaseException:
-        client.close()
-        if cluster is not None:
-            cluster.close()
-        raise
+    with _ctrl_c_requests() as pressed:
+        if scheduler:
+            try:
+                cluster, client = None, Client(scheduler, timeout=f"{CONNECT_S}s")
+            except (OSError, TimeoutError) as exc:
+                raise InputError(f"--scheduler {scheduler}: could not connect ({type(exc).__name__})") from None
+        else:
+            with warnings.catch_warnings(), dask.config.set(LOCAL_CLUSTER_CONFIG), _sigint_blocked():
+                # its small HTTP server (health checks) moves off a busy port
+                warnings.filterwarnings("ignore", message="Port .* is already in use")
+                cluster = LocalCluster(
+                    n_workers=workers,
+                    threads_per_worker=1,
+                    processes=True,
+                    dashboard_address=None,
+                    silence_logs=logging.CRITICAL,  # SILENT_LOGS
+                )
+                client = Client(cluster)
+        try:
+            futures = [
+                client.submit(runner, job, pure=False, priority=-i, key=f"task-{task.id}") for i, (task, job) in enumerate(jobs)
+            ]
+            finished = as_completed(futures)
+            while not finished.is_empty():
+                if pressed.is_set():
+                    raise KeyboardInterrupt
+                batch = finished.next_batch(block=False)
+                for future in batch:
+                    save(future.result())
+                    future.release()
+                if not batch:
+                    pressed.wait(POLL_S)
+        except BaseException:
+            client.close()
+            if cluster is not None:
+                cluster.close()
+            raise
     client.close()
     if cluster is None:
         return _done
@@ -126,14 +245,15 @@ def run_dask(inputs: list[TaskInput], save: Save, workers: int, scheduler: str |
 
 
 def execute(
-    inputs: list[TaskInput], save: Save, workers: int, scheduler: str | None, on_stop: Callable[[], None]
+    jobs: list[tuple[Any, Any]], runner: Callable, save: Save, workers: int, scheduler: str | None, on_stop: Callable[[], None]
 ) -> Callable[[], None]:
-    """Run `inputs`, calling `save` with each finished task (in completion order);
-    `on_stop` ends the process on Ctrl-C in the in-process path. Returns a function that
-    waits until every local worker process has exited (`run_dask`)."""
-    if not inputs:  # every task kept from before: no cluster to start or reach
+    """Run `runner` on each (task, input) of `jobs`, calling `save` with each result (in
+    completion order); `on_stop` ends the process on Ctrl-C in the in-process path.
+    Returns a function that waits until every local worker process has exited
+    (`run_dask`)."""
+    if not jobs:  # every task kept from before: no cluster to start or reach
         return _done
-    if scheduler is None and (workers <= 1 or len(inputs) == 1):
-        run_in_process(inputs, save, on_stop)
+    if scheduler is None and workers <= 1:
+        run_in_process(jobs, runner, save, on_stop)
         return _done
-    return run_dask(inputs, save, workers, scheduler)
+    return run_dask(jobs, runner, save, workers, scheduler)

@@ -174,8 +174,11 @@ def _night(index: pd.DatetimeIndex, night: str) -> np.ndarray:
 
 
 def _check_step(step_minutes: float | None) -> None:
-    if step_minutes is not None and not (isinstance(step_minutes, (int, float)) and math.isfinite(step_minutes)):
-        raise InputError(f"--step-minutes must be a finite number of minutes, got {step_minutes!r}")
+    """None (the period's own step) or a finite number of minutes > 0 (0 is no step, and
+    must not read as "not given")."""
+    number = isinstance(step_minutes, (int, float)) and not isinstance(step_minutes, bool)
+    if step_minutes is not None and not (number and math.isfinite(step_minutes) and step_minutes > 0):
+        raise InputError(f"--step-minutes must be a finite number of minutes > 0, got {step_minutes!r}")
 
 
 def period_index(period: str, step_minutes: float | None = None, native_minutes: float | None = None) -> pd.DatetimeIndex:

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import sys
 
-from opfbench.study.tasks import TaskOutput
+from opfbench.study.engine import TaskOutput
 
 
 class Progress:
@@ -22,10 +22,10 @@ class Progress:
     def update(self, result: TaskOutput) -> None:
         self.count += 1
         if self.bar is not None:
-            self.bar.set_postfix_str(result.task.id, refresh=False)
+            self.bar.set_postfix_str(result.task.label, refresh=False)
             self.bar.update(1)
         elif not self.quiet:
-            print(f"[{self.count}/{self.total}] {result.task.id}  {result.wall_s:.1f} s", file=sys.stderr, flush=True)
+            print(f"[{self.count}/{self.total}] {result.task.label}  {result.wall_s:.1f} s", file=sys.stderr, flush=True)
 
     def close(self) -> None:
         if self.bar is not None:

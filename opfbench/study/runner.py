@@ -1,39 +1,42 @@
-"""A study from config to run folder: check everything, plan the tasks, skip the finished
-ones, run the rest (in process or on Dask), assemble the tables."""
+"""`opfbench run`'s study as a task family of the study engine (`study.engine`): check
+everything, plan the tasks, run them (in process or on Dask), assemble steps.parquet, the
+detail tables and summary.csv. A run with learned configurations fits them first
+(`study.training`: the study's own nested runs over the training period)."""
 
 from __future__ import annotations
 
-import os
-import sys
+import tempfile
 from dataclasses import dataclass, field, replace
 from pathlib import Path
+from typing import Any, Callable
 
 import pandas as pd
+import pyarrow as pa
 
-from opfbench.io import load_network
+from opfbench.io import load_case
+from opfbench.jsonio import write_atomic
+from opfbench.parquetio import ParquetStream
 from opfbench.registry import configuration
-from opfbench.study.config import StudyConfig
-from opfbench.study.execution import STOPPED, execute
+from opfbench.study.config import LABEL_FIELDS, StudyConfig
+from opfbench.study.engine import EngineRun, TaskOutput, run_family
 from opfbench.study.fitted import Fitted
-from opfbench.study.learning import check_learned
 from opfbench.study.periods import Period
-from opfbench.study.progress import Progress
-from opfbench.study.scenarios import study_period
-from opfbench.study.store import RunStore
-from opfbench.study.tasks import Task, TaskOutput, plan_tasks, task_input
-from opfbench.study.training import train
-from opfbench.timing import elapsed_ms, now
+from opfbench.study.scenarios import check_model_forecasts, study_period
+from opfbench.study.tables import DETAIL_COLUMNS, KEYS, PARTIAL_COLUMNS, extra_columns, step_columns, summarize
+from opfbench.study.tasks import RunTask, TaskInput, plan_tasks, task_input
+
+RUN_OUTPUTS = ("steps.parquet", "summary.csv", "der_q.parquet", "bus_v.parquet", "report.html")
 
 
 @dataclass
 class StudyRun:
-    """A finished (or interrupted) run: its folder, summary (None if interrupted), tasks
-    run now and kept from before, wall time (s)."""
+    """A finished run: its folder, summary, tasks run now and kept from before, wall time
+    (s), each task's wall time."""
 
     out: Path
     config: StudyConfig
     period: Period
-    tasks: list[Task]
+    tasks: list[RunTask]
     kept: int = 0
     ran: int = 0
     wall_s: float = 0.0
@@ -41,93 +44,171 @@ class StudyRun:
     task_wall: dict = field(default_factory=dict)
 
 
-def prepare(config: StudyConfig) -> tuple[StudyConfig, Period, list[Task]]:
+def _case_info(case: str) -> dict:
+    loaded = load_case(case)
+    net = loaded.network
+    return {
+        "buses": int(net.n_bus),
+        "ders": [{"bus": int(net.bus_ids[d.bus]), "kind": d.kind, "rating_mw": float(d.rating_mw)} for d in net.ders],
+        "vmin_pu": float(net.vmin.min()),
+        "vmax_pu": float(net.vmax.max()),
+        "loads": int(net.n_load),
+        "series": None if loaded.series is None else loaded.series.source,
+        "notes": list(loaded.notes),
+        "data_sha256": loaded.data_sha256,
+    }
+
+
+@dataclass
+class RunFamily:
+    """The run's tasks (see `study.tasks`); the assembler streams steps.parquet and the
+    detail tables and writes summary.csv from the tasks' partial sums."""
+
+    config: StudyConfig
+    period: Period
+    tasks: list[RunTask]
+    kind: str = "run"
+    outputs: tuple[str, ...] = RUN_OUTPUTS
+    label_fields: tuple[str, ...] = LABEL_FIELDS
+
+    @property
+    def tables(self) -> tuple[str, ...]:
+        return ("steps", "summary", *self.config.detail_tables)
+
+    def columns(self, table: str) -> list[str]:
+        if table == "steps":
+            return step_columns(extra_columns(self.config.strategies))
+        return [*KEYS, *PARTIAL_COLUMNS] if table == "summary" else DETAIL_COLUMNS[table]
+
+    @property
+    def notes(self) -> tuple[str, ...]:
+        return self.config.notes
+
+    def manifest(self) -> dict:
+        cases = {case: _case_info(case) for case in self.config.cases}
+        return {
+            "config": self.config.as_dict(),
+            "config_digest": self.config.digest(),
+            "data_sha256": {f"case {case}": info["data_sha256"] for case, info in cases.items()},
+            "period": self.period.as_dict(),
+            "data_sources": list(self.period.sources),
+            "cases": cases,
+        }
+
+    def job(self, task: RunTask) -> TaskInput:
+        return task_input(task, self.config, self.period)
+
+    def runner(self) -> Callable[[TaskInput], TaskOutput]:
+        from opfbench.study import tasks  # looked up at run time (tests replace it)
+
+        return tasks.run_task
+
+    def assembler(self, out: Path) -> "RunAssembler":
+        return RunAssembler(out, self.config.detail_tables)
+
+    def timings(self, wall_s: float) -> dict:
+        return {}
+
+
+class RunAssembler:
+    """steps.parquet (+ the detail tables) streamed task by task in planned order as arrow
+    tables (never pandas), summary.csv from the partial sums on commit; all atomic."""
+
+    def __init__(self, out: Path, detail: tuple[str, ...]):
+        self.out = out
+        self.writers = {name: ParquetStream(out / f"{name}.parquet") for name in ("steps", *detail)}
+        self.partials: list[pd.DataFrame] = []
+        self.order: list[tuple] = []
+
+    def add(self, task: RunTask, tables: dict[str, pa.Table]) -> None:
+        for name, writer in self.writers.items():
+            writer.write(tables[name])
+        partial = tables["summary"].to_pandas()
+        self.partials.append(partial)
+        self.order.extend(map(tuple, partial[KEYS].itertuples(index=False)))
+
+    def commit(self) -> pd.DataFrame:
+        for w in self.writers.values():
+            w.commit()
+        summary = summarize(self.partials, list(dict.fromkeys(self.order)))
+        # figures to 6 significant digits; k exactly (0.1 and 0.1000001 are two configurations)
+        exact_k = summary.assign(k=summary["k"].map(_exact))
+        write_atomic(self.out / "summary.csv", exact_k.to_csv(index=False, float_format="%.6g"))
+        return summary
+
+    def abort(self) -> None:
+        for w in self.writers.values():
+            w.abort()
+
+
+def _exact(value: float) -> str:
+    """`value` as 6 significant digits where that is exact, else its shortest exact text."""
+    short = f"{value:.6g}"
+    return short if float(short) == value else repr(value)
+
+
+def prepare(config: StudyConfig) -> RunFamily:
     """Resolve the period, load the cases, plan the tasks — everything that can refuse the
     input, before any work."""
     period, cases = study_period(config.cases, config.forecast, config.period, config.night, config.step_minutes)
     config = replace(config.with_period(period.step_h * 60, period.step_h * len(period.index)), notes=config.notes + cases.notes)
     models = [s for s in config.forecast if s not in ("off", "oracle") and config.strategies_for(s)]
-    if models:  # a missing or incomplete forecast file is refused here, not in a worker
-        from opfbench.forecasting.outputs import load_forecast
-
-        for model in models:
-            load_forecast(config.forecast_dir, "pv", model)
+    check_model_forecasts(config.forecast_dir, models, period)  # a missing or incomplete forecast file: here, not in a worker
     running = {label for source in config.forecast for label in config.strategies_for(source)}
+    data = {}
     for case in config.cases:
-        net = load_network(case)
+        loaded = load_case(case)
+        data[case] = loaded.data_sha256
         for label in config.strategies:
             if label in running:
-                configuration(label).spec.check_network(net)
-    return config, period, plan_tasks(config, period)
+                configuration(label).spec.check_network(loaded.network)
+    return RunFamily(config, period, plan_tasks(config, period, data))
 
 
 def run_study(
     config: StudyConfig,
     out: Path,
     *,
-    workers: int = 1,
+    workers: int | None = 1,
     scheduler: str | None = None,
     fresh: bool = False,
     quiet: bool = False,
     command: list[str] | None = None,
     fitted: tuple[Fitted, ...] | None = None,
 ) -> StudyRun:
-    """Run `config` into the folder `out` (resuming finished tasks). KeyboardInterrupt
-    propagates after the finished tasks are saved; `StudyRun.kept` counts them then.
-    Learned configurations are trained first (`study.training`, nested run folders in
-    `out`) unless `fitted` gives their fitted rules (a nested run's)."""
-    say = (lambda msg: None) if quiet else (lambda msg: print(msg, file=sys.stderr, flush=True))
-    start = now()
-    store = RunStore(out, say)
-    config, period, tasks = prepare(config)
+    """Run `config` into the folder `out` (resuming finished tasks; `run_family` for the
+    rest). Ctrl-C: `Stopped` after the finished tasks are saved. Its learned
+    configurations are fitted first (`fit_learned`), unless `fitted` gives their rules
+    (a nested training run's)."""
+    options: dict[str, Any] = {"workers": workers, "scheduler": scheduler, "fresh": fresh, "quiet": quiet, "command": command}
     if fitted is None:
-        check_learned(config.strategies, config.cases, period)
-
-        def nested(sub: StudyConfig, folder: Path, rules: tuple[Fitted, ...]) -> StudyRun:
-            return run_study(
-                sub, folder, workers=workers, scheduler=scheduler, fresh=fresh, quiet=quiet, command=command, fitted=rules
-            )
-
-        fitted = train(config, store.out, nested)
+        fitted = fit_learned(config, out, options)
     config = replace(config, fitted=fitted)
-    for note in config.notes:
-        say(note)
-    run = StudyRun(store.out, config, period, tasks)
-    with store:
-        done = store.open(config, period, tasks, command or [], fresh)
-        pending = [task_input(t, config, period) for t in tasks if t.id not in done]
-        progress = Progress(len(tasks), len(done), quiet)
-        run.kept = len(done)
-        assembly = store.assembly(tasks, config.detail_tables)
+    run: EngineRun = run_family(lambda: prepare(config), out, **options)
+    family: RunFamily = run.family
+    return StudyRun(run.out, family.config, family.period, family.tasks, run.kept, run.ran, run.wall_s, run.result, run.task_wall)
 
-        def save(result: TaskOutput) -> None:
-            store.save(result)
-            run.kept += 1
-            run.ran += 1
-            run.task_wall[result.task.id] = result.wall_s
-            progress.update(result)
-            assembly.advance()
 
-        def stop() -> None:  # Ctrl-C in the in-process path: every finished task is on disk
-            progress.close()
-            assembly.abort()
-            store.lock.unlink(missing_ok=True)
-            print(
-                f"\nstopped; {run.kept} tasks kept in {store.out}; rerun the same command to resume", file=sys.stderr, flush=True
-            )
-            os._exit(STOPPED)
+def fit_learned(config: StudyConfig, out: Path | None, options: dict[str, Any]) -> tuple[Fitted, ...]:
+    """The fitted rules of `config`'s learned configurations, after every check of the run
+    itself (its input, the training periods apart from the test period, a params file's
+    case, the folder's earlier run) — before any work: the `train=` ones fitted in nested
+    runs of the folder `out` (`study.training`; a temporary folder when `out` is None)."""
+    from opfbench.study.learning import check_learned, learned_configs
+    from opfbench.study.store import RunStore
+    from opfbench.study.training import train
 
-        try:
-            assembly.advance()  # the tasks kept from before
-            try:
-                workers_exited = execute(pending, save, workers, scheduler, stop)
-            finally:  # also after an interrupt: the manifest marks the finished tasks
-                progress.close()
-                store.finish_manifest(None, workers, scheduler, run.task_wall)
-            run.summary = assembly.finish()
-        finally:
-            assembly.abort()
-        workers_exited()  # before the manifest records the worker processes' peak memory
-        run.wall_s = elapsed_ms(start) / 1e3
-        store.finish_manifest(run.wall_s, workers, scheduler, run.task_wall)
-    return run
+    if not learned_configs(config.strategies):
+        return ()
+    family = prepare(config)
+    check_learned(family.config.strategies, family.config.cases, family.period)
+    if out is not None:
+        RunStore(Path(out), lambda msg: None).check(family, bool(options["fresh"]))
+
+    def nested(sub: StudyConfig, folder: Path, rules: tuple[Fitted, ...]) -> StudyRun:
+        return run_study(sub, folder, fitted=rules, **options)
+
+    if out is not None:
+        return train(family.config, Path(out), nested)
+    with tempfile.TemporaryDirectory(prefix="opfbench-train-") as folder:
+        return train(family.config, Path(folder), nested)

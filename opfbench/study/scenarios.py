@@ -15,6 +15,7 @@ the paper day, not the grid's own units).
 from __future__ import annotations
 
 from dataclasses import dataclass, replace
+from typing import TYPE_CHECKING, Sequence
 
 import numpy as np
 import pandas as pd
@@ -22,6 +23,9 @@ import pandas as pd
 from opfbench.errors import DataError, InputError
 from opfbench.io import Case, load_case
 from opfbench.scenario import Scenario
+
+if TYPE_CHECKING:
+    from opfbench.study.periods import Period
 
 
 def model_pv_forecast_pu(
@@ -51,6 +55,16 @@ def model_pv_forecast_pu(
             f"{series.index[0]} .. {series.index[-1]}"
         )
     return np.where(missing, pv_now[:n], ahead)  # in [0, 1]: `load_forecast` refuses values outside the rating
+
+
+def check_model_forecasts(forecast_dir: str, models: Sequence[str], period: Period) -> None:
+    """Refuse, before any work, a model whose forecast file is unreadable, out of range or
+    leaves a daylight step of the period uncovered: `model_pv_forecast_pu`, the rule each
+    chunk applies, applied once to the whole period (the chunks' steps and next steps are
+    the period's, so no chunk can fail later)."""
+    pv = period.profiles["pv"].to_numpy()
+    for model in models:
+        model_pv_forecast_pu(forecast_dir, model, period.index, pv, pd.Timedelta(hours=period.step_h))
 
 
 def chunk_scenario(

@@ -1,51 +1,56 @@
-"""The run folder: lock, manifest, one checkpoint file per finished task, and the tables
-assembled from them (layout: the run-folder contract).
+"""The study folder of any task family (`study.engine`): lock, manifest, one checkpoint per
+finished task (layout and fields: docs/CONTRACTS.md).
 
-- Lock: `.lock` holds the PID of the run using the folder; a second run is refused while
-  that process lives; a lock left by a dead process is taken over, with a note.
-- Manifest: the config and its digest. The same config resumes (finished tasks are
-  skipped); another config is refused unless `fresh` (which deletes the previous run's
-  files, and only those).
-- Checkpoints: `tasks/<id>.parquet` written atomically (temporary file + os.replace);
-  its partial sums (`tasks/<id>.summary.parquet`) and detail tables (`.der_q.parquet`,
-  `.bus_v.parquet`) beside it are written first, so a task counts as finished only once
-  its main file exists.
-- Assembly: `steps.parquet` (and the detail tables) streamed task by task in the planned
-  order as arrow tables while the run goes on, `summary.csv` from the per-task partial
-  sums; all written atomically.
+- Lock: `.lock` holds the PID and host of the run using the folder; a second run is
+  refused while that process lives; a lock left by a dead process is taken over, with a
+  note.
+- Manifest (`manifest.json`, the one manifest writer): the family's config and its
+  digest, the hash of each input's data, versions, machine, the task list with each
+  task's full definition, timings. The same config on the same data resumes; another
+  config, edited input data, another kind of folder or another manifest schema is
+  refused (`--fresh` discards the previous run's files, and only those, where the kind
+  matches). Opening a folder removes its previously assembled files first, so the folder
+  never holds a mix of two runs' files.
+- Checkpoints: `tasks/<id>.parquet` (the task's main table) with its other tables beside
+  it (`tasks/<id>.<name>.parquet`), written side files first and each atomically, every
+  file tagged with its task's definition hash (and the main one with every table's row
+  count). A task counts as finished only if all of its files are there, readable, of its
+  definition and of their recorded length: anything else — truncated, empty, another
+  task's rows, a file missing — is recomputed, with a note. Checkpoint files of no task of
+  this run are removed, with a note.
 """
 
 from __future__ import annotations
 
-import io
+import json
 import os
 import platform
+import re
+import shutil
 import socket
 import subprocess
 from datetime import datetime, timezone
 from pathlib import Path
+from typing import Callable
 
-import pandas as pd
 import pyarrow as pa
 import pyarrow.parquet as pq
 
 from opfbench.errors import InputError
 from opfbench.folders import check_out_dir
-from opfbench.jsonio import write_atomic, write_json
-from opfbench.study.config import DETAIL_TABLES, LABEL_FIELDS, StudyConfig
-from opfbench.study.periods import Period
-from opfbench.study.tables import KEYS, summarize
-from opfbench.study.tasks import Task, TaskOutput
+from opfbench.jsonio import write_json
+from opfbench.parquetio import arrow_table, write_parquet
+from opfbench.study.engine import Task, TaskFamily, TaskOutput
 
-SCHEMA = 1
-RUN_FILES = ("steps.parquet", "summary.csv", "der_q.parquet", "bus_v.parquet", "report.html", "manifest.json")
-SIDE_FILES = ("summary", *DETAIL_TABLES)  # tasks/<id>.<side>.parquet beside tasks/<id>.parquet
+SCHEMA = 2  # 2: kinds, task definitions and hashed ids, input data hashes
+TASK_KEY = b"opfbench.task"  # a checkpoint file's metadata: its task's definition hash
+ROWS_KEY = b"opfbench.rows"  # the main file's metadata: every table's row count (JSON)
+_MAIN = re.compile(r"-[0-9a-f]{16}\.parquet$")
 
 
 def finished_tasks(out: Path) -> int:
-    """How many finished tasks the run folder `out` holds (their main files)."""
-    side = tuple(f".{name}.parquet" for name in SIDE_FILES)
-    return sum(not f.name.endswith(side) for f in (out / "tasks").glob("*.parquet"))
+    """How many checkpoints (main files) the folder `out` holds."""
+    return sum(bool(_MAIN.search(f.name)) for f in (Path(out) / "tasks").glob("*.parquet"))
 
 
 def _alive(pid: int) -> bool:
@@ -63,7 +68,7 @@ def _versions() -> dict:
     import sys
 
     out: dict[str, str | None] = {"python": sys.version.split()[0]}
-    for name in ("numpy", "scipy", "pandas", "casadi", "cvxpy", "clarabel", "dask"):
+    for name in ("numpy", "scipy", "pandas", "pyarrow", "numba", "casadi", "cvxpy", "clarabel", "dask", "distributed"):
         try:
             out[name] = md.version(name)
         except md.PackageNotFoundError:
@@ -77,174 +82,6 @@ def _git_commit() -> str | None:
     except (OSError, subprocess.SubprocessError):
         return None
     return res.stdout.strip() or None if res.returncode == 0 else None
-
-
-def _case_info(case: str) -> dict:
-    from opfbench.io import load_case
-
-    loaded = load_case(case)
-    net = loaded.network
-    return {
-        "buses": int(net.n_bus),
-        "ders": [{"bus": int(net.bus_ids[d.bus]), "kind": d.kind, "rating_mw": float(d.rating_mw)} for d in net.ders],
-        "vmin_pu": float(net.vmin.min()),
-        "vmax_pu": float(net.vmax.max()),
-        "loads": int(net.n_load),
-        "series": None if loaded.series is None else loaded.series.source,
-        "notes": list(loaded.notes),
-    }
-
-
-class RunStore:
-    """One run folder (see the module docstring). Use as a context manager: the lock is
-    held inside the `with` block."""
-
-    def __init__(self, out: Path, say=print):
-        self.out = check_out_dir(Path(out))
-        self.tasks_dir = self.out / "tasks"
-        self.lock = self.out / ".lock"
-        self.say = say
-        self.manifest: dict = {}
-
-    # ----- lock -------------------------------------------------------------------------
-    def __enter__(self) -> "RunStore":
-        me = f"{os.getpid()} {socket.gethostname()}\n"
-        while True:
-            try:
-                fd = os.open(self.lock, os.O_CREAT | os.O_EXCL | os.O_WRONLY)
-            except FileExistsError:
-                text = self.lock.read_text().split()
-                pid = int(text[0]) if text and text[0].isdigit() else -1
-                host = text[1] if len(text) > 1 else socket.gethostname()
-                if pid > 0 and (host != socket.gethostname() or _alive(pid)):
-                    raise InputError(
-                        f"{self.out} is in use by another run (PID {pid} on {host}); wait for it, or "
-                        f"delete {self.lock} if that run is gone"
-                    ) from None
-                self.say(f"note: taking over the lock of a run that is gone (PID {pid})")
-                self.lock.unlink(missing_ok=True)
-                continue
-            except OSError as exc:
-                raise InputError(f"--out {self.out} is not writable ({exc.strerror})") from None
-            with os.fdopen(fd, "w") as fh:
-                fh.write(me)
-            return self
-
-    def __exit__(self, *exc) -> None:
-        self.lock.unlink(missing_ok=True)
-
-    # ----- manifest ---------------------------------------------------------------------
-    def open(self, config: StudyConfig, period: Period, tasks: list[Task], command: list[str], fresh: bool) -> set[str]:
-        """Check the folder against `config`, write the manifest; returns the ids of the
-        tasks already finished (resume)."""
-        path = self.out / "manifest.json"
-        digest = config.digest()
-        if path.exists() and not fresh:
-            import json
-
-            try:
-                old = json.loads(path.read_text())
-            except ValueError:
-                raise InputError(f"{path} is not a run manifest; use --fresh to start over") from None
-            if old.get("config_digest") != digest:
-                prev = old.get("config", {})
-                now = config.as_dict()
-                diff = sorted(k for k in now if k not in LABEL_FIELDS and prev.get(k) != now[k])
-                raise InputError(
-                    f"{self.out} holds a run of another configuration (differs in: {', '.join(diff) or '?'}); "
-                    "use --fresh to discard it, or another --out"
-                )
-        if fresh:
-            self._discard()
-        self.tasks_dir.mkdir(exist_ok=True)
-        for stale in (*self.out.glob(".*.tmp"), *self.tasks_dir.glob(".*.tmp")):  # left by a killed run
-            stale.unlink()
-        done = {t.id for t in tasks if (self.out / t.file).exists()}
-        self.manifest = {
-            "schema": SCHEMA,
-            "opfbench_version": _version(),
-            "git_commit": _git_commit(),
-            "command": command,
-            "created_utc": datetime.now(timezone.utc).isoformat(timespec="seconds"),
-            "config": config.as_dict(),
-            "config_digest": digest,
-            "period": period.as_dict(),
-            "data_sources": list(period.sources),
-            "versions": _versions(),
-            "machine": {"cores": os.cpu_count(), "platform": platform.platform()},
-            "cases": {case: _case_info(case) for case in config.cases},
-            "tasks": [t.as_dict() | {"done": t.id in done, "wall_s": None} for t in tasks],
-            "timings": {"wall_s": None, "workers": None, "scheduler": None},
-        }
-        write_json(path, self.manifest)
-        return done
-
-    def _discard(self) -> None:
-        for name in RUN_FILES:
-            (self.out / name).unlink(missing_ok=True)
-        if self.tasks_dir.is_dir():
-            for f in self.tasks_dir.glob("*.parquet"):
-                f.unlink()
-
-    def finish_manifest(self, wall_s: float | None, workers: int, scheduler: str | None, task_wall: dict) -> None:
-        for t in self.manifest["tasks"]:
-            t["done"] = (self.out / t["file"]).exists()
-            t["wall_s"] = task_wall.get(t["id"], t["wall_s"])
-        self.manifest["timings"] = {"wall_s": wall_s, "workers": workers, "scheduler": scheduler} | _peak_rss_mb()
-        write_json(self.out / "manifest.json", self.manifest)
-
-    # ----- checkpoints --------------------------------------------------------------------
-    def save(self, result: TaskOutput) -> None:
-        """Write a finished task atomically (its side files first, the main file last)."""
-        base = self.out / result.task.file
-        for name, frame in (result.detail | {"summary": result.summary}).items():
-            _write_parquet(base.with_suffix(f".{name}.parquet"), frame)
-        _write_parquet(base, result.steps)
-
-    # ----- assembly -----------------------------------------------------------------------
-    def assembly(self, tasks: list[Task], detail: tuple[str, ...]) -> Assembly:
-        """The run's tables, assembled from the task files of `tasks` as they are written."""
-        return Assembly(self.out, tasks, detail)
-
-
-class Assembly:
-    """steps.parquet (+ the detail tables) and summary.csv from the task files, streamed in
-    the planned order while the run goes on: `advance` adds every next task whose file
-    is written (call it after each), `finish` adds the rest and commits, `abort` drops
-    the temporary files. The tables go through as arrow tables, never pandas."""
-
-    def __init__(self, out: Path, tasks: list[Task], detail: tuple[str, ...]):
-        self.out, self.tasks, self.added = out, tasks, 0
-        self.writers = {name: _AtomicParquet(out / f"{name}.parquet") for name in ("steps", *detail)}
-        self.partials: list[pd.DataFrame] = []
-        self.order: list[tuple] = []
-
-    def advance(self) -> None:
-        while self.added < len(self.tasks) and (self.out / self.tasks[self.added].file).exists():
-            base = self.out / self.tasks[self.added].file
-            for name, writer in self.writers.items():
-                writer.write(pq.read_table(base if name == "steps" else base.with_suffix(f".{name}.parquet")))
-            partial = pd.read_parquet(base.with_suffix(".summary.parquet"))
-            self.partials.append(partial)
-            self.order.extend(map(tuple, partial[KEYS].itertuples(index=False)))
-            self.added += 1
-
-    def finish(self) -> pd.DataFrame:
-        """Commit the tables once every task is added; returns the summary."""
-        self.advance()
-        if self.added < len(self.tasks):
-            raise RuntimeError(f"task {self.tasks[self.added].id} has no file in {self.out / 'tasks'}")
-        for w in self.writers.values():
-            w.commit()
-        summary = summarize(self.partials, list(dict.fromkeys(self.order)))
-        buf = io.StringIO()
-        summary.to_csv(buf, index=False, float_format="%.6g")
-        write_atomic(self.out / "summary.csv", buf.getvalue())
-        return summary
-
-    def abort(self) -> None:
-        for w in self.writers.values():
-            w.abort()
 
 
 def _peak_rss_mb() -> dict:
@@ -262,41 +99,227 @@ def _version() -> str:
     return __version__
 
 
-def _arrow(frame: pd.DataFrame | pa.Table) -> pa.Table:
-    """The frame as an arrow table whose categorical columns are plain strings (the files
-    hold text; categoricals only make building and writing the long tables fast)."""
-    table = frame if isinstance(frame, pa.Table) else pa.Table.from_pandas(frame, preserve_index=False)
-    fields = [pa.field(f.name, f.type.value_type) if pa.types.is_dictionary(f.type) else f for f in table.schema]
-    return table.cast(pa.schema(fields)) if fields != list(table.schema) else table
+def side_file(task: Task, name: str, tables: tuple[str, ...]) -> str:
+    """The checkpoint file of the task's table `name` (relative to the folder)."""
+    return task.file if name == tables[0] else task.file.removesuffix(".parquet") + f".{name}.parquet"
 
 
-def _write_parquet(path: Path, frame: pd.DataFrame) -> None:
-    buf = io.BytesIO()
-    pq.write_table(_arrow(frame), buf)
-    write_atomic(path, buf.getvalue())
+class RunStore:
+    """One study folder (see the module docstring). Use as a context manager: the lock is
+    held inside the `with` block. `note` prints what the user should know."""
+
+    def __init__(self, out: Path, note=print):
+        self.out = check_out_dir(Path(out))
+        self.tasks_dir = self.out / "tasks"
+        self.lock = self.out / ".lock"
+        self.note = note
+        self.manifest: dict = {}
+
+    # ----- lock -------------------------------------------------------------------------
+    def __enter__(self) -> "RunStore":
+        me = f"{os.getpid()} {socket.gethostname()}\n"
+        while True:
+            try:
+                fd = os.open(self.lock, os.O_CREAT | os.O_EXCL | os.O_WRONLY)
+            except FileExistsError:
+                text = self.lock.read_text().split()
+                pid = int(text[0]) if text and text[0].isdigit() else -1
+                host = text[1] if len(text) > 1 else socket.gethostname()
+                if pid > 0 and (host != socket.gethostname() or _alive(pid)):
+                    raise InputError(
+                        f"{self.out} is in use by another run (PID {pid} on {host}); wait for it, or "
+                        f"delete {self.lock} if that run is gone"
+                    ) from None
+                self.note(f"note: taking over the lock of a run that is gone (PID {pid})")
+                self.lock.unlink(missing_ok=True)
+                continue
+            except OSError as exc:
+                raise InputError(f"--out {self.out} is not writable ({exc.strerror})") from None
+            with os.fdopen(fd, "w") as fh:
+                fh.write(me)
+            return self
+
+    def __exit__(self, *exc) -> None:
+        self.release()
+
+    def release(self) -> None:
+        self.lock.unlink(missing_ok=True)
+
+    # ----- manifest ---------------------------------------------------------------------
+    def open(self, family: TaskFamily, command: list[str], fresh: bool) -> set[str]:
+        """Check the folder against the family's config and data, clear what a previous
+        run assembled, write the manifest; returns the ids of the tasks whose checkpoints
+        are kept (resume)."""
+        path = self.out / "manifest.json"
+        part = self.check(family, fresh)
+        if self.tasks_dir.exists() and not self.tasks_dir.is_dir():
+            raise InputError(f"{self.tasks_dir} is not a folder (a study keeps its checkpoints there); move it away")
+        for name in family.outputs:  # a previous run's assembled files: never mixed with this run's
+            _remove(self.out / name)
+        if fresh:
+            _remove(path)
+            for f in self.tasks_dir.glob("*.parquet"):
+                _remove(f)
+        self.tasks_dir.mkdir(exist_ok=True)
+        for stale in (*self.out.glob(".*.tmp"), *self.tasks_dir.glob(".*.tmp")):  # left by a killed run
+            _remove(stale)
+        done = self._checkpoints(family)
+        self.manifest = {
+            "schema": SCHEMA,
+            "kind": family.kind,
+            "opfbench_version": _version(),
+            "git_commit": _git_commit(),
+            "command": command,
+            "created_utc": datetime.now(timezone.utc).isoformat(timespec="seconds"),
+            **part,
+            "versions": _versions(),
+            "machine": {"cores": os.cpu_count(), "platform": platform.platform()},
+            "tasks": [t.as_dict() | {"done": t.id in done, "wall_s": None} for t in family.tasks],
+            "timings": {"wall_s": None, "workers": None, "scheduler": None},
+        }
+        write_json(path, self.manifest)
+        return done
+
+    def check(self, family: TaskFamily, fresh: bool) -> dict:
+        """What `open` checks before it touches the folder — a manifest of another kind,
+        version, configuration or data (without `fresh`) — InputError naming it; returns
+        the family's part of the manifest. A caller with work to do before the run (a
+        run's training) calls it first."""
+        path = self.out / "manifest.json"
+        part = family.manifest()
+        old = self._previous(path, family.kind, fresh) if path.exists() else None
+        if old is not None and not fresh:
+            self._check_resume(old, part, family)
+        return part
+
+    def _previous(self, path: Path, kind: str, fresh: bool) -> dict | None:
+        """The folder's manifest (None: unreadable, to be discarded with `fresh`);
+        InputError if it is not one (without `fresh`) or of another kind."""
+        try:
+            old = json.loads(path.read_bytes().decode("utf-8"))
+        except (OSError, ValueError, RecursionError):
+            old = None
+        if not isinstance(old, dict):
+            if fresh:
+                return None
+            raise InputError(f"{path} is not a manifest opfbench wrote; use --fresh to start over, or another --out")
+        # schema 1 wrote no kind: its fault folders have an operating point
+        theirs = old.get("kind") or ("fault" if "operating_point" in old else "run")
+        if theirs != kind:
+            raise InputError(f"{self.out} holds a {theirs} folder; give the {kind} study a folder of its own (another --out)")
+        return old
+
+    def _check_resume(self, old: dict, part: dict, family: TaskFamily) -> None:
+        if old.get("schema") != SCHEMA:
+            raise InputError(
+                f"{self.out} holds a run written by another opfbench version (manifest schema {old.get('schema')!r}, "
+                f"this one writes {SCHEMA}); use --fresh to discard it, or another --out"
+            )
+        if old.get("config_digest") != part["config_digest"]:
+            prev = _object(old.get("config"))
+            now = part["config"]
+            diff = sorted(k for k in now if k not in family.label_fields and prev.get(k) != now[k])
+            raise InputError(
+                f"{self.out} holds a run of another configuration (differs in: {', '.join(diff) or '?'}); "
+                "use --fresh to discard it, or another --out"
+            )
+        before = _object(old.get("data_sha256"))
+        for name, sha in part["data_sha256"].items():
+            if before.get(name) != sha:
+                raise InputError(
+                    f"{self.out}: the data of {name} changed since this run began (sha256 {str(before.get(name))[:12]}… → "
+                    f"{sha[:12]}…); its finished tasks are of the old data: use --fresh to discard them, or restore "
+                    "the old data"
+                )
+
+    def _checkpoints(self, family: TaskFamily) -> set[str]:
+        """The planned tasks whose checkpoints are whole and of their definition; the
+        files of the others (and of no planned task) are removed, with a note."""
+        done: set[str] = set()
+        mine: set[str] = set()
+        for task in family.tasks:
+            files = {name: self.out / side_file(task, name, family.tables) for name in family.tables}
+            mine.update(f.name for f in files.values())
+            if not files[family.tables[0]].exists():
+                continue
+            problem = _damage(task, files, family.columns)
+            if problem is None:
+                done.add(task.id)
+                continue
+            self.note(f"note: {task.file} {problem}: recomputing that task")
+            for f in files.values():
+                _remove(f)
+        foreign = [f for f in self.tasks_dir.glob("*.parquet") if f.name not in mine]
+        if foreign:
+            self.note(f"note: removed {len(foreign)} checkpoint file(s) of no task of this run from {self.tasks_dir}")
+            for f in foreign:
+                _remove(f)
+        return done
+
+    def finish_manifest(self, wall_s: float | None, workers: int, scheduler: str | None, task_wall: dict, extra: dict) -> None:
+        for t in self.manifest["tasks"]:
+            t["done"] = (self.out / t["file"]).exists()
+            t["wall_s"] = task_wall.get(t["id"], t["wall_s"])
+        timings = {"wall_s": wall_s, "workers": workers, "scheduler": scheduler}
+        self.manifest["timings"] = timings | (_peak_rss_mb() if wall_s is not None else {}) | extra
+        write_json(self.out / "manifest.json", self.manifest)
+
+    # ----- checkpoints --------------------------------------------------------------------
+    def save(self, result: TaskOutput, tables: tuple[str, ...]) -> dict[str, pa.Table]:
+        """Write a finished task atomically (its side files first, the main file last);
+        returns the tables as written (arrow)."""
+        task = result.task
+        tag = {TASK_KEY: task.digest.encode()}
+        rows = json.dumps({name: len(result.tables[name]) for name in tables}).encode()
+        written = {}
+        for name in (*tables[1:], tables[0]):
+            meta = tag | {ROWS_KEY: rows} if name == tables[0] else tag
+            written[name] = arrow_table(result.tables[name], meta)
+            write_parquet(self.out / side_file(task, name, tables), written[name])
+        return written
+
+    def read(self, task: Task, tables: tuple[str, ...]) -> dict[str, pa.Table]:
+        """A finished task's tables, as arrow tables."""
+        return {name: pq.read_table(self.out / side_file(task, name, tables)) for name in tables}
 
 
-class _AtomicParquet:
-    """A parquet file written table by table into a temporary file, renamed on commit."""
+def _remove(path: Path) -> None:
+    """Remove the file (or a folder standing where one of the study's files belongs)."""
+    if path.is_dir() and not path.is_symlink():
+        shutil.rmtree(path)
+    else:
+        path.unlink(missing_ok=True)
 
-    def __init__(self, path: Path):
-        self.path, self.tmp = path, path.with_name(f".{path.name}.{os.getpid()}.tmp")
-        self.writer: pq.ParquetWriter | None = None
 
-    def write(self, frame: pd.DataFrame | pa.Table) -> None:
-        table = _arrow(frame)
-        if self.writer is None:
-            self.writer = pq.ParquetWriter(self.tmp, table.schema)
-        self.writer.write_table(table.cast(self.writer.schema))
+def _object(value: object) -> dict:
+    return value if isinstance(value, dict) else {}
 
-    def commit(self) -> None:
-        if self.writer is not None:
-            self.writer.close()
-            self.writer = None
-            os.replace(self.tmp, self.path)
 
-    def abort(self) -> None:
-        if self.writer is not None:
-            self.writer.close()
-            self.writer = None
-        self.tmp.unlink(missing_ok=True)
+def _damage(task: Task, files: dict[str, Path], columns: Callable[[str], list[str]]) -> str | None:
+    """Why the checkpoint `files` (table name → file, the main one first) are not the
+    finished task `task` with each table's `columns`, or None."""
+    rows: object = None
+    for i, (name, path) in enumerate(files.items()):
+        if not path.exists():
+            return f"is partly missing (no {path.name})"
+        if not path.is_file():
+            return f"is partly unreadable ({path.name} is not a file)"
+        if path.stat().st_size == 0:
+            return "is empty" if i == 0 else f"is partly empty ({path.name})"
+        try:
+            meta = pq.read_metadata(path)
+        except (OSError, pa.ArrowException):
+            return "is truncated or not a parquet file" if i == 0 else f"is partly unreadable ({path.name})"
+        tags = meta.metadata or {}
+        if tags.get(TASK_KEY) != task.digest.encode():
+            return "holds another task's rows" if TASK_KEY in tags else "was not written as this task's checkpoint"
+        if i == 0:
+            try:
+                rows = json.loads(tags.get(ROWS_KEY, b"null"))
+            except ValueError:
+                rows = None
+        if not isinstance(rows, dict) or rows.get(name) != meta.num_rows:
+            return f"is partly missing (rows of {path.name})"
+        if meta.schema.names != columns(name):
+            return f"has other columns than this version writes ({path.name})"
+    return None

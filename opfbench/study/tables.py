@@ -1,4 +1,4 @@
-"""The run's tables (columns in docs: the run-folder contract): per-step rows of one
+"""The run's tables (columns: docs/CONTRACTS.md, run folder): per-step rows of one
 strategy result, the optional detail tables (per-DER Q, per-bus V), and the summary,
 built from per-task partial sums so that a year never has to sit in memory at once.
 """
@@ -8,7 +8,6 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 
-from opfbench.errors import InputError
 from opfbench.registry import BASELINE, configuration, describe
 from opfbench.result import NOT_SETTLED, OK, StrategyResult
 from opfbench.study.config import DETAIL_TABLES
@@ -183,7 +182,7 @@ def partial_summary(steps: pd.DataFrame) -> pd.DataFrame:
         certified=(steps.certified_by != "").astype(np.int64),
     )
     g = s.groupby(KEYS, sort=False, observed=True)
-    return pd.DataFrame(
+    sums = pd.DataFrame(
         {
             "steps": g.size(),
             "hours": g.step_h.sum(),
@@ -206,7 +205,8 @@ def partial_summary(steps: pd.DataFrame) -> pd.DataFrame:
             "solver_known": g.solver_known.sum(),
             "certified": g.certified.sum(),
         }
-    ).reset_index()
+    )
+    return sums[list(PARTIAL_COLUMNS)].reset_index()
 
 
 PARTIAL_COLUMNS = (
@@ -231,8 +231,9 @@ PARTIAL_COLUMNS = (
     "solver_known",
     "certified",
 )
-"""The columns of a task's partial sums (`partial_summary`) besides KEYS: a checkpoint
-without one of them was written by another version."""
+"""The columns of a task's partial sums (`partial_summary`) besides KEYS."""
+EXTREMES = {"vmin_pu": "min", "vmax_pu": "max", "max_excursion_mvar": "max", "max_violation_pu": "max"}
+"""The partial sums' extremes (combined by `summarize` with these; the others are summed)."""
 
 
 def summarize(partials: list[pd.DataFrame], order: list[tuple]) -> pd.DataFrame:
@@ -249,34 +250,10 @@ def summarize(partials: list[pd.DataFrame], order: list[tuple]) -> pd.DataFrame:
     voltage limits, max_violation_pu the worst excursion beyond them; not_settled_steps:
     steps where a closed-loop rule did not settle."""
     p = pd.concat(partials, ignore_index=True)
-    missing = [c for c in PARTIAL_COLUMNS if c not in p.columns]
-    if missing:  # a checkpoint of an older opfbench: its rows do not mean what this version's do
-        raise InputError(
-            f"the run folder holds finished tasks whose partial sums lack {', '.join(missing)} (written by another "
-            "opfbench version); rerun with --fresh"
-        )
     g = p.groupby(KEYS, sort=False)
-    sums = g[
-        [
-            "steps",
-            "hours",
-            "pf_converged_steps",
-            "measured_hours",
-            "energy_kwh",
-            "not_ok_steps",
-            "not_settled_steps",
-            "voltage_violation_steps",
-            "voltage_violation_h",
-            "excursion_steps",
-            "lower_bound_kwh",
-            "lb_missing",
-            "wall_s",
-            "solver_s",
-            "solver_known",
-            "certified",
-        ]
-    ].sum()
-    out = sums.join(g.vmin_pu.min()).join(g.vmax_pu.max()).join(g.max_excursion_mvar.max()).join(g.max_violation_pu.max())
+    out = g[[c for c in PARTIAL_COLUMNS if c not in EXTREMES]].sum()
+    for column, how in EXTREMES.items():
+        out = out.join(g[column].agg(how))
     out = out.reindex(pd.MultiIndex.from_tuples(order, names=KEYS)).reset_index()
     out["pf_diverged_steps"] = out.steps - out.pf_converged_steps
     out["avg_loss_kw"] = (out.energy_kwh / out.measured_hours).where(out.pf_converged_steps > 0)

@@ -14,19 +14,20 @@ warm-starts inside it — the same whatever the number of workers.
 
 from __future__ import annotations
 
-import re
-from dataclasses import asdict, dataclass, replace
+from dataclasses import dataclass, replace
 
 import numpy as np
 import pandas as pd
 from threadpoolctl import threadpool_limits
 
+from opfbench.errors import InputError
 from opfbench.plugins import PluginSource, ensure, loaded
 from opfbench.registry import OptionValue, configuration, run_strategy
 from opfbench.result import StrategyResult
 from opfbench.scenario import Scenario
 from opfbench.strategies.learned import install
 from opfbench.study.config import StudyConfig
+from opfbench.study.engine import Task, TaskOutput
 from opfbench.study.fitted import Fitted
 from opfbench.study.periods import Period
 from opfbench.study.scenarios import chunk_scenario
@@ -43,10 +44,14 @@ from opfbench.study.tables import (
 
 
 @dataclass(frozen=True)
-class Task:
-    """One piece of work; `start`/`end` are the first and last step (ISO, local time)."""
+class RunTask(Task):
+    """One piece of work of a run; `start`/`end` are the first and last step (ISO, local
+    time); `data_sha256` the case data's hash, `config_digest` the run's (both in its
+    definition, so a checkpoint of other data or another config never matches); `fitted`
+    (label, sha256) of the learned rules fitted for its case (in its definition when
+    there are some: a checkpoint of another fit never matches)."""
 
-    id: str
+    label: str
     case: str
     night_modes: tuple[str, ...]
     forecast: str
@@ -54,13 +59,27 @@ class Task:
     strategies: tuple[str, ...]
     start: str
     end: str
+    data_sha256: str
+    config_digest: str
+    fitted: tuple[tuple[str, str], ...] = ()
 
-    @property
-    def file(self) -> str:
-        return f"tasks/{self.id}.parquet"
+    def definition(self) -> dict:
+        fitted = {"fitted": dict(self.fitted)} if self.fitted else {}
+        return fitted | {
+            "case": self.case,
+            "data_sha256": self.data_sha256,
+            "night_modes": list(self.night_modes),
+            "forecast": self.forecast,
+            "k": self.k,
+            "strategies": list(self.strategies),
+            "start": self.start,
+            "end": self.end,
+            "config_digest": self.config_digest,
+        }
 
     def as_dict(self) -> dict:
-        return asdict(self) | {"night_modes": list(self.night_modes), "strategies": list(self.strategies), "file": self.file}
+        fields = {"case": self.case, "night_modes": list(self.night_modes), "forecast": self.forecast, "k": self.k}
+        return super().as_dict() | fields | {"strategies": list(self.strategies), "start": self.start, "end": self.end}
 
 
 @dataclass(frozen=True)
@@ -71,7 +90,7 @@ class TaskInput:
     of the run's strategies, the plugins they come from (loaded in the worker first) and
     the fitted rules of the task's case (installed in the worker first)."""
 
-    task: Task
+    task: RunTask
     profiles: pd.DataFrame
     night: np.ndarray
     n_steps: int
@@ -84,27 +103,13 @@ class TaskInput:
     fitted: tuple[Fitted, ...] = ()
 
 
-@dataclass
-class TaskOutput:
-    """A finished task's tables (`summary`: its partial sums, `tables.partial_summary`;
-    `detail`: the requested long tables by name) and wall time (s)."""
-
-    task: Task
-    steps: pd.DataFrame
-    summary: pd.DataFrame
-    detail: dict[str, pd.DataFrame]
-    wall_s: float
-
-
-def _slug(text: str) -> str:
-    return re.sub(r"[^A-Za-z0-9.]+", "-", text).strip("-")
-
-
-def plan_tasks(config: StudyConfig, period: Period) -> list[Task]:
+def plan_tasks(config: StudyConfig, period: Period, data_sha256: dict[str, str]) -> list[RunTask]:
     """Every task of the grid, in a fixed order (case, forecast, k, chunk). A forecast
-    source with no strategy to run (only formulations asked) adds none."""
+    source with no strategy to run (only formulations asked) adds none. `data_sha256`:
+    each case's data hash."""
     tasks = []
     chunks = period.chunks(config.chunk)
+    digest = config.digest()
     for case in config.cases:
         for source in config.forecast:
             names = config.strategies_for(source)
@@ -113,12 +118,26 @@ def plan_tasks(config: StudyConfig, period: Period) -> list[Task]:
             for k in config.ks:
                 for rows in chunks:
                     t0, t1 = period.index[rows.start], period.index[rows.stop - 1]
-                    ident = f"{_slug(case)}_{_slug(source)}_k{k:g}_{t0:%Y%m%dT%H%M}"
-                    tasks.append(Task(ident, case, config.night_modes, source, float(k), names, t0.isoformat(), t1.isoformat()))
+                    label = f"{case}_{source}_k{k:g}_{t0:%Y%m%dT%H%M}"
+                    tasks.append(
+                        RunTask(
+                            label,
+                            case,
+                            config.night_modes,
+                            source,
+                            float(k),
+                            names,
+                            t0.isoformat(),
+                            t1.isoformat(),
+                            data_sha256[case],
+                            digest,
+                            tuple((f.label, f.sha256) for f in config.fitted if f.case == case),
+                        )
+                    )
     return tasks
 
 
-def task_input(task: Task, config: StudyConfig, period: Period) -> TaskInput:
+def task_input(task: RunTask, config: StudyConfig, period: Period) -> TaskInput:
     """The task's input: its rows of the period, plus the next step when there is one."""
     index = period.index
     first = index.get_loc(pd.Timestamp(task.start))
@@ -150,10 +169,13 @@ def fitted_options(fitted: tuple[Fitted, ...]) -> dict[str, dict[str, OptionValu
 def run_task(inp: TaskInput) -> TaskOutput:
     """Run every night mode and strategy of the task, the strategies of a night mode on one
     scenario (single-threaded BLAS, so results are bit-identical wherever it runs)."""
+    from opfbench.io import load_case
     from opfbench.timing import elapsed_ms, now
 
     start = now()
     t = inp.task
+    if load_case(t.case).data_sha256 != t.data_sha256:
+        raise InputError(f"case {t.case}: its data changed while the run went on (or differ on this worker); rerun")
     ensure(inp.plugins)
     overrides = fitted_options(inp.fitted)
     settings = dict(inp.settings)
@@ -179,10 +201,5 @@ def run_task(inp: TaskInput) -> TaskOutput:
             if same is None:
                 ran.append((scenario, results))
         table = stack(steps, step_columns(inp.columns), time.tz)
-    return TaskOutput(
-        t,
-        table,
-        partial_summary(table),
-        {name: stack(parts, DETAIL_COLUMNS[name], time.tz) for name, parts in detail.items()},
-        elapsed_ms(start) / 1e3,
-    )
+    details = {name: stack(parts, DETAIL_COLUMNS[name], time.tz) for name, parts in detail.items()}
+    return TaskOutput(t, {"steps": table, "summary": partial_summary(table), **details}, elapsed_ms(start) / 1e3)

@@ -7,9 +7,10 @@ with the study runner itself, inside the run folder (layout: docs/CONTRACTS.md):
                             connected at night, forecast off, with the per-DER Q table
     RUN/learned/<case>--<label>.json
                             each learned configuration fitted to the optimum at TRAIN_K on
-                            each case model (`LearnedParams`)
+                            each case model (`LearnedParams`; the names' characters other
+                            than letters and digits as '-')
     RUN/train/learned/      the learned configurations (and no action) over the training
-                            period: their in-sample figures
+                            period: their in-sample figures (no per-DER table)
     RUN/train/summary.csv   both runs' summaries: the report's training-period column
 
 The cases trained on are the run's case models (`learning.model_case`: a `line-z`
@@ -23,6 +24,7 @@ part of the run's configuration, so a refit is another configuration.
 from __future__ import annotations
 
 import io
+import re
 from pathlib import Path
 from typing import Any, Callable
 
@@ -89,12 +91,12 @@ def train(config: Any, out: Path, run_nested: NestedRun) -> tuple[Fitted, ...]:
         q, ok = optimum(ref_run.out, model, len(load_network(model).ders))
         training = training_set(model, period, config.night, q, ok, config.step_minutes)
         for lc in trained:
-            path = out / LEARNED_DIR / f"{_slug(model)}--{_slug(lc.label)}.json"
+            path = out / LEARNED_DIR / f"{_stem(model)}--{_stem(lc.label)}.json"
             params = _fit(lc, training, path)
             ref = f"{LEARNED_DIR}/{path.name}"
             on_models.append(Fitted.of(model, lc.label, ref, params))
             fitted += [Fitted.of(case, lc.label, ref, params) for case in config.cases if model_case(case) == model]
-    in_sample = type(config).build(strategies=[BASELINE, *(lc.label for lc in trained)], ks=config.ks, **common)
+    in_sample = type(config).build(strategies=[BASELINE, *(lc.label for lc in trained)], ks=config.ks, detail=False, **common)
     learned_run = run_nested(in_sample, out / TRAIN_DIR / "learned", tuple(on_models))
     ref_summary = ref_run.summary[ref_run.summary["k"].isin(config.ks)]
     rows = learned_run.summary[learned_run.summary["strategy"] != BASELINE]
@@ -104,10 +106,9 @@ def train(config: Any, out: Path, run_nested: NestedRun) -> tuple[Fitted, ...]:
     return tuple(fitted)
 
 
-def _slug(text: str) -> str:
-    import re
-
-    return re.sub(r"[^A-Za-z0-9.]+", "-", text).strip("-")
+def _stem(text: str) -> str:
+    """`text` as a file name's part: letters and digits, every other run of characters '-'."""
+    return re.sub(r"[^A-Za-z0-9]+", "-", text).strip("-")
 
 
 def _fit(lc: LearnedConfig, training, path: Path) -> LearnedParams:

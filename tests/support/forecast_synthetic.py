@@ -7,8 +7,12 @@ direction, a cubic power curve between cut-in and rated speed.
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 import pandas as pd
+
+from opfbench.forecasting.models import settings_for  # the real one: `use_tiny_synthetic` replaces it
 
 
 def _ar1(rng: np.random.Generator, n: int, phi: float, sigma: float) -> np.ndarray:
@@ -70,3 +74,22 @@ def synthetic_wind_hourly(days: int = 60, seed: int = 0, rating_kw: float = 11.0
     )
     frame.attrs["rating_kw"] = rating_kw
     return frame
+
+
+def tiny_settings(dataset: str, quick: bool = True):
+    """The quick settings, cut to one epoch of 64 windows and one ARIMA order fitted on 300 samples."""
+    return replace(settings_for(dataset, quick), epochs=1, windows_per_epoch=64, arima_orders=((1, 0, 0),), arima_fit_samples=300)
+
+
+def use_tiny_synthetic(monkeypatch) -> None:
+    """`opfbench forecast` on synthetic data (6 days of PV, 60 of wind) with `tiny_settings`:
+    the whole pipeline in seconds."""
+    from opfbench.forecasting import models
+    from opfbench.forecasting.datasets import pv_dataset, wind_dataset
+
+    synthetic = {
+        "pv": lambda: pv_dataset(synthetic_pv_minute(days=6)),
+        "wind": lambda: wind_dataset(synthetic_wind_hourly(days=60)),
+    }
+    monkeypatch.setattr("opfbench.forecasting.datasets.forecast_dataset", lambda name: synthetic[name]())
+    monkeypatch.setattr(models, "settings_for", tiny_settings)

@@ -4,14 +4,16 @@ workers started as their own processes, as on other machines)."""
 
 from __future__ import annotations
 
+import multiprocessing
 import os
+import random
 import socket
 import subprocess
 import sys
 import time
 from contextlib import contextmanager
 from pathlib import Path
-from typing import Iterator
+from typing import Callable, Iterator
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -68,3 +70,26 @@ def dask_cluster(log: Path, n_workers: int = 2) -> Iterator[str]:
                     p.wait(20)
                 except subprocess.TimeoutExpired:
                     p.kill()
+
+
+def kill_at_random_moments(
+    target: Callable[..., object], args: tuple, reference_s: float, seed: int, window: tuple[float, float]
+) -> tuple[int, bool]:
+    """Run `target(*args)` in a forked child up to five times, each killed with SIGKILL (no
+    cleanup: a lock left behind, maybe a half-written temporary file) at a random moment
+    of `window` × `reference_s` unless it finished first; (kills, whether one finished)."""
+    ctx = multiprocessing.get_context("fork")
+    rng = random.Random(seed)
+    kills = 0
+    for _ in range(5):
+        child = ctx.Process(target=target, args=args)
+        child.start()
+        child.join(rng.uniform(*window) * reference_s)
+        if child.exitcode is not None:
+            assert child.exitcode == 0
+            return kills, True
+        child.kill()
+        child.join(30)
+        kills += 1
+        time.sleep(0.05)
+    return kills, False

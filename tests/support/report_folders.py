@@ -125,7 +125,7 @@ def summary_table(steps: pd.DataFrame) -> pd.DataFrame:
 
 
 def write_run(directory: Path, case: str = "paper33", detail: bool = True, period: str = "paper-day") -> Path:
-    """A run folder per the run-folder contract (manifest, steps, summary, der_q, bus_v)."""
+    """A run folder per docs/CONTRACTS.md (manifest, steps, summary, der_q, bus_v)."""
     directory.mkdir(parents=True, exist_ok=True)
     steps = steps_table(case)
     steps.to_parquet(directory / "steps.parquet", index=False)
