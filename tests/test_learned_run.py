@@ -75,6 +75,10 @@ def test_a_run_refuses_leaks_before_any_work(tmp_path, capsys):
     out = tmp_path / "run"
     assert _run(out, extra=("--period", "2016-03-01T12:00..2016-03-01T18:00", "--workers", "1")) == 2
     assert "overlaps the test period" in capsys.readouterr().err and not (out / "train").exists()
+    other = tmp_path / "other"  # a folder holding another configuration's run: refused before the training
+    assert _run(other, cases=("paper33",), strategies=("no-action",)) == 0
+    assert _run(other) == 2 and "holds a run of another configuration" in capsys.readouterr().err
+    assert not (other / "train").exists()
     two = (AFFINE, "learned-vv:train=2016-02-01..2016-02-02")
     assert _run(out, strategies=("no-action", *two)) == 2
     assert "share one training period" in capsys.readouterr().err

@@ -5,7 +5,6 @@ detail tables and summary.csv. A run with learned configurations fits them first
 
 from __future__ import annotations
 
-import tempfile
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any, Callable
@@ -189,11 +188,11 @@ def run_study(
     return StudyRun(run.out, family.config, family.period, family.tasks, run.kept, run.ran, run.wall_s, run.result, run.task_wall)
 
 
-def fit_learned(config: StudyConfig, out: Path | None, options: dict[str, Any]) -> tuple[Fitted, ...]:
+def fit_learned(config: StudyConfig, out: Path, options: dict[str, Any]) -> tuple[Fitted, ...]:
     """The fitted rules of `config`'s learned configurations, after every check of the run
     itself (its input, the training periods apart from the test period, a params file's
     case, the folder's earlier run) — before any work: the `train=` ones fitted in nested
-    runs of the folder `out` (`study.training`; a temporary folder when `out` is None)."""
+    runs of the folder `out` (`study.training`)."""
     from opfbench.study.learning import check_learned, learned_configs
     from opfbench.study.store import RunStore
     from opfbench.study.training import train
@@ -202,13 +201,9 @@ def fit_learned(config: StudyConfig, out: Path | None, options: dict[str, Any]) 
         return ()
     family = prepare(config)
     check_learned(family.config.strategies, family.config.cases, family.period)
-    if out is not None:
-        RunStore(Path(out), lambda msg: None).check(family, bool(options["fresh"]))
+    RunStore(Path(out), lambda msg: None).check(family, bool(options["fresh"]))
 
     def nested(sub: StudyConfig, folder: Path, rules: tuple[Fitted, ...]) -> StudyRun:
         return run_study(sub, folder, fitted=rules, **options)
 
-    if out is not None:
-        return train(family.config, Path(out), nested)
-    with tempfile.TemporaryDirectory(prefix="opfbench-train-") as folder:
-        return train(family.config, Path(folder), nested)
+    return train(family.config, Path(out), nested)
