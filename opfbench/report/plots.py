@@ -455,7 +455,7 @@ def how_close(table: pd.DataFrame) -> list[Plot]:
             f"How close can a local rule get: share of the AC OPF's loss reduction (k={k:g}, PV connected at night, forecast off)",
             fig,
             "",
-            "share of the AC OPF's loss reduction (%)",
+            "share of the OPF's reduction (%)",
             height=460,
         )
     ]
