@@ -162,6 +162,8 @@ class LearnedRule:
 
     name: ClassVar[str]
     reads: ClassVar[tuple[str, ...]]
+    hyper: ClassVar[tuple[str, ...]] = ()  # the constructor's hyper-parameters
+    solver: ClassVar[str] = "clarabel (cvxpy)"
 
     def __init__(self) -> None:
         self.s_rated_mva_ = np.zeros(0)  # (n_der,) S̄ of the DERs fitted, MVA
@@ -292,6 +294,7 @@ class VoltVarRule(_CurveRule):
     each DER's training voltages (module docstring)."""
 
     name = "learned-vv"
+    hyper = ("knots",)
 
     def __init__(self, knots: int = KNOTS) -> None:
         super().__init__()
@@ -356,6 +359,7 @@ class Ieee1547Rule(_CurveRule):
     searched on a GRID_PU grid (module docstring)."""
 
     name = "learned-1547"
+    solver = f"grid search ({GRID_PU} p.u.)"
 
     def fit(self, x: Features, q_mvar: np.ndarray, slope_max: np.ndarray, use: np.ndarray) -> "Ieee1547Rule":
         s = x.s_rated_mva
@@ -477,7 +481,7 @@ def fit_rule(family: str, training: TrainingSet, rho: float = RHO, rounds: int =
     converged = np.asarray(pf.converged, dtype=bool)
     x = features(sc, np.abs(pf.v[:, net.der_bus]))
     use = (training.ok & converged)[:, None] & (sc.qmax_mvar() > MIN_LIMIT_SHARE * net.der_s_mva)
-    hyper = {"knots": knots} if family == VoltVarRule.name else {}
+    hyper = {key: value for key, value in {"knots": knots}.items() if key in FAMILIES[family].hyper}
 
     def new() -> LearnedRule:
         return FAMILIES[family](**hyper)
@@ -519,7 +523,7 @@ def fit_rule(family: str, training: TrainingSet, rho: float = RHO, rounds: int =
         slope_max_mvar_per_pu=tuple(float(v) for v in slope_max),
         rule=rule,
         fit={
-            "solver": "clarabel (cvxpy)" if family != Ieee1547Rule.name else f"grid search ({GRID_PU} p.u.)",
+            "solver": rule.solver,
             "rmse_pu": [float(v) if np.isfinite(v) else None for v in np.sqrt(np.nanmean(err**2, axis=0))] if use.any() else [],
             "contraction_factor": contraction_factor(x_sens, rule.v_slope()),
             "rounds": history,
