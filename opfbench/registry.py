@@ -19,6 +19,11 @@ engine clips it to the limits and settles rules that read |V| or flows; see
 option may take its default from a run-level setting (`Option.setting`, e.g. the AC OPF
 solver of `opfbench run --acopf-solver`), applied by `Configuration.run(settings=…)`
 where the label does not set it.
+
+A learned strategy (`fit`: "module:function") is a local rule fitted to the reference
+optimum over a training period: its options `train` (the period, fitted by `opfbench run`)
+and `params` (a fitted rule's file) say where its parameters come from, so it has no
+default configuration and is not part of `DEFAULT_RUN`.
 """
 
 from __future__ import annotations
@@ -36,6 +41,7 @@ import numpy as np
 
 from opfbench.errors import InputError
 from opfbench.formulations.options import ACOPF_SOLVERS, FALLBACKS
+from opfbench.strategies.learned import KNOTS, RHO
 from opfbench.strategies.rules import DEFAULT_SETTLING as SETTLING
 from opfbench.strategies.rules import READS, RESIDUAL, Rule
 
@@ -183,6 +189,30 @@ SETTLING_OPTIONS = (
     Option("adaptive", SETTLING.adaptive, "adapt α per DER from successive voltage changes (OpenDSS InvControl)"),
 )
 _ENGINE = {o.name for o in (SAFE, *SETTLING_OPTIONS)}
+#: A learned strategy's options (`StrategySpec.fit`): where its parameters come from, and the fit's.
+TRAIN = Option("train", "", "training period START..END (END excluded): opfbench run fits the rule to the AC OPF over it")
+PARAMS = Option("params", "", "a fitted rule's parameters (JSON: a run folder's learned/*.json)")
+
+
+def _rho(value: OptionValue) -> str | None:
+    return None if isinstance(value, float) and 0 < value < 1 else f"a contraction factor lies in (0, 1), got {value}"
+
+
+def _rounds(value: OptionValue) -> str | None:
+    return None if isinstance(value, int) and 0 <= value <= 20 else f"rounds lie in 0..20, got {value}"
+
+
+LEARNED_OPTIONS = (
+    TRAIN,
+    PARAMS,
+    Option("rho", RHO, "the slope bound's contraction factor ρ: |∂Q_i/∂|V_i|| ≤ ρ / Σ_j |∂|V_i|/∂Q_j|", check=_rho),
+    Option(
+        "rounds",
+        0,
+        "end-to-end rounds: refit on the voltages the rule produces in closed loop on the training period",
+        check=_rounds,
+    ),
+)
 _SETTLING_FIELD = {"tol_v_pu": "tol_v_pu", "tol_q_mvar": "tol_q_mvar", "max_steps": "max_steps", "step_factor": "step_factor"}
 CLOSED_LOOP_COLUMNS = {RESIDUAL: "largest |clip(target) − Q| at the last iterate, MVAr (≤ tol_q_mvar when settled)"}
 
@@ -199,7 +229,9 @@ class StrategySpec:
     """One registered strategy (see the module docstring). `reads`: what a local rule
     measures (`strategies.engine.READS`); `bound_rank`: it gives a certified lower bound on
     the losses (the summary takes the bound from the lowest rank present); `supports`:
-    network classes it runs on ("radial", "meshed"); `network_check`: "module:function"
+    network classes it runs on ("radial", "meshed"); `fit`: "module:function",
+    `fit(name, training, options) -> fitted parameters`, for a learned strategy (module
+    docstring); `network_check`: "module:function"
     refusing a network it cannot model, before any work; `check`: refuses option
     combinations (a function of the options dict); `columns`: extra per-step result
     columns (name → meaning, from `StrategyResult.extra`); `relaxation`: its point is a
@@ -222,6 +254,7 @@ class StrategySpec:
     columns: dict[str, str] = field(default_factory=dict)
     relaxation: bool = False
     source: str = "opfbench"
+    fit: str | Callable | None = None
 
     def __post_init__(self) -> None:
         if (self.runner is None) == (self.rule is None):
@@ -239,6 +272,22 @@ class StrategySpec:
     @property
     def closed_loop(self) -> bool:
         return self.rule is not None and bool({"v", "flows"} & set(self.reads))
+
+    @property
+    def learned(self) -> bool:
+        """Fitted to the reference optimum: its parameters come from `train` or `params`."""
+        return self.fit is not None
+
+    def fitted_options(self, ref: str) -> dict[str, OptionValue]:
+        """The options that run a learned configuration with the fitted parameters `ref`:
+        params=ref, and the fit's own options (train, rho, …) at their defaults — the fit
+        used them; the engine's options stay the label's."""
+        return {o.name: o.default for o in self.options if o.name not in _ENGINE} | {"params": ref}
+
+    def fit_rule(self, training: Any, options: Mapping[str, OptionValue]) -> Any:
+        """A learned strategy's fitted parameters for `training` (`fit`)."""
+        assert self.fit is not None, f"{self.name} is not a learned strategy"
+        return _callable(self.fit)(self.name, training, dict(options))
 
     def defaults(self) -> dict[str, OptionValue]:
         return {o.name: o.default for o in self.options}
@@ -281,6 +330,7 @@ class StrategySpec:
             "summary": self.summary,
             "reads": list(self.reads) if self.kind == "local" else ["the whole network (centralized)"],
             "closed_loop": self.closed_loop,
+            "learned": self.learned,
             "uses_forecast": self.uses_forecast,
             "lower_bound": self.bound_rank is not None,
             "supports": list(self.supports),
@@ -379,6 +429,23 @@ def _builtin() -> tuple[StrategySpec, ...]:
 
     std = "opfbench.strategies.standards"
     paper = "opfbench.strategies.paper"
+    learned = "opfbench.strategies.learned"
+
+    def learned_rule(name: str, summary: str, family: str, reads: tuple[str, ...], *extra: Option) -> StrategySpec:
+        """A learned family (`strategies.learned`): slope-bounded, closed loop."""
+        return StrategySpec(
+            name,
+            "local",
+            summary + " (slope-bounded), closed loop",
+            rule=f"{learned}:{family}_target",
+            reads=reads,
+            options=(*LEARNED_OPTIONS, *extra, *closed_loop),
+            uses_forecast=True,
+            check=f"{learned}:check_{family}",
+            columns=CLOSED_LOOP_COLUMNS,
+            fit=f"{learned}:fit_configuration",
+        )
+
     check = "opfbench.formulations.problem:check_supported"
     return (
         StrategySpec("no-action", "local", "every DER at Q = 0", rule=f"{paper}:no_action_target"),
@@ -466,6 +533,25 @@ def _builtin() -> tuple[StrategySpec, ...]:
             check=f"{std}:check_q_u",
             columns=CLOSED_LOOP_COLUMNS,
         ),
+        learned_rule(
+            "learned-affine",
+            "learned linear decision rule Q/S̄ = a + b·P/S̄ + c·|V| + d·Q_load/S̄ per DER (c ≤ 0), fitted to the AC OPF",
+            "affine",
+            ("v", "p", "load"),
+        ),
+        learned_rule(
+            "learned-vv",
+            "learned Volt-VAR: monotone piecewise-linear Q(|V|) per DER, knots at training-voltage quantiles, fitted to the AC OPF",
+            "vv",
+            ("v",),
+            Option("knots", KNOTS, "knots of the curve, at quantiles of the DER's training voltages"),
+        ),
+        learned_rule(
+            "learned-1547",
+            "learned IEEE 1547 Volt-VAR: the four-point shape with per-DER points fitted to the AC OPF",
+            "ieee1547",
+            ("v",),
+        ),
         StrategySpec(
             "acopf",
             "formulation",
@@ -511,8 +597,9 @@ REFERENCE_OPTIMUM = "acopf"
 #: rules (LLMA, LFMA) and its OPF setup.
 PAPER_RULES = ("llma", "lfma")
 PAPER_OPF = "acopf-paper"
-#: `opfbench run`'s default grid: every built-in strategy at its default options.
-DEFAULT_RUN = tuple(STRATEGIES)
+#: `opfbench run`'s default grid: every built-in strategy at its default options (the
+#: learned ones have none: their parameters come from a training period or a file).
+DEFAULT_RUN = tuple(name for name, s in STRATEGIES.items() if not s.learned)
 #: The default grid's strategies under a forecast source: the paper's Algorithm 3 rules
 #: (the grid codes' rules know no forecast; only Algorithm 3's limit would change them).
 DEFAULT_FORECAST = PAPER_RULES

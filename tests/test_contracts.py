@@ -16,7 +16,8 @@ from tests.support.contracts import check_folder, check_json, check_table, parse
 from tests.support.forecast_synthetic import use_tiny_synthetic
 
 CONTRACT = parse()
-RUN = ["run", "--period", "2016-06-28T10:00..2016-06-28T10:20", "--strategies", "no-action", "volt-var", "--k", "0"]
+LEARNED = "learned-affine:train=2016-06-27T10:00..2016-06-27T11:00"  # its training writes learned/ and train/
+RUN = ["run", "--period", "2016-06-28T10:00..2016-06-28T10:20", "--strategies", "no-action", "volt-var", LEARNED, "--k", "0"]
 RUN += ["--night-modes", "connected", "--forecast", "off", "--detail", "--workers", "1", "--quiet"]
 FAULT = ["fault", "paper33", "--fault-bus", "18", "--strategies", "no-action", "--k", "0", "--t-end", "0.4"]
 FAULT += ["--workers", "1", "--quiet"]
@@ -44,7 +45,7 @@ def test_the_page_declares_every_folder_file_and_block():
 
 
 def test_a_fresh_run_folder(run_folder):
-    extra = list(extra_columns(("no-action", "volt-var")))
+    extra = list(extra_columns(("no-action", "volt-var", LEARNED)))
     assert extra == ["residual_mvar"]  # a closed-loop rule's column
     assert check_folder(CONTRACT, "run", run_folder, {"<extra>": extra}) == []
 

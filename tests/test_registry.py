@@ -27,7 +27,8 @@ def test_registry_lists_every_builtin_strategy_once():
         n for n, k in kinds.items() if k == "local"
     }
     assert {"acopf", "acopf-paper", "socp"} == {n for n, k in kinds.items() if k == "formulation"}
-    assert set(DEFAULT_RUN) == {s.name for s in specs() if s.source == "opfbench"}
+    assert set(DEFAULT_RUN) == {s.name for s in specs() if s.source == "opfbench" and not s.learned}
+    assert {s.name for s in specs() if s.learned} == {"learned-affine", "learned-vv", "learned-1547"}
     assert STRATEGIES[BASELINE].kind == "local" and STRATEGIES[REFERENCE_OPTIMUM].bound_rank is not None
 
 

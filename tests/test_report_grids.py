@@ -8,7 +8,7 @@ import pandas as pd
 import pytest
 
 from opfbench.report.claims import FAILS, HOLDS, ranking_per_case
-from opfbench.report.tables import leaderboard
+from opfbench.report.tables import how_close, leaderboard
 
 
 def _summary() -> pd.DataFrame:
@@ -76,3 +76,19 @@ def test_leaderboard_columns_and_the_recovery_added_from_a_fault_study():
     assert np.isnan(board.loc[("grid-b", "lfma"), "recovery_added_ms"])  # no fault study of grid-b
     assert board.loc[("grid-a", "llma"), "max_violation_pu"] == 0.012 and board.loc[("grid-a", "llma"), "avg_loss_kw"] == 4.0
     assert "recovery_added_ms" not in leaderboard(s).columns  # without a fault study
+
+
+def test_how_close_sets_train_beside_test_and_maps_a_perturbed_case_to_its_model():
+    test = _summary().assign(voltage_violation_min=0.0, max_violation_pu=0.0, not_settled_steps=0)
+    perturbed = test[test["case"] == "grid-a"].assign(case="grid-a?line-z=1.2")
+    train = test[test["case"] == "grid-a"].copy()
+    train.loc[train["strategy"] == "lfma", "energy_kwh"] = 85.0  # train: 75 % of the OPF's reduction
+    table = how_close(pd.concat([test, perturbed]), train, {"grid-a?line-z=1.2": "grid-a"}).set_index(["case", "strategy"])
+    assert "acopf" not in table.index.get_level_values(1) and "socp" not in table.index.get_level_values(1)
+    assert table.loc[("grid-a", "no-action"), "test_share_pct"] == 0.0
+    assert table.loc[("grid-a", "lfma"), "test_share_pct"] == pytest.approx(50.0)
+    assert table.loc[("grid-a", "lfma"), "train_share_pct"] == pytest.approx(75.0)
+    assert table.loc[("grid-a?line-z=1.2", "lfma"), "train_share_pct"] == pytest.approx(75.0)  # the model's training
+    assert np.isnan(table.loc[("grid-b", "lfma"), "train_share_pct"])  # no training on grid-b
+    alone = how_close(test)
+    assert alone["train_share_pct"].isna().all() and len(alone) == 6

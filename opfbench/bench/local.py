@@ -33,7 +33,7 @@ def bench_local(scenario: Scenario, k: float = 0.4, repeats: int = 3, loop_sampl
     n = scenario.n_snapshots
     out: dict = {"case": scenario.net.name, "snapshots": n, "k": k, "repeats": repeats, "rules": {}}
     for spec in specs():
-        if spec.kind != "local" or spec.source != "opfbench":
+        if spec.kind != "local" or spec.source != "opfbench" or spec.learned:  # learned rules: `bench learned`
             continue
         ms, res = best_ms(partial(cold, run_strategy, spec.name, scenario, k), repeats)
         out["rules"][spec.name] = {

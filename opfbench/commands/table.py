@@ -89,8 +89,8 @@ def loss_table(
 
 
 def local_rules() -> list:
-    """Every registered local rule, in registry order."""
-    return [s for s in specs() if s.kind == "local"]
+    """Every registered local rule that runs at its default options (not the learned ones), in registry order."""
+    return [s for s in specs() if s.kind == "local" and not s.learned]
 
 
 def format_table(table: "pd.DataFrame") -> str:

@@ -4,13 +4,14 @@ operating point, its own time series when it has them, notes).
 Specs (`opfbench.io.spec`): a shipped name (`opfbench.cases`), a MATPOWER `.m` file
 (`opfbench.io.matpower`, reader and writer), a pandapower net saved as `.json`
 (`opfbench.io.pandapower`) or `simbench:CODE` (`opfbench.io.simbench`), each with the
-options `der=` and `der-pf=`. Cases are cached per process by spec (files also by their
+options `der=`, `der-pf=` and `line-z=` (a perturbed model). Cases are cached per process by spec (files also by their
 modification time and size), so a worker that runs many tasks of one case reads it once;
 SimBench grids, slow to extract, also on disk across processes (`opfbench.io.cache`).
 """
 
 from __future__ import annotations
 
+import dataclasses
 import threading
 from collections import OrderedDict
 from pathlib import Path
@@ -101,6 +102,8 @@ def _read(spec: CaseSpec) -> Case:
         case = Case(spec.text, shipped_network(spec.source))
     if spec.der is not None and spec.der != "gens":
         case = _with_listed_ders(case, spec, der_pf)
+    if spec.line_z is not None:
+        case = _with_line_impedances(case, spec.line_z)
     if not case.network.ders:
         case = Case(
             case.spec,
@@ -129,6 +132,15 @@ def _with_listed_ders(case: Case, spec: CaseSpec, der_pf: float) -> Case:
         s = e.rating_mw / der_pf if e.kind == "inverter" else None
         ders.append(DER(net.index_of(e.bus), e.kind, e.rating_mw, s, e.energy))  # type: ignore[arg-type]
     return Case(spec.text, net.with_changes(ders=tuple(ders)), None, case.series, case.short_circuit, case.notes, case.load_index)
+
+
+def _with_line_impedances(case: Case, factor: float) -> Case:
+    """`case` with every line's r and x times `factor` (`opfbench.io.spec`: line-z)."""
+    net = case.network
+    line = (net.base_kv[net.f] == net.base_kv[net.t]) & (net.tap == 1.0) & (net.shift == 0.0)
+    scale = np.where(line, factor, 1.0)
+    note = f"line-z={factor!r}: the series impedance of {int(line.sum())} lines × {factor:g} (a perturbed model)"
+    return dataclasses.replace(case, network=net.with_changes(r=net.r * scale, x=net.x * scale), notes=case.notes + (note,))
 
 
 def _pandapower_case(spec: CaseSpec, der_pf: float) -> Case:

@@ -1,7 +1,7 @@
 """Case specs: the one string that names a case everywhere (command line, config, task,
 worker, tables).
 
-    SOURCE[?der=DER&der-pf=PF]
+    SOURCE[?der=DER&der-pf=PF&line-z=F]
 
 SOURCE is a shipped case name (`opfbench cases`), the path of a MATPOWER `.m` file or of a
 pandapower net saved with `pandapower.to_json` (`.json`), or `simbench:CODE` (a SimBench LV
@@ -15,6 +15,12 @@ or MV grid code, e.g. `simbench:1-MV-rural--0-sw`). Options:
 - `der-pf=PF` in (0, 1]: the generic inverters' rating S̄ = P̄/PF where the source gives
   no larger nameplate (pandapower/SimBench static generators, generators as DER, `der=`
   inverters). Default 0.90, VDE-AR-N 4105's power factor at full output.
+- `line-z=F`, F > 0: a perturbed model — every line's series impedance r + jx is F times
+  the source's (transformers, shunts and line charging unchanged; a line is a branch
+  between buses of one base voltage, without tap or phase shift). Every strategy runs on
+  the perturbed grid, and a learned rule trained in the same run is fitted on the case's
+  model (`CaseSpec.model`: the spec without `line-z`), the operator's view of the grid:
+  its result on the perturbed case is the price of model error.
 """
 
 from __future__ import annotations
@@ -34,13 +40,20 @@ class CaseSpec:
     source: str
     der: str | None = None
     der_pf: float | None = None
+    line_z: float | None = None
 
     @property
     def text(self) -> str:
         """The canonical spec string."""
         opts = [f"der={self.der}"] if self.der is not None else []
         opts += [f"der-pf={self.der_pf:g}"] if self.der_pf is not None else []
+        opts += [f"line-z={self.line_z!r}"] if self.line_z is not None else []
         return self.source + ("?" + "&".join(opts) if opts else "")
+
+    @property
+    def model(self) -> "CaseSpec":
+        """The case as modelled: this spec without its perturbation (`line-z`)."""
+        return CaseSpec(self.source, self.der, self.der_pf)
 
     @property
     def kind(self) -> str:
@@ -61,11 +74,11 @@ def parse_spec(text: str) -> CaseSpec:
             f"a case is a shipped case's name, a MATPOWER .m or pandapower .json file's path or simbench:CODE, got {text!r}"
         )
     source, sep, query = text.strip().partition("?")
-    der, der_pf = None, None
+    der, der_pf, line_z = None, None, None
     for part in query.split("&") if sep else ():
         key, eq, value = part.partition("=")
         if not eq or not value:
-            raise InputError(f"case {text!r}: option {part!r} must be key=value (der=…, der-pf=…)")
+            raise InputError(f"case {text!r}: option {part!r} must be key=value (der=…, der-pf=…, line-z=…)")
         if key == "der":
             der = value
         elif key == "der-pf":
@@ -75,14 +88,27 @@ def parse_spec(text: str) -> CaseSpec:
                 raise InputError(f"case {text!r}: der-pf must be a number in (0, 1], got {value!r}") from None
             if not 0 < der_pf <= 1:
                 raise InputError(f"case {text!r}: der-pf must lie in (0, 1], got {value}")
+        elif key == "line-z":
+            line_z = _factor(text, value)
         else:
-            raise InputError(f"case {text!r}: unknown option {key!r} (der, der-pf)")
-    spec = CaseSpec(source, der, der_pf)
+            raise InputError(f"case {text!r}: unknown option {key!r} (der, der-pf, line-z)")
+    spec = CaseSpec(source, der, der_pf, line_z)
     if der is not None and der != "gens":
         parse_der_list(der, text)
     if der == "gens" and spec.kind != "matpower":
         raise InputError(f"case {text!r}: der=gens reads a MATPOWER file's generators; this case is {spec.kind}")
     return spec
+
+
+def _factor(text: str, value: str) -> float:
+    """line-z's factor: a finite number > 0 (e.g. 1.2: impedances +20 %)."""
+    try:
+        factor = float(value)
+    except ValueError:
+        raise InputError(f"case {text!r}: line-z must be a number > 0 (e.g. 1.2: line impedances +20 %), got {value!r}") from None
+    if not (0 < factor < float("inf")):
+        raise InputError(f"case {text!r}: line-z must be a finite number > 0, got {value}")
+    return factor
 
 
 @dataclass(frozen=True)

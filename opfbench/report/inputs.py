@@ -22,6 +22,7 @@ import pyarrow.parquet as pq
 
 import opfbench
 from opfbench.errors import InputError
+from opfbench.io.spec import parse_spec
 from opfbench.registry import is_formulation
 from opfbench.report.sources import check_given, report_sources
 from opfbench.report.tables import REFERENCE_NIGHT
@@ -56,7 +57,20 @@ class Inputs:
     year_summary: pd.DataFrame | None = None
     year_manifest: dict | None = None
     year_dir: Path | None = None
+    train_summary: pd.DataFrame | None = None  # train/summary.csv: the rules over the training period
+    learned: dict[str, str] = field(default_factory=dict)  # the run's learned/<file>.json -> what it holds, one line
     missing: dict[str, str] = field(default_factory=dict)  # input name -> how to produce it
+
+    def models(self) -> dict[str, str]:
+        """Each case of the run → the case it is modelled by (its spec without `line-z`),
+        whose rows the training summary holds."""
+        out = {}
+        for case in set(self.summary["case"].astype(str)) if self.summary is not None else ():
+            try:
+                out[case] = parse_spec(case).model.text
+            except InputError:
+                out[case] = case
+        return out
 
 
 TEXT, NUMBER, TIME, FLAG, NULL = "text", "number", "time", "true/false", "null"
@@ -458,8 +472,27 @@ def load_inputs(
             inp.missing[name] = command
     if inp.der_q is None:  # the report plots the DER setpoints (the per-bus |V| table it does not read)
         inp.missing["der_q.parquet"] = DETAIL_COMMAND.format(dir=run)
+    inp.train_summary = _summary(run / "train" / "summary.csv", command)
+    fitted = (inp.manifest or {}).get("config", {}).get("fitted") or []
+    for ref in sorted({str(f.get("ref")) for f in fitted if isinstance(f, dict)}):
+        if ref.startswith("learned/"):  # the run's own fits (a params= file given lies elsewhere)
+            inp.learned[ref] = _learned_line(run / ref, command)
     _load_sources(inp, forecast_dir, fault_dir, year_dir)
     return inp
+
+
+def _learned_line(path: Path, command: str) -> str:
+    """One line on a fitted rule's parameters file (`strategies.learned.LearnedParams`)."""
+    data = _json(path, command) or {}
+    try:
+        train, fit = data["train"], data.get("fit") or {}
+        return (
+            f"{data['family']} fitted on {data['case']} over {train['period']} ({train['optimal_steps']} certified optimal "
+            f"steps, {len(data['ders'])} DER; training data sha256 {str(data['data_sha256'])[:12]}…), slope bound ρ = "
+            f"{data['rho']:g}, contraction factor {fit.get('contraction_factor', float('nan')):.3f}"
+        )
+    except (KeyError, TypeError, ValueError) as exc:
+        raise _damaged(path, f"not a fitted rule's parameters ({type(exc).__name__}: {exc})", command) from None
 
 
 def _load_sources(

@@ -428,3 +428,34 @@ def fault_traces(traces: pd.DataFrame, bus: int = TRACE_BUS) -> list[Plot]:
 
 
 _COLORS = ("#1f77b4", "#ff7f0e", "#2ca02c", "#d62728", "#9467bd", "#8c564b", "#e377c2", "#7f7f7f")
+
+
+def how_close(table: pd.DataFrame) -> list[Plot]:
+    """The share of the AC OPF's loss reduction each local rule reaches, training and test
+    period side by side, per case, at the smallest k (a `tables.how_close`)."""
+    if table.empty or table["test_share_pct"].isna().all():
+        return []
+    k = float(table["k"].min())
+    sub = table[np.isclose(table["k"], k)]
+    cases = [escape(str(c)) for c in sub["case"]]
+    names = [escape(str(s)) for s in sub["strategy"]]
+    fig = _figure()
+    for column, name in (("train_share_pct", "training period"), ("test_share_pct", "test period")):
+        if sub[column].notna().any():
+            fig.add_bar(
+                x=[cases, names],
+                y=sub[column],
+                name=name,
+                hovertemplate="%{x}<br>%{y:.1f} % of the OPF's reduction<extra>" + name + "</extra>",
+            )
+    fig.update_layout(barmode="group")
+    return [
+        plot_json(
+            "how-close",
+            f"How close can a local rule get: share of the AC OPF's loss reduction (k={k:g}, PV connected at night, forecast off)",
+            fig,
+            "",
+            "share of the OPF's reduction (%)",
+            height=460,
+        )
+    ]

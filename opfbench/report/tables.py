@@ -320,15 +320,17 @@ def _recovery_added(rec: pd.DataFrame | None) -> dict[tuple, float]:
     return {(c, s, float(k)): float(v) for (c, s, k), v in mean.items()}
 
 
-def leaderboard(summary: pd.DataFrame, night_mode: str = REFERENCE_NIGHT, recovery: pd.DataFrame | None = None) -> pd.DataFrame:
+def leaderboard(
+    summary: pd.DataFrame, night_mode: str = REFERENCE_NIGHT, recovery: pd.DataFrame | None = None, baseline: bool = False
+) -> pd.DataFrame:
     """Per case × k (forecast off, one night mode), every rule and formulation other than
     the baseline by its share of the AC OPF's loss reduction,
     (E_no-action − E)/(E_no-action − E_acopf) in % (NaN where the OPF reduces nothing), with
     its energy and average losses, minutes outside the case's voltage limits and the worst
     excursion beyond them (p.u.), not-settled and not-ok steps, and — given a fault study's
     `recovery` table — the recovery time it adds over no action (mean over the fault
-    buses, ms); ranked per case and k, lowest energy first. A summary written before a
-    column existed gives NaN there."""
+    buses, ms); ranked per case and k, lowest energy first; `baseline`: the baseline's row
+    too (share 0). A summary written before a column existed gives NaN there."""
     sub = summary[(summary["forecast"] == "off") & (summary["night_mode"] == night_mode)]
     added = _recovery_added(recovery)
     rows = []
@@ -336,7 +338,7 @@ def leaderboard(summary: pd.DataFrame, night_mode: str = REFERENCE_NIGHT, recove
         ref = grp.loc[grp["strategy"] == REFERENCE_OPTIMUM, "energy_kwh"]
         na = grp["no_action_kwh"].iloc[0]
         reduction = na - float(ref.iloc[0]) if len(ref) else np.nan
-        for r in grp[grp["strategy"] != BASELINE].to_dict(orient="records"):
+        for r in (grp if baseline else grp[grp["strategy"] != BASELINE]).to_dict(orient="records"):
             share = 100 * (na - r["energy_kwh"]) / reduction if reduction > TOL_KWH else np.nan
             rows.append(
                 {c: r.get(c, np.nan) for c in LEADERBOARD_COLUMNS}
@@ -354,3 +356,52 @@ def leaderboard(summary: pd.DataFrame, night_mode: str = REFERENCE_NIGHT, recove
         out = out.drop(columns="recovery_added_ms")
     out["rank"] = out.groupby(["case", "k"])["energy_kwh"].rank(method="min").astype("Int64")  # none without an energy
     return out.sort_values(["case", "k", "rank"], kind="stable").reset_index(drop=True)
+
+
+LOCAL_COLUMNS = [
+    "case",
+    "k",
+    "strategy",
+    "train_share_pct",
+    "test_share_pct",
+    "test_energy_kwh",
+    "test_voltage_violation_min",
+    "test_max_violation_pu",
+    "train_not_settled_steps",
+    "test_not_settled_steps",
+]
+
+
+def how_close(summary: pd.DataFrame, train: pd.DataFrame | None = None, model_of: dict[str, str] | None = None) -> pd.DataFrame:
+    """Per case × k (forecast off, PV connected at night): every local rule — no action,
+    the paper's, the rules in force, the learned ones — by its share of the AC OPF's loss
+    reduction on the test period (the run, `summary`) and on the training period (`train`,
+    the run's training summary, whose cases are the cases' models: `model_of` maps a case
+    to its model's name, default itself), beside its test energy, minutes outside the
+    voltage limits, worst excursion and not-settled steps (the `leaderboard`'s figures).
+    NaN where a side lacks the rule or the OPF."""
+    test = leaderboard(summary, baseline=True)
+    test = test[~test["strategy"].astype(str).map(is_formulation).astype(bool)]
+    out = pd.DataFrame(
+        {
+            "case": test["case"],
+            "k": test["k"],
+            "strategy": test["strategy"],
+            "test_share_pct": test["opf_share_pct"],
+            "test_energy_kwh": test["energy_kwh"],
+            "test_voltage_violation_min": test["voltage_violation_min"],
+            "test_max_violation_pu": test["max_violation_pu"],
+            "test_not_settled_steps": test["not_settled_steps"],
+        }
+    )
+    if train is not None and not train.empty:
+        side = leaderboard(train, baseline=True)[["case", "k", "strategy", "opf_share_pct", "not_settled_steps"]]
+        side = side.rename(
+            columns={"case": "model", "opf_share_pct": "train_share_pct", "not_settled_steps": "train_not_settled_steps"}
+        )
+        out["model"] = out["case"].map(lambda c: (model_of or {}).get(c, c))
+        out = out.merge(side, on=["model", "k", "strategy"], how="left").drop(columns="model")
+    for column in LOCAL_COLUMNS:
+        if column not in out:
+            out[column] = np.nan
+    return order(out[LOCAL_COLUMNS]).sort_values(["case", "k"], kind="stable").reset_index(drop=True)

@@ -20,6 +20,7 @@ from opfbench.errors import InputError
 from opfbench.forecasting.names import MODEL_NAMES
 from opfbench.formulations.options import ACOPF_SOLVERS, check_option
 from opfbench.registry import DEFAULT_RUN, StrategySpec, configuration, specs
+from opfbench.study.fitted import Fitted
 from opfbench.study.price import DEFAULT_CURRENCY, DEFAULT_PRICE_PER_KWH, DEFAULT_PRICE_SOURCE
 
 NIGHT_MODES = ("connected", "disconnected", "connected-q")
@@ -98,14 +99,16 @@ class StudyConfig:
     "auto": 6h for periods of up to two days, so the paper day's tasks spread over the
     workers, month otherwise), fixed by the config and never by the number of workers. `detail`: also write the long
     tables of per-DER Q and per-bus V (None: per-DER Q alone for periods of ≤ 2 days, which
-    the report plots); `detail_tables` the names resolved from it (`with_period`). Price fields only label the report.
+    the report plots; a tuple: those of `DETAIL_TABLES`); `detail_tables` the names resolved from it (`with_period`). Price fields only label the report.
     `acopf_solver`: "auto" (the SOCP certifies the AC optimum where it can, IPOPT solves the
     rest) or "ipopt" (IPOPT on every step: the solver's own outcomes, as the paper asks) —
     the run-level setting of every option that declares it (`registry.Option.setting`).
     `strategies` are configuration labels (`NAME:key=value,…`), kept canonical
     (`registry.configuration`); `plugins` and `plugin_digests` (derived, not given) name
     the plugins those strategies come from and their sources' sha256, so a changed plugin
-    is another configuration."""
+    is another configuration. `fitted` (derived by the run, not given): the learned
+    configurations' fitted rules per case (`study.training`), their hashes part of the
+    configuration."""
 
     cases: tuple[str, ...] = ("paper33",)
     strategies: tuple[str, ...] = DEFAULT_RUN
@@ -116,7 +119,7 @@ class StudyConfig:
     period: str = "paper-day"
     step_minutes: float | None = None
     chunk: str = "auto"
-    detail: bool | None = None
+    detail: bool | None | tuple[str, ...] = None
     detail_tables: tuple[str, ...] = ()
     acopf_solver: str = "auto"
     forecast_dir: str = "reports/forecast"
@@ -126,6 +129,7 @@ class StudyConfig:
     forecast_strategies: tuple[str, ...] | None = None
     plugins: tuple[str, ...] = ()
     plugin_digests: tuple[str, ...] = ()
+    fitted: tuple[Fitted, ...] = ()
     notes: tuple[str, ...] = field(default=(), compare=False)
 
     def __post_init__(self) -> None:
@@ -157,6 +161,8 @@ class StudyConfig:
                 )
         if not (isinstance(self.currency, str) and self.currency.strip() and self.currency.isprintable()):
             raise InputError(f"currency must be a printable, non-empty label (e.g. EUR), got {self.currency!r}")
+        if isinstance(self.detail, tuple) and not set(self.detail) <= set(DETAIL_TABLES):
+            raise InputError(f"unknown detail table(s) {', '.join(sorted(set(self.detail) - set(DETAIL_TABLES)))}")
         if self.chunk not in CHUNKS:
             raise InputError(f"unknown chunk {self.chunk!r}; choose from {', '.join(CHUNKS)}")
         check_night(self.night)
@@ -186,18 +192,23 @@ class StudyConfig:
         """The manifest's `config` (JSON-ready)."""
         out = asdict(self)
         out.pop("notes")
+        out["fitted"] = [f.as_dict() for f in self.fitted]
         return {key: list(v) if isinstance(v, tuple) else v for key, v in out.items()}
 
     def digest(self) -> str:
-        """Hash of everything that changes results (not the price labels)."""
-        body = {k: v for k, v in self.as_dict().items() if k not in LABEL_FIELDS}
+        """Hash of everything that changes results (not the price labels, nor the fitted
+        rules: they follow from the rest, and each task's definition holds its case's)."""
+        body = {k: v for k, v in self.as_dict().items() if k not in (*LABEL_FIELDS, "fitted")}
         return hashlib.sha256(json.dumps(body, sort_keys=True).encode()).hexdigest()[:16]
 
     def with_period(self, step_minutes: float, hours: float) -> "StudyConfig":
         """The config with what the period decides filled in: its step, the long tables
         (`detail`) and the chunk ("auto"), for a period of `hours`."""
         short = hours <= SHORT_PERIOD_H
-        tables = DETAIL_TABLES if self.detail else ("der_q",) if self.detail is None and short else ()
+        if isinstance(self.detail, tuple):
+            tables = tuple(t for t in DETAIL_TABLES if t in self.detail)
+        else:
+            tables = DETAIL_TABLES if self.detail else ("der_q",) if self.detail is None and short else ()
         chunk = ("6h" if short else "month") if self.chunk == "auto" else self.chunk
         return replace(self, step_minutes=step_minutes, detail_tables=tables, chunk=chunk)
 

@@ -1,12 +1,13 @@
 """`opfbench run`'s study as a task family of the study engine (`study.engine`): check
 everything, plan the tasks, run them (in process or on Dask), assemble steps.parquet, the
-detail tables and summary.csv."""
+detail tables and summary.csv. A run with learned configurations fits them first
+(`study.training`: the study's own nested runs over the training period)."""
 
 from __future__ import annotations
 
 from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import Callable
+from typing import Any, Callable
 
 import pandas as pd
 import pyarrow as pa
@@ -17,6 +18,7 @@ from opfbench.parquetio import ParquetStream
 from opfbench.registry import configuration
 from opfbench.study.config import LABEL_FIELDS, StudyConfig
 from opfbench.study.engine import EngineRun, TaskOutput, run_family
+from opfbench.study.fitted import Fitted
 from opfbench.study.periods import Period
 from opfbench.study.scenarios import check_model_forecasts, study_period
 from opfbench.study.tables import DETAIL_COLUMNS, KEYS, PARTIAL_COLUMNS, extra_columns, step_columns, summarize
@@ -171,11 +173,37 @@ def run_study(
     fresh: bool = False,
     quiet: bool = False,
     command: list[str] | None = None,
+    fitted: tuple[Fitted, ...] | None = None,
 ) -> StudyRun:
     """Run `config` into the folder `out` (resuming finished tasks; `run_family` for the
-    rest). Ctrl-C: `Stopped` after the finished tasks are saved."""
-    run: EngineRun = run_family(
-        lambda: prepare(config), out, workers=workers, scheduler=scheduler, fresh=fresh, quiet=quiet, command=command
-    )
+    rest). Ctrl-C: `Stopped` after the finished tasks are saved. Its learned
+    configurations are fitted first (`fit_learned`), unless `fitted` gives their rules
+    (a nested training run's)."""
+    options: dict[str, Any] = {"workers": workers, "scheduler": scheduler, "fresh": fresh, "quiet": quiet, "command": command}
+    if fitted is None:
+        fitted = fit_learned(config, out, options)
+    config = replace(config, fitted=fitted)
+    run: EngineRun = run_family(lambda: prepare(config), out, **options)
     family: RunFamily = run.family
     return StudyRun(run.out, family.config, family.period, family.tasks, run.kept, run.ran, run.wall_s, run.result, run.task_wall)
+
+
+def fit_learned(config: StudyConfig, out: Path, options: dict[str, Any]) -> tuple[Fitted, ...]:
+    """The fitted rules of `config`'s learned configurations, after every check of the run
+    itself (its input, the training periods apart from the test period, a params file's
+    case, the folder's earlier run) — before any work: the `train=` ones fitted in nested
+    runs of the folder `out` (`study.training`)."""
+    from opfbench.study.learning import check_learned, learned_configs
+    from opfbench.study.store import RunStore
+    from opfbench.study.training import train
+
+    if not learned_configs(config.strategies):
+        return ()
+    family = prepare(config)
+    check_learned(family.config.strategies, family.config.cases, family.period)
+    RunStore(Path(out), lambda msg: None).check(family, bool(options["fresh"]))
+
+    def nested(sub: StudyConfig, folder: Path, rules: tuple[Fitted, ...]) -> StudyRun:
+        return run_study(sub, folder, fitted=rules, **options)
+
+    return train(family.config, Path(out), nested)

@@ -151,10 +151,7 @@ class RunStore:
         run assembled, write the manifest; returns the ids of the tasks whose checkpoints
         are kept (resume)."""
         path = self.out / "manifest.json"
-        part = family.manifest()
-        old = self._previous(path, family.kind, fresh) if path.exists() else None
-        if old is not None and not fresh:
-            self._check_resume(old, part, family)
+        part = self.check(family, fresh)
         if self.tasks_dir.exists() and not self.tasks_dir.is_dir():
             raise InputError(f"{self.tasks_dir} is not a folder (a study keeps its checkpoints there); move it away")
         for name in family.outputs:  # a previous run's assembled files: never mixed with this run's
@@ -182,6 +179,18 @@ class RunStore:
         }
         write_json(path, self.manifest)
         return done
+
+    def check(self, family: TaskFamily, fresh: bool) -> dict:
+        """What `open` checks before it touches the folder — a manifest of another kind,
+        version, configuration or data (without `fresh`) — InputError naming it; returns
+        the family's part of the manifest. A caller with work to do before the run (a
+        run's training) calls it first."""
+        path = self.out / "manifest.json"
+        part = family.manifest()
+        old = self._previous(path, family.kind, fresh) if path.exists() else None
+        if old is not None and not fresh:
+            self._check_resume(old, part, family)
+        return part
 
     def _previous(self, path: Path, kind: str, fresh: bool) -> dict | None:
         """The folder's manifest (None: unreadable, to be discarded with `fresh`);

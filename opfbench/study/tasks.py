@@ -22,11 +22,13 @@ from threadpoolctl import threadpool_limits
 
 from opfbench.errors import InputError
 from opfbench.plugins import PluginSource, ensure, loaded
-from opfbench.registry import run_strategy
+from opfbench.registry import OptionValue, configuration, run_strategy
 from opfbench.result import StrategyResult
 from opfbench.scenario import Scenario
+from opfbench.strategies.learned import install
 from opfbench.study.config import StudyConfig
 from opfbench.study.engine import Task, TaskOutput
+from opfbench.study.fitted import Fitted
 from opfbench.study.periods import Period
 from opfbench.study.scenarios import chunk_scenario
 from opfbench.study.tables import (
@@ -45,7 +47,9 @@ from opfbench.study.tables import (
 class RunTask(Task):
     """One piece of work of a run; `start`/`end` are the first and last step (ISO, local
     time); `data_sha256` the case data's hash, `config_digest` the run's (both in its
-    definition, so a checkpoint of other data or another config never matches)."""
+    definition, so a checkpoint of other data or another config never matches); `fitted`
+    (label, sha256) of the learned rules fitted for its case (in its definition when
+    there are some: a checkpoint of another fit never matches)."""
 
     label: str
     case: str
@@ -57,9 +61,11 @@ class RunTask(Task):
     end: str
     data_sha256: str
     config_digest: str
+    fitted: tuple[tuple[str, str], ...] = ()
 
     def definition(self) -> dict:
-        return {
+        fitted = {"fitted": dict(self.fitted)} if self.fitted else {}
+        return fitted | {
             "case": self.case,
             "data_sha256": self.data_sha256,
             "night_modes": list(self.night_modes),
@@ -81,7 +87,8 @@ class TaskInput:
     """Everything a worker needs: the task, its profiles (the chunk plus, when the
     period goes on, the next step), the night mask on those rows, the step, the run-level
     settings of the strategies' options (`StudyConfig.settings`), the extra step columns
-    of the run's strategies and the plugins they come from (loaded in the worker first)."""
+    of the run's strategies, the plugins they come from (loaded in the worker first) and
+    the fitted rules of the task's case (installed in the worker first)."""
 
     task: RunTask
     profiles: pd.DataFrame
@@ -93,6 +100,7 @@ class TaskInput:
     settings: tuple[tuple[str, str], ...] = ()
     columns: tuple[str, ...] = ()
     plugins: tuple[PluginSource, ...] = ()
+    fitted: tuple[Fitted, ...] = ()
 
 
 def plan_tasks(config: StudyConfig, period: Period, data_sha256: dict[str, str]) -> list[RunTask]:
@@ -123,6 +131,7 @@ def plan_tasks(config: StudyConfig, period: Period, data_sha256: dict[str, str])
                             t1.isoformat(),
                             data_sha256[case],
                             digest,
+                            tuple((f.label, f.sha256) for f in config.fitted if f.case == case),
                         )
                     )
     return tasks
@@ -145,7 +154,16 @@ def task_input(task: RunTask, config: StudyConfig, period: Period) -> TaskInput:
         tuple(config.settings().items()),
         extra_columns(config.strategies),
         loaded(config.plugins),
+        tuple(f for f in config.fitted if f.case == task.case),
     )
+
+
+def fitted_options(fitted: tuple[Fitted, ...]) -> dict[str, dict[str, OptionValue]]:
+    """Install the fitted rules (under their references) and return, per label fitted by
+    the run (`train=`), the options that make it run with them."""
+    install({f.ref: f.parsed() for f in fitted})
+    configs = {f.label: configuration(f.label) for f in fitted}
+    return {f.label: configs[f.label].spec.fitted_options(f.ref) for f in fitted if configs[f.label].options()["train"]}
 
 
 def run_task(inp: TaskInput) -> TaskOutput:
@@ -159,6 +177,7 @@ def run_task(inp: TaskInput) -> TaskOutput:
     if load_case(t.case).data_sha256 != t.data_sha256:
         raise InputError(f"case {t.case}: its data changed while the run went on (or differ on this worker); rerun")
     ensure(inp.plugins)
+    overrides = fitted_options(inp.fitted)
     settings = dict(inp.settings)
     with threadpool_limits(1):
         step = pd.Timedelta(hours=inp.step_h)
@@ -172,7 +191,9 @@ def run_task(inp: TaskInput) -> TaskOutput:
             results = {}
             for name in t.strategies:
                 res = results[name] = (
-                    replace(same[name], wall_ms=0.0) if same is not None else run_strategy(name, scenario, t.k, settings)
+                    replace(same[name], wall_ms=0.0)
+                    if same is not None
+                    else run_strategy(name, scenario, t.k, settings, **overrides.get(name, {}))
                 )
                 steps.append(step_rows(t.case, mode, t.forecast, time, inp.step_h, night, res, inp.columns))
                 for table, columns in detail_rows(t.case, mode, t.forecast, time, res, inp.detail).items():

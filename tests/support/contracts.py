@@ -85,6 +85,8 @@ def parse(text: str | None = None) -> Contract:
                 contract.blocks[file] = Node(kinds={"object"})
         elif line.startswith("Columns as `") and folder and file:
             contract.columns[folder, file] = contract.columns[folder, line.split("`")[1]]
+        elif line.startswith("Fields as `") and folder and file:
+            contract.fields[folder, file] = contract.fields[folder, line.split("`")[1]]
         elif line.startswith("| file |") and folder:
             contract.files[folder] = [_name(r[0]) for r in _rows(lines, i)]
         elif line.startswith("| column |") and folder and file:

@@ -1,0 +1,769 @@
+"""Local rules learned from the certified optimum: how close can a communication-free rule
+get? Each family is fitted per DER to the AC OPF's optimal Q over a training period, from
+what that DER measures in closed loop — its own-bus |V| (p.u.), its own P (MW), its
+own-bus load P (MW) and Q (MVAr); no time stamp, no other DER's data — and runs as a local
+rule on the engine (`opfbench.strategies.engine`): the target is clipped to ±(1 − k)·Qmax
+like every rule's, and a rule of |V| is solved for its closed-loop steady state.
+
+Families (Q positive = injected; q = Q/S̄ in p.u. of the DER's nameplate S̄):
+
+- `learned-affine` (`AffineRule`): a linear decision rule
+  q = a + b·P/S̄ + c·|V| + d·Q_load/S̄ per DER, with c ≤ 0 (Volt-VAR's sign, as the curves
+  below: Q does not rise with the DER's own voltage).
+- `learned-vv` (`VoltVarRule`): a monotone non-increasing piecewise-linear q(|V|) per DER,
+  flat beyond its end knots — an optimized Volt-VAR curve. Its knots are fixed at
+  quantiles of the DER's training voltages (`knots` of them, evenly spaced in
+  probability), and only the values at the knots are fitted: with fixed knots the fit is
+  a convex quadratic program (one global optimum, certified by Clarabel), whereas free
+  breakpoints make it non-convex (local optima, starting-point dependent); quantile knots
+  put the curve's resolution where the DER's voltages are.
+- `learned-1547` (`Ieee1547Rule`): the IEEE 1547-2018 Volt-VAR shape — (V1, q1), (V2, 0),
+  (V3, 0), (V4, q4), q1 ≥ 0 ≥ q4, flat beyond — with per-DER points. Non-convex in its
+  breakpoints, so they are searched exhaustively on a grid of GRID_PU over the DER's
+  training voltages (binned sums make each candidate O(1)), each candidate's q1 and q4 in
+  closed form (a bounded one-variable least squares per side): the global optimum on the
+  grid.
+
+The fit is least squares on the training steps whose OPF point is a certified optimum
+(status ok) and where the DER has a reactive limit (PV at night without "Q at night" has
+none: any target gives Q = 0 there), features measured at the optimum (|V| from the power
+flow at the optimal Q). Affine and Volt-VAR fits are one constrained least-squares
+problem over all DERs in cvxpy (Clarabel), on the per-DER sufficient statistics (Gram
+matrices), with a tiny ridge (RIDGE) that makes unidentifiable coefficients 0 (a bus with
+no load gives no information on d). Every family obeys the **slope bound**
+|∂Q_i/∂|V_i|| ≤ ρ / Σ_j |X_ij| with X the grid's voltage sensitivity at the DER buses
+(`opfbench.strategies.sensitivity`, which derives it): the undamped closed-loop iteration
+is then a contraction with factor ρ (option `rho`, default RHO) on the model it was fitted
+on. The limits are not part of the fit: they are applied at evaluation, the same clip as
+every rule's. Every family is also non-increasing in |V| (c ≤ 0): with X's entries positive
+(injecting Q raises every voltage) the eigenvalues of diag(c)·X then lie in [−ρ, 0], and
+the engine's damped iteration settles at a rate of about ½ per step; a rule whose Q rose
+with its own voltage would be positive feedback, converging at rate ρ — 150 steps for
+1e-7 at ρ = 0.9, beyond the engine's 100 (measured on 1-MV-rural: 69 of 102 unconstrained
+affine fits had c > 0 and 32 of 1 344 test steps did not settle; with c ≤ 0, none).
+
+End to end (`rounds=N`): N rounds of fit → closed-loop evaluation on the training period
+→ refit with the voltages the rule itself produced in closed loop (the distribution it
+meets at run time); the round with the lowest closed-loop training losses is kept (each
+round's losses are in the parameters file).
+
+A fitted rule is written as JSON (`LearnedParams.write`, format FORMAT): the family, the
+case and its DERs (bus, S̄, P̄), the training period, the hash of the training data, the
+sensitivity's row sums, the slope limits and the per-DER parameters. `params=FILE` makes
+it a rule anywhere; the run's training (`train=START..END`) is fitted by `opfbench run`
+(`opfbench.study.learning`), which ships the fitted parameters to its workers
+(`install`).
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import threading
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import TYPE_CHECKING, Any, Callable, ClassVar, Protocol
+
+import numpy as np
+
+from opfbench.errors import InputError
+from opfbench.jsonio import dumps, write_atomic
+
+if TYPE_CHECKING:
+    from opfbench.scenario import Scenario
+
+FORMAT = "opfbench-learned-rule"
+VERSION = 1
+RHO = 0.9  # the default contraction factor of the slope bound
+KNOTS = 5  # learned-vv's default number of knots
+GRID_PU = 0.0025  # learned-1547's breakpoint grid, p.u. of voltage
+MAX_GRID = 161  # at most this many breakpoint candidates per DER (the grid widens beyond)
+TOLERANCE = 1e-10  # Clarabel's gap and feasibility tolerances for the fits
+RIDGE = 1e-9  # × the Gram matrix's mean diagonal: makes unidentifiable coefficients 0
+MIN_LIMIT_SHARE = 1e-3  # a step is used for a DER where its limit exceeds this share of S̄
+#: The k and night mode the optimum is fitted at: the DER's whole capability (k = 0), PV
+#: connected at night, no forecast; at evaluation the target is clipped to ±(1 − k)·Qmax.
+TRAIN_K = 0.0
+TRAIN_NIGHT = "connected"
+
+
+class Measured(Protocol):
+    """What a learned rule reads: the engine's `Measurements` or the training `Features`."""
+
+    @property
+    def v_pu(self) -> np.ndarray: ...
+    @property
+    def p_mw(self) -> np.ndarray: ...
+    @property
+    def load_p_mw(self) -> np.ndarray: ...
+    @property
+    def load_q_mvar(self) -> np.ndarray: ...
+    @property
+    def s_rated_mva(self) -> np.ndarray: ...
+
+
+@dataclass(frozen=True)
+class Features:
+    """The measurements of the training steps, each (S, n_der): own-bus |V| p.u., own P MW,
+    own-bus load P MW and Q MVAr; `s_rated_mva` (n_der,) the DERs' S̄."""
+
+    v_pu: np.ndarray
+    p_mw: np.ndarray
+    load_p_mw: np.ndarray
+    load_q_mvar: np.ndarray
+    s_rated_mva: np.ndarray
+
+    @property
+    def shape(self) -> tuple[int, int]:
+        return (self.v_pu.shape[0], self.v_pu.shape[1])
+
+    def with_v(self, v_pu: np.ndarray) -> "Features":
+        return Features(v_pu, self.p_mw, self.load_p_mw, self.load_q_mvar, self.s_rated_mva)
+
+
+# ----- the constrained least squares (cvxpy, Clarabel) -------------------------------------
+def _block_lsq(gram: np.ndarray, rhs: np.ndarray, constraints: Callable[[Any], list]) -> np.ndarray:
+    """argmin Σ_i θ_iᵀ G_i θ_i − 2 h_iᵀ θ_i over θ (n, K) under `constraints(θ)`: one
+    problem over all DERs, as Σ_i ‖L_iᵀ θ_i − L_i⁻¹ h_i‖² with G_i + ridge = L_i L_iᵀ."""
+    import cvxpy as cp
+    import scipy.linalg as sla
+    import scipy.sparse as sp
+
+    n, k = rhs.shape
+    if n == 0:
+        return np.zeros((0, k))
+    ridge = RIDGE * np.maximum(np.trace(gram, axis1=1, axis2=2) / k, 1.0)
+    lower = np.linalg.cholesky(gram + ridge[:, None, None] * np.eye(k))
+    target = np.stack([sla.solve_triangular(lower[i], rhs[i], lower=True) for i in range(n)])
+    a = sp.block_diag([lower[i].T for i in range(n)], format="csr")
+    theta = cp.Variable((n, k))
+    flat = cp.reshape(theta, (n * k,), order="C")
+    problem = cp.Problem(cp.Minimize(cp.sum_squares(a @ flat - target.reshape(-1))), constraints(theta))
+    problem.solve(solver=cp.CLARABEL, tol_gap_abs=TOLERANCE, tol_gap_rel=TOLERANCE, tol_feas=TOLERANCE)
+    if problem.status not in ("optimal", "optimal_inaccurate") or theta.value is None:
+        raise InputError(f"the learned rule's least-squares fit failed (Clarabel: {problem.status})")
+    return np.asarray(theta.value)
+
+
+def _hat_basis(v: np.ndarray, knots: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(left knot index j, weight w) of each v on the piecewise-linear basis of `knots`
+    (flat beyond the ends): the curve through q at v is (1 − w)·q_j + w·q_{j+1}."""
+    j = np.clip(np.searchsorted(knots, v, side="right") - 1, 0, len(knots) - 2)
+    w = np.clip((v - knots[j]) / (knots[j + 1] - knots[j]), 0.0, 1.0)
+    return j, w
+
+
+# ----- the families -----------------------------------------------------------------------
+class LearnedRule:
+    """A family of local rules fitted per DER, scikit-learn style: hyper-parameters in the
+    constructor, `fit` sets the per-DER parameters, `predict` gives Q targets (S, n_der)
+    MVAr from measurements. `v_slope()` (n_der,) is each DER's largest |∂target/∂|V||,
+    MVAr per p.u."""
+
+    name: ClassVar[str]
+    reads: ClassVar[tuple[str, ...]]
+    hyper: ClassVar[tuple[str, ...]] = ()  # the constructor's hyper-parameters
+    solver: ClassVar[str] = "clarabel (cvxpy)"
+
+    def __init__(self) -> None:
+        self.s_rated_mva_ = np.zeros(0)  # (n_der,) S̄ of the DERs fitted, MVA
+
+    def fit(self, x: Features, q_mvar: np.ndarray, slope_max: np.ndarray, use: np.ndarray) -> "LearnedRule":
+        """Fit to the optimal `q_mvar` (S, n_der) on the steps `use` (S, n_der) bool, each
+        DER's |∂Q/∂|V|| ≤ `slope_max` (n_der,) MVAr per p.u."""
+        raise NotImplementedError
+
+    def predict(self, m: Measured) -> np.ndarray:
+        raise NotImplementedError
+
+    def v_slope(self) -> np.ndarray:
+        raise NotImplementedError
+
+    def parameters(self) -> list[dict]:
+        """Per DER, the fitted parameters as the params file holds them."""
+        raise NotImplementedError
+
+    @classmethod
+    def from_parameters(cls, items: list, hyper: dict) -> "LearnedRule":
+        """The rule of a params file's per-DER parameters; InputError (without context) if
+        they are malformed."""
+        raise NotImplementedError
+
+
+class AffineRule(LearnedRule):
+    """q = a + b·P/S̄ + c·|V| + d·Q_load/S̄ per DER, c ≤ 0; `coef_` (n_der, 4) [a, b, c, d]."""
+
+    name = "learned-affine"
+    reads = ("v", "p", "load")
+    TERMS = ("a", "b", "c", "d")
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.coef_ = np.zeros((0, 4))
+
+    def fit(self, x: Features, q_mvar: np.ndarray, slope_max: np.ndarray, use: np.ndarray) -> "AffineRule":
+
+        s = x.s_rated_mva
+        # |V| centred on 1 p.u. for conditioning: θ = [a + c, b, c, d]
+        z = np.stack([np.ones_like(x.v_pu), x.p_mw / s, x.v_pu - 1.0, x.load_q_mvar / s], axis=-1)  # (S, n, 4)
+        z = np.where(use[..., None], z, 0.0)
+        y = np.where(use, q_mvar / s, 0.0)
+        gram = np.einsum("sik,sil->ikl", z, z)
+        rhs = np.einsum("sik,si->ik", z, y)
+        c_max = slope_max / s
+        theta = _block_lsq(gram, rhs, lambda t: [t[:, 2] <= 0, t[:, 2] >= -c_max])
+        theta[:, 2] = np.clip(theta[:, 2], -c_max, 0.0)  # the solver's tolerance, not a change of the fit
+        self.coef_ = np.column_stack([theta[:, 0] - theta[:, 2], theta[:, 1], theta[:, 2], theta[:, 3]])
+        self.s_rated_mva_ = np.asarray(s, dtype=float)
+        return self
+
+    def predict(self, m: Measured) -> np.ndarray:
+        a, b, c, d = self.coef_.T
+        s = m.s_rated_mva
+        return a * s + b * m.p_mw + c * s * m.v_pu + d * m.load_q_mvar
+
+    def v_slope(self) -> np.ndarray:
+        return np.abs(self.coef_[:, 2]) * self.s_rated_mva_
+
+    def parameters(self) -> list[dict]:
+        return [dict(zip(self.TERMS, map(float, row), strict=True)) for row in self.coef_]
+
+    @classmethod
+    def from_parameters(cls, items: list, hyper: dict) -> "AffineRule":
+        rule = cls()
+        try:
+            rule.coef_ = np.array([[float(item[t]) for t in cls.TERMS] for item in items]).reshape(-1, 4)
+        except (KeyError, TypeError, ValueError):
+            raise InputError(f"each DER's parameters must be numbers {', '.join(cls.TERMS)}") from None
+        if not np.isfinite(rule.coef_).all():
+            raise InputError("a parameter is not finite")
+        return rule
+
+
+class _CurveRule(LearnedRule):
+    """A piecewise-linear q(|V|) per DER through the points (`v_`, `q_`) (n_der, K), flat
+    beyond its ends, q non-increasing in |V|."""
+
+    reads = ("v",)
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.v_ = np.zeros((0, 2))
+        self.q_ = np.zeros((0, 2))
+
+    def predict(self, m: Measured) -> np.ndarray:
+        v = m.v_pu
+        out = np.empty(v.shape)
+        for i in range(v.shape[1]):
+            out[:, i] = np.interp(v[:, i], self.v_[i], self.q_[i])
+        return out * m.s_rated_mva
+
+    def v_slope(self) -> np.ndarray:
+        dv = np.diff(self.v_, axis=1)
+        dq = -np.diff(self.q_, axis=1)
+        slope = np.where(dv > 0, dq / np.where(dv > 0, dv, 1.0), 0.0)
+        return slope.max(axis=1, initial=0.0) * self.s_rated_mva_
+
+    def parameters(self) -> list[dict]:
+        return [{"v": [float(x) for x in v], "q": [float(x) for x in q]} for v, q in zip(self.v_, self.q_, strict=True)]
+
+    @classmethod
+    def from_parameters(cls, items: list, hyper: dict) -> "_CurveRule":
+        rule = cls()
+        try:
+            v = np.array([[float(x) for x in item["v"]] for item in items])
+            q = np.array([[float(x) for x in item["q"]] for item in items])
+        except (KeyError, TypeError, ValueError):
+            raise InputError("each DER's parameters must be the curve's points v and q (lists of numbers)") from None
+        if v.ndim != 2 or v.shape != q.shape or v.shape[1] < 2:
+            raise InputError("each DER's curve needs as many v as q values, at least 2, the same for every DER")
+        if not (np.isfinite(v).all() and np.isfinite(q).all()):
+            raise InputError("a curve point is not finite")
+        if (np.diff(v, axis=1) < 0).any() or (np.diff(q, axis=1) > 0).any():
+            raise InputError("a curve's voltages must not decrease and its q values must not increase")
+        if ((np.diff(v, axis=1) == 0) & (np.diff(q, axis=1) != 0)).any():
+            raise InputError("a curve has a vertical step (two q values at one voltage)")
+        if (np.abs(q) > 1).any():
+            raise InputError("a curve's q values are per unit of S̄ and must lie in [−1, 1]")
+        rule.v_, rule.q_ = v, q
+        return rule
+
+
+class VoltVarRule(_CurveRule):
+    """Monotone non-increasing piecewise-linear q(|V|) with `knots` knots at quantiles of
+    each DER's training voltages (module docstring)."""
+
+    name = "learned-vv"
+    hyper = ("knots",)
+
+    def __init__(self, knots: int = KNOTS) -> None:
+        super().__init__()
+        self.knots = knots
+
+    def fit(self, x: Features, q_mvar: np.ndarray, slope_max: np.ndarray, use: np.ndarray) -> "VoltVarRule":
+        import cvxpy as cp
+
+        s = x.s_rated_mva
+        n, k = len(s), self.knots
+        knots = np.zeros((n, k))
+        gram, rhs = np.zeros((n, k, k)), np.zeros((n, k))
+        for i in range(n):
+            v, y = x.v_pu[use[:, i], i], q_mvar[use[:, i], i] / s[i]
+            knots[i] = _quantile_knots(v, k)
+            j, w = _hat_basis(v, knots[i])
+            for a, wa in ((j, 1 - w), (j + 1, w)):
+                np.add.at(rhs[i], a, wa * y)
+                for b, wb in ((j, 1 - w), (j + 1, w)):
+                    np.add.at(gram[i], (a, b), wa * wb)
+        step = np.diff(knots, axis=1)
+        drop = (slope_max / s)[:, None] * step
+
+        def constraints(t):
+            fall = t[:, :-1] - t[:, 1:]
+            return [fall >= 0, fall <= drop, cp.abs(t) <= 1]
+
+        q = _block_lsq(gram, rhs, constraints)
+        self.v_, self.q_ = knots, _monotone(q, drop)
+        self.s_rated_mva_ = np.asarray(s, dtype=float)
+        return self
+
+    @classmethod
+    def from_parameters(cls, items: list, hyper: dict) -> "VoltVarRule":
+        rule = super().from_parameters(items, hyper)
+        assert isinstance(rule, VoltVarRule)
+        rule.knots = rule.v_.shape[1]
+        return rule
+
+
+def _quantile_knots(v: np.ndarray, k: int) -> np.ndarray:
+    """`k` strictly increasing knots at the quantiles of `v` (at least 1e-4 p.u. apart;
+    around 1 p.u. where there are no data)."""
+    base = np.quantile(v, np.linspace(0, 1, k)) if v.size else np.full(k, 1.0)
+    out = base.copy()
+    for i in range(1, k):
+        out[i] = max(out[i], out[i - 1] + 1e-4)
+    return out
+
+
+def _monotone(q: np.ndarray, drop: np.ndarray) -> np.ndarray:
+    """The solver's point with its last tolerance removed: each step down within [0,
+    drop], |q| ≤ 1 (changes of the order of the solver's tolerance, 1e-8)."""
+    out = np.clip(q, -1.0, 1.0)
+    for i in range(1, out.shape[1]):
+        out[:, i] = np.clip(out[:, i], out[:, i - 1] - drop[:, i - 1], out[:, i - 1])
+    return out
+
+
+class Ieee1547Rule(_CurveRule):
+    """The IEEE 1547 Volt-VAR shape per DER, points (V1, q1), (V2, 0), (V3, 0), (V4, q4)
+    searched on a GRID_PU grid (module docstring)."""
+
+    name = "learned-1547"
+    solver = f"grid search ({GRID_PU} p.u.)"
+
+    def fit(self, x: Features, q_mvar: np.ndarray, slope_max: np.ndarray, use: np.ndarray) -> "Ieee1547Rule":
+        s = x.s_rated_mva
+        n = len(s)
+        self.v_, self.q_ = np.zeros((n, 4)), np.zeros((n, 4))
+        for i in range(n):
+            self.v_[i], self.q_[i] = _fit_1547(x.v_pu[use[:, i], i], q_mvar[use[:, i], i] / s[i], slope_max[i] / s[i])
+        self.s_rated_mva_ = np.asarray(s, dtype=float)
+        return self
+
+
+def _grid(v: np.ndarray) -> np.ndarray:
+    """Breakpoint candidates: a GRID_PU grid over the voltages (one step beyond each end),
+    at most MAX_GRID points."""
+    lo, hi = (float(v.min()), float(v.max())) if v.size else (1.0, 1.0)
+    step = max(GRID_PU, (hi - lo + 2 * GRID_PU) / (MAX_GRID - 1))
+    start = np.floor(lo / step) * step - step
+    return start + step * np.arange(int(np.ceil((hi - start) / step)) + 2)
+
+
+def _fit_1547(v: np.ndarray, y: np.ndarray, slope_max: float) -> tuple[np.ndarray, np.ndarray]:
+    """(v points (4,), q points (4,)) of the best 1547 shape for samples (v, y = Q/S̄): the
+    exhaustive search over breakpoints on `_grid(v)`; each side's amplitude is the bounded
+    least squares q = clip(Σyφ / Σφ², cap) with cap = min(1, slope_max·(V2 − V1))."""
+    g = _grid(v)
+    order = np.argsort(v)
+    vs, ys = v[order], y[order]
+    pos = np.searchsorted(vs, g, side="left")  # samples below each grid point
+
+    def prefix(values: np.ndarray) -> np.ndarray:
+        return np.concatenate([[0.0], np.cumsum(values)])[pos]
+
+    cnt, sy, sv, svy, svv = prefix(np.ones_like(vs)), prefix(ys), prefix(vs), prefix(vs * ys), prefix(vs * vs)
+    lo, hi = np.triu_indices(len(g), k=1)  # candidate pairs (lower breakpoint, upper breakpoint)
+    width = g[hi] - g[lo]
+    cap = np.minimum(1.0, slope_max * width)
+    n_in, y_in, v_in, vy_in, vv_in = (arr[hi] - arr[lo] for arr in (cnt, sy, sv, svy, svv))
+
+    def side(a: np.ndarray, b: np.ndarray, sign: float) -> tuple[np.ndarray, np.ndarray]:
+        amplitude = np.clip(np.divide(a, b, out=np.zeros_like(a), where=b > 0) * sign, 0.0, cap) * sign
+        return 2 * amplitude * a - amplitude**2 * b, amplitude
+
+    # low side: φ = 1 below V1 = g[lo], (V2 − v)/w between, 0 from V2 = g[hi] on
+    a_low = sy[lo] + (g[hi] * y_in - vy_in) / width
+    b_low = cnt[lo] + (g[hi] ** 2 * n_in - 2 * g[hi] * v_in + vv_in) / width**2
+    gain_low, q_low = side(a_low, b_low, 1.0)
+    # high side: φ = 0 below V3 = g[lo], (v − V3)/w between, 1 from V4 = g[hi] on
+    a_high = (sy[-1] - sy[hi]) + (vy_in - g[lo] * y_in) / width
+    b_high = (cnt[-1] - cnt[hi]) + (vv_in - 2 * g[lo] * v_in + g[lo] ** 2 * n_in) / width**2
+    gain_high, q_high = side(a_high, b_high, -1.0)
+    best_low = np.full(len(g), -np.inf)  # by V2's grid index
+    np.maximum.at(best_low, hi, gain_low)
+    best_high = np.full(len(g), -np.inf)  # by V3's grid index
+    np.maximum.at(best_high, lo, gain_high)
+    suffix = np.maximum.accumulate(best_high[::-1])[::-1]  # best high side with V3 ≥ each index
+    b2 = int(np.argmax(best_low + suffix))
+    b3 = b2 + int(np.argmax(best_high[b2:]))
+    low = np.flatnonzero((hi == b2) & (gain_low == best_low[b2]))[0]
+    high = np.flatnonzero((lo == b3) & (gain_high == best_high[b3]))[0]
+    points = np.array([g[lo[low]], g[b2], g[b3], g[hi[high]]])
+    return points, np.array([q_low[low], 0.0, 0.0, q_high[high]])
+
+
+FAMILIES: dict[str, type[LearnedRule]] = {f.name: f for f in (AffineRule, VoltVarRule, Ieee1547Rule)}
+
+
+# ----- training -----------------------------------------------------------------------------
+@dataclass(frozen=True)
+class TrainingSet:
+    """The training period's operating points and the optimum on them: `scenario` (k = 0,
+    PV connected at night, no forecast), the AC OPF's optimal Q `q_mvar` (S, n_der) MVAr and
+    `ok` (S,) the steps whose point is a certified optimum (status ok); `case` the case
+    spec trained on, `period` the training period as given (START..END, END excluded),
+    `start`/`end` its first and last step (ISO)."""
+
+    case: str
+    period: str
+    start: str
+    end: str
+    scenario: Scenario
+    q_mvar: np.ndarray
+    ok: np.ndarray
+
+    def digest(self) -> str:
+        """sha256 of the training data: every load's and DER's values, the optimum, the steps used."""
+        sc = self.scenario
+        h = hashlib.sha256()
+        for arr in (sc.load_scale, sc.load_p_mw, sc.load_q_mvar, sc.der_p_mw, self.q_mvar, self.ok):
+            h.update(b"-" if arr is None else np.ascontiguousarray(arr).tobytes())
+        return h.hexdigest()
+
+
+def features(scenario: Scenario, v_pu: np.ndarray) -> Features:
+    """The training features: `v_pu` (S, n_der) at the DER buses, the rest from `scenario`."""
+    net = scenario.net
+    return Features(v_pu, scenario.der_p_mw, scenario.load_p_at_der_mw(), scenario.load_q_at_der_mvar(), net.der_s_mva)
+
+
+def _closed_loop(rule: LearnedRule, scenario: Scenario) -> tuple[np.ndarray, float, int]:
+    """(|V| at the DER buses (S, n_der), mean losses kW, not-settled steps) of `rule` in
+    closed loop on `scenario` at TRAIN_K."""
+    from opfbench.strategies.engine import run_rule
+    from opfbench.strategies.rules import Rule
+
+    res = run_rule(rule.name, Rule(rule.name, lambda m: rule.predict(m), frozenset(rule.reads)), scenario, TRAIN_K, {})
+    return res.vm[:, scenario.net.der_bus], float(np.nanmean(res.losses_kw)), int((res.status == "not-settled").sum())
+
+
+def fit_rule(family: str, training: TrainingSet, rho: float = RHO, rounds: int = 0, knots: int = KNOTS) -> "LearnedParams":
+    """Fit `family` to `training` (module docstring); `rounds` end-to-end refits."""
+    from opfbench.powerflow import solve_pf_batch
+    from opfbench.strategies.sensitivity import contraction_factor, slope_limit, voltage_sensitivity
+
+    sc = training.scenario
+    net = sc.net
+    x_sens = voltage_sensitivity(sc.take(np.flatnonzero(training.ok)) if training.ok.any() else sc)
+    slope_max = slope_limit(x_sens, rho)
+    pf = solve_pf_batch(net, sc.injections(training.q_mvar))
+    converged = np.asarray(pf.converged, dtype=bool)
+    x = features(sc, np.abs(pf.v[:, net.der_bus]))
+    use = (training.ok & converged)[:, None] & (sc.qmax_mvar() > MIN_LIMIT_SHARE * net.der_s_mva)
+    hyper = {key: value for key, value in {"knots": knots}.items() if key in FAMILIES[family].hyper}
+
+    def new() -> LearnedRule:
+        return FAMILIES[family](**hyper)
+
+    rule = new().fit(x, training.q_mvar, slope_max, use)
+    history: list[dict] = []
+    if rounds:
+        best = rule
+        v_cl, loss, unsettled = _closed_loop(rule, sc)
+        history.append({"round": 0, "train_loss_kw": loss, "not_settled_steps": unsettled})
+        best_loss = loss
+        for r in range(1, rounds + 1):
+            rule = new().fit(x.with_v(v_cl), training.q_mvar, slope_max, use & np.isfinite(v_cl))
+            v_cl, loss, unsettled = _closed_loop(rule, sc)
+            history.append({"round": r, "train_loss_kw": loss, "not_settled_steps": unsettled})
+            if loss < best_loss:
+                best, best_loss = rule, loss
+        rule = best
+    fitted = rule.predict(x)
+    err = np.where(use, fitted - training.q_mvar, np.nan) / net.der_s_mva
+    return LearnedParams(
+        family=family,
+        case=training.case,
+        network=net.name,
+        der_bus=tuple(int(b) for b in net.bus_ids[net.der_bus]),
+        s_rated_mva=tuple(float(v) for v in net.der_s_mva),
+        train={
+            "period": training.period,
+            "start": training.start,
+            "end": training.end,
+            "steps": int(sc.n_snapshots),
+            "optimal_steps": int(training.ok.sum()),
+            "samples_used": int(use.sum()),
+        },
+        data_sha256=training.digest(),
+        rho=float(rho),
+        hyper=hyper | {"rounds": rounds},
+        row_sum_pu_per_mvar=tuple(float(v) for v in np.abs(x_sens).sum(axis=1)),
+        slope_max_mvar_per_pu=tuple(float(v) for v in slope_max),
+        rule=rule,
+        fit={
+            "solver": rule.solver,
+            "rmse_pu": [float(v) if np.isfinite(v) else None for v in np.sqrt(np.nanmean(err**2, axis=0))] if use.any() else [],
+            "contraction_factor": contraction_factor(x_sens, rule.v_slope()),
+            "rounds": history,
+        },
+    )
+
+
+# ----- the parameters file ----------------------------------------------------------------
+@dataclass(frozen=True, eq=False)
+class LearnedParams:
+    """A fitted rule and where it comes from (the params file's content, module docstring).
+    `der_bus` external bus numbers and `s_rated_mva` S̄ of the DERs in the network's order;
+    `row_sum_pu_per_mvar` Σ_j |X_ij| and `slope_max_mvar_per_pu` ρ / Σ_j |X_ij| per DER."""
+
+    family: str
+    case: str
+    network: str
+    der_bus: tuple[int, ...]
+    s_rated_mva: tuple[float, ...]
+    train: dict
+    data_sha256: str
+    rho: float
+    hyper: dict
+    row_sum_pu_per_mvar: tuple[float, ...]
+    slope_max_mvar_per_pu: tuple[float, ...]
+    rule: LearnedRule
+    fit: dict = field(default_factory=dict)
+
+    def as_dict(self) -> dict:
+        return {
+            "format": FORMAT,
+            "version": VERSION,
+            "family": self.family,
+            "case": self.case,
+            "network": self.network,
+            "ders": [{"bus": b, "s_mva": s} for b, s in zip(self.der_bus, self.s_rated_mva, strict=True)],
+            "train": self.train,
+            "data_sha256": self.data_sha256,
+            "rho": self.rho,
+            "hyper": self.hyper,
+            "row_sum_pu_per_mvar": list(self.row_sum_pu_per_mvar),
+            "slope_max_mvar_per_pu": list(self.slope_max_mvar_per_pu),
+            "parameters": self.rule.parameters(),
+            "fit": self.fit,
+        }
+
+    def text(self) -> str:
+        return dumps(self.as_dict()) + "\n"
+
+    def write(self, path: str | Path) -> Path:
+        return write_atomic(path, self.text())
+
+    @property
+    def digest(self) -> str:
+        """sha256 of the file's text: the fitted rule's identity."""
+        return hashlib.sha256(self.text().encode()).hexdigest()
+
+    @classmethod
+    def parse(cls, text: str, ref: str) -> "LearnedParams":
+        """The params file `ref`'s `text`, checked; InputError naming `ref` otherwise."""
+        try:
+            data = json.loads(text)
+        except ValueError as exc:
+            raise InputError(f"learned-rule parameters {ref}: not JSON ({exc})") from None
+        try:
+            return cls._from_dict(data)
+        except InputError as exc:
+            raise InputError(f"learned-rule parameters {ref}: {exc}") from None
+
+    @classmethod
+    def _from_dict(cls, data: object) -> "LearnedParams":
+        if not isinstance(data, dict) or data.get("format") != FORMAT:
+            raise InputError(f'not a learned rule\'s parameters (no "format": "{FORMAT}")')
+        if data.get("version") != VERSION:
+            raise InputError(f"format version {data.get('version')!r}; this opfbench reads version {VERSION}")
+        family = data.get("family")
+        if family not in FAMILIES:
+            raise InputError(f"unknown family {family!r}; one of {', '.join(FAMILIES)}")
+        ders, items = data.get("ders"), data.get("parameters")
+        if not isinstance(ders, list) or not isinstance(items, list) or len(ders) != len(items):
+            raise InputError('"ders" and "parameters" must be lists with one entry per DER')
+        try:
+            bus = tuple(int(d["bus"]) for d in ders)
+            s = tuple(float(d["s_mva"]) for d in ders)
+            row_sum = tuple(float(v) for v in data["row_sum_pu_per_mvar"])
+            slope_max = tuple(float(v) for v in data["slope_max_mvar_per_pu"])
+            rho = float(data["rho"])
+            case, network, digest = str(data["case"]), str(data["network"]), str(data["data_sha256"])
+            train, hyper = dict(data["train"]), dict(data.get("hyper") or {})
+        except (KeyError, TypeError, ValueError) as exc:
+            raise InputError(f"a field is missing or malformed ({type(exc).__name__}: {exc})") from None
+        if not (len(row_sum) == len(slope_max) == len(bus)):
+            raise InputError("the sensitivity and slope lists need one value per DER")
+        if not all(np.isfinite(v) and v > 0 for v in s) or not np.isfinite(slope_max).all() or not 0 < rho < 1:
+            raise InputError("S̄ must be positive, the slope limits finite and rho in (0, 1)")
+        rule = FAMILIES[family].from_parameters(items, hyper)
+        rule.s_rated_mva_ = np.array(s)
+        over = rule.v_slope() > np.array(slope_max) * (1 + 1e-6)
+        if over.any():
+            i = int(np.flatnonzero(over)[0])
+            raise InputError(
+                f"DER at bus {bus[i]}: |∂Q/∂|V|| = {rule.v_slope()[i]:.6g} MVAr/p.u. exceeds its slope limit {slope_max[i]:.6g}"
+            )
+        fit = dict(data.get("fit") or {})
+        return cls(family, case, network, bus, s, train, digest, rho, hyper, row_sum, slope_max, rule, fit)
+
+    def check_network(self, net, ref: str) -> None:
+        """InputError unless `net` has this rule's DERs (bus numbers and S̄, in order)."""
+        buses = tuple(int(b) for b in net.bus_ids[net.der_bus])
+        if len(buses) != len(self.der_bus):
+            raise InputError(
+                f"learned-rule parameters {ref} were fitted on {self.case} ({self.network}, {len(self.der_bus)} DER); "
+                f"{net.name} has {len(buses)} DER"
+            )
+        if buses != self.der_bus or not np.allclose(net.der_s_mva, self.s_rated_mva, rtol=1e-9, atol=0.0):
+            raise InputError(
+                f"learned-rule parameters {ref} were fitted on {self.case} ({self.network}): its DERs (buses, S̄) are not "
+                f"those of {net.name}"
+            )
+
+    def check_measurements(self, m: Measured, ref: str) -> None:
+        """InputError unless the measured DERs are this rule's (count and S̄)."""
+        s = np.asarray(m.s_rated_mva, dtype=float)
+        if s.shape != (len(self.s_rated_mva),) or not np.allclose(s, self.s_rated_mva, rtol=1e-9, atol=0.0):
+            raise InputError(
+                f"learned-rule parameters {ref} were fitted on {self.case} ({len(self.s_rated_mva)} DER); "
+                f"the network measured has {s.size} DER of other ratings"
+            )
+
+
+# ----- parameters at run time ---------------------------------------------------------------
+_installed: dict[str, LearnedParams] = {}
+_files: dict[tuple, LearnedParams] = {}
+_lock = threading.Lock()
+
+
+def install(params: dict[str, LearnedParams]) -> None:
+    """Make fitted rules known under their references (a worker process receives a run's
+    fitted rules this way: no access to the run folder needed)."""
+    with _lock:
+        _installed.update(params)
+
+
+def load_params(ref: str) -> LearnedParams:
+    """The fitted rule `ref`: one installed under that reference, else the file (cached by
+    path, modification time and size); InputError naming it if missing or malformed."""
+    with _lock:
+        if ref in _installed:
+            return _installed[ref]
+    path = Path(ref)
+    try:
+        st = path.stat()
+    except OSError:
+        raise InputError(f"learned-rule parameters {ref}: no such file") from None
+    key = (str(path.resolve()), st.st_mtime_ns, st.st_size)
+    with _lock:
+        if key in _files:
+            return _files[key]
+    try:
+        text = path.read_text(encoding="utf-8")
+    except (OSError, UnicodeDecodeError) as exc:
+        raise InputError(f"learned-rule parameters {ref}: cannot read it ({exc})") from None
+    params = LearnedParams.parse(text, ref)
+    with _lock:
+        _files[key] = params
+    return params
+
+
+def fitted(family: str, params: str, train: str) -> LearnedParams:
+    """The fitted rule a label's options name: `params` (a file or an installed reference)
+    of the family `family`; InputError where there is none."""
+    if not params:
+        raise InputError(
+            f"{family}:train={train} is fitted by opfbench run (the AC OPF over the training period, then the fit); "
+            f"elsewhere give params=FILE (a run folder's learned/*.json)"
+        )
+    got = load_params(params)
+    if got.family != family:
+        raise InputError(f"learned-rule parameters {params} are of {got.family}, not {family}")
+    return got
+
+
+def check_options(family: str, options: dict) -> None:
+    """A learned configuration: train= or params= (one of them); a training period
+    written START..END; fit options only with train=; a params file that loads."""
+    train, params = options["train"], options["params"]
+    if bool(train) == bool(params):
+        raise InputError(
+            f"{family}: give train=START..END (fitted by opfbench run to the AC OPF over that period) or params=FILE "
+            "(a fitted rule), one of them"
+        )
+    if train:
+        start, sep, end = train.partition("..")
+        if not (sep and start.strip() and end.strip()):
+            raise InputError(f"{family}: train must be a period START..END (END excluded), e.g. 2016-01-01..2016-10-01")
+    else:
+        fit_options = {"rho": RHO, "rounds": 0, "knots": KNOTS}
+        given = [key for key, default in fit_options.items() if key in options and options[key] != default]
+        if given:
+            raise InputError(f"{family}: {', '.join(given)} are options of the fit; with params= the rule is fitted already")
+        fitted(family, params, train)
+
+
+def check_affine(options: dict) -> None:
+    check_options(AffineRule.name, options)
+
+
+def check_vv(options: dict) -> None:
+    if not 2 <= options["knots"] <= 50:
+        raise InputError(f"learned-vv: knots must lie in 2..50, got {options['knots']}")
+    check_options(VoltVarRule.name, options)
+
+
+def check_ieee1547(options: dict) -> None:
+    check_options(Ieee1547Rule.name, options)
+
+
+def _target(family: str, m: Measured, train: str, params: str) -> np.ndarray:
+    got = fitted(family, params, train)
+    got.check_measurements(m, params)
+    return got.rule.predict(m)
+
+
+def affine_target(m: Measured, train: str = "", params: str = "", rho: float = RHO, rounds: int = 0) -> np.ndarray:
+    """learned-affine's Q target (S, n_der) MVAr (module docstring)."""
+    return _target(AffineRule.name, m, train, params)
+
+
+def vv_target(
+    m: Measured, train: str = "", params: str = "", rho: float = RHO, rounds: int = 0, knots: int = KNOTS
+) -> np.ndarray:
+    """learned-vv's Q target (S, n_der) MVAr (module docstring)."""
+    return _target(VoltVarRule.name, m, train, params)
+
+
+def ieee1547_target(m: Measured, train: str = "", params: str = "", rho: float = RHO, rounds: int = 0) -> np.ndarray:
+    """learned-1547's Q target (S, n_der) MVAr (module docstring)."""
+    return _target(Ieee1547Rule.name, m, train, params)
+
+
+def fit_configuration(family: str, training: TrainingSet, options: dict) -> LearnedParams:
+    """The registry's `fit` of the learned strategies: `fit_rule` with the label's fit options."""
+    return fit_rule(family, training, rho=options["rho"], rounds=options["rounds"], knots=options.get("knots", KNOTS))
