@@ -93,8 +93,36 @@ def _cell(value: object, digits: int) -> str:
     return "—" if value is None or value is pd.NA else str(value)
 
 
+UNITS = {
+    "kwh": "kWh",
+    "kw": "kW",
+    "mw": "MW",
+    "mvar": "MVAr",
+    "pct": "%",
+    "pu": "p.u.",
+    "ms": "ms",
+    "s": "s",
+    "min": "min",
+    "mb": "MB",
+}
+"""A column name's last word → the unit its heading shows in parentheses."""
+WORDS = {"opf": "OPF", "acopf": "AC OPF", "socp": "SOCP", "avg": "mean", "pv": "PV", "der": "DER"}
+
+
+def heading(column: str) -> str:
+    """A table column's heading for a reader: `energy_kwh` → "energy (kWh)",
+    `opf_share_pct` → "OPF share (%)"; names without underscores stay as they are."""
+    if "_" not in column:
+        return column
+    *words, last = column.split("_")
+    if last not in UNITS:
+        return " ".join(WORDS.get(w, w) for w in [*words, last])
+    return " ".join(WORDS.get(w, w) for w in words) + f" ({UNITS[last]})"
+
+
 def table_html(frame: pd.DataFrame) -> str:
-    """`frame` as an HTML table (template table.html.j2, every cell escaped): numbers
+    """`frame` as an HTML table (template table.html.j2, every cell escaped): headings for
+    a reader (`heading`, the data's column name as the heading's title), numbers
     right-aligned and formatted per column (p.u. 4 decimals, MSE 5, else 2), NaN as "—"."""
     numeric = [pd.api.types.is_numeric_dtype(frame[c]) and not pd.api.types.is_bool_dtype(frame[c]) for c in frame.columns]
     digits = [_digits(str(c)) for c in frame.columns]
@@ -102,7 +130,7 @@ def table_html(frame: pd.DataFrame) -> str:
     return (
         environment()
         .get_template("table.html.j2")
-        .render(columns=list(zip([str(c) for c in frame.columns], numeric, strict=True)), rows=rows)
+        .render(columns=[(str(c), heading(str(c)), n) for c, n in zip(frame.columns, numeric, strict=True)], rows=rows)
     )
 
 
