@@ -37,6 +37,15 @@ DOCS_FORECAST = Path(opfbench.__file__).resolve().parents[1] / "docs" / "forecas
 """The committed forecast JSONs, read when no forecast folder is given (a source checkout only)."""
 DOCS_YEAR = Path(opfbench.__file__).resolve().parents[1] / "docs" / "year"
 """The committed year run's summary and manifest, read when no year folder is given."""
+DOCS_LEARNED = Path(opfbench.__file__).resolve().parents[1] / "docs" / "learned"
+"""The committed learned-rule studies (one run folder each: summary, training summary, fits),
+shown by the headline section when the run itself trained no learned rule."""
+DOCS_FIELD_YEAR = Path(opfbench.__file__).resolve().parents[1] / "docs" / "field-year"
+"""The committed year on real grids (SimBench 1-MV-rural and 1-LV-rural3): summary and manifest."""
+FIELD_YEAR_COMMAND = (
+    "opfbench run --case simbench:1-MV-rural--0-sw simbench:1-LV-rural3--0-sw --k 0 0.4 "
+    "--night-modes connected disconnected --period year --out docs/field-year"
+)
 
 
 @dataclass
@@ -57,8 +66,11 @@ class Inputs:
     year_summary: pd.DataFrame | None = None
     year_manifest: dict | None = None
     year_dir: Path | None = None
+    field_summary: pd.DataFrame | None = None  # the committed year on real grids (docs/field-year)
+    field_manifest: dict | None = None
     train_summary: pd.DataFrame | None = None  # train/summary.csv: the rules over the training period
-    learned: dict[str, str] = field(default_factory=dict)  # the run's learned/<file>.json -> what it holds, one line
+    learned: dict[str, dict] = field(default_factory=dict)  # the run's learned/<file>.json -> what it holds (a row)
+    studies: list[Inputs] = field(default_factory=list)  # committed learned-rule studies (docs/learned), if the run trained none
     missing: dict[str, str] = field(default_factory=dict)  # input name -> how to produce it
 
     def models(self) -> dict[str, str]:
@@ -472,25 +484,46 @@ def load_inputs(
             inp.missing[name] = command
     if inp.der_q is None:  # the report plots the DER setpoints (the per-bus |V| table it does not read)
         inp.missing["der_q.parquet"] = DETAIL_COMMAND.format(dir=run)
-    inp.train_summary = _summary(run / "train" / "summary.csv", command)
-    fitted = (inp.manifest or {}).get("config", {}).get("fitted") or []
-    for ref in sorted({str(f.get("ref")) for f in fitted if isinstance(f, dict)}):
-        if ref.startswith("learned/"):  # the run's own fits (a params= file given lies elsewhere)
-            inp.learned[ref] = _learned_line(run / ref, command)
+    _load_training(inp, command)
+    if inp.train_summary is None:
+        inp.studies = [load_study(folder) for folder in sorted(DOCS_LEARNED.glob("*/")) if (folder / "summary.csv").is_file()]
     _load_sources(inp, forecast_dir, fault_dir, year_dir)
     return inp
 
 
-def _learned_line(path: Path, command: str) -> str:
-    """One line on a fitted rule's parameters file (`strategies.learned.LearnedParams`)."""
+def _load_training(inp: Inputs, command: str) -> None:
+    """A run's training summary and one line per fitted rule of its own (learned/)."""
+    inp.train_summary = _summary(inp.run_dir / "train" / "summary.csv", command)
+    fitted = (inp.manifest or {}).get("config", {}).get("fitted") or []
+    for ref in sorted({str(f.get("ref")) for f in fitted if isinstance(f, dict)}):
+        if ref.startswith("learned/"):  # the run's own fits (a params= file given lies elsewhere)
+            inp.learned[ref] = _learned_row(inp.run_dir / ref, command)
+
+
+def load_study(folder: Path) -> Inputs:
+    """A finished learned-rule study's summaries, manifest and fits (no per-step tables)."""
+    command = RUN_COMMAND.format(dir=folder)
+    inp = Inputs(run_dir=folder, manifest=_manifest(folder / "manifest.json", command))
+    inp.summary = _summary(folder / "summary.csv", command)
+    _load_training(inp, command)
+    return inp
+
+
+def _learned_row(path: Path, command: str) -> dict:
+    """A fitted rule's parameters file (`strategies.learned.LearnedParams`) as a table row."""
     data = _json(path, command) or {}
     try:
         train, fit = data["train"], data.get("fit") or {}
-        return (
-            f"{data['family']} fitted on {data['case']} over {train['period']} ({train['optimal_steps']} certified optimal "
-            f"steps, {len(data['ders'])} DER; training data sha256 {str(data['data_sha256'])[:12]}…), slope bound ρ = "
-            f"{data['rho']:g}, contraction factor {fit.get('contraction_factor', float('nan')):.3f}"
-        )
+        return {
+            "family": str(data["family"]),
+            "fitted on": str(data["case"]),
+            "training period": str(train["period"]),
+            "certified optimal steps": int(train["optimal_steps"]),
+            "DER": len(data["ders"]),
+            "slope bound ρ": float(data["rho"]),
+            "contraction factor": float(fit.get("contraction_factor", float("nan"))),
+            "training data sha256": f"{str(data['data_sha256'])[:12]}…",
+        }
     except (KeyError, TypeError, ValueError) as exc:
         raise _damaged(path, f"not a fitted rule's parameters ({type(exc).__name__}: {exc})", command) from None
 
@@ -531,6 +564,10 @@ def _load_sources(
     inp.year_manifest = _manifest(inp.year_dir / "manifest.json", YEAR_COMMAND)
     if inp.year_summary is None or inp.year_manifest is None:
         inp.missing["year run"] = YEAR_COMMAND
+    inp.field_summary = _summary(DOCS_FIELD_YEAR / "summary.csv", FIELD_YEAR_COMMAND)
+    inp.field_manifest = _manifest(DOCS_FIELD_YEAR / "manifest.json", FIELD_YEAR_COMMAND)
+    if inp.field_summary is None or inp.field_manifest is None:
+        inp.missing["real grids' year run"] = FIELD_YEAR_COMMAND
 
 
 def checked_sources(

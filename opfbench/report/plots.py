@@ -8,6 +8,7 @@ Plotly, whose text rendering understands a few HTML tags."""
 from __future__ import annotations
 
 import json
+import re
 from dataclasses import dataclass
 from functools import lru_cache
 from html import escape
@@ -254,29 +255,40 @@ def gap_vs_k(summary: pd.DataFrame) -> list[Plot]:
     return out
 
 
-def share_vs_violations(board: pd.DataFrame) -> list[Plot]:
-    """Per case: each strategy's share of the AC OPF's loss reduction against its minutes
-    outside the voltage limits, one point per k (a `tables.leaderboard`)."""
+SHARE_AXES = (
+    ("voltage_violation_min", "minutes outside the voltage limits", "%{x:.0f} min outside"),
+    ("recovery_added_ms", "fault recovery time added over no action (ms, mean over the fault buses)", "%{x:.0f} ms added"),
+)
+"""What a share of the OPF's loss reduction is plotted against, when the case has it."""
+
+
+def share_vs_costs(board: pd.DataFrame) -> list[Plot]:
+    """Per case: each strategy's share of the AC OPF's loss reduction (one point per k)
+    against what it costs — the minutes outside the voltage limits when any strategy has
+    some, the fault recovery time it adds when a fault study gave one; with neither, the
+    share against k (a `tables.leaderboard`)."""
     out: list[Plot] = []
-    if "voltage_violation_min" not in board or board.empty:
-        return out
     for i, case in enumerate(_cases(board)):
-        sub = board[board["case"] == case].dropna(subset=["opf_share_pct", "voltage_violation_min"])
-        if sub.empty:
-            continue
-        fig = _figure()
-        hover = "k=%{customdata[0]}<br>%{y:.1f} % of the OPF's reduction<br>%{x:.0f} min outside<br>%{customdata[1]:.2f} kWh"
-        _lines_over_k(fig, sub, "voltage_violation_min", "opf_share_pct", ["k", "energy_kwh"], hover)
-        out.append(
-            plot_json(
-                f"share-violations-{i}",
-                f"{case}: share of the AC OPF's loss reduction vs minutes outside the voltage limits "
-                "(one point per k, night connected, forecast off)",
-                fig,
-                "minutes outside the voltage limits",
-                "share of the AC OPF's loss reduction (%)",
+        sub = board[board["case"] == case].dropna(subset=["opf_share_pct"])
+        axes = [
+            (column, title, text)
+            for column, title, text in SHARE_AXES
+            if column in sub and sub[column].notna().any() and (sub[column].fillna(0) != 0).any()
+        ] or [("k", "reserve coefficient k", "k=%{x}")]
+        for column, title, text in axes:
+            fig = _figure()
+            hover = f"k=%{{customdata[0]}}<br>%{{y:.1f}} % of the OPF's reduction<br>{text}<br>%{{customdata[1]:.2f}} kWh"
+            _lines_over_k(fig, sub.dropna(subset=[column]), column, "opf_share_pct", ["k", "energy_kwh"], hover)
+            out.append(
+                plot_json(
+                    f"share-{column.replace('_', '-')}-{i}",
+                    f"{case}: share of the AC OPF's loss reduction vs {title.split(' (')[0]} "
+                    "(one point per k, night connected, forecast off)",
+                    fig,
+                    title,
+                    "share of the AC OPF's loss reduction (%)",
+                )
             )
-        )
     return out
 
 
@@ -430,29 +442,44 @@ def fault_traces(traces: pd.DataFrame, bus: int = TRACE_BUS) -> list[Plot]:
 _COLORS = ("#1f77b4", "#ff7f0e", "#2ca02c", "#d62728", "#9467bd", "#8c564b", "#e377c2", "#7f7f7f")
 
 
-def how_close(table: pd.DataFrame) -> list[Plot]:
+SHARE_FLOOR_PCT = -150.0
+"""The headline figure's lowest share shown: a rule far worse than no action (where the OPF
+saves little, shares run to −3000 %) would flatten every other bar."""
+
+
+def _short(label: str) -> str:
+    """A configuration label without its training period (the run's one, said beside)."""
+    return re.sub(r"(?<=[:,])train=[^,]*,?", "", label).rstrip(":,")
+
+
+def how_close(table: pd.DataFrame, name: str = "") -> list[Plot]:
     """The share of the AC OPF's loss reduction each local rule reaches, training and test
-    period side by side, per case, at the smallest k (a `tables.how_close`)."""
+    period side by side, per case, at the smallest k (a `tables.how_close`); `name` tells
+    one run's figure from another's."""
     if table.empty or table["test_share_pct"].isna().all():
         return []
     k = float(table["k"].min())
     sub = table[np.isclose(table["k"], k)]
     cases = [escape(str(c)) for c in sub["case"]]
-    names = [escape(str(s)) for s in sub["strategy"]]
+    names = [escape(_short(str(s))) for s in sub["strategy"]]
     fig = _figure()
-    for column, name in (("train_share_pct", "training period"), ("test_share_pct", "test period")):
+    for column, side in (("train_share_pct", "training period"), ("test_share_pct", "test period")):
         if sub[column].notna().any():
             fig.add_bar(
                 x=[cases, names],
                 y=sub[column],
-                name=name,
-                hovertemplate="%{x}<br>%{y:.1f} % of the OPF's reduction<extra>" + name + "</extra>",
+                name=side,
+                hovertemplate="%{x}<br>%{y:.1f} % of the OPF's reduction<extra>" + side + "</extra>",
             )
     fig.update_layout(barmode="group")
+    low = float(np.nanmin(sub[["train_share_pct", "test_share_pct"]].to_numpy(dtype=float)))
+    cut = f"; axis cut at {SHARE_FLOOR_PCT:g} %, the table has every value" if low < SHARE_FLOOR_PCT else ""
+    if cut:
+        fig.update_yaxes(range=[SHARE_FLOOR_PCT, max(110.0, float(np.nanmax(sub[["train_share_pct", "test_share_pct"]])) + 5)])
     return [
         plot_json(
-            "how-close",
-            f"How close can a local rule get: share of the AC OPF's loss reduction (k={k:g}, PV connected at night, forecast off)",
+            "how-close" + re.sub(r"[^a-z0-9]+", "-", name.lower()).rstrip("-"),
+            f"How close can a local rule get{name} (k={k:g}, PV connected at night, forecast off{cut})",
             fig,
             "",
             "share of the OPF's reduction (%)",

@@ -3,16 +3,15 @@ input: the section says which command produces it."""
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING, Callable
+from typing import Callable
+
+import pandas as pd
 
 from opfbench.report import plots, tables
 from opfbench.report.claims import claims, ranking_per_case
 from opfbench.report.inputs import Inputs
 from opfbench.report.page import Block, Section, table
 from opfbench.study.price import DEFAULT_CURRENCY, DEFAULT_PRICE_PER_KWH, DEFAULT_PRICE_SOURCE
-
-if TYPE_CHECKING:
-    import pandas as pd
 
 
 def _seconds(value: object) -> str:
@@ -56,20 +55,34 @@ def how_close(inputs: Inputs) -> Section:
     )
     if inputs.summary is None:
         return sec.add(*_missing(inputs, "summary.csv"))
-    board = tables.how_close(inputs.summary, inputs.train_summary, inputs.models())
+    sec.blocks += _how_close_blocks(inputs, "")
     if inputs.train_summary is None:
         sec.add(
             Block(
                 "note",
                 text="The run trained no learned rule, so there is no training-period column: add e.g. "
-                "--strategies ... learned-affine:train=2016-01-01..2016-10-01 with --period 2016-10-01..2017-01-01.",
+                "--strategies ... learned-affine:train=2016-01-01..2016-10-01 with --period 2016-10-01..2017-01-01."
+                + (" The committed studies below did: each a run of its own (docs/learned)." if inputs.studies else ""),
             )
         )
-    for name, info in sorted(inputs.learned.items()):
-        sec.add(Block("note", text=f"{name}: {info}"))
-    sec.add(table(board, "Share of the AC OPF's loss reduction per local rule, training vs test period", collapse_over=80))
-    sec.blocks += _plots(plots.how_close(board))
+    for study in inputs.studies:
+        if study.summary is not None:
+            sec.add(Block("heading", text=f"A committed study: {study.run_dir.name}"))
+            sec.add(_run_meta(f"docs/learned/{study.run_dir.name}", study.manifest or {}))
+            sec.blocks += _how_close_blocks(study, f" — {study.run_dir.name}")
     return sec
+
+
+def _how_close_blocks(inputs: Inputs, name: str) -> list[Block]:
+    """A run's shares of the AC OPF's loss reduction per local rule (train beside test),
+    its fitted rules and its figure; `name` tells the run apart."""
+    board = tables.how_close(inputs.summary, inputs.train_summary, inputs.models())
+    out = []
+    if inputs.learned:
+        fits = pd.DataFrame([{"file": ref} | row for ref, row in sorted(inputs.learned.items())])
+        out.append(table(fits, f"The fitted rules{name} (each file a rule: NAME:params=FILE)"))
+    out.append(table(board, f"Share of the AC OPF's loss reduction per local rule, training vs test period{name}", 30))
+    return out + _plots(plots.how_close(board, name))
 
 
 def metadata(inputs: Inputs, price: tuple[float, str, str]) -> Section:
@@ -208,8 +221,10 @@ def grids(inputs: Inputs) -> Section:
         sec.add(Block("note", text=f"{case}: {note}"))
     recovery = tables.recovery(inputs.fault) if inputs.fault is not None else None
     board = tables.leaderboard(inputs.summary, recovery=recovery)
-    sec.add(table(board, "Leaderboard per case and k (rank 1 = lowest energy)", collapse_over=60))
-    sec.blocks += _plots(plots.share_vs_violations(board))
+    shown = board.drop(columns=["avg_loss_kw", "voltage_violation_steps"])  # the energy and the minutes say it
+    shown = shown[["case", "k", "rank", *[c for c in shown if c not in ("case", "k", "rank")]]]
+    sec.add(table(shown, "Leaderboard per case and k (rank 1 = lowest energy)", collapse_over=60))
+    sec.blocks += _plots(plots.share_vs_costs(board))
     return sec.add(table(ranking_per_case(inputs.summary), "The ranking claim per grid (forecast off, every night mode and k)"))
 
 
@@ -272,6 +287,33 @@ def convergence(inputs: Inputs) -> Section:
     return sec
 
 
+def _run_meta(folder: object, m: dict) -> Block:
+    """A finished run's folder, command, period, wall time and peak memory (its manifest)."""
+    period, timings = m.get("period", {}), m.get("timings") or {}
+    return Block(
+        "meta",
+        items=[
+            ("run folder", f"{folder} (created {m.get('created_utc')}, opfbench {m.get('opfbench_version')})"),
+            ("command", " ".join(str(a) for a in m.get("command") or [])),
+            (
+                "period",
+                f"{period.get('start')} → {period.get('end')}, {period.get('steps')} steps of "
+                f"{m.get('config', {}).get('step_minutes')} min; {len(m.get('tasks', []))} tasks",
+            ),
+            (
+                "wall time",
+                f"{_seconds(timings.get('wall_s'))} on {timings.get('workers')} worker process(es) "
+                f"({(m.get('machine') or {}).get('cores')} cores)",
+            ),
+            (
+                "peak memory",
+                f"{timings.get('peak_rss_mb', float('nan')):.0f} MB (main process), "
+                f"{timings.get('worker_peak_rss_mb', float('nan')):.0f} MB (largest worker process)",
+            ),
+        ],
+    )
+
+
 def year(inputs: Inputs, price: tuple[float, str, str]) -> Section:
     sec = Section(
         "year",
@@ -283,35 +325,42 @@ def year(inputs: Inputs, price: tuple[float, str, str]) -> Section:
         return sec.add(Block("note", text="This run is the year run: the sections above show it."))
     if inputs.year_summary is None or inputs.year_manifest is None:
         return sec.add(*_missing(inputs, "year run"))
-    m, s = inputs.year_manifest, inputs.year_summary
-    period, timings = m.get("period", {}), m.get("timings") or {}
-    sec.add(
-        Block(
-            "meta",
-            items=[
-                ("run folder", f"{inputs.year_dir} (created {m.get('created_utc')}, opfbench {m.get('opfbench_version')})"),
-                ("command", " ".join(str(a) for a in m.get("command") or [])),
-                (
-                    "period",
-                    f"{period.get('start')} → {period.get('end')}, {period.get('steps')} steps of "
-                    f"{m.get('config', {}).get('step_minutes')} min; {len(m.get('tasks', []))} tasks",
-                ),
-                (
-                    "wall time",
-                    f"{_seconds(timings.get('wall_s'))} on {timings.get('workers')} worker process(es) "
-                    f"({(m.get('machine') or {}).get('cores')} cores)",
-                ),
-                (
-                    "peak memory",
-                    f"{timings.get('peak_rss_mb', float('nan')):.0f} MB (main process), "
-                    f"{timings.get('worker_peak_rss_mb', float('nan')):.0f} MB (largest worker process)",
-                ),
-            ],
-        )
-    )
+    s = inputs.year_summary
+    sec.add(_run_meta(inputs.year_dir, inputs.year_manifest))
     sec.blocks += _energy_tables(s, price, " over the year")
     sec.add(table(tables.convergence_summary(s), "Steps not ok over the year per formulation and k (all night modes)"))
     sec.blocks += _plots(plots.energy_vs_k(s, "year-energy-k", " over the year"))
+    return sec
+
+
+FIELD_BOARD = ["case", "k", "rank", "strategy", "energy_kwh", "savings_pct", "opf_share_pct"]
+
+
+def field_year(inputs: Inputs, price: tuple[float, str, str]) -> Section:
+    """The committed year on real grids (docs/field-year): every strategy on SimBench's
+    1-MV-rural and 1-LV-rural3 with their own profiles — the leaderboard per night mode,
+    the energies, the share of steps whose optimum is certified, what the run cost."""
+    sec = Section(
+        "field-year",
+        "Real grids over a year (SimBench, 2016 at 15 min)",
+        "Every strategy on SimBench's 1-MV-rural (102 generators) and 1-LV-rural3 over 2016 on the grids' own "
+        "per-load and per-generator profiles, k ∈ {0, 0.4}, PV connected and disconnected at night (a committed "
+        "run, docs/field-year): the leaderboard against the AC OPF, the energies, how many steps' optimum is "
+        "certified, and what the run cost.",
+    )
+    if inputs.field_summary is None or inputs.field_manifest is None:
+        return sec.add(*_missing(inputs, "real grids' year run"))
+    s = inputs.field_summary
+    sec.add(_run_meta("docs/field-year", inputs.field_manifest))
+    for mode in ("connected", "disconnected"):
+        board = tables.leaderboard(s, night_mode=mode)
+        if board.empty:
+            continue
+        shown = board[[*FIELD_BOARD, "voltage_violation_min", "max_violation_pu", "not_settled_steps", "not_ok_steps"]]
+        sec.add(table(shown, f"Leaderboard over the year, PV {mode} at night (rank 1 = lowest energy)"))
+    sec.add(table(tables.convergence_summary(s), "Steps not ok and certified optima over the year per formulation and k"))
+    sec.blocks += _energy_tables(s, price, " over the year")
+    sec.blocks += _plots(plots.share_vs_costs(tables.leaderboard(s)))
     return sec
 
 
@@ -461,6 +510,7 @@ SECTIONS: tuple[tuple[str, str, Builder], ...] = (
     ("grids", "Leaderboard per case", _unpriced(grids)),
     ("convergence", "Convergence of the formulations", _unpriced(convergence)),
     ("year", "A year (2016 at 15 min)", year),
+    ("field-year", "Real grids over a year (SimBench, 2016 at 15 min)", field_year),
     ("night", "Night hours", _unpriced(night)),
     ("gap", "Optimality gap", _unpriced(gap)),
     ("voltage", "Voltage compliance", _unpriced(voltage)),
