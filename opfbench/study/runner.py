@@ -178,12 +178,13 @@ def run_study(
     """Run `config` into the folder `out` (resuming finished tasks; `run_family` for the
     rest). Ctrl-C: `Stopped` after the finished tasks are saved. Its learned
     configurations are fitted first (`fit_learned`), unless `fitted` gives their rules
-    (a nested training run's)."""
+    (a nested training run's, whose case notes are its parent's to say)."""
     options: dict[str, Any] = {"workers": workers, "scheduler": scheduler, "fresh": fresh, "quiet": quiet, "command": command}
+    nested = fitted is not None
     if fitted is None:
         fitted = fit_learned(config, out, options)
     config = replace(config, fitted=fitted)
-    run: EngineRun = run_family(lambda: prepare(config), out, **options)
+    run: EngineRun = run_family(lambda: prepare(config), out, **options, notes=not nested)
     family: RunFamily = run.family
     return StudyRun(run.out, family.config, family.period, family.tasks, run.kept, run.ran, run.wall_s, run.result, run.task_wall)
 
