@@ -26,6 +26,7 @@ SHORT = ["paper33", "--strategies", "no-action", "llma", "--k", "0", "0.8", "--t
         (["paper33", "--fault-bus", "17", "--step-ms", "10"], "too large for the fastest time constant"),
         (["paper33", "--fault-bus", "17", "--motor-share", "1.5"], "motor share"),
         (["paper33", "--fault-bus", "17", "--motor-share", "-0.1"], "motor share"),
+        (["paper33", "--fault-bus", "17", "--variants", "motors=2"], "variant 'motors=2': motor share must lie in [0, 1]"),
         (["paper33", "--fault-bus", "17", "--variants", "source=abc"], "not a number"),
         (["paper33", "--fault-bus", "17", "--variants", "colour=red"], "unknown key"),
         (["paper33", "--fault-bus", "17", "--time", "25:00"], "--time"),

@@ -105,7 +105,8 @@ class Assembler(Protocol):
 class TaskFamily(Protocol):
     """What a study runs (see the module docstring). `kind` names the folder's kind
     ("run", "fault"); `tables` a task's tables, the main one first; `outputs` the files
-    the assembler writes; `notes` what planning wants the user to know; `label_fields` the
+    the assembler writes; `side_entries` what else its runs write into the folder (a run's
+    training, before its manifest); `notes` what planning wants the user to know; `label_fields` the
     config fields that change no result (a resume may change them); `columns(table)` a
     task table's columns (a checkpoint with others was written by another version)."""
 
@@ -117,6 +118,9 @@ class TaskFamily(Protocol):
 
     @property
     def outputs(self) -> tuple[str, ...]: ...
+
+    @property
+    def side_entries(self) -> tuple[str, ...]: ...
 
     @property
     def label_fields(self) -> tuple[str, ...]: ...

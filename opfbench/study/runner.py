@@ -18,7 +18,7 @@ from opfbench.parquetio import ParquetStream
 from opfbench.registry import configuration
 from opfbench.study.config import LABEL_FIELDS, StudyConfig
 from opfbench.study.engine import EngineRun, TaskOutput, run_family
-from opfbench.study.fitted import Fitted
+from opfbench.study.fitted import LEARNED_DIR, TRAIN_DIR, Fitted
 from opfbench.study.periods import Period
 from opfbench.study.scenarios import check_model_forecasts, study_period
 from opfbench.study.tables import DETAIL_COLUMNS, KEYS, PARTIAL_COLUMNS, extra_columns, step_columns, summarize
@@ -68,6 +68,7 @@ class RunFamily:
     tasks: list[RunTask]
     kind: str = "run"
     outputs: tuple[str, ...] = RUN_OUTPUTS
+    side_entries: tuple[str, ...] = (TRAIN_DIR, LEARNED_DIR)
     label_fields: tuple[str, ...] = LABEL_FIELDS
 
     @property
