@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import argparse
 import importlib
+import os
 import sys
 
 from opfbench.errors import OpfbenchError
@@ -25,9 +26,22 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+PIPE_CLOSED = 141
+"""Exit code when the reader of stdout went away (`opfbench cases | head -1`): 128 + SIGPIPE,
+what a shell reports for any program its pipe's reader left."""
+
+
 def main(argv: list[str] | None = None) -> int:
     """Run the command line; Ctrl-C anywhere stops with exit code 130 and one line (what a
-    study kept, `opfbench.errors.Stopped`)."""
+    study kept, `opfbench.errors.Stopped`); a closed stdout stops quietly."""
+    try:
+        return _main(argv)
+    except BrokenPipeError:
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())  # no second error when Python flushes it
+        return PIPE_CLOSED
+
+
+def _main(argv: list[str] | None) -> int:
     command = "opfbench"
     try:
         parser = build_parser()

@@ -1,6 +1,8 @@
 """CLI: `cases` and `pf` contracts, errors on stderr with exit code 2."""
 
 import json
+import subprocess
+import sys
 
 import numpy as np
 import pytest
@@ -81,3 +83,14 @@ def test_every_strategy_runs_on_a_case_without_der(capsys, strategy):
     code, out = _json(capsys, ["snapshot", "case33bw", "--strategy", strategy, "--json"])
     assert code == 0 and out["status"] == "ok" and out["q_mvar"] == {}
     assert out["losses_kw"] == pytest.approx(202.68, abs=0.05)
+
+
+def test_a_reader_that_closes_the_pipe_stops_the_listing_quietly():
+    """`opfbench cases | head -0`: no traceback, the shell's code for a closed pipe (the
+    reader is gone before the command has imported its modules, so its first line fails)."""
+    proc = subprocess.Popen([sys.executable, "-m", "opfbench", "cases"], stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+    assert proc.stdout is not None and proc.stderr is not None
+    proc.stdout.close()
+    err = proc.stderr.read().decode()
+    assert proc.wait(timeout=60) == 141, err
+    assert err == ""

@@ -117,3 +117,10 @@ def test_a_month_of_training_and_a_week_of_test(case, tmp_path):
     assert (learned["excursion_steps"] == 0).all() and (learned["energy_kwh"] < learned["no_action_kwh"]).all()
     train_summary = pd.read_csv(out / "train" / "summary.csv")
     assert set(labels) <= set(train_summary["strategy"]) and (train_summary["not_settled_steps"] == 0).all()
+
+
+def test_a_cases_notes_are_said_once_not_again_by_each_nested_training_run(tmp_path, capsys):
+    lv = "simbench:1-LV-rural1--0-sw"  # its notes: the taps, the short-circuit data, the phase shift
+    assert _run(tmp_path / "run", cases=(lv,), strategies=("no-action", AFFINE, "acopf")) == 0
+    notes = [line for line in capsys.readouterr().err.splitlines() if line.startswith(f"note: {lv}")]
+    assert len(notes) >= 2 and len(notes) == len(set(notes)), notes

@@ -93,3 +93,24 @@ def test_an_edited_case_file_is_refused_on_resume(tmp_path, capsys):
     assert "use --fresh to discard them" in err and len(err.splitlines()) == 1 and not (out / ".lock").exists()
     assert main([*argv, "--out", str(out), "--fresh"]) == 0
     assert pd.read_csv(out / "summary.csv").energy_kwh.iloc[0] > first  # bus 3 draws more: more losses
+
+
+def test_a_folder_of_other_files_is_refused_before_any_work(tmp_path, capsys):
+    """A run never writes among files that are no run's (and --fresh never removes them);
+    the folder of an earlier run, or an empty one, is taken."""
+    out = tmp_path / "mine"
+    out.mkdir()
+    (out / "notes.txt").write_text("mine")
+    (out / "data").mkdir()
+    argv = ["run", "--strategies", "no-action", "--k", "0", "--night-modes", "connected", "--forecast", "off"]
+    argv += ["--period", "2016-06-28T10:00..2016-06-28T10:20", "--workers", "1", "--quiet"]
+    for extra in ([], ["--fresh"]):
+        assert main([*argv, *extra, "--out", str(out)]) == 2
+        err = capsys.readouterr().err.strip()
+        assert f"--out {out} holds files of no opfbench run (data, notes.txt)" in err and len(err.splitlines()) == 1
+        assert sorted(p.name for p in out.iterdir()) == ["data", "notes.txt"]  # nothing written, nothing removed
+    fault = ["fault", "paper33", "--fault-bus", "18", "--strategies", "no-action", "--k", "0", "--quiet", "--out", str(out)]
+    assert main(fault) == 2 and "holds files of no opfbench fault" in capsys.readouterr().err
+    (out / "notes.txt").unlink()
+    (out / "data").rmdir()
+    assert main([*argv, "--out", str(out)]) == 0 and main([*argv, "--out", str(out)]) == 0  # empty, then its own run

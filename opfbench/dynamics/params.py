@@ -158,7 +158,10 @@ class ModelParams:
                 )
             seen.append(key)
             out = _apply(out, key, value.strip(), spec)
-        out.check()
+        try:
+            out.check()
+        except InputError as exc:
+            raise InputError(f"variant {spec!r}: {exc}") from None
         return out
 
     def check(self) -> None:

@@ -103,7 +103,9 @@ def check_fault(net: Network, params: ModelParams, fault: FaultParams) -> int:
         )
     if not fault.t_end_s > fault.t_on_s + fault.duration_s:
         raise InputError(
-            f"simulation end {fault.t_end_s} s must lie after the fault clears ({fault.t_on_s + fault.duration_s} s)"
+            f"simulation end {fault.t_end_s:g} s (--t-end) must lie after the fault clears at "
+            f"{fault.t_on_s + fault.duration_s:g} s (inception {fault.t_on_s:g} s + duration {fault.duration_s * 1e3:g} ms, "
+            "--duration-ms)"
         )
     steps = sum(math.ceil(length / fault.step_s - 1e-9) for length, _ in segments(fault))
     need = 8.0 * (steps + 1) * (net.n_bus + 1)  # the time and every bus's |V| at every step, float64

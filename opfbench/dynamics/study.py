@@ -220,6 +220,7 @@ class FaultFamily:
     kind: str = "fault"
     tables: tuple[str, ...] = ("measures", "traces")
     outputs: tuple[str, ...] = FAULT_OUTPUTS
+    side_entries: tuple[str, ...] = ()
     label_fields: tuple[str, ...] = ()
 
     @property

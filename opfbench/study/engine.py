@@ -105,7 +105,8 @@ class Assembler(Protocol):
 class TaskFamily(Protocol):
     """What a study runs (see the module docstring). `kind` names the folder's kind
     ("run", "fault"); `tables` a task's tables, the main one first; `outputs` the files
-    the assembler writes; `notes` what planning wants the user to know; `label_fields` the
+    the assembler writes; `side_entries` what else its runs write into the folder (a run's
+    training, before its manifest); `notes` what planning wants the user to know; `label_fields` the
     config fields that change no result (a resume may change them); `columns(table)` a
     task table's columns (a checkpoint with others was written by another version)."""
 
@@ -117,6 +118,9 @@ class TaskFamily(Protocol):
 
     @property
     def outputs(self) -> tuple[str, ...]: ...
+
+    @property
+    def side_entries(self) -> tuple[str, ...]: ...
 
     @property
     def label_fields(self) -> tuple[str, ...]: ...
@@ -192,12 +196,14 @@ def run_family(
     fresh: bool = False,
     quiet: bool = False,
     command: list[str] | None = None,
+    notes: bool = True,
 ) -> EngineRun:
     """Plan with `prepare()` and run the family into the folder `out` (None: a temporary
     folder, removed afterwards), resuming its finished tasks. `workers`: local worker
     processes (None: one per core), never more than tasks to run (a note says so when
     more were asked); ignored with a `scheduler` address. Notes go to stderr; `quiet`
-    silences the progress only. Ctrl-C: `Stopped` (or, in process, exit 130 at once)."""
+    silences the progress only; `notes=False` keeps the family's planning notes unsaid (a
+    nested run's, which its parent says). Ctrl-C: `Stopped` (or, in process, exit 130 at once)."""
     from opfbench.study.progress import Progress
     from opfbench.study.store import RunStore
 
@@ -216,7 +222,7 @@ def run_family(
 
         with execution.stop_on_ctrl_c(planning_stopped):
             family = prepare()
-        for note in family.notes:
+        for note in family.notes if notes else ():
             _note(note)
         run = EngineRun(store.out, family)
         if scheduler is not None and not all((store.out / t.file).exists() for t in family.tasks):

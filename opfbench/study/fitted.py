@@ -8,6 +8,7 @@ from dataclasses import dataclass
 from opfbench.strategies.learned import LearnedParams
 
 LEARNED_DIR = "learned"  # the run folder's fitted rules: learned/<case>--<label>.json
+TRAIN_DIR = "train"  # the run folder's training runs (train/reference, train/learned) and train/summary.csv
 
 
 @dataclass(frozen=True)

@@ -18,7 +18,7 @@ from opfbench.parquetio import ParquetStream
 from opfbench.registry import configuration
 from opfbench.study.config import LABEL_FIELDS, StudyConfig
 from opfbench.study.engine import EngineRun, TaskOutput, run_family
-from opfbench.study.fitted import Fitted
+from opfbench.study.fitted import LEARNED_DIR, TRAIN_DIR, Fitted
 from opfbench.study.periods import Period
 from opfbench.study.scenarios import check_model_forecasts, study_period
 from opfbench.study.tables import DETAIL_COLUMNS, KEYS, PARTIAL_COLUMNS, extra_columns, step_columns, summarize
@@ -68,6 +68,7 @@ class RunFamily:
     tasks: list[RunTask]
     kind: str = "run"
     outputs: tuple[str, ...] = RUN_OUTPUTS
+    side_entries: tuple[str, ...] = (TRAIN_DIR, LEARNED_DIR)
     label_fields: tuple[str, ...] = LABEL_FIELDS
 
     @property
@@ -178,12 +179,13 @@ def run_study(
     """Run `config` into the folder `out` (resuming finished tasks; `run_family` for the
     rest). Ctrl-C: `Stopped` after the finished tasks are saved. Its learned
     configurations are fitted first (`fit_learned`), unless `fitted` gives their rules
-    (a nested training run's)."""
+    (a nested training run's, whose case notes are its parent's to say)."""
     options: dict[str, Any] = {"workers": workers, "scheduler": scheduler, "fresh": fresh, "quiet": quiet, "command": command}
+    nested = fitted is not None
     if fitted is None:
         fitted = fit_learned(config, out, options)
     config = replace(config, fitted=fitted)
-    run: EngineRun = run_family(lambda: prepare(config), out, **options)
+    run: EngineRun = run_family(lambda: prepare(config), out, **options, notes=not nested)
     family: RunFamily = run.family
     return StudyRun(run.out, family.config, family.period, family.tasks, run.kept, run.ran, run.wall_s, run.result, run.task_wall)
 

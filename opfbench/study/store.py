@@ -187,10 +187,25 @@ class RunStore:
         run's training) calls it first."""
         path = self.out / "manifest.json"
         part = family.manifest()
+        if not path.exists():
+            self._check_empty(family)
         old = self._previous(path, family.kind, fresh) if path.exists() else None
         if old is not None and not fresh:
             self._check_resume(old, part, family)
         return part
+
+    def _check_empty(self, family: TaskFamily) -> None:
+        """A folder without a manifest holds nothing but what a run of `family` writes
+        (its checkpoints, outputs and side entries, hidden files): a run never writes
+        among other files (and `--fresh` never removes one of them)."""
+        own = {"tasks", *family.outputs, *family.side_entries}
+        foreign = sorted(p.name for p in self.out.iterdir() if p.name not in own and not p.name.startswith("."))
+        if foreign:
+            shown = ", ".join(foreign[:3]) + (f" and {len(foreign) - 3} more" if len(foreign) > 3 else "")
+            raise InputError(
+                f"--out {self.out} holds files of no opfbench {family.kind} ({shown}): give a new or empty folder, "
+                "or the folder of an earlier run to resume it"
+            )
 
     def _previous(self, path: Path, kind: str, fresh: bool) -> dict | None:
         """The folder's manifest (None: unreadable, to be discarded with `fresh`);

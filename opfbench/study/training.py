@@ -36,10 +36,9 @@ from opfbench.io import load_network
 from opfbench.jsonio import write_atomic
 from opfbench.registry import BASELINE, REFERENCE_OPTIMUM, configuration, is_formulation
 from opfbench.strategies.learned import TRAIN_K, TRAIN_NIGHT, LearnedParams
-from opfbench.study.fitted import LEARNED_DIR, Fitted
+from opfbench.study.fitted import LEARNED_DIR, TRAIN_DIR, Fitted
 from opfbench.study.learning import LearnedConfig, learned_configs, model_case, training_set
 
-TRAIN_DIR = "train"
 TRAIN_SUMMARY = f"{TRAIN_DIR}/summary.csv"
 
 
