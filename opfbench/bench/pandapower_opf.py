@@ -52,6 +52,10 @@ class PandapowerOpf:
         if "controllable" in pnet.load:
             pnet.load["controllable"] = False
         pnet.ext_grid["controllable"] = True  # the slack, free within ±BIG (SimBench leaves it NaN)
+        # a controllable ext_grid's voltage is an OPF variable within its bus's limits: held at
+        # its setpoint, as our OPF holds the slack (free, runopp lifts it to Vmax: less loss)
+        slack = pnet.ext_grid.bus.to_numpy()
+        pnet.bus.loc[slack, "min_vm_pu"] = pnet.bus.loc[slack, "max_vm_pu"] = pnet.ext_grid.vm_pu.to_numpy()
         for column, value in (("min_p_mw", -BIG), ("max_p_mw", BIG), ("min_q_mvar", -BIG), ("max_q_mvar", BIG)):
             known = pnet.ext_grid[column].astype(float) if column in pnet.ext_grid else None
             pnet.ext_grid[column] = known.fillna(value) if known is not None else value
