@@ -69,8 +69,15 @@ def how_close(inputs: Inputs) -> Section:
         if study.summary is not None:
             sec.add(Block("heading", text=f"A committed study: {study.run_dir.name}"))
             sec.add(_run_meta(f"docs/learned/{study.run_dir.name}", study.manifest or {}))
+            sec.add(Block("note", text=TRAINING_TIME))
             sec.blocks += _how_close_blocks(study, f" — {study.run_dir.name}")
     return sec
+
+
+TRAINING_TIME = (
+    "The wall time is the test period's: the training optimum and the in-sample evaluation ran before it, as "
+    "nested runs of their own (train/reference, train/learned)."
+)
 
 
 def _how_close_blocks(inputs: Inputs, name: str) -> list[Block]:
