@@ -12,7 +12,8 @@ from opfbench.report import write_report
 from opfbench.report.browser import check_page, find_chromium
 from tests.support.report_folders import write_fault, write_run
 
-SECTIONS = ["claims", "metadata", "losses", "convergence", "night", "gap", "voltage", "forecasting", "fault"]
+SECTIONS = ["local", "claims", "metadata", "losses", "grids", "convergence", "year", "field-year", "night", "gap", "voltage"]
+SECTIONS += ["forecasting", "fault"]
 
 if find_chromium() is None:
     if os.environ.get("CI", "").lower() == "true":
@@ -41,3 +42,16 @@ def test_the_check_sees_remote_requests(tmp_path):
     check = check_page(page)
     assert sorted(check.resources) == ["http://example.com/x.png", "https://cdn.example.org/lib.js"]
     assert len(check.page_requests) == 2 and check.images == 1
+
+
+def test_the_screenshot_command_names_a_bad_page_in_one_line(tmp_path, capsys):
+    from opfbench.report.screenshot import main as screenshot_main
+
+    missing = tmp_path / "none.html"
+    assert screenshot_main([str(missing), str(tmp_path / "out.png")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert str(missing) in err and len(err.splitlines()) == 1 and not (tmp_path / "out.png").exists()
+    page = tmp_path / "page.html"
+    page.write_text("<html><body>no head</body></html>")
+    assert screenshot_main([str(page), str(tmp_path / "out.png")]) == 2
+    assert "has no <head>: not an opfbench page" in capsys.readouterr().err

@@ -209,7 +209,10 @@ def screenshot(html: str | Path, png: str | Path, width: int = 1400, max_height:
     height = min(check_page(html, width).height, max_height)
     png = Path(png).resolve()
     png.parent.mkdir(parents=True, exist_ok=True)
-    _screenshot(Path(html), png, width, height)
+    try:
+        _screenshot(Path(html), png, width, height)
+    except subprocess.TimeoutExpired:  # headless Chromium now and then hangs drawing a very tall page: once more
+        _screenshot(Path(html), png, width, height)
     with Image.open(png) as image:
         small = image.convert("RGB").quantize(colors=256, method=Image.Quantize.MEDIANCUT)
     small.save(png, optimize=True)
