@@ -212,8 +212,8 @@ def grids(inputs: Inputs) -> Section:
     sec = Section(
         "grids",
         "Leaderboard per case",
-        "Every rule and formulation per case and k (forecast off, PV connected at night): energy and average "
-        "losses, the share of the AC OPF's loss reduction it reaches, (E_no-action − E)/(E_no-action − E_acopf), "
+        "Every rule and formulation per case and k (forecast off, PV connected at night): energy, savings, "
+        "the share of the AC OPF's loss reduction it reaches, (E_no-action − E)/(E_no-action − E_acopf), "
         "minutes outside the case's voltage limits and the worst excursion beyond them, steps where a closed-loop "
         "rule did not settle (not-settled) or the strategy's status is not ok, and — with a fault study — the "
         "recovery time it adds over no action (mean over the fault buses, reference model, forecast off); then the "
