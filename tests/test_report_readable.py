@@ -144,3 +144,18 @@ def test_the_headline_shows_the_committed_learned_studies_when_the_run_trained_n
     headings = [b.text for b in sec.blocks if b.kind == "heading"]
     assert headings == [f"A committed study: {s.run_dir.name}" for s in studies]
     assert sum(b.kind == "plot" for b in sec.blocks) == 1 + len(studies)
+
+
+def test_a_case_without_any_optimum_is_said_in_words():
+    rows = [
+        {"case": c, "strategy": s, "k": 0.0, "night_mode": "connected", "forecast": "off", "energy_kwh": e}
+        | {"no_action_kwh": 10.0, "steps": 4, "not_ok_steps": bad, "voltage_violation_min": 0.0}
+        for c, bad in (("lv5", 4), ("ok", 1))
+        for s, e in (("no-action", 10.0), ("lfma", 9.0), ("acopf", float("nan") if bad == 4 else 8.0))
+    ]
+    summary = pd.DataFrame(rows)
+    notes = [b.text for b in sections.grids(Inputs(run_dir=Path(), summary=summary)).blocks if b.kind == "note"]
+    assert [n for n in notes if "no optimum" in n] == [
+        "lv5, k=0: the AC OPF has no optimum at any of the 4 steps (infeasible or failed: see the convergence "
+        "section), so there is no reference and no share of its loss reduction (—)."
+    ]

@@ -206,6 +206,12 @@ def losses(inputs: Inputs, price: tuple[float, str, str]) -> Section:
     return sec
 
 
+NO_OPTIMUM = (
+    "{case}, k={k:g}: the AC OPF has no optimum at any of the {steps} steps (infeasible or failed: see the "
+    "convergence section), so there is no reference and no share of its loss reduction (—)."
+)
+
+
 def grids(inputs: Inputs) -> Section:
     """The leaderboard per case (every rule and formulation against the AC OPF) and the
     ranking claim checked per grid ("the rules work on any feeder")."""
@@ -226,6 +232,8 @@ def grids(inputs: Inputs) -> Section:
     ]
     for case, note in notes:
         sec.add(Block("note", text=f"{case}: {note}"))
+    for case, k, steps in tables.without_optimum(inputs.summary):
+        sec.add(Block("note", text=NO_OPTIMUM.format(case=case, k=k, steps=steps)))
     recovery = tables.recovery(inputs.fault) if inputs.fault is not None else None
     board = tables.leaderboard(inputs.summary, recovery=recovery)
     shown = board.drop(columns=["avg_loss_kw", "voltage_violation_steps"])  # the energy and the minutes say it

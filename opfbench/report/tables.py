@@ -358,6 +358,16 @@ def leaderboard(
     return out.sort_values(["case", "k", "rank"], kind="stable").reset_index(drop=True)
 
 
+def without_optimum(summary: pd.DataFrame) -> list[tuple[str, float, int]]:
+    """(case, k, steps) where the reference optimum (forecast off, PV connected at night)
+    is not ok at a single step — no share of its loss reduction can be computed there."""
+    ref = summary[
+        (summary["strategy"] == REFERENCE_OPTIMUM) & (summary["forecast"] == "off") & (summary["night_mode"] == REFERENCE_NIGHT)
+    ]
+    none = ref[ref["not_ok_steps"] >= ref["steps"]]
+    return [(str(r.case), float(r.k), int(r.steps)) for r in none.itertuples()]
+
+
 LOCAL_COLUMNS = [
     "case",
     "k",
