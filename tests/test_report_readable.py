@@ -11,7 +11,7 @@ import pandas as pd
 import pytest
 
 from opfbench.registry import DEFAULT_RUN
-from opfbench.report import plots, sections
+from opfbench.report import plots, sections, tables
 from opfbench.report.inputs import DOCS_FIELD_YEAR, DOCS_LEARNED, Inputs, load_study
 from opfbench.report.page import heading, table_html
 from opfbench.report.tables import leaderboard
@@ -159,3 +159,12 @@ def test_a_case_without_any_optimum_is_said_in_words():
         "lv5, k=0: the AC OPF has no optimum at any of the 4 steps (infeasible or failed: see the convergence "
         "section), so there is no reference and no share of its loss reduction (—)."
     ]
+
+
+def test_an_optimum_that_fell_back_but_reduced_losses_is_not_called_missing():
+    rows = [
+        {"case": "g", "strategy": s, "k": 0.0, "night_mode": "connected", "forecast": "off", "energy_kwh": e}
+        | {"no_action_kwh": 10.0, "steps": 4, "not_ok_steps": 4 if s == "acopf" else 0}
+        for s, e in (("no-action", 10.0), ("acopf", 8.0))  # every step fallback-cold: still an optimum
+    ]
+    assert tables.without_optimum(pd.DataFrame(rows)) == []

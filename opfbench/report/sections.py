@@ -212,6 +212,11 @@ NO_OPTIMUM = (
 )
 
 
+def _shown(board: pd.DataFrame) -> pd.DataFrame:
+    """A leaderboard's columns the report shows (`tables.SHOWN_BOARD`, those it has)."""
+    return board[[c for c in tables.SHOWN_BOARD if c in board]]
+
+
 def grids(inputs: Inputs) -> Section:
     """The leaderboard per case (every rule and formulation against the AC OPF) and the
     ranking claim checked per grid ("the rules work on any feeder")."""
@@ -236,9 +241,7 @@ def grids(inputs: Inputs) -> Section:
         sec.add(Block("note", text=NO_OPTIMUM.format(case=case, k=k, steps=steps)))
     recovery = tables.recovery(inputs.fault) if inputs.fault is not None else None
     board = tables.leaderboard(inputs.summary, recovery=recovery)
-    shown = board.drop(columns=["avg_loss_kw", "voltage_violation_steps"])  # the energy and the minutes say it
-    shown = shown[["case", "k", "rank", *[c for c in shown if c not in ("case", "k", "rank")]]]
-    sec.add(table(shown, "Leaderboard per case and k (rank 1 = lowest energy)", collapse_over=60))
+    sec.add(table(_shown(board), "Leaderboard per case and k (rank 1 = lowest energy)", collapse_over=60))
     sec.blocks += _plots(plots.share_vs_costs(board))
     return sec.add(table(ranking_per_case(inputs.summary), "The ranking claim per grid (forecast off, every night mode and k)"))
 
@@ -348,9 +351,6 @@ def year(inputs: Inputs, price: tuple[float, str, str]) -> Section:
     return sec
 
 
-FIELD_BOARD = ["case", "k", "rank", "strategy", "energy_kwh", "savings_pct", "opf_share_pct"]
-
-
 def field_year(inputs: Inputs, price: tuple[float, str, str]) -> Section:
     """The committed year on real grids (docs/field-year): every strategy on SimBench's
     1-MV-rural and 1-LV-rural3 with their own profiles — the leaderboard per night mode,
@@ -371,8 +371,7 @@ def field_year(inputs: Inputs, price: tuple[float, str, str]) -> Section:
         board = tables.leaderboard(s, night_mode=mode)
         if board.empty:
             continue
-        shown = board[[*FIELD_BOARD, "voltage_violation_min", "max_violation_pu", "not_settled_steps", "not_ok_steps"]]
-        sec.add(table(shown, f"Leaderboard over the year, PV {mode} at night (rank 1 = lowest energy)"))
+        sec.add(table(_shown(board), f"Leaderboard over the year, PV {mode} at night (rank 1 = lowest energy)"))
     sec.add(table(tables.convergence_summary(s), "Steps not ok and certified optima over the year per formulation and k"))
     sec.blocks += _energy_tables(s, price, " over the year")
     sec.blocks += _plots(plots.share_vs_costs(tables.leaderboard(s)))
