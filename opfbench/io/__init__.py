@@ -1,12 +1,15 @@
 """Case sources behind one interface: `load_case(spec)` → `Case` (network, stored
 operating point, its own time series when it has them, notes).
 
-Specs (`opfbench.io.spec`): a shipped name (`opfbench.cases`), a MATPOWER `.m` file
-(`opfbench.io.matpower`, reader and writer), a pandapower net saved as `.json`
-(`opfbench.io.pandapower`) or `simbench:CODE` (`opfbench.io.simbench`), each with the
-options `der=`, `der-pf=` and `line-z=` (a perturbed model). Cases are cached per process by spec (files also by their
-modification time and size), so a worker that runs many tasks of one case reads it once;
-SimBench grids, slow to extract, also on disk across processes (`opfbench.io.cache`).
+Specs (`opfbench.io.spec`): a shipped name (`opfbench.cases`; the unbalanced feeders
+`opfbench.cases.opendss_cases`), a MATPOWER `.m` file (`opfbench.io.matpower`, reader and
+writer), a pandapower net saved as `.json` (`opfbench.io.pandapower`), `simbench:CODE`
+(`opfbench.io.simbench`) or `opendss:PATH` (`opfbench.io.opendss`: a three-phase
+`PhaseNetwork`), each with the options `der=`, `der-pf=` and `line-z=` (a perturbed model).
+Cases are cached per process by spec (files also by their modification time and size — an
+OpenDSS master also by the newest file in its folder), so a worker that runs many tasks
+of one case reads it once; SimBench grids, slow to extract, also on disk across processes
+(`opfbench.io.cache`).
 """
 
 from __future__ import annotations
@@ -20,7 +23,8 @@ import numpy as np
 
 from opfbench.errors import CaseFormatError, InputError
 from opfbench.io.case import Case, CaseSeries
-from opfbench.io.spec import CaseSpec, parse_der_list, parse_spec
+from opfbench.io.spec import OPENDSS, CaseSpec, parse_der_list, parse_spec
+from opfbench.multiphase import PhaseNetwork
 from opfbench.network import DER, Network
 
 __all__ = ["NO_DER_NOTE", "Case", "CaseSeries", "CaseSpec", "load_case", "load_network", "parse_spec"]
@@ -30,21 +34,30 @@ NO_DER_NOTE = (
     "the case has no DER: every strategy gives the no-action result; add DER with --der BUS:KIND:MW,… "
     "(or --der gens for a MATPOWER file's generators)"
 )
+NO_PHASE_DER_NOTE = "the feeder has no DER (PVSystem or Generator elements): every strategy gives the no-action result"
 _cache: OrderedDict[tuple, Case] = OrderedDict()
 _lock = threading.Lock()
 
 
 def _stamp(spec: CaseSpec) -> tuple:
-    if spec.kind in ("matpower", "pandapower"):
-        path = Path(spec.source)
-        try:
-            st = path.stat()
-        except OSError:
-            raise InputError(
-                f"case file {spec.source!r} not found (a shipped case name, a .m or .json path, or simbench:CODE)"
-            ) from None
-        return (str(path.resolve()), st.st_mtime_ns, st.st_size)
+    if spec.kind in ("matpower", "pandapower", "opendss"):
+        return _file_stamp(Path(spec.source.removeprefix(OPENDSS)), spec.kind == "opendss")
     return ()
+
+
+def _file_stamp(path: Path, folder: bool) -> tuple:
+    """(path, modification time, size) of a case file; with `folder` also the newest
+    modification time in its folder (the files an OpenDSS master reads)."""
+    try:
+        st = path.stat()
+    except OSError:
+        raise InputError(
+            f"case file {str(path)!r} not found (a shipped case name, a .m or .json path, simbench:CODE or opendss:PATH)"
+        ) from None
+    stamp: tuple = (str(path.resolve()), st.st_mtime_ns, st.st_size)
+    if folder:
+        stamp += (max((f.stat().st_mtime_ns for f in path.resolve().parent.rglob("*") if f.is_file()), default=0),)
+    return stamp
 
 
 def load_case(spec: str) -> Case:
@@ -66,8 +79,9 @@ def load_case(spec: str) -> Case:
 
 
 def load_network(spec: str) -> Network:
-    """The network of `load_case(spec)`."""
-    return load_case(spec).network
+    """The balanced network of `load_case(spec)`; InputError for a three-phase feeder
+    (`load_case` gives its `PhaseNetwork`)."""
+    return load_case(spec).balanced("this command (for now only `opfbench pf` and `opfbench cases` read three-phase feeders)")
 
 
 def _read(spec: CaseSpec) -> Case:
@@ -91,20 +105,29 @@ def _read(spec: CaseSpec) -> Case:
         case = Case(spec.text, net, stored)
     elif spec.kind == "pandapower":
         case = _pandapower_case(spec, der_pf)
+    elif spec.kind == "opendss":
+        case = _opendss_case(spec, Path(spec.source.removeprefix(OPENDSS)), None)
     else:
         from opfbench.cases import CASE_NAMES, shipped_network
+        from opfbench.cases.opendss_cases import OPENDSS_NAMES
 
-        if spec.source not in CASE_NAMES:
+        if spec.source in OPENDSS_NAMES:
+            case = _opendss_case(spec, None, spec.source)
+        elif spec.source not in CASE_NAMES:
             raise InputError(
-                f"unknown case {spec.source!r}: give one of {', '.join(CASE_NAMES)}, the path of a MATPOWER .m or "
-                "pandapower .json file, or simbench:CODE (e.g. simbench:1-MV-rural--0-sw)"
+                f"unknown case {spec.source!r}: give one of {', '.join(CASE_NAMES + OPENDSS_NAMES)}, the path of a "
+                "MATPOWER .m or pandapower .json file, simbench:CODE (e.g. simbench:1-MV-rural--0-sw) or opendss:PATH "
+                "(an OpenDSS master file)"
             )
-        case = Case(spec.text, shipped_network(spec.source))
+        else:
+            case = Case(spec.text, shipped_network(spec.source))
+    if isinstance(case.network, PhaseNetwork) and (spec.der is not None or spec.line_z is not None):
+        raise InputError(f"case {spec.text!r}: der= and line-z= apply to balanced cases; this is a three-phase feeder")
     if spec.der is not None and spec.der != "gens":
         case = _with_listed_ders(case, spec, der_pf)
     if spec.line_z is not None:
         case = _with_line_impedances(case, spec.line_z)
-    if not case.network.ders:
+    if not case.network.ders and NO_PHASE_DER_NOTE not in case.notes:
         case = Case(
             case.spec,
             case.network,
@@ -118,9 +141,38 @@ def _read(spec: CaseSpec) -> Case:
     return case
 
 
+def _opendss_case(spec: CaseSpec, path: Path | None, name: str | None) -> Case:
+    """The OpenDSS master file `path` — or, without it, the shipped feeder `name` (compiled
+    from a temporary copy) — as a case (`opfbench.io.opendss`): its three-phase network,
+    and the snapshot the file defines as the stored operating point (also kept on disk,
+    `opfbench.io.cache`: OpenDSS hands a large feeder over in seconds)."""
+    from opfbench.cases.opendss_cases import opendss_copy, opendss_master
+    from opfbench.io.cache import cached_case
+    from opfbench.io.opendss import read_opendss
+
+    def build() -> Case:
+        if path is None:
+            assert name is not None
+            with opendss_copy(name) as master:
+                circuit = read_opendss(master, name)
+        else:
+            circuit = read_opendss(path, name)
+        stored = (circuit.load_p_mw, circuit.load_q_mvar, circuit.der_p_mw, circuit.der_q_mvar)
+        notes = circuit.notes if circuit.network.ders else circuit.notes + (NO_PHASE_DER_NOTE,)
+        return Case(spec.text, circuit.network, stored, notes=notes)
+
+    if path is None:
+        assert name is not None
+        path_of_record = opendss_master(name)
+    else:
+        path_of_record = path
+    return cached_case(spec.text, build, _file_stamp(path_of_record, folder=True))
+
+
 def _with_listed_ders(case: Case, spec: CaseSpec, der_pf: float) -> Case:
     """`case` with the DER of the spec's `der=` list (only on a case without DER)."""
     net = case.network
+    assert isinstance(net, Network)
     if net.ders:
         raise InputError(f"case {spec.text!r}: the case already has {len(net.ders)} DER; der= places DER on a case without")
     ders = []
@@ -137,6 +189,7 @@ def _with_listed_ders(case: Case, spec: CaseSpec, der_pf: float) -> Case:
 def _with_line_impedances(case: Case, factor: float) -> Case:
     """`case` with every line's r and x times `factor` (`opfbench.io.spec`: line-z)."""
     net = case.network
+    assert isinstance(net, Network)
     line = (net.base_kv[net.f] == net.base_kv[net.t]) & (net.tap == 1.0) & (net.shift == 0.0)
     scale = np.where(line, factor, 1.0)
     note = f"line-z={factor!r}: the series impedance of {int(line.sum())} lines × {factor:g} (a perturbed model)"

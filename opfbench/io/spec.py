@@ -4,8 +4,9 @@ worker, tables).
     SOURCE[?der=DER&der-pf=PF&line-z=F]
 
 SOURCE is a shipped case name (`opfbench cases`), the path of a MATPOWER `.m` file or of a
-pandapower net saved with `pandapower.to_json` (`.json`), or `simbench:CODE` (a SimBench LV
-or MV grid code, e.g. `simbench:1-MV-rural--0-sw`). Options:
+pandapower net saved with `pandapower.to_json` (`.json`), `simbench:CODE` (a SimBench LV
+or MV grid code, e.g. `simbench:1-MV-rural--0-sw`) or `opendss:PATH` (an OpenDSS master
+file, read by OpenDSS itself: `opfbench.io.opendss`). Options:
 
 - `der=gens` (MATPOWER files): the case's non-slack generators become DER
   (`opfbench.io.matpower`); `der=BUS:KIND:MW[:ENERGY],…`: DER placed at those buses
@@ -31,6 +32,7 @@ from opfbench.errors import InputError
 from opfbench.network import DER_ENERGIES, DER_KINDS
 
 SIMBENCH = "simbench:"
+OPENDSS = "opendss:"
 
 
 @dataclass(frozen=True)
@@ -57,9 +59,11 @@ class CaseSpec:
 
     @property
     def kind(self) -> str:
-        """ "simbench", "matpower", "pandapower" or "shipped"."""
+        """ "simbench", "opendss", "matpower", "pandapower" or "shipped"."""
         if self.source.startswith(SIMBENCH):
             return "simbench"
+        if self.source.startswith(OPENDSS):
+            return "opendss"
         if self.source.endswith(".m"):
             return "matpower"
         if self.source.endswith(".json"):
@@ -95,6 +99,8 @@ def parse_spec(text: str) -> CaseSpec:
     spec = CaseSpec(source, der, der_pf, line_z)
     if der is not None and der != "gens":
         parse_der_list(der, text)
+    if spec.kind == "opendss" and not spec.source.removeprefix(OPENDSS).strip():
+        raise InputError(f"case {text!r}: opendss: needs the path of an OpenDSS master file, e.g. opendss:my/Master.dss")
     if der == "gens" and spec.kind != "matpower":
         raise InputError(f"case {text!r}: der=gens reads a MATPOWER file's generators; this case is {spec.kind}")
     return spec

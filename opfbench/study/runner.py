@@ -45,7 +45,7 @@ class StudyRun:
 
 def _case_info(case: str) -> dict:
     loaded = load_case(case)
-    net = loaded.network
+    net = loaded.balanced("a study (for now only `opfbench pf` and `opfbench cases` read three-phase feeders)")
     return {
         "buses": int(net.n_bus),
         "ders": [{"bus": int(net.bus_ids[d.bus]), "kind": d.kind, "rating_mw": float(d.rating_mw)} for d in net.ders],
