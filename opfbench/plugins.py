@@ -47,7 +47,16 @@ from pathlib import Path
 import numpy as np
 
 from opfbench.errors import InputError
-from opfbench.registry import CLOSED_LOOP_COLUMNS, SAFE, SETTLING_OPTIONS, STRATEGIES, Option, OptionValue, StrategySpec, register
+from opfbench.registry.catalog import (
+    CLOSED_LOOP_COLUMNS,
+    SAFE,
+    SETTLING_OPTIONS,
+    STRATEGIES,
+    Option,
+    OptionValue,
+    StrategySpec,
+    register,
+)
 
 __all__ = ["Option", "PluginSource", "ensure", "load", "load_entry_points", "loaded", "local_rule", "probe", "unload"]
 from opfbench.strategies.rules import FEEDBACK, Measurements, Rule, targets

@@ -32,7 +32,7 @@ def isolated_registry() -> Iterator[None]:
     """Plugins loaded inside the test are forgotten after it: the registry's entries and
     the loaded-plugin list are restored (every plugin registers into the one registry)."""
     from opfbench import plugins
-    from opfbench.registry import STRATEGIES
+    from opfbench.registry.catalog import STRATEGIES
 
     entries, before = dict(STRATEGIES), {p.ref for p in plugins.loaded()}
     yield

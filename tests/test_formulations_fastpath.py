@@ -20,7 +20,7 @@ from opfbench.formulations.problem import snapshot_data
 from opfbench.formulations.relaxation import build_socp, relaxation, socp_solves
 from opfbench.formulations.socp import run_socp
 from opfbench.io import load_network
-from opfbench.registry import run_strategy
+from opfbench.registry.catalog import run_strategy
 from opfbench.scenario import Scenario
 
 

@@ -15,7 +15,7 @@ import pytest
 
 from opfbench.data import paper_day
 from opfbench.io import load_network
-from opfbench.registry import DEFAULT_RUN, run_strategy
+from opfbench.registry.catalog import DEFAULT_RUN, run_strategy
 from opfbench.result import OK
 from opfbench.scenario import Scenario
 

@@ -15,7 +15,7 @@ from opfbench import plugins
 from opfbench.cli import main
 from opfbench.errors import InputError
 from opfbench.io import load_network
-from opfbench.registry import STRATEGIES, configuration, run_strategy, spec
+from opfbench.registry.catalog import STRATEGIES, configuration, run_strategy, spec
 from opfbench.result import OK, RULE_NON_FINITE
 from opfbench.scenario import Scenario
 

@@ -6,7 +6,7 @@ import pytest
 
 from opfbench.errors import InputError
 from opfbench.io import load_network
-from opfbench.registry import (
+from opfbench.registry.catalog import (
     BASELINE,
     DEFAULT_RUN,
     REFERENCE_OPTIMUM,

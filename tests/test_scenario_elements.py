@@ -11,7 +11,7 @@ from opfbench.errors import InputError
 from opfbench.io import load_network
 from opfbench.network import DER
 from opfbench.powerflow import solve_pf_batch
-from opfbench.registry import DEFAULT_RUN, run_strategy
+from opfbench.registry.catalog import DEFAULT_RUN, run_strategy
 from opfbench.scenario import Scenario
 
 

@@ -11,7 +11,7 @@ import pytest
 
 from opfbench.io import load_network
 from opfbench.powerflow import solve_pf
-from opfbench.registry import configuration, run_strategy
+from opfbench.registry.catalog import configuration, run_strategy
 from opfbench.result import NOT_SETTLED, OK
 from opfbench.scenario import Scenario
 from opfbench.strategies import standards

@@ -53,7 +53,7 @@ from opfbench.io import load_case, load_network
 from opfbench.network import Network
 from opfbench.powerflow import solve_pf_batch
 from opfbench.powerflow.memo import forget_flows
-from opfbench.registry import run_strategy
+from opfbench.registry.catalog import run_strategy
 from opfbench.scenario import Scenario
 from opfbench.timing import elapsed_ms, now
 

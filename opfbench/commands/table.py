@@ -13,7 +13,7 @@ from typing import TYPE_CHECKING, Sequence
 
 from opfbench.capability import PAPER_KS
 from opfbench.commands.common import fraction, print_json, share
-from opfbench.registry import run_strategy, specs
+from opfbench.registry.catalog import run_strategy, specs
 
 if TYPE_CHECKING:
     import pandas as pd

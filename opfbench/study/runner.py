@@ -15,7 +15,7 @@ import pyarrow as pa
 from opfbench.io import load_case
 from opfbench.jsonio import write_atomic
 from opfbench.parquetio import ParquetStream
-from opfbench.registry import configuration
+from opfbench.registry.catalog import configuration
 from opfbench.study.config import LABEL_FIELDS, StudyConfig
 from opfbench.study.engine import EngineRun, TaskOutput, run_family
 from opfbench.study.fitted import LEARNED_DIR, TRAIN_DIR, Fitted

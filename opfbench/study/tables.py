@@ -8,7 +8,7 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 
-from opfbench.registry import BASELINE, configuration, describe
+from opfbench.registry.catalog import BASELINE, configuration, describe
 from opfbench.result import NOT_SETTLED, OK, StrategyResult
 from opfbench.study.config import DETAIL_TABLES
 
