@@ -14,11 +14,11 @@ from opfbench.capability import qmax
 from opfbench.cli import main
 from opfbench.errors import InputError
 from opfbench.formulations import policy
-from opfbench.formulations.acopf import run_acopf
 from opfbench.formulations.infeasibility import SLACK_MUST_EXPORT, VOLTAGES_OUT_OF_REACH
 from opfbench.formulations.models import polar_ac
 from opfbench.formulations.models.polar_ac import AcOpf, build_acopf
 from opfbench.formulations.problem import VOLTAGE_TOLERANCE, snapshot_data
+from opfbench.formulations.runner import run_acopf
 from opfbench.formulations.socp import run_socp
 from opfbench.powerflow import solve_pf
 from opfbench.result import STATUSES

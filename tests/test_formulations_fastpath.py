@@ -8,17 +8,17 @@ import numpy as np
 import pytest
 
 from opfbench.errors import InputError, NetworkError
-from opfbench.formulations import acopf as acopf_module
-from opfbench.formulations import relaxation as relaxation_module
-from opfbench.formulations.acopf import run_acopf
+from opfbench.formulations import runner as acopf_module
+from opfbench.formulations import solves as relaxation_module
 from opfbench.formulations.cache import EXACT_KEY_BYTES, PER_THREAD, SolveCache, per_thread
 from opfbench.formulations.infeasibility import VOLTAGES_OUT_OF_REACH
+from opfbench.formulations.models.conic import SocpRelaxation, data_vector
 from opfbench.formulations.models.polar_ac import ac_opf
-from opfbench.formulations.models.soc import SocpRelaxation, data_vector
 from opfbench.formulations.policy import CERTIFY_RTOL
 from opfbench.formulations.problem import snapshot_data
-from opfbench.formulations.relaxation import build_socp, relaxation, socp_solves
+from opfbench.formulations.runner import run_acopf
 from opfbench.formulations.socp import run_socp
+from opfbench.formulations.solves import build_socp, relaxation, socp_solves
 from opfbench.io import load_network
 from opfbench.registry.catalog import run_strategy
 from opfbench.scenario import Scenario

@@ -9,10 +9,10 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from opfbench.formulations import acopf as acopf_module
-from opfbench.formulations.acopf import run_acopf
+from opfbench.formulations import runner as acopf_module
 from opfbench.formulations.infeasibility import SLACK_MUST_EXPORT, VOLTAGES_OUT_OF_REACH, flow_bounds, proven_infeasible
 from opfbench.formulations.problem import VOLTAGE_TOLERANCE, OpfProblem, slack_p_mw, snapshot_data
+from opfbench.formulations.runner import run_acopf
 from opfbench.io import load_case, load_network
 from opfbench.powerflow import solve_pf_batch
 from opfbench.scenario import Scenario

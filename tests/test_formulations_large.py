@@ -14,9 +14,9 @@ import casadi as ca
 import numpy as np
 import pytest
 
-from opfbench.formulations.acopf import run_acopf
 from opfbench.formulations.models.polar_ac import build_acopf
-from opfbench.formulations.relaxation import build_socp
+from opfbench.formulations.runner import run_acopf
+from opfbench.formulations.solves import build_socp
 from opfbench.io import load_network
 from opfbench.network import DER, Network
 from opfbench.scenario import Scenario

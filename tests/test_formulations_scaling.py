@@ -7,12 +7,12 @@ import numpy as np
 import pytest
 
 from opfbench.bench.pf_large import day96
-from opfbench.formulations.acopf import run_acopf
 from opfbench.formulations.models import distflow
 from opfbench.formulations.models.distflow import branch_scale
 from opfbench.formulations.policy import CERTIFY_RTOL
 from opfbench.formulations.problem import snapshot_data
-from opfbench.formulations.relaxation import build_socp
+from opfbench.formulations.runner import run_acopf
+from opfbench.formulations.solves import build_socp
 from opfbench.io import load_network
 from opfbench.scenario import Scenario
 

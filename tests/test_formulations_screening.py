@@ -8,9 +8,9 @@ import numpy as np
 import pytest
 
 from opfbench.bench.profiles import paper_day_scenario
-from opfbench.formulations.models.soc import data_vector
+from opfbench.formulations.models.conic import data_vector
 from opfbench.formulations.problem import snapshot_data
-from opfbench.formulations.relaxation import build_socp
+from opfbench.formulations.solves import build_socp
 from opfbench.io import load_network
 from opfbench.scenario import Scenario
 

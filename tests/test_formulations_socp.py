@@ -7,13 +7,13 @@ import numpy as np
 import pytest
 
 from opfbench.errors import NetworkError
-from opfbench.formulations.acopf import run_acopf
+from opfbench.formulations.models.conic import data_vector
 from opfbench.formulations.models.distflow import DistFlowSocp
 from opfbench.formulations.models.jabr import JabrSocp
-from opfbench.formulations.models.soc import data_vector
 from opfbench.formulations.problem import snapshot_data
-from opfbench.formulations.relaxation import build_socp
+from opfbench.formulations.runner import run_acopf
 from opfbench.formulations.socp import run_socp
+from opfbench.formulations.solves import build_socp
 from opfbench.io import load_network
 from opfbench.scenario import Scenario
 

@@ -48,7 +48,7 @@ from opfbench.bench.pandapower_opf import PandapowerOpf
 from opfbench.bench.profiles import paper_day_scenario
 from opfbench.formulations.models.polar_ac import build_acopf
 from opfbench.formulations.problem import snapshot_data
-from opfbench.formulations.relaxation import build_socp, forget_solves
+from opfbench.formulations.solves import build_socp, forget_solves
 from opfbench.io import load_case, load_network
 from opfbench.network import Network
 from opfbench.powerflow import solve_pf_batch

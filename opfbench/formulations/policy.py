@@ -31,8 +31,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from opfbench.formulations.models.conic import SocpSolve
 from opfbench.formulations.models.polar_ac import AcOpf, ac_opf
-from opfbench.formulations.models.soc import SocpSolve
 from opfbench.formulations.options import Fallback
 from opfbench.formulations.problem import OpfProblem, SnapshotData
 from opfbench.formulations.results import CERTIFIED_BY_IPOPT, CERTIFIED_BY_SOCP, FROM_COLD, FROM_NO_ACTION, FROM_SOCP, FROM_SOLVER

@@ -7,8 +7,8 @@ from __future__ import annotations
 import numpy as np
 
 from opfbench.formulations.problem import OpfProblem, snapshot_data
-from opfbench.formulations.relaxation import model_of, socp_solves
 from opfbench.formulations.results import FROM_NO_ACTION, FROM_SOLVER, diagnostics, evaluated_result
+from opfbench.formulations.solves import model_of, socp_solves
 from opfbench.result import INFEASIBLE, OK, SOLVER_FAILED, StrategyResult
 from opfbench.scenario import Scenario
 from opfbench.timing import elapsed_ms, now

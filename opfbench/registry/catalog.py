@@ -556,7 +556,7 @@ def _builtin() -> tuple[StrategySpec, ...]:
             "acopf",
             "formulation",
             "centralized AC OPF (IPOPT), fallback chain ending at an AC-feasible point",
-            runner="opfbench.formulations.acopf:run_acopf",
+            runner="opfbench.formulations.runner:run_acopf",
             options=(
                 Option("fallback", "chain", "chain: warm → cold IPOPT → SOCP → no action; paper: no action", choices=FALLBACKS),
                 slack_export,
@@ -569,7 +569,7 @@ def _builtin() -> tuple[StrategySpec, ...]:
             "acopf-paper",
             "formulation",
             "AC OPF under the paper's setup: slack may not export, failure → no action",
-            runner="opfbench.formulations.acopf:run_acopf",
+            runner="opfbench.formulations.runner:run_acopf",
             options=(solver,),
             fixed={"fallback": "paper", "slack_export": False},
             network_check=check,

@@ -25,7 +25,7 @@ import cvxpy as cp
 import numpy as np
 
 from opfbench.errors import NetworkError
-from opfbench.formulations.models.soc import Reader, SocpRelaxation
+from opfbench.formulations.models.conic import Reader, SocpRelaxation
 from opfbench.formulations.problem import incidence
 from opfbench.network import Network
 

@@ -14,7 +14,7 @@ from __future__ import annotations
 import cvxpy as cp
 import numpy as np
 
-from opfbench.formulations.models.soc import Reader, SocpRelaxation
+from opfbench.formulations.models.conic import Reader, SocpRelaxation
 
 
 class JabrSocp(SocpRelaxation):

@@ -20,8 +20,8 @@ from opfbench.formulations.infeasibility import proven_infeasible
 from opfbench.formulations.options import ACOPF_SOLVERS, FALLBACKS, AcopfSolver, Fallback, check_option
 from opfbench.formulations.policy import IpoptPolicy, fast_path, merge_flows
 from opfbench.formulations.problem import OpfProblem, snapshot_data
-from opfbench.formulations.relaxation import socp_solves
 from opfbench.formulations.results import diagnostics, evaluated_result
+from opfbench.formulations.solves import socp_solves
 from opfbench.powerflow import solve_pf_batch
 from opfbench.result import StrategyResult
 from opfbench.scenario import Scenario

@@ -24,9 +24,9 @@ from __future__ import annotations
 import numpy as np
 
 from opfbench.formulations.cache import SolveCache, per_thread
+from opfbench.formulations.models.conic import SocpRelaxation, SocpSolve, data_vector
 from opfbench.formulations.models.distflow import DistFlowSocp
 from opfbench.formulations.models.jabr import JabrSocp
-from opfbench.formulations.models.soc import SocpRelaxation, SocpSolve, data_vector
 from opfbench.formulations.problem import SnapshotData, snapshot_data
 from opfbench.network import Network
 from opfbench.scenario import Scenario
