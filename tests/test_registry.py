@@ -6,17 +6,8 @@ import pytest
 
 from opfbench.errors import InputError
 from opfbench.io import load_network
-from opfbench.registry.catalog import (
-    BASELINE,
-    DEFAULT_RUN,
-    REFERENCE_OPTIMUM,
-    STRATEGIES,
-    canonical,
-    configuration,
-    get_strategy,
-    run_strategy,
-    specs,
-)
+from opfbench.registry.catalog import STRATEGIES, canonical, configuration, get_strategy, run_strategy, specs
+from opfbench.registry.references import BASELINE, DEFAULT_RUN, REFERENCE_OPTIMUM
 from opfbench.result import StrategyResult
 from opfbench.scenario import Scenario
 

@@ -22,7 +22,8 @@ from threadpoolctl import threadpool_limits
 
 from opfbench.errors import InputError
 from opfbench.plugins import PluginSource, ensure, loaded
-from opfbench.registry.catalog import OptionValue, configuration, run_strategy
+from opfbench.registry.catalog import configuration, run_strategy
+from opfbench.registry.options import OptionValue
 from opfbench.result import StrategyResult
 from opfbench.scenario import Scenario
 from opfbench.strategies.learned import install
