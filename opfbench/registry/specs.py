@@ -60,9 +60,8 @@ class StrategySpec:
     cannot model, before any work; `check(options)` refuses option combinations;
     `columns`: extra per-step result columns (name → meaning, from `StrategyResult.extra`);
     `fit(name, training, options)`: a learned strategy's fit, `fit_options` the options it
-    takes; `in_default_run`: part of `opfbench run`'s default grid (built-ins only);
-    `probe()`: a plugin's check on made-up input when it loads; `source`: "opfbench" or the
-    plugin that registered it, `module` the module that declared it."""
+    takes; `source`: "opfbench" or the plugin that registered it, `module` the module that
+    declared it."""
 
     name: str
     kind: Kind
@@ -82,8 +81,6 @@ class StrategySpec:
     columns: dict[str, str] = field(default_factory=dict)
     fit: Callable[..., Any] | None = None
     fit_options: tuple[str, ...] = ()
-    in_default_run: bool = False
-    probe: Callable[[], None] | None = None
     source: str = OPFBENCH
     module: str = ""
 
@@ -277,7 +274,6 @@ def strategy(
     network_check: Callable[[Network], None] | None = None,
     check: Callable[[dict], None] | None = None,
     columns: Mapping[str, str] | None = None,
-    in_default_run: bool = False,
 ) -> Callable[[Runner], Runner]:
     """Register the decorated `runner(scenario, k, **options) -> StrategyResult` as the
     strategy `name` (fields: `StrategySpec`). Stacked, one runner serves several entries
@@ -300,7 +296,6 @@ def strategy(
                 network_check=network_check,
                 check=check,
                 columns=dict(columns or {}),
-                in_default_run=in_default_run,
                 source=source_of(runner.__module__),
                 module=runner.__module__,
             )
