@@ -113,7 +113,7 @@ def run(args: argparse.Namespace) -> int:
             f"  solver        {out['solver_status']} · {out['iterations']} iterations · {out['solve_ms']:.2f} ms"
             f" · fallback {out['fallback']}"
         )
-    print("  Q setpoints   " + ", ".join(f"bus {b}: {q:+.4f}" for b, q in out["q_mvar"].items()) + " MVAr")
+    print("  Q setpoints   " + ", ".join(f"{name}: {q:+.4f}" for name, q in out["q_mvar"].items()) + " MVAr")
     print(f"  power flows   {out['power_flows']}   excursion {out['excursion_mvar']:.4f} MVAr   wall {out['wall_ms']:.2f} ms")
     for key in result.extra:  # strategy diagnostics, e.g. LFMA's upstream disagreements
         print(f"  {key.replace('_', ' ')}: {out[key]}")

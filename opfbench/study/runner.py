@@ -48,7 +48,10 @@ def _case_info(case: str) -> dict:
     net = loaded.network
     return {
         "buses": int(net.n_bus),
-        "ders": [{"bus": int(net.bus_ids[d.bus]), "kind": d.kind, "rating_mw": float(d.rating_mw)} for d in net.ders],
+        "ders": [
+            {"name": name, "bus": int(net.bus_ids[d.bus]), "kind": d.kind, "rating_mw": float(d.rating_mw)}
+            for name, d in zip(net.der_names, net.ders, strict=True)
+        ],
         "vmin_pu": float(net.vmin.min()),
         "vmax_pu": float(net.vmax.max()),
         "loads": int(net.n_load),
