@@ -91,10 +91,13 @@ def run(args: argparse.Namespace) -> int:
     from opfbench.io import load_network
     from opfbench.registry import run_strategy
     from opfbench.scenario import Scenario
+    from opfbench.study.learning import check_params
 
     (label,) = strategy_labels([args.strategy], args)
     options = _options(args, label)
-    net = load_network(case_spec(args.case, args))
+    spec = case_spec(args.case, args)
+    net = load_network(spec)
+    check_params([label], [spec])  # a fitted rule runs on the grid it was fitted on (or a perturbed one)
     scenario = Scenario.snapshot(net, args.load_scale, args.der_scale, args.forecast_der_scale)
     result = run_strategy(label, scenario, args.k, **options)
     out = result.snapshot_json(0)
