@@ -32,8 +32,10 @@ def isolated_registry() -> Iterator[None]:
     """Plugins loaded inside the test are forgotten after it: the registry's entries and
     the loaded-plugin list are restored (every plugin registers into the one registry)."""
     from opfbench import plugins
+    from opfbench.registry.catalog import specs
     from opfbench.registry.specs import MODELS, STRATEGIES
 
+    specs()  # the built-ins loaded (on first need) before the registry is taken
     entries, models, before = dict(STRATEGIES), dict(MODELS), {p.ref for p in plugins.loaded()}
     yield
     for source in plugins.loaded():
