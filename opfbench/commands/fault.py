@@ -26,7 +26,7 @@ from opfbench.commands.common import (
 from opfbench.dynamics.params import FORECASTS, SENSITIVITY_VARIANTS, FaultParams, ModelParams
 from opfbench.errors import InputError
 from opfbench.jsonio import print_json
-from opfbench.registry import DEFAULT_FAULT
+from opfbench.registry.references import DEFAULT_FAULT
 
 if TYPE_CHECKING:
     from opfbench.io.case import Case
@@ -135,6 +135,7 @@ def _variants(args: argparse.Namespace) -> tuple[str, ...]:
 def run(args: argparse.Namespace) -> int:
     from opfbench.dynamics.study import FaultConfig, run_fault_study  # numba: only when a study runs
     from opfbench.io import load_case
+    from opfbench.study.learning import check_params
 
     case = load_case(case_spec(args.case, args))
     net = case.balanced("the fault study (a balanced three-phase RMS model)")
@@ -163,6 +164,7 @@ def run(args: argparse.Namespace) -> int:
         time=args.time,
     )
     config.check(net)  # before any work
+    check_params(config.strategies, [case.spec])
     try:
         study = run_fault_study(
             config,

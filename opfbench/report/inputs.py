@@ -23,7 +23,7 @@ import pyarrow.parquet as pq
 import opfbench
 from opfbench.errors import InputError
 from opfbench.io.spec import parse_spec
-from opfbench.registry import is_formulation
+from opfbench.registry.catalog import is_formulation
 from opfbench.report.sources import check_given, report_sources
 from opfbench.report.tables import REFERENCE_NIGHT
 from opfbench.study.store import SCHEMA
@@ -134,7 +134,7 @@ SUMMARY_NUMBERS = (
     "certified_share",
 )
 """The numeric columns of summary.csv the report uses besides its keys (`_KEYS`);
-pf_converged_steps and pf_diverged_steps when present."""
+pf_converged_steps, pf_diverged_steps and rule_non_finite_steps when present."""
 FORECAST_METRICS = ("mse_scaled", "mape_pct", "mae_kw", "rmse_kw", "skill", "fit_s")
 """The metrics of a forecast JSON the report shows."""
 SUMMARY_COUNTS = (
@@ -144,9 +144,10 @@ SUMMARY_COUNTS = (
     "excursion_steps",
     "pf_converged_steps",
     "pf_diverged_steps",
+    "rule_non_finite_steps",
 )
 """Columns of summary.csv that count steps: whole numbers ≥ 0."""
-SUMMARY_OPTIONAL_NUMBERS = ("pf_converged_steps", "pf_diverged_steps")
+SUMMARY_OPTIONAL_NUMBERS = ("pf_converged_steps", "pf_diverged_steps", "rule_non_finite_steps")
 
 
 def _number(value: object) -> bool:

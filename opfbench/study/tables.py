@@ -8,8 +8,9 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 
-from opfbench.registry import BASELINE, configuration, describe
-from opfbench.result import NOT_SETTLED, OK, StrategyResult
+from opfbench.registry.catalog import configuration, describe
+from opfbench.registry.references import BASELINE
+from opfbench.result import NOT_SETTLED, OK, PF_DIVERGED, RULE_NON_FINITE, StrategyResult
 from opfbench.study.config import DETAIL_TABLES
 
 KEYS = ["case", "strategy", "k", "night_mode", "forecast"]
@@ -34,7 +35,7 @@ STEP_COLUMNS = [
     "fallback",
     "solver_status",
 ]
-DETAIL_COLUMNS = {"der_q": [*KEYS, "time", "bus", "kind", "q_mvar"], "bus_v": [*KEYS, "time", "bus", "v_pu"]}
+DETAIL_COLUMNS = {"der_q": [*KEYS, "time", "der", "bus", "kind", "q_mvar"], "bus_v": [*KEYS, "time", "bus", "v_pu"]}
 VIOLATION_PU = 1e-6  # a step violates the voltage limits beyond this
 EXCURSION_MVAR = 1e-9  # a step's setpoint exceeds the physical capability beyond this
 
@@ -48,13 +49,6 @@ def extra_columns(labels: tuple[str, ...]) -> tuple[str, ...]:
 def step_columns(extra: tuple[str, ...] = ()) -> list[str]:
     """The per-step table's columns: STEP_COLUMNS, then the strategies' extra ones."""
     return [*STEP_COLUMNS, *extra]
-
-
-def _certified_by(res: StrategyResult) -> np.ndarray:
-    """Per step: the formulations' own record ("socp" | "ipopt" | ""); "" for the local rules."""
-    if "certified_by" in res.extra:
-        return np.asarray(res.extra["certified_by"], dtype=object)
-    return np.full(res.n_snapshots, "", dtype=object)
 
 
 Columns = dict[str, np.ndarray | str | float | int | bool]  # name → the part's rows, or one value for all
@@ -74,8 +68,7 @@ def step_rows(
     `extra_columns` from `res.extra` (NaN where this strategy has none)."""
     n = res.n_snapshots
     nan = np.full(n, np.nan)
-    extra = res.extra
-    local = "fallback" not in extra
+    solver = res.solver  # a formulation's typed record; None for a local rule
     lb = res.lower_bound_kw if res.lower_bound_kw is not None else nan
     return {
         "case": case,
@@ -96,12 +89,12 @@ def step_rows(
         "lower_bound_kw": np.asarray(lb, dtype=float),
         "power_flows": np.asarray(res.power_flows, dtype=np.int64),
         "wall_ms": res.wall_ms / n,
-        "solver_ms": np.asarray(extra.get("solve_ms", nan), dtype=float),
-        "iterations": np.asarray(extra.get("iterations", nan), dtype=float),
-        "certified_by": _certified_by(res).astype(str),
-        "fallback": "" if local else np.asarray(extra["fallback"], dtype=str),
-        "solver_status": "" if local else np.asarray(extra["solver_status"], dtype=str),
-    } | {name: np.asarray(extra.get(name, nan), dtype=float) for name in extra_columns}
+        "solver_ms": nan if solver is None else np.asarray(solver.solve_ms, dtype=float),
+        "iterations": nan if solver is None else np.asarray(solver.iterations, dtype=float),
+        "certified_by": "" if solver is None else np.asarray(solver.certified_by, dtype=str),
+        "fallback": "" if solver is None else np.asarray(solver.fallback, dtype=str),
+        "solver_status": "" if solver is None else np.asarray(solver.solver_status, dtype=str),
+    } | {name: np.asarray(res.extra.get(name, nan), dtype=float) for name in extra_columns}
 
 
 def detail_rows(
@@ -113,7 +106,7 @@ def detail_rows(
     tables: tuple[str, ...] = DETAIL_TABLES,
 ) -> dict[str, Columns]:
     """The columns of the long tables named in `tables`, for `stack`: "der_q" per-DER
-    setpoints (bus id, kind, q_mvar), "bus_v" per-bus |V| (p.u.)."""
+    setpoints (DER name, bus id, kind, q_mvar), "bus_v" per-bus |V| (p.u.)."""
     net = res.net
     n = res.n_snapshots
     label: Columns = {"case": case, "strategy": res.strategy, "k": float(res.k), "night_mode": night_mode, "forecast": forecast}
@@ -122,6 +115,7 @@ def detail_rows(
         n_der = len(net.ders)
         return label | {
             "time": np.repeat(time.asi8, n_der),
+            "der": np.tile(np.asarray(net.der_names, dtype=str), n),
             "bus": np.tile(net.bus_ids[net.der_bus], n).astype(np.int64),
             "kind": np.tile(np.asarray(net.der_kinds, dtype=str), n),
             "q_mvar": res.q_mvar.reshape(-1),
@@ -175,6 +169,8 @@ def partial_summary(steps: pd.DataFrame) -> pd.DataFrame:
         lb_missing=steps.lower_bound_kw.isna().astype(np.int64),
         not_ok=(steps.status != OK).astype(np.int64),
         not_settled=(steps.status == NOT_SETTLED).astype(np.int64),
+        pf_diverged=(steps.status == PF_DIVERGED).astype(np.int64),
+        non_finite=(steps.status == RULE_NON_FINITE).astype(np.int64),
         vv=(steps.voltage_violation_pu > VIOLATION_PU).astype(np.int64),
         vv_h=steps.step_h.where(steps.voltage_violation_pu > VIOLATION_PU, 0.0),
         exc=(steps.excursion_mvar > EXCURSION_MVAR).astype(np.int64),
@@ -191,6 +187,8 @@ def partial_summary(steps: pd.DataFrame) -> pd.DataFrame:
             "energy_kwh": g.energy.sum(),
             "not_ok_steps": g.not_ok.sum(),
             "not_settled_steps": g.not_settled.sum(),
+            "pf_diverged_steps": g.pf_diverged.sum(),
+            "rule_non_finite_steps": g.non_finite.sum(),
             "voltage_violation_steps": g.vv.sum(),
             "voltage_violation_h": g.vv_h.sum(),
             "max_violation_pu": g.voltage_violation_pu.max(),
@@ -217,6 +215,8 @@ PARTIAL_COLUMNS = (
     "energy_kwh",
     "not_ok_steps",
     "not_settled_steps",
+    "pf_diverged_steps",
+    "rule_non_finite_steps",
     "voltage_violation_steps",
     "voltage_violation_h",
     "max_violation_pu",
@@ -238,10 +238,12 @@ EXTREMES = {"vmin_pu": "min", "vmax_pu": "max", "max_excursion_mvar": "max", "ma
 
 def summarize(partials: list[pd.DataFrame], order: list[tuple]) -> pd.DataFrame:
     """The summary (one row per configuration, in `order` of KEYS tuples) from
-    `partial_summary` frames. A step whose power flow did not converge (pf-diverged) has
-    no loss or voltage figure: pf_diverged_steps counts them, pf_converged_steps the
-    others — the steps avg_loss_kw, vmin_pu, vmax_pu and voltage_violation_steps are
-    over; energy_kwh (the period's) is NaN unless every step has a figure, and so are the
+    `partial_summary` frames. A step whose power flow did not converge (pf-diverged) or
+    whose rule gave no finite target (rule-non-finite) has no loss or voltage figure: each
+    status is counted under its own name (pf_diverged_steps, rule_non_finite_steps),
+    pf_converged_steps counts the steps with a figure — the steps avg_loss_kw, vmin_pu,
+    vmax_pu and voltage_violation_steps are over; energy_kwh (the period's) is NaN unless
+    every step has a figure, and so are the
     savings and gaps built on it. no_action_kwh: the baseline's (`registry.BASELINE`)
     energy for the same case, k and night mode with forecast off; lower_bound_kwh: the
     certified bound over the same steps from the strategy at its default options with the
@@ -255,9 +257,8 @@ def summarize(partials: list[pd.DataFrame], order: list[tuple]) -> pd.DataFrame:
     for column, how in EXTREMES.items():
         out = out.join(g[column].agg(how))
     out = out.reindex(pd.MultiIndex.from_tuples(order, names=KEYS)).reset_index()
-    out["pf_diverged_steps"] = out.steps - out.pf_converged_steps
     out["avg_loss_kw"] = (out.energy_kwh / out.measured_hours).where(out.pf_converged_steps > 0)
-    out["energy_kwh"] = out.energy_kwh.where(out.pf_diverged_steps == 0)  # a period's energy needs every step's
+    out["energy_kwh"] = out.energy_kwh.where(out.pf_converged_steps == out.steps)  # a period's energy needs every step's
     out["solver_s"] = out.solver_s.where(out.solver_known > 0)
     out["certified_share"] = out.certified / out.steps
     out["voltage_violation_min"] = 60.0 * out.pop("voltage_violation_h")
@@ -300,6 +301,7 @@ def summarize(partials: list[pd.DataFrame], order: list[tuple]) -> pd.DataFrame:
         "certified_share",
         "pf_converged_steps",
         "pf_diverged_steps",
+        "rule_non_finite_steps",
     ]
     ints = [
         "steps",
@@ -309,6 +311,7 @@ def summarize(partials: list[pd.DataFrame], order: list[tuple]) -> pd.DataFrame:
         "excursion_steps",
         "pf_converged_steps",
         "pf_diverged_steps",
+        "rule_non_finite_steps",
     ]
     return out[KEYS + cols].astype({c: np.int64 for c in ints})
 
