@@ -162,9 +162,10 @@ def prepare(config: StudyConfig) -> RunFamily:
     for case in config.cases:
         loaded = load_case(case)
         data[case] = loaded.data_sha256
+        net = loaded.balanced("a study (for now only `opfbench pf` and `opfbench cases` read three-phase feeders)")
         for label in config.strategies:
             if label in running:
-                configuration(label).spec.check_network(loaded.network)
+                configuration(label).spec.check_network(net)
     return RunFamily(config, period, plan_tasks(config, period, data))
 
 
