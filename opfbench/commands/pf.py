@@ -20,10 +20,10 @@ import numpy as np
 
 from opfbench.commands.common import CASE_HELP, add_case_options, case_spec, fraction, print_json, share
 from opfbench.errors import InputError
-from opfbench.multiphase import PhaseNetwork
 
 if TYPE_CHECKING:
     from opfbench.io import Case
+    from opfbench.multiphase import PhaseNetwork
 
 DEFAULT_LOAD_SCALE, DEFAULT_DER_SCALE = 1.0, 0.8
 
@@ -57,6 +57,7 @@ def run(args: argparse.Namespace) -> int:
     import pandas as pd
 
     from opfbench.io import load_case
+    from opfbench.multiphase import PhaseNetwork
     from opfbench.powerflow import solve_pf
     from opfbench.scenario import Scenario
     from opfbench.study.periods import local_time
