@@ -16,12 +16,13 @@ from opfbench.io import load_case
 from opfbench.jsonio import write_atomic
 from opfbench.parquetio import ParquetStream
 from opfbench.registry.catalog import configuration
+from opfbench.schema import KEYS, TASK_SUMMARY
 from opfbench.study.config import LABEL_FIELDS, StudyConfig
 from opfbench.study.engine import EngineRun, TaskOutput, run_family
 from opfbench.study.fitted import LEARNED_DIR, TRAIN_DIR, Fitted
 from opfbench.study.periods import Period
 from opfbench.study.scenarios import check_model_forecasts, study_period
-from opfbench.study.tables import DETAIL_COLUMNS, KEYS, PARTIAL_COLUMNS, extra_columns, step_columns, summarize
+from opfbench.study.tables import DETAIL_COLUMNS, extra_columns, step_columns, summarize
 from opfbench.study.tasks import RunTask, TaskInput, plan_tasks, task_input
 
 RUN_OUTPUTS = ("steps.parquet", "summary.csv", "der_q.parquet", "bus_v.parquet", "report.html")
@@ -81,7 +82,7 @@ class RunFamily:
     def columns(self, table: str) -> list[str]:
         if table == "steps":
             return step_columns(extra_columns(self.config.strategies))
-        return [*KEYS, *PARTIAL_COLUMNS] if table == "summary" else DETAIL_COLUMNS[table]
+        return TASK_SUMMARY.names if table == "summary" else DETAIL_COLUMNS[table]
 
     @property
     def notes(self) -> tuple[str, ...]:
@@ -96,6 +97,7 @@ class RunFamily:
             "period": self.period.as_dict(),
             "data_sources": list(self.period.sources),
             "cases": cases,
+            "strategies": {label: configuration(label).spec.record() for label in self.config.strategies},
         }
 
     def job(self, task: RunTask) -> TaskInput:
