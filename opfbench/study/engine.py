@@ -204,7 +204,7 @@ def run_family(
     more were asked); ignored with a `scheduler` address. Notes go to stderr; `quiet`
     silences the progress only; `notes=False` keeps the family's planning notes unsaid (a
     nested run's, which its parent says). Ctrl-C: `Stopped` (or, in process, exit 130 at once)."""
-    from opfbench.study.progress import Progress
+    from opfbench.commands.progress import Progress
     from opfbench.study.store import RunStore
 
     start = now()
