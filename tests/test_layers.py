@@ -43,6 +43,7 @@ LAYERS: tuple[tuple[str, tuple[str, ...]], ...] = (
     ("study", ("opfbench.study",)),
     ("dynamics", ("opfbench.dynamics",)),
     ("report", ("opfbench.report",)),
+    ("api", ("opfbench.api",)),
     ("commands", ("opfbench.commands", "opfbench.cli", "opfbench.__main__")),
     ("bench", ("opfbench.bench",)),
 )

@@ -37,7 +37,7 @@ from opfbench.registry.references import DEFAULT_FAULT
 from opfbench.scenario import Scenario
 from opfbench.schema import FAULT, FAULT_TASK, FAULT_TASK_TRACES, TRACES
 from opfbench.study.config import check_something_to_run, strategies_for, unique_grid
-from opfbench.study.engine import EngineRun, Task, TaskOutput, run_family
+from opfbench.study.engine import SILENT, EngineRun, Reporter, Task, TaskOutput, run_family
 from opfbench.timing import elapsed_ms, now
 
 FAULT_OUTPUTS = ("fault.parquet", "traces.parquet")
@@ -430,13 +430,13 @@ def run_fault_study(
     workers: int | None = 1,
     scheduler: str | None = None,
     fresh: bool = False,
-    quiet: bool = False,
     command: list[str] | None = None,
+    reporter: Reporter = SILENT,
 ) -> FaultStudy:
     """Run the study on the engine into `out` (None: a temporary folder), resuming its
     finished tasks; see `study.engine.run_family` for the rest."""
     run = run_family(
-        lambda: plan(config, case), out, workers=workers, scheduler=scheduler, fresh=fresh, quiet=quiet, command=command
+        lambda: plan(config, case), out, workers=workers, scheduler=scheduler, fresh=fresh, command=command, reporter=reporter
     )
     return FaultStudy(out and run.out, run.family, run.result, run)
 
