@@ -26,6 +26,7 @@ from opfbench.io.case import Case, CaseSeries
 from opfbench.io.spec import OPENDSS, CaseSpec, parse_der_list, parse_spec
 from opfbench.multiphase import PhaseNetwork
 from opfbench.network import DER, Network
+from opfbench.state import PROCESS
 
 __all__ = ["NO_DER_NOTE", "Case", "CaseSeries", "CaseSpec", "load_case", "load_network", "parse_spec"]
 
@@ -37,6 +38,14 @@ NO_DER_NOTE = (
 NO_PHASE_DER_NOTE = "the feeder has no DER (PVSystem or Generator elements): every strategy gives the no-action result"
 _cache: OrderedDict[tuple, Case] = OrderedDict()
 _lock = threading.Lock()
+
+
+def _forget_cases() -> None:
+    with _lock:
+        _cache.clear()
+
+
+PROCESS.on_reset("cases read", _forget_cases)
 
 
 def _stamp(spec: CaseSpec) -> tuple:
