@@ -109,7 +109,7 @@ def _keys(table: str | None = None) -> tuple[Column, ...]:
             "case",
             "text",
             NO_UNIT,
-            "the case spec (`paper33`, a file path, `simbench:CODE`, with `?der=…` options)",
+            "the case spec (`opfbench.io.sources`: a shipped name, a file path, `simbench:CODE`, with `?der=…` options)",
             lambda c: c.case,
         ),
         Column("strategy", "text", NO_UNIT, "the registered strategy (configuration label)", lambda c: c.res.strategy),

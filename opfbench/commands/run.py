@@ -21,6 +21,7 @@ from opfbench.commands.common import (
     strategy_labels,
 )
 from opfbench.formulations.options import ACOPF_SOLVERS
+from opfbench.io.sources import formats
 from opfbench.jsonio import print_json
 from opfbench.registry.references import DEFAULT_FORECAST, DEFAULT_RUN
 from opfbench.study.config import CHUNKS, DEFAULT_NIGHT, NIGHT_MODES, StudyConfig
@@ -55,8 +56,7 @@ def register(sub: argparse._SubParsersAction) -> None:
         "--case",
         nargs="+",
         default=None,
-        help="case specs (default paper33): shipped names, MATPOWER .m or pandapower .json paths, simbench:CODE, "
-        "e.g. paper33 case69-der simbench:1-MV-rural--0-sw",
+        help=f"case specs (default paper33), each {formats()}; e.g. paper33 case69-der simbench:1-MV-rural--0-sw",
     )
     cases.add_argument(
         "--suite",

@@ -1,12 +1,12 @@
 """Case sources behind one interface: `load_case(spec)` → `Case` (network, stored
 operating point, its own time series when it has them, notes).
 
-Specs (`opfbench.io.spec`): a shipped name (`opfbench.cases`), a MATPOWER `.m` file
-(`opfbench.io.matpower`, reader and writer), a pandapower net saved as `.json`
-(`opfbench.io.pandapower`) or `simbench:CODE` (`opfbench.io.simbench`), each with the
-options `der=`, `der-pf=` and `line-z=` (a perturbed model). Cases are cached per process by spec (files also by their
-modification time and size), so a worker that runs many tasks of one case reads it once;
-SimBench grids, slow to extract, also on disk across processes (`opfbench.io.cache`).
+Specs (`opfbench.io.spec`): a SOURCE of one of the sources `opfbench.io.sources` declares
+(the shipped names, MATPOWER `.m` and pandapower `.json` files, SimBench grids; its
+`formats()` names them in every help and error text), with the options `der=`, `der-pf=`
+and `line-z=` (a perturbed model). Cases are cached per process by spec (files also by
+their modification time and size), so a worker that runs many tasks of one case reads it
+once; SimBench grids, slow to extract, also on disk across processes (`opfbench.io.cache`).
 """
 
 from __future__ import annotations
@@ -18,8 +18,9 @@ from pathlib import Path
 
 import numpy as np
 
-from opfbench.errors import CaseFormatError, InputError
+from opfbench.errors import InputError
 from opfbench.io.case import Case, CaseSeries
+from opfbench.io.sources import formats, source_of
 from opfbench.io.spec import CaseSpec, parse_der_list, parse_spec
 from opfbench.network import DER, Network
 from opfbench.state import PROCESS
@@ -44,14 +45,12 @@ PROCESS.on_reset("cases read", _forget_cases)
 
 
 def _stamp(spec: CaseSpec) -> tuple:
-    if spec.kind in ("matpower", "pandapower"):
+    if source_of(spec.source).file:
         path = Path(spec.source)
         try:
             st = path.stat()
         except OSError:
-            raise InputError(
-                f"case file {spec.source!r} not found (a shipped case name, a .m or .json path, or simbench:CODE)"
-            ) from None
+            raise InputError(f"case file {spec.source!r} not found (a case is {formats()})") from None
         return (str(path.resolve()), st.st_mtime_ns, st.st_size)
     return ()
 
@@ -83,32 +82,7 @@ def _read(spec: CaseSpec) -> Case:
     from opfbench.io.pandapower import DEFAULT_DER_PF
 
     der_pf = DEFAULT_DER_PF if spec.der_pf is None else spec.der_pf
-    if spec.kind == "simbench":
-        from opfbench.io.cache import cached_case
-        from opfbench.io.simbench import simbench_case
-
-        code = spec.source.removeprefix("simbench:")
-        case = cached_case(spec.text, lambda: simbench_case(spec.text, code, der_pf))
-    elif spec.kind == "matpower":
-        from opfbench.io.matpower import read_case_file
-
-        net, der_p = read_case_file(spec.source, None, der_pf if spec.der == "gens" else None)
-        stored = None
-        if spec.der == "gens":
-            loads = net.load_p_mw[net.load_bus], net.load_q_mvar[net.load_bus]
-            stored = (*loads, der_p, np.zeros_like(der_p))
-        case = Case(spec.text, net, stored)
-    elif spec.kind == "pandapower":
-        case = _pandapower_case(spec, der_pf)
-    else:
-        from opfbench.cases import CASE_NAMES, shipped_network
-
-        if spec.source not in CASE_NAMES:
-            raise InputError(
-                f"unknown case {spec.source!r}: give one of {', '.join(CASE_NAMES)}, the path of a MATPOWER .m or "
-                "pandapower .json file, or simbench:CODE (e.g. simbench:1-MV-rural--0-sw)"
-            )
-        case = Case(spec.text, shipped_network(spec.source))
+    case = source_of(spec.source).read(spec, der_pf)
     if spec.der is not None and spec.der != "gens":
         case = _with_listed_ders(case, spec, der_pf)
     if spec.line_z is not None:
@@ -150,31 +124,3 @@ def _with_line_impedances(case: Case, factor: float) -> Case:
     scale = np.where(line, factor, 1.0)
     note = f"line-z={factor!r}: the series impedance of {int(line.sum())} lines × {factor:g} (a perturbed model)"
     return dataclasses.replace(case, network=net.with_changes(r=net.r * scale, x=net.x * scale), notes=case.notes + (note,))
-
-
-def _pandapower_case(spec: CaseSpec, der_pf: float) -> Case:
-    import pandapower
-
-    from opfbench.io.pandapower import from_pandapower
-
-    path = Path(spec.source)
-    try:
-        pnet = pandapower.from_json(str(path))
-    except Exception as exc:  # noqa: BLE001 — pandapower raises anything from json, pandas or its own checks
-        raise CaseFormatError(
-            f"{path}: not a pandapower net saved with pandapower.to_json ({type(exc).__name__}: {exc})"
-        ) from None
-    if not isinstance(pnet, pandapower.pandapowerNet) or "bus" not in pnet or "ext_grid" not in pnet:
-        raise CaseFormatError(f"{path}: not a pandapower net (no bus and ext_grid tables)")
-    conv = from_pandapower(pnet, path.stem, der_pf=der_pf, label=str(path))
-    stored = (conv.stored_load_p_mw, conv.stored_load_q_mvar, conv.stored_der_p_mw, conv.stored_der_q_mvar)
-    return Case(
-        spec.text,
-        conv.network,
-        stored,
-        None,
-        conv.short_circuit,
-        conv.notes,
-        conv.load_index,
-        conv.sgen_index,
-    )
