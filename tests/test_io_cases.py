@@ -12,8 +12,8 @@ from opfbench.cases import _matpower_file
 from opfbench.cli import main
 from opfbench.errors import CaseFormatError, InputError
 from opfbench.io import NO_DER_NOTE, load_case, load_network, parse_spec
-from opfbench.io.cache import cached_case
 from opfbench.io.case import Case
+from opfbench.io.disk_cache import cached_case
 
 GEN_CASE = """function mpc = gens
 mpc.version = '2';

@@ -37,6 +37,7 @@ LAYERS: tuple[tuple[str, tuple[str, ...]], ...] = (
     ("records", ("opfbench.scenario", "opfbench.result", "opfbench.schema")),
     ("specs", ("opfbench.registry.options", "opfbench.registry.references", "opfbench.registry.specs")),
     ("strategies", ("opfbench.strategies",)),
+    ("learned", ("opfbench.learned",)),
     ("formulations", ("opfbench.formulations",)),
     ("registry", ("opfbench.registry", "opfbench.plugins")),
     ("data", ("opfbench.data", "opfbench.forecasting")),
@@ -122,7 +123,7 @@ def test_every_layer_name_is_a_module_or_a_package_to_come():
 @pytest.mark.parametrize(
     "source, expected",
     [
-        ("from opfbench.commands.common import fraction\n", "(strategies) imports opfbench.commands.common (commands)"),
+        ("from opfbench.commands.arguments import fraction\n", "(strategies) imports opfbench.commands.arguments (commands)"),
         ("def f():\n    from opfbench.report import page\n", "(strategies) imports opfbench.report"),
         ("from ..study import config\n", "(strategies) imports opfbench.study"),
         ("import opfbench.registry\n", "(strategies) imports opfbench.registry (registry)"),

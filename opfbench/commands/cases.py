@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import argparse
 
-from opfbench.commands.common import print_json
+from opfbench.commands.arguments import print_json
 from opfbench.io.sources import formats
 
 

@@ -12,7 +12,7 @@ import argparse
 from typing import TYPE_CHECKING, Sequence
 
 from opfbench.capability import PAPER_KS
-from opfbench.commands.common import fraction, print_json, share
+from opfbench.commands.arguments import fraction, print_json, share
 from opfbench.io.sources import formats
 
 if TYPE_CHECKING:

@@ -36,8 +36,8 @@ from typing import TYPE_CHECKING, Any, Protocol, TypeVar
 import numpy as np
 
 from opfbench.errors import NetworkError
-from opfbench.formulations.cache import per_thread
 from opfbench.formulations.problem import OpfProblem, check_supported
+from opfbench.formulations.solver_cache import per_thread
 from opfbench.registry.options import Option
 from opfbench.registry.specs import (
     MODELS,

@@ -6,7 +6,7 @@ Specs (`opfbench.io.spec`): a SOURCE of one of the sources `opfbench.io.sources`
 `formats()` names them in every help and error text), with the options `der=`, `der-pf=`
 and `line-z=` (a perturbed model). Cases are cached per process by spec (files also by
 their modification time and size), so a worker that runs many tasks of one case reads it
-once; SimBench grids, slow to extract, also on disk across processes (`opfbench.io.cache`).
+once; SimBench grids, slow to extract, also on disk across processes (`opfbench.io.disk_cache`).
 """
 
 from __future__ import annotations

@@ -44,7 +44,7 @@ class CaseSource:
 
 
 def _simbench(spec: CaseSpec, der_pf: float) -> Case:
-    from opfbench.io.cache import cached_case
+    from opfbench.io.disk_cache import cached_case
     from opfbench.io.simbench import simbench_case
 
     code = spec.source.removeprefix("simbench:")
