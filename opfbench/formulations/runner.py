@@ -1,6 +1,6 @@
 """The one runner of every formulation model: the model's setpoints on every snapshot of a
 scenario, AC-evaluated, with statuses, the fallback chain and certification
-(`model` says what a model is; `results` builds the one result record).
+(`model` says what a model is; `evaluation` builds the one result record).
 
 - An exact model (`run_exact`, the OPF problem's exact model behind `acopf`): with
   `solver="auto"` (default) the interval bounds (`infeasibility`) and the OPF problem's
