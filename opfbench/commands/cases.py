@@ -2,13 +2,14 @@
 OpenDSS feeders — (or the given specs: files, simbench:CODE, opendss:PATH) with
 bus/node/branch/DER/load counts; `--simbench` lists the SimBench codes the field suite
 runs. The text listing prints each case as it is read (an OpenDSS feeder is compiled on
-its first read, then kept on disk: `opfbench.io.cache`)."""
+its first read, then kept on disk: `opfbench.io.disk_cache`)."""
 
 from __future__ import annotations
 
 import argparse
 
-from opfbench.commands.common import print_json
+from opfbench.commands.arguments import print_json
+from opfbench.io.sources import formats
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -49,8 +50,5 @@ def run(args: argparse.Namespace) -> int:
             flush=True,
         )
     if not args.simbench and not args.specs:
-        print(
-            "\nalso: any MATPOWER .m or pandapower .json file, simbench:CODE (SimBench LV/MV grids; --simbench lists the "
-            "suite) and opendss:PATH (an OpenDSS master file)"
-        )
+        print(f"\nalso: {formats(without='shipped')} (--simbench lists SimBench's suite)")
     return 0

@@ -18,7 +18,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from opfbench.commands.common import CASE_HELP, add_case_options, case_spec, fraction, print_json, share
+from opfbench.commands.arguments import CASE_HELP, add_case_options, case_spec, fraction, print_json, share
 from opfbench.errors import InputError
 
 if TYPE_CHECKING:

@@ -39,13 +39,18 @@ import os
 import threading
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from opfbench.errors import CaseFormatError, NetworkError
+from opfbench.io.case import Case
 from opfbench.multiphase import GROUND, Branches, Element, Line, LoadModels, PhaseNetwork, Source, Transformer, Winding
 from opfbench.multiphase.branches import LOAD_MODELS
 from opfbench.network import DER
+
+if TYPE_CHECKING:
+    from opfbench.io.spec import CaseSpec
 
 SOLVE_TOLERANCE = 1e-10
 MIN_ITERATIONS = 100
@@ -453,3 +458,34 @@ class _Reader:
                 i = api.Next()
         p = np.clip(np.array(p_out, dtype=float), 0.0, [d.rating_mw for d in ders]) if ders else np.zeros(0)
         return ders, names, Branches(owner, a, b, base, share, len(ders)), p, np.array(q_out, dtype=float)
+
+
+NO_DER_NOTE = "the feeder has no DER (PVSystem or Generator elements): every strategy gives the no-action result"
+
+
+def opendss_case(spec: CaseSpec, path: Path | None, name: str | None) -> Case:
+    """The OpenDSS master file `path` — or, without it, the shipped feeder `name` (compiled
+    from a temporary copy: `opfbench.cases.opendss_cases.opendss_copy`) — as a case: its
+    three-phase network, and the snapshot the file defines as the stored operating point.
+    Also kept on disk (`opfbench.io.disk_cache`): OpenDSS hands a large feeder over in
+    seconds."""
+    from opfbench.cases.opendss_cases import opendss_copy, opendss_master
+    from opfbench.io.disk_cache import cached_case
+    from opfbench.io.loading import file_stamp
+
+    def build() -> Case:
+        if path is None:
+            assert name is not None
+            with opendss_copy(name) as master:
+                circuit = read_opendss(master, name)
+        else:
+            circuit = read_opendss(path, name)
+        stored = (circuit.load_p_mw, circuit.load_q_mvar, circuit.der_p_mw, circuit.der_q_mvar)
+        notes = circuit.notes if circuit.network.ders else circuit.notes + (NO_DER_NOTE,)
+        return Case(spec.text, circuit.network, stored, notes=notes)
+
+    record = path
+    if record is None:
+        assert name is not None
+        record = opendss_master(name)
+    return cached_case(spec.text, build, file_stamp(record, folder=True))

@@ -3,10 +3,9 @@ worker, tables).
 
     SOURCE[?der=DER&der-pf=PF&line-z=F]
 
-SOURCE is a shipped case name (`opfbench cases`), the path of a MATPOWER `.m` file or of a
-pandapower net saved with `pandapower.to_json` (`.json`), `simbench:CODE` (a SimBench LV
-or MV grid code, e.g. `simbench:1-MV-rural--0-sw`) or `opendss:PATH` (an OpenDSS master
-file, read by OpenDSS itself: `opfbench.io.opendss`). Options:
+SOURCE is one of the case sources `opfbench.io.sources` declares (its `formats()` names
+them: the shipped names, MATPOWER `.m` and pandapower `.json` files, `simbench:CODE`,
+`opendss:PATH`). Options:
 
 - `der=gens` (MATPOWER files): the case's non-slack generators become DER
   (`opfbench.io.matpower`); `der=BUS:KIND:MW[:ENERGY],…`: DER placed at those buses
@@ -29,10 +28,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from opfbench.errors import InputError
+from opfbench.io.sources import formats, source_of
 from opfbench.network import DER_ENERGIES, DER_KINDS
-
-SIMBENCH = "simbench:"
-OPENDSS = "opendss:"
 
 
 @dataclass(frozen=True)
@@ -59,24 +56,14 @@ class CaseSpec:
 
     @property
     def kind(self) -> str:
-        """ "simbench", "opendss", "matpower", "pandapower" or "shipped"."""
-        if self.source.startswith(SIMBENCH):
-            return "simbench"
-        if self.source.startswith(OPENDSS):
-            return "opendss"
-        if self.source.endswith(".m"):
-            return "matpower"
-        if self.source.endswith(".json"):
-            return "pandapower"
-        return "shipped"
+        """The kind of its source (`sources.SOURCES`: "shipped", "matpower", …)."""
+        return source_of(self.source).kind
 
 
 def parse_spec(text: str) -> CaseSpec:
     """The CaseSpec of `text`; InputError naming the option for a malformed one."""
     if not isinstance(text, str) or not text.strip():
-        raise InputError(
-            f"a case is a shipped case's name, a MATPOWER .m or pandapower .json file's path or simbench:CODE, got {text!r}"
-        )
+        raise InputError(f"a case is {formats()}, got {text!r}")
     source, sep, query = text.strip().partition("?")
     der, der_pf, line_z = None, None, None
     for part in query.split("&") if sep else ():
@@ -99,7 +86,7 @@ def parse_spec(text: str) -> CaseSpec:
     spec = CaseSpec(source, der, der_pf, line_z)
     if der is not None and der != "gens":
         parse_der_list(der, text)
-    if spec.kind == "opendss" and not spec.source.removeprefix(OPENDSS).strip():
+    if spec.kind == "opendss" and not spec.source.removeprefix("opendss:").strip():
         raise InputError(f"case {text!r}: opendss: needs the path of an OpenDSS master file, e.g. opendss:my/Master.dss")
     if der == "gens" and spec.kind != "matpower":
         raise InputError(f"case {text!r}: der=gens reads a MATPOWER file's generators; this case is {spec.kind}")

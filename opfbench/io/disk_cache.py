@@ -34,11 +34,11 @@ _SOURCES = (
     "io/simbench.py",
     "io/opendss.py",
     "io/case.py",
-    "io/cache.py",
+    "io/disk_cache.py",
     "network.py",
     "multiphase/model.py",
     "multiphase/branches.py",
-    "data/simbench.py",
+    "data/simbench_profiles.py",
 )
 _FORMAT = 2
 _RECORD = "__record__"
