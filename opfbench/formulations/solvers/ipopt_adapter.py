@@ -18,7 +18,7 @@ import numpy as np
 TOLERANCE = 1e-10  # IPOPT tol (scaled NLP error; objective in kW)
 # IPOPT's gradient-based scaling shrinks the kW objective; without this extra factor the
 # barrier leaves active Q bounds short of their limits and the objective above the exact
-# SOCP bound by more than the certification's 1e-6 (tests/test_formulations_socp.py).
+# SOCP bound by more than the certification's tolerance (`policy.CERTIFY_RTOL`).
 OBJECTIVE_SCALING = 100.0
 MAX_ITER = 300
 IPOPT_OPTIONS: dict[str, Any] = {
