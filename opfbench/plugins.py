@@ -47,13 +47,23 @@ from pathlib import Path
 import numpy as np
 
 from opfbench.errors import InputError
-from opfbench.registry import CLOSED_LOOP_COLUMNS, SAFE, SETTLING_OPTIONS, STRATEGIES, Option, OptionValue, StrategySpec, register
+from opfbench.registry import (
+    CLOSED_LOOP_COLUMNS,
+    PRIORITY,
+    SAFE,
+    SETTLING_OPTIONS,
+    STRATEGIES,
+    Option,
+    OptionValue,
+    StrategySpec,
+    register,
+)
 
 __all__ = ["Option", "PluginSource", "ensure", "load", "load_entry_points", "loaded", "local_rule", "probe", "unload"]
 from opfbench.strategies.rules import FEEDBACK, Measurements, Rule, targets
 
 ENTRY_POINT_GROUP = "opfbench.strategies"
-_RESERVED = {o.name for o in (SAFE, *SETTLING_OPTIONS)}
+_RESERVED = {o.name for o in (SAFE, PRIORITY, *SETTLING_OPTIONS)}
 
 
 @dataclass(frozen=True)
@@ -90,13 +100,16 @@ def local_rule(
     options: Mapping[str, OptionValue | Option] | None = None,
     summary: str = "",
     columns: Mapping[str, str] | None = None,
+    curtails: bool = False,
 ) -> Callable[[Callable], Callable]:
     """Register the decorated function `target(m, **options) -> (S, n_der)` MVAr as the
     local rule `name` (see the module docstring). `options`: name → default (bool, int,
     float, str or a tuple of floats; the default's type is the option's) or an `Option`.
-    The rule reads a forecast (its limit is Algorithm 3's), so it takes `safe`; a rule of
-    |V| or flows also takes the engine's settling options. InputError for a bad name,
-    reads, option or signature, or targets of the wrong shape or not finite on a probe."""
+    The rule reads a forecast (its limit is Algorithm 3's), so it takes `safe`, and the
+    inverter's `priority`; a rule of |V| or flows also takes the engine's settling options.
+    `curtails`: the function returns `opfbench.strategies.rules.Targets` (Q targets and a
+    cap on active power, MW) instead of Q targets alone. InputError for a bad name, reads,
+    option or signature, or targets of the wrong shape or not finite on a probe."""
 
     def decorate(target: Callable) -> Callable:
         source = _loading[-1] if _loading else getattr(target, "__module__", "plugin")
@@ -108,10 +121,11 @@ def local_rule(
             summary or (inspect.getdoc(target) or f"local rule {name}").splitlines()[0],
             rule=target,
             reads=tuple(reads),
-            options=(*declared, SAFE, *(SETTLING_OPTIONS if closed else ())),
+            options=(*declared, SAFE, PRIORITY, *(SETTLING_OPTIONS if closed else ())),
             uses_forecast=True,
             columns=dict(CLOSED_LOOP_COLUMNS if closed else {}) | dict(columns or {}),
             source=source,
+            curtails=curtails,
         )
         _check_signature(spec, target, declared)
         probe(spec)
@@ -175,10 +189,10 @@ def probe(spec: StrategySpec) -> None:
         "line_mva": np.array([[[-0.2 - 0.1j, 0.1 + 0.05j]] * 2] * n_rows),
     }
     m = Measurements(frozenset(spec.reads), values, n_rows, rating, rating, np.array(["PV", "DFIG"]), np.ones((2, 2), dtype=bool))
-    rule = Rule(spec.name, spec.rule, frozenset(spec.reads))  # type: ignore[arg-type]
+    rule = Rule(spec.name, spec.rule, frozenset(spec.reads), spec.curtails)  # type: ignore[arg-type]
     options = {o.name: o.default for o in spec.options if o.name not in _RESERVED}
     out = targets(rule, m, options, n_rows)
-    if not np.all(np.isfinite(out)):
+    if not out.finite.all():
         raise InputError(
             f"rule {spec.name!r} returned NaN or inf on a probe (|V| 0.9–1.1 p.u., P 0–100 % of rating, default "
             "options); a rule must give a finite Q target for every DER"

@@ -43,7 +43,7 @@ from opfbench.errors import InputError
 from opfbench.formulations.options import ACOPF_SOLVERS, FALLBACKS
 from opfbench.strategies.learned import KNOTS, RHO
 from opfbench.strategies.rules import DEFAULT_SETTLING as SETTLING
-from opfbench.strategies.rules import READS, RESIDUAL, Rule
+from opfbench.strategies.rules import PRIORITIES, READS, RESIDUAL, Rule
 
 if TYPE_CHECKING:
     from opfbench.result import StrategyResult
@@ -180,6 +180,13 @@ def _non_negative(value: OptionValue) -> str | None:
 
 
 SAFE = Option("safe", False, "Algorithm 3: cap the forecast-aware limit at the physical capability at P^C")
+PRIORITY = Option(
+    "priority",
+    "p",
+    "which power yields where the capability binds: p (active priority: Q within what P leaves) or "
+    "q (reactive priority: P curtailed so that (1 − k)·Qmax(P) covers Q)",
+    choices=PRIORITIES,
+)
 #: The closed-loop engine's options (`strategies.engine.Settling`), on every rule that reads |V| or flows.
 SETTLING_OPTIONS = (
     Option("max_steps", SETTLING.max_steps, "damped steps before a snapshot counts as not-settled", check=_non_negative),
@@ -188,7 +195,7 @@ SETTLING_OPTIONS = (
     Option("step_factor", SETTLING.step_factor, "damping α of Q += α·(target − Q), the first step's when adaptive", check=_step),
     Option("adaptive", SETTLING.adaptive, "adapt α per DER from successive voltage changes (OpenDSS InvControl)"),
 )
-_ENGINE = {o.name for o in (SAFE, *SETTLING_OPTIONS)}
+_ENGINE = {o.name for o in (SAFE, PRIORITY, *SETTLING_OPTIONS)}
 #: A learned strategy's options (`StrategySpec.fit`): where its parameters come from, and the fit's.
 TRAIN = Option("train", "", "training period START..END (END excluded): opfbench run fits the rule to the AC OPF over it")
 PARAMS = Option("params", "", "a fitted rule's parameters (JSON: a run folder's learned/*.json)")
@@ -255,6 +262,7 @@ class StrategySpec:
     relaxation: bool = False
     source: str = "opfbench"
     fit: str | Callable | None = None
+    curtails: bool = False
 
     def __post_init__(self) -> None:
         if (self.runner is None) == (self.rule is None):
@@ -330,6 +338,7 @@ class StrategySpec:
             "summary": self.summary,
             "reads": list(self.reads) if self.kind == "local" else ["the whole network (centralized)"],
             "closed_loop": self.closed_loop,
+            "curtails": self.curtails,
             "learned": self.learned,
             "uses_forecast": self.uses_forecast,
             "lower_bound": self.bound_rank is not None,
@@ -355,11 +364,20 @@ class StrategySpec:
             from opfbench.strategies.engine import run_rule
 
             engine = {key: v for key, v in options.items() if key in _ENGINE}
-            changes: dict[str, Any] = {key: v for key, v in engine.items() if key != "safe"}
+            changes: dict[str, Any] = {key: v for key, v in engine.items() if key not in ("safe", "priority")}
             settling = dataclasses.replace(SETTLING, **changes)
-            rule = Rule(self.name, _callable(self.rule), frozenset(self.reads))
+            rule = Rule(self.name, _callable(self.rule), frozenset(self.reads), self.curtails)
             rule_options = {key: v for key, v in options.items() if key not in _ENGINE}
-            result = run_rule(label, rule, scenario, k, rule_options, safe=bool(engine.get("safe", False)), settling=settling)
+            result = run_rule(
+                label,
+                rule,
+                scenario,
+                k,
+                rule_options,
+                safe=bool(engine.get("safe", False)),
+                settling=settling,
+                priority=str(engine.get("priority", "p")),
+            )
         else:
             assert self.runner is not None
             result = _callable(self.runner)(scenario, k, **(options | self.fixed))
@@ -392,6 +410,12 @@ class Configuration:
     def uses_forecast(self) -> bool:
         return self.spec.uses_forecast
 
+    @property
+    def curtails(self) -> bool:
+        """Its DER may deliver less active power than they have: a rule that caps it, or any
+        rule with reactive priority (`priority=q`)."""
+        return self.spec.curtails or self.options().get("priority") == "q"
+
     def options(self, settings: Mapping[str, object] | None = None) -> dict[str, OptionValue]:
         """Every option's value: the label's, else the run-level setting the option names,
         else its default."""
@@ -410,7 +434,7 @@ class Configuration:
 
 
 def _builtin() -> tuple[StrategySpec, ...]:
-    closed_loop = (SAFE, *SETTLING_OPTIONS)
+    closed_loop = (SAFE, PRIORITY, *SETTLING_OPTIONS)
     solver = Option(
         "solver",
         "auto",
@@ -425,6 +449,18 @@ def _builtin() -> tuple[StrategySpec, ...]:
         return (
             Option(x, (), f"explicit curve points instead of a preset: {help_x}, increasing, written 0.9/1.0/1.1 (with q=)"),
             Option("q", (), "explicit curve points: Q per unit, one per point, written 0.44/0/-0.44"),
+        )
+
+    def watt_points(v: str, p: str) -> tuple[Option, Option]:
+        return (
+            Option(
+                v,
+                (),
+                f"Volt-Watt curve points instead of IEEE 1547's default: |V| p.u., increasing, written 1.06/1.1 (with {p}=)",
+            ),
+            Option(
+                p, (), "Volt-Watt curve points: the active-power cap in p.u. of P̄, one per point, not increasing, written 1/0"
+            ),
         )
 
     std = "opfbench.strategies.standards"
@@ -455,7 +491,7 @@ def _builtin() -> tuple[StrategySpec, ...]:
             "Algorithm 1: Q = the load's Q at the DER's own bus, within (1 − k)·Qmax",
             rule=f"{paper}:llma_target",
             reads=("load",),
-            options=(SAFE,),
+            options=(SAFE, PRIORITY),
             uses_forecast=True,
         ),
         StrategySpec(
@@ -485,7 +521,7 @@ def _builtin() -> tuple[StrategySpec, ...]:
             "IEEE 1547-2018 Watt-VAR Q(P/P̄) in p.u. of S̄ (0.2/0 0.5/0 1.0/−0.44 for B, −0.25 for A)",
             rule=f"{std}:watt_var",
             reads=("p",),
-            options=(curve, *points("p", "P/P̄"), SAFE),
+            options=(curve, *points("p", "P/P̄"), SAFE, PRIORITY),
             uses_forecast=True,
             check=f"{std}:check_watt_var",
         ),
@@ -499,6 +535,7 @@ def _builtin() -> tuple[StrategySpec, ...]:
                 Option("pf", 0.95, "power factor in (0, 1]"),
                 Option("mode", "absorb", "absorb (under-excited) or inject (over-excited)", choices=("absorb", "inject")),
                 SAFE,
+                PRIORITY,
             ),
             uses_forecast=True,
             check=f"{std}:check_const_pf",
@@ -513,6 +550,7 @@ def _builtin() -> tuple[StrategySpec, ...]:
                 Option("pf_min", 0.90, "cos φ at P̄, under-excited (0.95 for units ≤ 4.6 kVA)"),
                 Option("p_start", 0.5, "P/P̄ where cos φ leaves 1"),
                 SAFE,
+                PRIORITY,
             ),
             uses_forecast=True,
             check=f"{std}:check_cosphi_p",
@@ -532,6 +570,30 @@ def _builtin() -> tuple[StrategySpec, ...]:
             uses_forecast=True,
             check=f"{std}:check_q_u",
             columns=CLOSED_LOOP_COLUMNS,
+        ),
+        StrategySpec(
+            "volt-watt",
+            "local",
+            "IEEE 1547-2018 Volt-Watt: active power capped at P(V) in p.u. of P̄ (1.06/1 1.10/0), Q = 0, closed loop",
+            rule=f"{std}:volt_watt",
+            reads=("v",),
+            options=(*watt_points("v", "p"), *closed_loop),
+            uses_forecast=True,
+            check=f"{std}:check_volt_watt",
+            columns=CLOSED_LOOP_COLUMNS,
+            curtails=True,
+        ),
+        StrategySpec(
+            "volt-var+volt-watt",
+            "local",
+            "IEEE 1547-2018 Volt-VAR and Volt-Watt together (OpenDSS CombiMode=VV_VW), closed loop",
+            rule=f"{std}:volt_var_volt_watt",
+            reads=("v",),
+            options=(curve, *points("v", "|V| p.u."), *watt_points("vw_v", "vw_p"), *closed_loop),
+            uses_forecast=True,
+            check=f"{std}:check_volt_var_volt_watt",
+            columns=CLOSED_LOOP_COLUMNS,
+            curtails=True,
         ),
         learned_rule(
             "learned-affine",

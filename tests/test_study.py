@@ -338,7 +338,7 @@ def test_the_repeat_check_finds_a_repeated_configuration(day_run):
 
 
 def test_the_default_grid_runs_a_forecast_only_where_a_strategy_reads_it():
-    """Planned without running: `opfbench run`'s default grid has 195 configurations (165
+    """Planned without running: `opfbench run`'s default grid has 225 configurations (195
     with forecast off: every built-in strategy; 30 with the oracle: the paper's Algorithm 3
     rules, `DEFAULT_FORECAST`); without that choice every strategy the registry says reads a
     forecast runs under the oracle too, and no other."""
@@ -346,7 +346,7 @@ def test_the_default_grid_runs_a_forecast_only_where_a_strategy_reads_it():
     assert {t.strategies for t in tasks if t.forecast == "oracle"} == {DEFAULT_FORECAST}
     assert {t.strategies for t in tasks if t.forecast == "off"} == {DEFAULT_RUN}
     configurations = {(t.case, s, t.k, m, t.forecast) for t in tasks for s in t.strategies for m in t.night_modes}
-    assert len(configurations) == 195 and len(tasks) == 2 * 5 * 4
+    assert len(configurations) == 225 and len(tasks) == 2 * 5 * 4
     every = prepare(StudyConfig()).tasks
     readers = {name for name in DEFAULT_RUN if get_strategy(name).uses_forecast}
     assert {t.strategies for t in every if t.forecast == "oracle"} == {tuple(s for s in DEFAULT_RUN if s in readers)}
@@ -414,3 +414,28 @@ def test_auto_chunk_is_six_hours_on_short_periods_and_a_month_otherwise():
     )
     year, tasks = family.config, family.tasks
     assert year.chunk == "month" and len(tasks) == 12
+
+
+def test_curtailed_energy_is_a_column_of_every_strategy(tmp_path):
+    """Volt-Watt on a curve that binds at paper33's midday voltages (below 1 p.u.): the steps carry the
+    power curtailed (kW), the DER table each unit's (MW), the summary the energy (kWh), and
+    a strategy that curtails nothing carries 0."""
+    config = StudyConfig(
+        strategies=("no-action", "volt-watt:v=0.9/1,p=1/0"),
+        ks=(0.0,),
+        night_modes=("connected",),
+        forecast=("off",),
+        period="2016-06-28T11:00..2016-06-28T12:00",
+    )
+    run = run_study(config, tmp_path, quiet=True)
+    steps = pd.read_parquet(tmp_path / "steps.parquet")
+    der = pd.read_parquet(tmp_path / "der_q.parquet")
+    summary = pd.read_csv(tmp_path / "summary.csv").set_index("strategy")
+    vw = "volt-watt:v=0.9/1,p=1/0"
+    assert (steps[steps.strategy == "no-action"].curtailed_kw == 0).all()
+    assert (steps[steps.strategy == vw].curtailed_kw > 0).any()
+    assert summary.loc[vw, "curtailed_kwh"] == pytest.approx((steps[steps.strategy == vw].curtailed_kw / 60).sum(), rel=1e-5)
+    assert summary.loc[vw, "curtailed_kwh"] > 0 and summary.loc["no-action", "curtailed_kwh"] == 0
+    by_step = der[der.strategy == vw].groupby("time").curtailed_mw.sum() * 1e3
+    np.testing.assert_allclose(by_step.to_numpy(), steps[steps.strategy == vw].curtailed_kw.to_numpy(), rtol=1e-12)
+    assert run.summary is not None and "curtailed_kwh" in run.summary

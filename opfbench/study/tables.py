@@ -24,6 +24,7 @@ STEP_COLUMNS = [
     "vmax_pu",
     "voltage_violation_pu",
     "q_total_mvar",
+    "curtailed_kw",
     "excursion_mvar",
     "lower_bound_kw",
     "power_flows",
@@ -34,7 +35,7 @@ STEP_COLUMNS = [
     "fallback",
     "solver_status",
 ]
-DETAIL_COLUMNS = {"der_q": [*KEYS, "time", "bus", "kind", "q_mvar"], "bus_v": [*KEYS, "time", "bus", "v_pu"]}
+DETAIL_COLUMNS = {"der_q": [*KEYS, "time", "bus", "kind", "q_mvar", "curtailed_mw"], "bus_v": [*KEYS, "time", "bus", "v_pu"]}
 VIOLATION_PU = 1e-6  # a step violates the voltage limits beyond this
 EXCURSION_MVAR = 1e-9  # a step's setpoint exceeds the physical capability beyond this
 
@@ -92,6 +93,7 @@ def step_rows(
         "vmax_pu": res.vmax,
         "voltage_violation_pu": res.voltage_violation(),
         "q_total_mvar": res.q_mvar.sum(axis=1),
+        "curtailed_kw": res.curtailed_kw,
         "excursion_mvar": res.excursion_mvar,
         "lower_bound_kw": np.asarray(lb, dtype=float),
         "power_flows": np.asarray(res.power_flows, dtype=np.int64),
@@ -113,18 +115,20 @@ def detail_rows(
     tables: tuple[str, ...] = DETAIL_TABLES,
 ) -> dict[str, Columns]:
     """The columns of the long tables named in `tables`, for `stack`: "der_q" per-DER
-    setpoints (bus id, kind, q_mvar), "bus_v" per-bus |V| (p.u.)."""
+    setpoints (bus id, kind, q_mvar, curtailed_mw), "bus_v" per-bus |V| (p.u.)."""
     net = res.net
     n = res.n_snapshots
     label: Columns = {"case": case, "strategy": res.strategy, "k": float(res.k), "night_mode": night_mode, "forecast": forecast}
 
     def der_q() -> Columns:
         n_der = len(net.ders)
+        curtailed = np.zeros(n * n_der) if res.curtailed_mw is None else res.curtailed_mw.reshape(-1)
         return label | {
             "time": np.repeat(time.asi8, n_der),
             "bus": np.tile(net.bus_ids[net.der_bus], n).astype(np.int64),
             "kind": np.tile(np.asarray(net.der_kinds, dtype=str), n),
             "q_mvar": res.q_mvar.reshape(-1),
+            "curtailed_mw": curtailed,
         }
 
     def bus_v() -> Columns:
@@ -169,6 +173,7 @@ def partial_summary(steps: pd.DataFrame) -> pd.DataFrame:
     measured = steps.losses_kw.notna()  # a converged power flow: the step has a loss and voltage figure
     s = steps.assign(
         energy=steps.losses_kw * steps.step_h,
+        curtailed=steps.curtailed_kw * steps.step_h,
         measured=measured.astype(np.int64),
         measured_h=steps.step_h.where(measured, 0.0),
         lb_energy=steps.lower_bound_kw * steps.step_h,
@@ -189,6 +194,7 @@ def partial_summary(steps: pd.DataFrame) -> pd.DataFrame:
             "pf_converged_steps": g.measured.sum(),
             "measured_hours": g.measured_h.sum(),
             "energy_kwh": g.energy.sum(),
+            "curtailed_kwh": g.curtailed.sum(),
             "not_ok_steps": g.not_ok.sum(),
             "not_settled_steps": g.not_settled.sum(),
             "voltage_violation_steps": g.vv.sum(),
@@ -215,6 +221,7 @@ PARTIAL_COLUMNS = (
     "pf_converged_steps",
     "measured_hours",
     "energy_kwh",
+    "curtailed_kwh",
     "not_ok_steps",
     "not_settled_steps",
     "voltage_violation_steps",
@@ -246,7 +253,8 @@ def summarize(partials: list[pd.DataFrame], order: list[tuple]) -> pd.DataFrame:
     energy for the same case, k and night mode with forecast off; lower_bound_kwh: the
     certified bound over the same steps from the strategy at its default options with the
     lowest `bound_rank` (the SOCP, slack may export, else the AC OPF's record of it), NaN
-    unless every step has one. voltage_violation_min: minutes of steps outside the case's
+    unless every step has one. curtailed_kwh: the active energy the DER had and did not
+    deliver (a rule's Volt-Watt or reactive priority). voltage_violation_min: minutes of steps outside the case's
     voltage limits, max_violation_pu the worst excursion beyond them; not_settled_steps:
     steps where a closed-loop rule did not settle."""
     p = pd.concat(partials, ignore_index=True)
@@ -283,6 +291,7 @@ def summarize(partials: list[pd.DataFrame], order: list[tuple]) -> pd.DataFrame:
         "energy_kwh",
         "no_action_kwh",
         "savings_pct",
+        "curtailed_kwh",
         "not_ok_steps",
         "not_settled_steps",
         "voltage_violation_steps",
