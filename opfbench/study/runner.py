@@ -21,10 +21,29 @@ from opfbench.study.engine import EngineRun, TaskOutput, run_family
 from opfbench.study.fitted import LEARNED_DIR, TRAIN_DIR, Fitted
 from opfbench.study.periods import Period
 from opfbench.study.scenarios import check_model_forecasts, study_period
-from opfbench.study.tables import DETAIL_COLUMNS, KEYS, PARTIAL_COLUMNS, extra_columns, step_columns, summarize
+from opfbench.study.tables import (
+    DETAIL_COLUMNS,
+    FRONTIER_COLUMNS,
+    FRONTIER_KEYS,
+    KEYS,
+    PARTIAL_COLUMNS,
+    PARTIAL_FRONTIER_COLUMNS,
+    extra_columns,
+    step_columns,
+    summarize,
+    summarize_frontier,
+)
 from opfbench.study.tasks import RunTask, TaskInput, plan_tasks, task_input
 
-RUN_OUTPUTS = ("steps.parquet", "summary.csv", "der_q.parquet", "bus_v.parquet", "report.html")
+RUN_OUTPUTS = (
+    "steps.parquet",
+    "summary.csv",
+    "frontier.parquet",
+    "frontier.csv",
+    "der_q.parquet",
+    "bus_v.parquet",
+    "report.html",
+)
 
 
 @dataclass
@@ -60,8 +79,9 @@ def _case_info(case: str) -> dict:
 
 @dataclass
 class RunFamily:
-    """The run's tasks (see `study.tasks`); the assembler streams steps.parquet and the
-    detail tables and writes summary.csv from the tasks' partial sums."""
+    """The run's tasks (see `study.tasks`); the assembler streams steps.parquet, the
+    frontier's steps and the detail tables and writes summary.csv and frontier.csv from
+    the tasks' partial sums."""
 
     config: StudyConfig
     period: Period
@@ -73,12 +93,17 @@ class RunFamily:
 
     @property
     def tables(self) -> tuple[str, ...]:
-        return ("steps", "summary", *self.config.detail_tables)
+        return ("steps", "summary", "frontier", "frontier_summary", *self.config.detail_tables)
 
     def columns(self, table: str) -> list[str]:
+        fixed = {
+            "summary": [*KEYS, *PARTIAL_COLUMNS],
+            "frontier": FRONTIER_COLUMNS,
+            "frontier_summary": [*FRONTIER_KEYS, "eps_pu", *PARTIAL_FRONTIER_COLUMNS],
+        }
         if table == "steps":
             return step_columns(extra_columns(self.config.strategies))
-        return [*KEYS, *PARTIAL_COLUMNS] if table == "summary" else DETAIL_COLUMNS[table]
+        return fixed[table] if table in fixed else DETAIL_COLUMNS[table]
 
     @property
     def notes(self) -> tuple[str, ...]:
@@ -111,13 +136,15 @@ class RunFamily:
 
 
 class RunAssembler:
-    """steps.parquet (+ the detail tables) streamed task by task in planned order as arrow
-    tables (never pandas), summary.csv from the partial sums on commit; all atomic."""
+    """steps.parquet, frontier.parquet (+ the detail tables) streamed task by task in
+    planned order as arrow tables (never pandas), summary.csv and frontier.csv from the
+    partial sums on commit; all atomic."""
 
     def __init__(self, out: Path, detail: tuple[str, ...]):
         self.out = out
-        self.writers = {name: ParquetStream(out / f"{name}.parquet") for name in ("steps", *detail)}
+        self.writers = {name: ParquetStream(out / f"{name}.parquet") for name in ("steps", "frontier", *detail)}
         self.partials: list[pd.DataFrame] = []
+        self.frontier: list[pd.DataFrame] = []
         self.order: list[tuple] = []
 
     def add(self, task: RunTask, tables: dict[str, pa.Table]) -> None:
@@ -125,6 +152,7 @@ class RunAssembler:
             writer.write(tables[name])
         partial = tables["summary"].to_pandas()
         self.partials.append(partial)
+        self.frontier.append(tables["frontier_summary"].to_pandas())
         self.order.extend(map(tuple, partial[KEYS].itertuples(index=False)))
 
     def commit(self) -> pd.DataFrame:
@@ -134,6 +162,8 @@ class RunAssembler:
         # figures to 6 significant digits; k exactly (0.1 and 0.1000001 are two configurations)
         exact_k = summary.assign(k=summary["k"].map(_exact))
         write_atomic(self.out / "summary.csv", exact_k.to_csv(index=False, float_format="%.6g"))
+        front = summarize_frontier(self.frontier)
+        write_atomic(self.out / "frontier.csv", front.assign(k=front["k"].map(_exact)).to_csv(index=False, float_format="%.6g"))
         return summary
 
     def abort(self) -> None:

@@ -1,6 +1,16 @@
 """The run's tables (columns: docs/CONTRACTS.md, run folder): per-step rows of one
-strategy result, the optional detail tables (per-DER Q, per-bus V), and the summary,
-built from per-task partial sums so that a year never has to sit in memory at once.
+strategy result, the optional detail tables (per-DER Q, per-bus V), the frontier's steps,
+and the summaries, built from per-task partial sums so that a year never has to sit in
+memory at once.
+
+Every configuration's step is compared with the frontier (`formulations.frontier`) at the
+smallest grid ε that covers its own excursion beyond the voltage band: its cost (losses
+plus curtailed power) against the optimum as compliant as it — the **gap at equal
+compliance** (≥ 0 where the optimum is global and the point is in the OPF's set) — and,
+over the period, the **share at equal compliance**: the reduction of the cost below no
+action's losses over the reduction that optimum makes, (E_na − C)/(E_na − F), ≤ 100 %.
+The plain, loss-only share (E_na − E)/(E_na − E_acopf) is kept beside it (`share_pct`):
+it compares a rule with an optimum that holds the band whatever the rule does.
 """
 
 from __future__ import annotations
@@ -8,7 +18,8 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 
-from opfbench.registry import BASELINE, configuration, describe
+from opfbench.formulations.frontier import Frontier
+from opfbench.registry import BASELINE, REFERENCE_OPTIMUM, configuration, describe
 from opfbench.result import NOT_SETTLED, OK, StrategyResult
 from opfbench.study.config import DETAIL_TABLES
 
@@ -34,10 +45,17 @@ STEP_COLUMNS = [
     "certified_by",
     "fallback",
     "solver_status",
+    "frontier_kw",
+    "frontier_bound_kw",
+    "frontier_eps_pu",
 ]
 DETAIL_COLUMNS = {"der_q": [*KEYS, "time", "bus", "kind", "q_mvar", "curtailed_mw"], "bus_v": [*KEYS, "time", "bus", "v_pu"]}
+FRONTIER_KEYS = ["case", "k", "night_mode"]
+FRONTIER_COLUMNS = [*FRONTIER_KEYS, "time", "step_h", "eps_pu", "cost_kw", "bound_kw", "excursion_pu", "status", "solved"]
 VIOLATION_PU = 1e-6  # a step violates the voltage limits beyond this
 EXCURSION_MVAR = 1e-9  # a step's setpoint exceeds the physical capability beyond this
+BELOW_KW = 1e-4  # a cost this far below its frontier point counts as below it (solver tolerances)
+SHARE_MIN_KWH = 1e-6  # a reduction below this defines no share
 
 
 def extra_columns(labels: tuple[str, ...]) -> tuple[str, ...]:
@@ -70,11 +88,15 @@ def step_rows(
     night: np.ndarray,
     res: StrategyResult,
     extra_columns: tuple[str, ...] = (),
+    frontier: Frontier | None = None,
 ) -> Columns:
     """The columns of one row per step of `res` (see the contract), for `stack`; the
-    `extra_columns` from `res.extra` (NaN where this strategy has none)."""
+    `extra_columns` from `res.extra` (NaN where this strategy has none); the frontier point
+    at the step's compliance (`Frontier.at`; NaN without a frontier)."""
     n = res.n_snapshots
     nan = np.full(n, np.nan)
+    violation = res.voltage_violation()
+    reference = frontier.at(violation) if frontier is not None else (nan, nan, nan)
     extra = res.extra
     local = "fallback" not in extra
     lb = res.lower_bound_kw if res.lower_bound_kw is not None else nan
@@ -91,7 +113,7 @@ def step_rows(
         "losses_kw": res.losses_kw,
         "vmin_pu": res.vmin,
         "vmax_pu": res.vmax,
-        "voltage_violation_pu": res.voltage_violation(),
+        "voltage_violation_pu": violation,
         "q_total_mvar": res.q_mvar.sum(axis=1),
         "curtailed_kw": res.curtailed_kw,
         "excursion_mvar": res.excursion_mvar,
@@ -103,7 +125,28 @@ def step_rows(
         "certified_by": _certified_by(res).astype(str),
         "fallback": "" if local else np.asarray(extra["fallback"], dtype=str),
         "solver_status": "" if local else np.asarray(extra["solver_status"], dtype=str),
+        "frontier_kw": reference[0],
+        "frontier_bound_kw": reference[1],
+        "frontier_eps_pu": reference[2],
     } | {name: np.asarray(extra.get(name, nan), dtype=float) for name in extra_columns}
+
+
+def frontier_rows(case: str, k: float, night_mode: str, time: pd.DatetimeIndex, step_h: float, front: Frontier) -> Columns:
+    """The frontier's rows (see the contract: one per step and grid ε), for `stack`."""
+    n, m = front.cost_kw.shape
+    return {
+        "case": case,
+        "k": float(k),
+        "night_mode": night_mode,
+        "time": np.repeat(time.asi8, m),
+        "step_h": float(step_h),
+        "eps_pu": np.tile(front.eps, n),
+        "cost_kw": front.cost_kw.reshape(-1),
+        "bound_kw": front.bound_kw.reshape(-1),
+        "excursion_pu": front.excursion_pu.reshape(-1),
+        "status": front.status.reshape(-1).astype(str),
+        "solved": front.solved.reshape(-1),
+    }
 
 
 def detail_rows(
@@ -174,6 +217,11 @@ def partial_summary(steps: pd.DataFrame) -> pd.DataFrame:
     s = steps.assign(
         energy=steps.losses_kw * steps.step_h,
         curtailed=steps.curtailed_kw * steps.step_h,
+        front=steps.frontier_kw * steps.step_h,
+        front_missing=steps.frontier_kw.isna().astype(np.int64),
+        front_bound=steps.frontier_bound_kw * steps.step_h,
+        front_bound_missing=steps.frontier_bound_kw.isna().astype(np.int64),
+        below=(steps.losses_kw + steps.curtailed_kw < steps.frontier_kw - BELOW_KW).astype(np.int64),
         measured=measured.astype(np.int64),
         measured_h=steps.step_h.where(measured, 0.0),
         lb_energy=steps.lower_bound_kw * steps.step_h,
@@ -195,6 +243,11 @@ def partial_summary(steps: pd.DataFrame) -> pd.DataFrame:
             "measured_hours": g.measured_h.sum(),
             "energy_kwh": g.energy.sum(),
             "curtailed_kwh": g.curtailed.sum(),
+            "frontier_kwh": g.front.sum(),
+            "frontier_missing": g.front_missing.sum(),
+            "frontier_bound_kwh": g.front_bound.sum(),
+            "frontier_bound_missing": g.front_bound_missing.sum(),
+            "below_frontier_steps": g.below.sum(),
             "not_ok_steps": g.not_ok.sum(),
             "not_settled_steps": g.not_settled.sum(),
             "voltage_violation_steps": g.vv.sum(),
@@ -222,6 +275,11 @@ PARTIAL_COLUMNS = (
     "measured_hours",
     "energy_kwh",
     "curtailed_kwh",
+    "frontier_kwh",
+    "frontier_missing",
+    "frontier_bound_kwh",
+    "frontier_bound_missing",
+    "below_frontier_steps",
     "not_ok_steps",
     "not_settled_steps",
     "voltage_violation_steps",
@@ -254,9 +312,17 @@ def summarize(partials: list[pd.DataFrame], order: list[tuple]) -> pd.DataFrame:
     certified bound over the same steps from the strategy at its default options with the
     lowest `bound_rank` (the SOCP, slack may export, else the AC OPF's record of it), NaN
     unless every step has one. curtailed_kwh: the active energy the DER had and did not
-    deliver (a rule's Volt-Watt or reactive priority). voltage_violation_min: minutes of steps outside the case's
-    voltage limits, max_violation_pu the worst excursion beyond them; not_settled_steps:
-    steps where a closed-loop rule did not settle."""
+    deliver (a rule's Volt-Watt or reactive priority); cost_kwh = energy_kwh + curtailed_kwh.
+    voltage_violation_min: minutes of steps outside the case's voltage limits,
+    max_violation_pu the worst excursion beyond them; not_settled_steps: steps where a
+    closed-loop rule did not settle. At equal compliance (module docstring): frontier_kwh
+    the frontier's optimum at each step's compliance (NaN unless every step has one;
+    frontier_missing_steps count those without), frontier_bound_kwh its certified bound,
+    gap_eq_kwh = cost_kwh − frontier_kwh (gap_eq_pct of frontier_kwh), share_eq_pct =
+    100·(no_action_kwh − cost_kwh)/(no_action_kwh − frontier_kwh) where that reduction
+    exceeds SHARE_MIN_KWH, below_frontier_steps the steps whose cost lies more than
+    BELOW_KW under their frontier point; share_pct the plain loss-only share,
+    100·(no_action_kwh − energy_kwh)/(no_action_kwh − the reference optimum's energy)."""
     p = pd.concat(partials, ignore_index=True)
     g = p.groupby(KEYS, sort=False)
     out = g[[c for c in PARTIAL_COLUMNS if c not in EXTREMES]].sum()
@@ -284,6 +350,18 @@ def summarize(partials: list[pd.DataFrame], order: list[tuple]) -> pd.DataFrame:
     )
     out["gap_kwh"] = out.energy_kwh - out.lower_bound_kwh
     out["gap_pct"] = 100 * out.gap_kwh / out.lower_bound_kwh
+    out["cost_kwh"] = out.energy_kwh + out.curtailed_kwh
+    out["frontier_missing_steps"] = out.pop("frontier_missing")
+    out["frontier_kwh"] = out.frontier_kwh.where(out.frontier_missing_steps == 0)
+    out["frontier_bound_kwh"] = out.frontier_bound_kwh.where(out.pop("frontier_bound_missing") == 0)
+    out["gap_eq_kwh"] = out.cost_kwh - out.frontier_kwh
+    out["gap_eq_pct"] = 100 * out.gap_eq_kwh / out.frontier_kwh
+    reduction = out.no_action_kwh - out.frontier_kwh
+    out["share_eq_pct"] = (100 * (out.no_action_kwh - out.cost_kwh) / reduction).where(reduction > SHARE_MIN_KWH)
+    optimum = out[(out.strategy == REFERENCE_OPTIMUM) & (out.forecast == "off")].set_index(["case", "k", "night_mode"]).energy_kwh
+    e_opt = pd.MultiIndex.from_frame(out[["case", "k", "night_mode"]]).map(optimum.to_dict().get).astype(float)
+    plain = out.no_action_kwh - e_opt
+    out["share_pct"] = (100 * (out.no_action_kwh - out.energy_kwh) / plain).where(plain > SHARE_MIN_KWH)
     cols = [
         "steps",
         "hours",
@@ -292,6 +370,15 @@ def summarize(partials: list[pd.DataFrame], order: list[tuple]) -> pd.DataFrame:
         "no_action_kwh",
         "savings_pct",
         "curtailed_kwh",
+        "cost_kwh",
+        "frontier_kwh",
+        "frontier_bound_kwh",
+        "gap_eq_kwh",
+        "gap_eq_pct",
+        "share_eq_pct",
+        "share_pct",
+        "frontier_missing_steps",
+        "below_frontier_steps",
         "not_ok_steps",
         "not_settled_steps",
         "voltage_violation_steps",
@@ -312,6 +399,8 @@ def summarize(partials: list[pd.DataFrame], order: list[tuple]) -> pd.DataFrame:
     ]
     ints = [
         "steps",
+        "frontier_missing_steps",
+        "below_frontier_steps",
         "not_ok_steps",
         "not_settled_steps",
         "voltage_violation_steps",
@@ -326,3 +415,73 @@ def _bound_rank(label: str) -> float:
     """The `bound_rank` of a label that is a strategy at its default options (NaN: none)."""
     spec = describe(label)
     return float(spec.bound_rank) if spec is not None and spec.bound_rank is not None and label == spec.name else np.nan
+
+
+def partial_frontier(front: pd.DataFrame) -> pd.DataFrame:
+    """Sums per (case, k, night mode, ε) of one task's frontier rows (combined by
+    `summarize_frontier`)."""
+    s = front.assign(
+        energy=front.cost_kw * front.step_h,
+        missing=front.cost_kw.isna().astype(np.int64),
+        bound=front.bound_kw * front.step_h,
+        bound_missing=front.bound_kw.isna().astype(np.int64),
+        outside_h=front.step_h.where(front.excursion_pu > VIOLATION_PU, 0.0),
+        solved=front.solved.astype(np.int64),
+    )
+    g = s.groupby([*FRONTIER_KEYS, "eps_pu"], sort=False, observed=True)
+    sums = pd.DataFrame(
+        {
+            "steps": g.size(),
+            "energy_kwh": g.energy.sum(),
+            "missing": g.missing.sum(),
+            "bound_kwh": g.bound.sum(),
+            "bound_missing": g.bound_missing.sum(),
+            "outside_h": g.outside_h.sum(),
+            "max_excursion_pu": g.excursion_pu.max(),
+            "solved": g.solved.sum(),
+        }
+    )
+    return sums[list(PARTIAL_FRONTIER_COLUMNS)].reset_index()
+
+
+PARTIAL_FRONTIER_COLUMNS = (
+    "steps",
+    "energy_kwh",
+    "missing",
+    "bound_kwh",
+    "bound_missing",
+    "outside_h",
+    "max_excursion_pu",
+    "solved",
+)
+"""The columns of a task's frontier sums (`partial_frontier`) besides the keys and ε."""
+FRONTIER_SUMMARY_COLUMNS = [
+    *FRONTIER_KEYS,
+    "eps_pu",
+    "steps",
+    "energy_kwh",
+    "bound_kwh",
+    "no_optimum_steps",
+    "voltage_violation_min",
+    "max_violation_pu",
+    "solved_steps",
+]
+
+
+def summarize_frontier(partials: list[pd.DataFrame]) -> pd.DataFrame:
+    """The frontier of each (case, k, night mode): per grid ε the optimum's energy over the
+    period (NaN unless every step has an optimum at that ε; no_optimum_steps count those
+    without: infeasible, or only a fallback point), its certified bound's, the minutes its
+    optimum lies outside the (unwidened) band and its worst excursion there, and the steps
+    solved at that ε (the others take the answer of an ε that covers them)."""
+    if not partials:
+        return pd.DataFrame(columns=FRONTIER_SUMMARY_COLUMNS)
+    p = pd.concat(partials, ignore_index=True)
+    g = p.groupby([*FRONTIER_KEYS, "eps_pu"], sort=False)
+    out = g[["steps", "energy_kwh", "missing", "bound_kwh", "bound_missing", "outside_h", "solved"]].sum()
+    out = out.join(g["max_excursion_pu"].max()).reset_index()
+    out["energy_kwh"] = out.energy_kwh.where(out.missing == 0)
+    out["bound_kwh"] = out.bound_kwh.where(out.pop("bound_missing") == 0)
+    out = out.rename(columns={"missing": "no_optimum_steps", "max_excursion_pu": "max_violation_pu", "solved": "solved_steps"})
+    out["voltage_violation_min"] = 60.0 * out.pop("outside_h")
+    return out[FRONTIER_SUMMARY_COLUMNS].astype({"steps": np.int64, "no_optimum_steps": np.int64, "solved_steps": np.int64})
