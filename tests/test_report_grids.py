@@ -37,9 +37,9 @@ def _summary() -> pd.DataFrame:
 
 def test_leaderboard_shares_of_the_opf_reduction():
     board = leaderboard(_summary()).set_index(["case", "strategy"])
-    assert board.loc[("grid-a", "lfma"), "opf_share_pct"] == pytest.approx(50.0)
-    assert board.loc[("grid-a", "llma"), "opf_share_pct"] == pytest.approx(20.0)
-    assert board.loc[("grid-b", "llma"), "opf_share_pct"] == pytest.approx(-50.0)  # worse than no action
+    assert board.loc[("grid-a", "lfma"), "loss_only_share_pct"] == pytest.approx(50.0)
+    assert board.loc[("grid-a", "llma"), "loss_only_share_pct"] == pytest.approx(20.0)
+    assert board.loc[("grid-b", "llma"), "loss_only_share_pct"] == pytest.approx(-50.0)  # worse than no action
     assert board.loc[("grid-a", "acopf"), "rank"] == 1 and board.loc[("grid-a", "llma"), "rank"] == 4
     assert board.loc[("grid-a", "llma"), "voltage_violation_steps"] == 3 and "no-action" not in board.index.get_level_values(1)
 
@@ -47,7 +47,7 @@ def test_leaderboard_shares_of_the_opf_reduction():
 def test_leaderboard_without_an_opf_reduction_gives_no_share():
     s = _summary()
     s.loc[s.strategy == "acopf", "energy_kwh"] = s.loc[s.strategy == "acopf", "no_action_kwh"]
-    assert np.isnan(leaderboard(s).opf_share_pct).all()
+    assert np.isnan(leaderboard(s).loss_only_share_pct).all()
 
 
 def test_ranking_claim_per_grid():
@@ -85,10 +85,10 @@ def test_how_close_sets_train_beside_test_and_maps_a_perturbed_case_to_its_model
     train.loc[train["strategy"] == "lfma", "energy_kwh"] = 85.0  # train: 75 % of the OPF's reduction
     table = how_close(pd.concat([test, perturbed]), train, {"grid-a?line-z=1.2": "grid-a"}).set_index(["case", "strategy"])
     assert "acopf" not in table.index.get_level_values(1) and "socp" not in table.index.get_level_values(1)
-    assert table.loc[("grid-a", "no-action"), "test_share_pct"] == 0.0
-    assert table.loc[("grid-a", "lfma"), "test_share_pct"] == pytest.approx(50.0)
-    assert table.loc[("grid-a", "lfma"), "train_share_pct"] == pytest.approx(75.0)
-    assert table.loc[("grid-a?line-z=1.2", "lfma"), "train_share_pct"] == pytest.approx(75.0)  # the model's training
-    assert np.isnan(table.loc[("grid-b", "lfma"), "train_share_pct"])  # no training on grid-b
+    assert table.loc[("grid-a", "no-action"), "test_loss_only_share_pct"] == 0.0
+    assert table.loc[("grid-a", "lfma"), "test_loss_only_share_pct"] == pytest.approx(50.0)
+    assert table.loc[("grid-a", "lfma"), "train_loss_only_share_pct"] == pytest.approx(75.0)
+    assert table.loc[("grid-a?line-z=1.2", "lfma"), "train_loss_only_share_pct"] == pytest.approx(75.0)  # the model's training
+    assert np.isnan(table.loc[("grid-b", "lfma"), "train_loss_only_share_pct"])  # no training on grid-b
     alone = how_close(test)
-    assert alone["train_share_pct"].isna().all() and len(alone) == 6
+    assert alone["train_loss_only_share_pct"].isna().all() and len(alone) == 6

@@ -75,9 +75,9 @@ def _board(violations: float, recovery: float | None) -> pd.DataFrame:
     ("violations", "recovery", "ids"),
     [
         (0.0, None, ["share-k-0"]),
-        (15.0, None, ["share-voltage-violation-min-0"]),
+        (15.0, None, ["share-k-0"]),  # compliance is the frontier figure's axis
         (0.0, -3.0, ["share-recovery-added-ms-0"]),
-        (15.0, -3.0, ["share-voltage-violation-min-0", "share-recovery-added-ms-0"]),
+        (15.0, -3.0, ["share-recovery-added-ms-0"]),
     ],
 )
 def test_the_share_is_plotted_against_what_the_case_has(violations, recovery, ids):
@@ -90,8 +90,8 @@ def test_the_headline_figure_cuts_a_share_far_below_no_action():
             "case": ["grid"] * 3,
             "k": [0.0] * 3,
             "strategy": ["no-action", "lfma", "learned-affine:train=2016-01-01..2016-10-01,rounds=3"],
-            "train_share_pct": [0.0, -2500.0, 95.0],
-            "test_share_pct": [0.0, -3000.0, 97.0],
+            "train_share_eq_pct": [0.0, -2500.0, 95.0],
+            "test_share_eq_pct": [0.0, -3000.0, 97.0],
         }
     )
     (plot,) = plots.how_close(board, " — grid")
@@ -99,7 +99,7 @@ def test_the_headline_figure_cuts_a_share_far_below_no_action():
     assert figure["layout"]["yaxis"]["range"][0] == plots.SHARE_FLOOR_PCT
     assert "axis cut" in plot.title
     assert "learned-affine:rounds=3" in figure["data"][0]["x"][1]  # the training period is the run's, said beside
-    (uncut,) = plots.how_close(board.assign(train_share_pct=[0.0, -20.0, 95.0], test_share_pct=[0.0, -30.0, 97.0]))
+    (uncut,) = plots.how_close(board.assign(train_share_eq_pct=[0.0, -20.0, 95.0], test_share_eq_pct=[0.0, -30.0, 97.0]))
     assert "axis cut" not in uncut.title and "range" not in json.loads(uncut.json)["layout"].get("yaxis", {})
 
 

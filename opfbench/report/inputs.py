@@ -68,6 +68,8 @@ class Inputs:
     year_dir: Path | None = None
     field_summary: pd.DataFrame | None = None  # the committed year on real grids (docs/field-year)
     field_manifest: dict | None = None
+    field_frontier: pd.DataFrame | None = None
+    frontier: pd.DataFrame | None = None  # frontier.csv: losses against compliance (a run before it has none)
     train_summary: pd.DataFrame | None = None  # train/summary.csv: the rules over the training period
     learned: dict[str, dict] = field(default_factory=dict)  # the run's learned/<file>.json -> what it holds (a row)
     studies: list[Inputs] = field(default_factory=list)  # committed learned-rule studies (docs/learned), if the run trained none
@@ -139,6 +141,8 @@ FORECAST_METRICS = ("mse_scaled", "mape_pct", "mae_kw", "rmse_kw", "skill", "fit
 """The metrics of a forecast JSON the report shows."""
 SUMMARY_COUNTS = (
     "steps",
+    "frontier_missing_steps",
+    "below_frontier_steps",
     "not_ok_steps",
     "voltage_violation_steps",
     "excursion_steps",
@@ -146,7 +150,25 @@ SUMMARY_COUNTS = (
     "pf_diverged_steps",
 )
 """Columns of summary.csv that count steps: whole numbers ≥ 0."""
-SUMMARY_OPTIONAL_NUMBERS = ("pf_converged_steps", "pf_diverged_steps")
+SUMMARY_OPTIONAL_NUMBERS = (
+    "pf_converged_steps",
+    "pf_diverged_steps",
+    "curtailed_kwh",
+    "cost_kwh",
+    "frontier_kwh",
+    "frontier_bound_kwh",
+    "gap_eq_kwh",
+    "gap_eq_pct",
+    "share_eq_pct",
+    "share_pct",
+    "frontier_missing_steps",
+    "below_frontier_steps",
+)
+"""Columns of summary.csv a run writes that an older one may lack (checked where present)."""
+FRONTIER_KINDS = {"case": TEXT, "k": NUMBER, "night_mode": TEXT, "eps_pu": NUMBER, "steps": NUMBER, "energy_kwh": NUMBER}
+FRONTIER_KINDS |= {"bound_kwh": NUMBER, "no_optimum_steps": NUMBER, "voltage_violation_min": NUMBER}
+FRONTIER_KINDS |= {"max_violation_pu": NUMBER, "solved_steps": NUMBER}
+"""frontier.csv's columns the report uses."""
 
 
 def _number(value: object) -> bool:
@@ -435,6 +457,35 @@ def _summary(path: Path, command: str) -> pd.DataFrame | None:
     return summary
 
 
+def _frontier(path: Path, command: str) -> pd.DataFrame | None:
+    """frontier.csv (None when absent: a run written before the frontier); InputError unless
+    UTF-8 CSV text with the columns the report uses, numbers where numbers belong (ε may
+    be inf: the physical limits alone)."""
+    if not path.is_file():
+        return None
+    try:
+        frame = pd.read_csv(io.StringIO(path.read_bytes().decode("utf-8")), dtype={"case": str, "night_mode": str})
+    except OSError as exc:
+        raise InputError(f"{path}: cannot read it ({exc.strerror})") from None
+    except UnicodeDecodeError as exc:
+        raise _damaged(path, f"not a UTF-8 text file (byte {exc.start})", command) from None
+    except (ValueError, pd.errors.ParserError, pd.errors.EmptyDataError) as exc:
+        raise _damaged(path, f"not a readable CSV table ({exc})", command) from None
+    missing = [c for c in FRONTIER_KINDS if c not in frame.columns]
+    if missing:
+        raise _damaged(path, f"no column {', '.join(missing)}", command)
+    for name, kind in FRONTIER_KINDS.items():
+        if kind == NUMBER and (not pd.api.types.is_numeric_dtype(frame[name]) or pd.api.types.is_bool_dtype(frame[name])):
+            raise _damaged(path, f"column {name!r} holds a value that is not a number", command)
+    eps = frame["eps_pu"].to_numpy(dtype=float)
+    if np.isnan(eps).any() or (eps < 0).any():
+        raise _damaged(path, "column 'eps_pu' holds a value that is not a widening ≥ 0", command)
+    _check_numbers(
+        path, {c: frame[c].to_numpy() for c, kind in FRONTIER_KINDS.items() if kind == NUMBER and c != "eps_pu"}, command
+    )
+    return frame if not frame.empty else None
+
+
 def _is_number(value: object) -> bool:
     try:
         float(value)  # type: ignore[arg-type]
@@ -474,6 +525,7 @@ def load_inputs(
     command = RUN_COMMAND.format(dir=run)
     inp.manifest = _manifest(run / "manifest.json", command)
     inp.summary = _summary(run / "summary.csv", command)
+    inp.frontier = _frontier(run / "frontier.csv", command)
     inp.steps = _steps(run / "steps.parquet", inp.summary, command)
     # plotted: the reference rows
     inp.der_q = _filtered(
@@ -505,6 +557,7 @@ def load_study(folder: Path) -> Inputs:
     command = RUN_COMMAND.format(dir=folder)
     inp = Inputs(run_dir=folder, manifest=_manifest(folder / "manifest.json", command))
     inp.summary = _summary(folder / "summary.csv", command)
+    inp.frontier = _frontier(folder / "frontier.csv", command)
     _load_training(inp, command)
     return inp
 
@@ -566,6 +619,7 @@ def _load_sources(
         inp.missing["year run"] = YEAR_COMMAND
     inp.field_summary = _summary(DOCS_FIELD_YEAR / "summary.csv", FIELD_YEAR_COMMAND)
     inp.field_manifest = _manifest(DOCS_FIELD_YEAR / "manifest.json", FIELD_YEAR_COMMAND)
+    inp.field_frontier = _frontier(DOCS_FIELD_YEAR / "frontier.csv", FIELD_YEAR_COMMAND)
     if inp.field_summary is None or inp.field_manifest is None:
         inp.missing["real grids' year run"] = FIELD_YEAR_COMMAND
 

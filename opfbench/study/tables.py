@@ -324,7 +324,7 @@ def summarize(partials: list[pd.DataFrame], order: list[tuple]) -> pd.DataFrame:
     BELOW_KW under their frontier point; share_pct the plain loss-only share,
     100·(no_action_kwh − energy_kwh)/(no_action_kwh − the reference optimum's energy)."""
     p = pd.concat(partials, ignore_index=True)
-    g = p.groupby(KEYS, sort=False)
+    g = p.groupby(KEYS, sort=False, observed=True)
     out = g[[c for c in PARTIAL_COLUMNS if c not in EXTREMES]].sum()
     for column, how in EXTREMES.items():
         out = out.join(g[column].agg(how))
