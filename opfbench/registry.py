@@ -219,6 +219,12 @@ LEARNED_OPTIONS = (
         "end-to-end rounds: refit on the voltages the rule produces in closed loop on the training period",
         check=_rounds,
     ),
+    Option(
+        "comply",
+        True,
+        "keep the voltage band: while the fitted rule leaves it in closed loop on the training period, refit to the "
+        "optimum with the band tightened by 0.0025, 0.005, 0.01, 0.02 p.u. (false: fit the optimum itself)",
+    ),
 )
 _SETTLING_FIELD = {"tol_v_pu": "tol_v_pu", "tol_q_mvar": "tol_q_mvar", "max_steps": "max_steps", "step_factor": "step_factor"}
 CLOSED_LOOP_COLUMNS = {RESIDUAL: "largest |clip(target) − Q| at the last iterate, MVAr (≤ tol_q_mvar when settled)"}

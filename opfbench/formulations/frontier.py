@@ -51,9 +51,10 @@ _lock = threading.Lock()
 
 
 def widened(net: Network, eps: float) -> Network:
-    """`net` with every bus's voltage band widened by `eps` p.u. (vmin − ε ≥ 0, vmax + ε ≤
-    V_LIMIT_MAX_PU; ∞: those limits), one object per (network, ε) in this process so that
-    the formulations' compiled programs and solves are shared by every caller."""
+    """`net` with every bus's voltage band but the slack's widened by `eps` p.u. (vmin − ε ≥ 0,
+    vmax + ε ≤ V_LIMIT_MAX_PU; ∞: those limits; a negative ε tightens it), one object per
+    (network, ε) in this process so that the formulations' compiled programs and solves
+    are shared by every caller."""
     if eps == 0:
         return net
     key = (net, float(eps))
@@ -61,9 +62,10 @@ def widened(net: Network, eps: float) -> Network:
         if key in _cache:
             _cache.move_to_end(key)
             return _cache[key]
+    other = np.arange(net.n_bus) != net.slack  # the slack's |V| is held at its setpoint: its band stays
+    vmin = np.maximum(net.vmin - eps, 0.0) if math.isfinite(eps) else np.zeros(net.n_bus)
     out = net.with_changes(
-        vmin=np.maximum(net.vmin - eps, 0.0) if math.isfinite(eps) else np.zeros(net.n_bus),
-        vmax=np.minimum(net.vmax + eps, V_LIMIT_MAX_PU),
+        vmin=np.where(other, vmin, net.vmin), vmax=np.where(other, np.minimum(net.vmax + eps, V_LIMIT_MAX_PU), net.vmax)
     )
     with _lock:
         out = _cache.setdefault(key, out)
@@ -182,3 +184,29 @@ def frontier(scenario: Scenario, k: float, at_zero: StrategyResult | None = None
             part = replace(scenario.take(rows), net=widened(net, grid[j]))
             record(rows, run_acopf(part, k), j)
     return Frontier(grid, cost, bound, exc, status, solved)
+
+
+def tightened(scenario: Scenario, k: float, margin: float, q_mvar: np.ndarray, ok: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The AC OPF with every bus's band tightened by `margin` p.u. (the frontier below ε = 0),
+    given the optimum at ε = 0 — setpoints `q_mvar` (S, n_der) MVAr, a solver's optimum at
+    `ok` (S,): a step whose optimum keeps every |V| at least margin + MARGIN_PU inside its
+    limits keeps it; the others are solved on the tightened network. Returns (Q (S, n_der)
+    MVAr, ok (S,)): where the tightened problem has no optimum, the step's ε = 0 point and
+    its `ok`."""
+    from opfbench.formulations.acopf import run_acopf
+    from opfbench.powerflow import solve_pf_batch
+
+    net = scenario.net
+    width = np.delete(net.vmax - net.vmin, net.slack)  # the slack's |V| is held at its setpoint
+    if not 0 < margin < float(width.min(initial=np.inf)) / 2:
+        raise ValueError(f"a band can be tightened by a margin in (0, half its width), got {margin}")
+    vm = np.asarray(solve_pf_batch(net, scenario.injections(q_mvar)).vm)
+    with np.errstate(invalid="ignore"):
+        inside = ((vm >= net.vmin + margin + MARGIN_PU) & (vm <= net.vmax - margin - MARGIN_PU)).all(axis=1)
+    rows = np.flatnonzero(~(inside & ok))
+    q, good = np.array(q_mvar, dtype=float), np.array(ok, dtype=bool)
+    if rows.size:
+        res = run_acopf(replace(scenario.take(rows), net=widened(net, -margin)), k)
+        optimum = np.isin(res.status.astype(str), OPTIMA)
+        q[rows[optimum]], good[rows[optimum]] = res.q_mvar[optimum], True
+    return q, good

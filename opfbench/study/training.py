@@ -25,6 +25,8 @@ from __future__ import annotations
 
 import io
 import re
+from dataclasses import replace
+from functools import lru_cache, partial
 from pathlib import Path
 from typing import Any, Callable
 
@@ -32,6 +34,7 @@ import numpy as np
 import pandas as pd
 
 from opfbench.errors import InputError
+from opfbench.formulations.frontier import tightened
 from opfbench.io import load_network
 from opfbench.jsonio import write_atomic
 from opfbench.registry import BASELINE, REFERENCE_OPTIMUM, configuration, is_formulation
@@ -89,6 +92,7 @@ def train(config: Any, out: Path, run_nested: NestedRun) -> tuple[Fitted, ...]:
     for model in models:
         q, ok = optimum(ref_run.out, model, len(load_network(model).ders))
         training = training_set(model, period, config.night, q, ok, config.step_minutes)
+        training = replace(training, tightened=lru_cache(partial(tightened, training.scenario, TRAIN_K, q_mvar=q, ok=ok)))
         for lc in trained:
             path = out / LEARNED_DIR / f"{_stem(model)}--{_stem(lc.label)}.json"
             params = _fit(lc, training, path)
@@ -130,7 +134,10 @@ def _fit(lc: LearnedConfig, training, path: Path) -> LearnedParams:
 
 def _hyper(options: dict) -> dict:
     """The fit's hyper-parameters as `LearnedParams.hyper` records them."""
-    return ({"knots": options["knots"]} if "knots" in options else {}) | {"rounds": options["rounds"]}
+    return ({"knots": options["knots"]} if "knots" in options else {}) | {
+        "rounds": options["rounds"],
+        "comply": options["comply"],
+    }
 
 
 def optimum(folder: Path, case: str, n_der: int) -> tuple[np.ndarray, np.ndarray]:
