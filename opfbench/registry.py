@@ -418,9 +418,10 @@ class Configuration:
 
     @property
     def curtails(self) -> bool:
-        """Its DER may deliver less active power than they have: a rule that caps it, or any
-        rule with reactive priority (`priority=q`)."""
-        return self.spec.curtails or self.options().get("priority") == "q"
+        """Its DER may deliver less active power than they have: a rule that caps it, any
+        rule with reactive priority (`priority=q`), the AC OPF with `curtail=true`."""
+        options = self.options()
+        return self.spec.curtails or options.get("priority") == "q" or options.get("curtail") is True
 
     def options(self, settings: Mapping[str, object] | None = None) -> dict[str, OptionValue]:
         """Every option's value: the label's, else the run-level setting the option names,
@@ -629,6 +630,12 @@ def _builtin() -> tuple[StrategySpec, ...]:
                 Option("fallback", "chain", "chain: warm → cold IPOPT → SOCP → no action; paper: no action", choices=FALLBACKS),
                 slack_export,
                 solver,
+                Option(
+                    "curtail",
+                    False,
+                    "the optimum may curtail the DER's active power too, at the cost of the energy curtailed "
+                    "(objective: losses + curtailed power)",
+                ),
             ),
             bound_rank=1,
             network_check=check,

@@ -95,3 +95,24 @@ def test_every_built_in_rule_lies_on_or_above_the_frontier_at_its_own_compliance
         assert (res.losses_kw + res.curtailed_kw >= cost - 1e-4).all(), label
         checked += 1
     assert checked >= 8
+
+
+def test_rules_that_curtail_lie_on_or_above_the_frontier_of_the_optimum_that_may_curtail():
+    """paper33, upper limit 1.03 p.u., light load and full sun: Volt-Watt and reactive
+    priority curtail; the optimum that may curtail (losses + curtailed power) is a frontier
+    below the plain one at every ε and none of them lies below it at its own compliance."""
+    net = load_network("paper33")
+    net = net.with_changes(vmax=np.where(np.arange(net.n_bus) != net.slack, 1.03, net.vmax))
+    scenario = Scenario(net, [0.2, 0.3, 0.5, 0.8], np.array([1.0, 0.95, 0.85, 0.7])[:, None] * net.der_rating_mw)
+    plain, cutting = frontier(scenario, 0.0), frontier(scenario, 0.0, curtail=True)
+    assert cutting.curtail and not plain.curtail and not np.isnan(cutting.cost_kw).any()
+    assert np.isnan(plain.cost_kw[0, 0])  # no point within the band without curtailing
+    both = ~np.isnan(plain.cost_kw)
+    assert (cutting.cost_kw[both] <= plain.cost_kw[both] + 1e-4).all()
+    curtailed = 0.0
+    for label in ("volt-watt:v=1/1.03,p=1/0", "volt-var+volt-watt:vw_v=1/1.03,vw_p=1/0", "volt-var:priority=q"):
+        res = run_strategy(label, scenario, 0.0)
+        cost, _, _ = cutting.at(res.voltage_violation())
+        assert (res.losses_kw + res.curtailed_kw >= cost - 1e-4).all(), label
+        curtailed += float(res.curtailed_kw.sum())
+    assert curtailed > 1.0

@@ -35,8 +35,11 @@ def run_acopf(
     slack_export: bool = True,
     fallback: Fallback = "chain",
     solver: AcopfSolver = "auto",
+    curtail: bool = False,
 ) -> StrategyResult:
-    """AC OPF on every snapshot of `scenario` with reserve k (see the module docstring).
+    """AC OPF on every snapshot of `scenario` with reserve k (see the module docstring);
+    `curtail`: the optimum may curtail the DER's active power at the cost of the power
+    curtailed (`formulations.curtail`).
 
     Returns the setpoints evaluated by the AC power flow, with status per snapshot and
     lower_bound_kw from the SOCP relaxation (NaN where it was not solved, or where the
@@ -53,6 +56,10 @@ def run_acopf(
     """
     check_option("AC OPF failure policy", fallback, FALLBACKS)
     check_option("AC OPF solver", solver, ACOPF_SOLVERS)
+    if curtail:
+        from opfbench.formulations.curtail import run_curtailing
+
+        return run_curtailing(scenario, k, slack_export=slack_export, fallback=fallback, solver=solver)
     start = now()
     net = scenario.net
     data = snapshot_data(scenario, k)

@@ -12,6 +12,10 @@ the optimum being global (certified by the relaxation almost everywhere; IPOPT's
 optimum elsewhere) and the rule's point lying in the OPF's set (within its capability,
 its active power its own).
 
+With `curtail` the frontier is that of the AC OPF that may curtail (`acopf:curtail=true`:
+objective losses + curtailed power): the reference of the configurations that curtail
+(Volt-Watt, reactive priority), whose points lie in its set and not in the plain one's.
+
 The frontier point at ε = 0 is the `acopf` strategy's own answer (passed in where the run
 has it). Widening a band that does not bind changes no optimum: where the ε = 0 optimum
 keeps every |V| at least `MARGIN_PU` inside its limits it is the point at every ε, and only
@@ -89,7 +93,8 @@ class Frontier:
     the relaxation's certified bound, NaN where not solved; `excursion_pu` the optimum's own
     largest excursion beyond the (unwidened) band; `status` the AC OPF's status of the
     point; `solved` whether the point was solved at this ε (False: taken from the answer of
-    another ε that covers it). `eps` (n_ε,) the grid."""
+    another ε that covers it). `eps` (n_ε,) the grid; `curtail` whether the optimum may
+    curtail."""
 
     eps: np.ndarray
     cost_kw: np.ndarray
@@ -97,6 +102,7 @@ class Frontier:
     excursion_pu: np.ndarray
     status: np.ndarray
     solved: np.ndarray
+    curtail: bool = False
 
     @property
     def n_snapshots(self) -> int:
@@ -142,9 +148,15 @@ def _binds(net: Network, res: StrategyResult) -> np.ndarray:
     return ~(inside & np.isin(res.status.astype(str), OPTIMA))
 
 
-def frontier(scenario: Scenario, k: float, at_zero: StrategyResult | None = None, eps: tuple[float, ...] = EPSILONS) -> Frontier:
-    """The frontier of `scenario` at reserve k (module docstring); `at_zero`: the `acopf`
-    strategy's result on the same scenario and k, where the caller has it."""
+def frontier(
+    scenario: Scenario,
+    k: float,
+    at_zero: StrategyResult | None = None,
+    eps: tuple[float, ...] = EPSILONS,
+    curtail: bool = False,
+) -> Frontier:
+    """The frontier of `scenario` at reserve k (module docstring); `at_zero`: the AC OPF's
+    result on the same scenario and k (with the same `curtail`), where the caller has it."""
     from opfbench.formulations.acopf import run_acopf
 
     grid = np.asarray(eps, dtype=float)
@@ -170,7 +182,7 @@ def frontier(scenario: Scenario, k: float, at_zero: StrategyResult | None = None
             solved[r, j] = j == at
         return e
 
-    zero = at_zero if at_zero is not None else run_acopf(scenario, k)
+    zero = at_zero if at_zero is not None else run_acopf(scenario, k, curtail=curtail)
     every = np.arange(n)
     record(every, zero, 0)
     binding = _binds(net, zero)
@@ -182,8 +194,8 @@ def frontier(scenario: Scenario, k: float, at_zero: StrategyResult | None = None
         rows = every[binding & (status[:, j] == "")]
         if rows.size:
             part = replace(scenario.take(rows), net=widened(net, grid[j]))
-            record(rows, run_acopf(part, k), j)
-    return Frontier(grid, cost, bound, exc, status, solved)
+            record(rows, run_acopf(part, k, curtail=curtail), j)
+    return Frontier(grid, cost, bound, exc, status, solved, curtail)
 
 
 def tightened(scenario: Scenario, k: float, margin: float, q_mvar: np.ndarray, ok: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -21,13 +21,15 @@ exports at the unrestricted optimum, or its solve failed) are solved again.
 
 from __future__ import annotations
 
+from typing import Callable
+
 import numpy as np
 
 from opfbench.formulations.cache import SolveCache, per_thread
 from opfbench.formulations.models.distflow import DistFlowSocp
 from opfbench.formulations.models.jabr import JabrSocp
-from opfbench.formulations.models.soc import SocpRelaxation, SocpSolve, data_vector
-from opfbench.formulations.problem import SnapshotData, snapshot_data
+from opfbench.formulations.models.soc import SocpRelaxation, SocpSolve, curtail_vector, data_vector
+from opfbench.formulations.problem import CurtailData, PqCapability, SnapshotData, snapshot_data
 from opfbench.network import Network
 from opfbench.scenario import Scenario
 
@@ -40,9 +42,10 @@ def model_of(net: Network) -> type[SocpRelaxation]:
     return JabrSocp if net.meshed else DistFlowSocp
 
 
-def build_socp(net: Network, slack_export: bool = True) -> SocpRelaxation:
-    """A new relaxation of `net` (the caller's own: its Clarabel instance is mutable)."""
-    return model_of(net)(net, slack_export)
+def build_socp(net: Network, slack_export: bool = True, curtail: PqCapability | None = None) -> SocpRelaxation:
+    """A new relaxation of `net` (the caller's own: its Clarabel instance is mutable);
+    `curtail`: the one that decides the DER's active power too, at that capability."""
+    return model_of(net)(net, slack_export, curtail)
 
 
 def relaxation(net: Network, slack_export: bool = True) -> SocpRelaxation:
@@ -83,19 +86,40 @@ def relaxed_solves(
         return tuple(SocpSolve.not_solved() if skipped else next(part) for skipped in skip)
     unrestricted = None if slack_export else relaxed_solves(net, data, True)
     thetas = data_vector(data.s_fixed, data.q_limit)
-    keys = _cache.keys(net, ("socp", bool(slack_export)), thetas)
-    out = _cache.get_many(keys)
+    found = _cache.get_many(_cache.keys(net, ("socp", bool(slack_export)), thetas))
     if unrestricted is not None:
-        out = [_restricted(unrestricted[i]) if solve is None else solve for i, solve in enumerate(out)]
+        found = [_restricted(unrestricted[i]) if solve is None else solve for i, solve in enumerate(found)]
+    return _solved(net, ("socp", bool(slack_export)), thetas, found, lambda: relaxation(net, slack_export))
+
+
+def _solved(
+    net: Network, options: tuple, thetas: np.ndarray, found: list[SocpSolve | None], model: Callable[[], SocpRelaxation]
+) -> tuple[SocpSolve, ...]:
+    """Every snapshot's solve: `found` (the cache's, None where it has none) and the others
+    solved by `model()` — a snapshot whose data come again in the batch once —, all then
+    cached under `options`."""
+    keys = _cache.keys(net, options, thetas)
     first: dict[tuple, int] = {}  # a snapshot whose data come again in this batch is solved once
-    for i, solve in enumerate(out):
+    for i, solve in enumerate(found):
         if solve is None:
             first.setdefault(keys[i], i)
     todo = sorted(first.values())
-    solved = dict(zip(todo, relaxation(net, slack_export).solve_data(thetas[todo]) if todo else [], strict=True))
-    solves = tuple(solve if solve is not None else solved[first[key]] for solve, key in zip(out, keys, strict=True))
+    solved = dict(zip(todo, model().solve_data(thetas[todo]) if todo else [], strict=True))
+    solves = tuple(solve if solve is not None else solved[first[key]] for solve, key in zip(found, keys, strict=True))
     _cache.put_many(list(zip(keys, solves, strict=True)))
     return solves
+
+
+def curtail_solves(net: Network, data: CurtailData, k: float, slack_export: bool = True) -> tuple[SocpSolve, ...]:
+    """The relaxation that decides the DER's active power too (`models.soc`, `curtail`) solved
+    on every snapshot of `data` at reserve k, shared by data as `relaxed_solves` is."""
+    options = ("socp-curtail", bool(slack_export), float(k))
+    thetas = curtail_vector(data.s_fixed, data.p_avail, data.p_low, data.offset)
+
+    def model() -> SocpRelaxation:
+        return per_thread(net, options, lambda: build_socp(net, slack_export, PqCapability.of(net, k)))
+
+    return _solved(net, options, thetas, _cache.get_many(_cache.keys(net, options, thetas)), model)
 
 
 def socp_solves(

@@ -165,7 +165,8 @@ SUMMARY_OPTIONAL_NUMBERS = (
     "below_frontier_steps",
 )
 """Columns of summary.csv a run writes that an older one may lack (checked where present)."""
-FRONTIER_KINDS = {"case": TEXT, "k": NUMBER, "night_mode": TEXT, "eps_pu": NUMBER, "steps": NUMBER, "energy_kwh": NUMBER}
+FRONTIER_KINDS = {"case": TEXT, "k": NUMBER, "night_mode": TEXT, "curtail": FLAG, "eps_pu": NUMBER, "steps": NUMBER}
+FRONTIER_KINDS |= {"energy_kwh": NUMBER}
 FRONTIER_KINDS |= {"bound_kwh": NUMBER, "no_optimum_steps": NUMBER, "voltage_violation_min": NUMBER}
 FRONTIER_KINDS |= {"max_violation_pu": NUMBER, "solved_steps": NUMBER}
 """frontier.csv's columns the report uses."""
@@ -477,6 +478,8 @@ def _frontier(path: Path, command: str) -> pd.DataFrame | None:
     for name, kind in FRONTIER_KINDS.items():
         if kind == NUMBER and (not pd.api.types.is_numeric_dtype(frame[name]) or pd.api.types.is_bool_dtype(frame[name])):
             raise _damaged(path, f"column {name!r} holds a value that is not a number", command)
+        if kind == FLAG and not pd.api.types.is_bool_dtype(frame[name]):
+            raise _damaged(path, f"column {name!r} holds a value that is not true or false", command)
     eps = frame["eps_pu"].to_numpy(dtype=float)
     if np.isnan(eps).any() or (eps < 0).any():
         raise _damaged(path, "column 'eps_pu' holds a value that is not a widening ≥ 0", command)

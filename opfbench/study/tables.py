@@ -48,9 +48,10 @@ STEP_COLUMNS = [
     "frontier_kw",
     "frontier_bound_kw",
     "frontier_eps_pu",
+    "frontier_curtails",
 ]
 DETAIL_COLUMNS = {"der_q": [*KEYS, "time", "bus", "kind", "q_mvar", "curtailed_mw"], "bus_v": [*KEYS, "time", "bus", "v_pu"]}
-FRONTIER_KEYS = ["case", "k", "night_mode"]
+FRONTIER_KEYS = ["case", "k", "night_mode", "curtail"]
 FRONTIER_COLUMNS = [*FRONTIER_KEYS, "time", "step_h", "eps_pu", "cost_kw", "bound_kw", "excursion_pu", "status", "solved"]
 VIOLATION_PU = 1e-6  # a step violates the voltage limits beyond this
 EXCURSION_MVAR = 1e-9  # a step's setpoint exceeds the physical capability beyond this
@@ -128,6 +129,7 @@ def step_rows(
         "frontier_kw": reference[0],
         "frontier_bound_kw": reference[1],
         "frontier_eps_pu": reference[2],
+        "frontier_curtails": frontier is not None and frontier.curtail,
     } | {name: np.asarray(extra.get(name, nan), dtype=float) for name in extra_columns}
 
 
@@ -138,6 +140,7 @@ def frontier_rows(case: str, k: float, night_mode: str, time: pd.DatetimeIndex, 
         "case": case,
         "k": float(k),
         "night_mode": night_mode,
+        "curtail": bool(front.curtail),
         "time": np.repeat(time.asi8, m),
         "step_h": float(step_h),
         "eps_pu": np.tile(front.eps, n),
@@ -248,6 +251,7 @@ def partial_summary(steps: pd.DataFrame) -> pd.DataFrame:
             "frontier_bound_kwh": g.front_bound.sum(),
             "frontier_bound_missing": g.front_bound_missing.sum(),
             "below_frontier_steps": g.below.sum(),
+            "frontier_curtails": g.frontier_curtails.max(),
             "not_ok_steps": g.not_ok.sum(),
             "not_settled_steps": g.not_settled.sum(),
             "voltage_violation_steps": g.vv.sum(),
@@ -280,6 +284,7 @@ PARTIAL_COLUMNS = (
     "frontier_bound_kwh",
     "frontier_bound_missing",
     "below_frontier_steps",
+    "frontier_curtails",
     "not_ok_steps",
     "not_settled_steps",
     "voltage_violation_steps",
@@ -297,7 +302,13 @@ PARTIAL_COLUMNS = (
     "certified",
 )
 """The columns of a task's partial sums (`partial_summary`) besides KEYS."""
-EXTREMES = {"vmin_pu": "min", "vmax_pu": "max", "max_excursion_mvar": "max", "max_violation_pu": "max"}
+EXTREMES = {
+    "vmin_pu": "min",
+    "vmax_pu": "max",
+    "max_excursion_mvar": "max",
+    "max_violation_pu": "max",
+    "frontier_curtails": "max",
+}
 """The partial sums' extremes (combined by `summarize` with these; the others are summed)."""
 
 
@@ -321,7 +332,9 @@ def summarize(partials: list[pd.DataFrame], order: list[tuple]) -> pd.DataFrame:
     gap_eq_kwh = cost_kwh − frontier_kwh (gap_eq_pct of frontier_kwh), share_eq_pct =
     100·(no_action_kwh − cost_kwh)/(no_action_kwh − frontier_kwh) where that reduction
     exceeds SHARE_MIN_KWH, below_frontier_steps the steps whose cost lies more than
-    BELOW_KW under their frontier point; share_pct the plain loss-only share,
+    BELOW_KW under their frontier point, frontier_curtails whether that frontier is the
+    optimum's that may curtail (the reference of the configurations that curtail);
+    share_pct the plain loss-only share,
     100·(no_action_kwh − energy_kwh)/(no_action_kwh − the reference optimum's energy)."""
     p = pd.concat(partials, ignore_index=True)
     g = p.groupby(KEYS, sort=False, observed=True)
@@ -351,6 +364,7 @@ def summarize(partials: list[pd.DataFrame], order: list[tuple]) -> pd.DataFrame:
     out["gap_kwh"] = out.energy_kwh - out.lower_bound_kwh
     out["gap_pct"] = 100 * out.gap_kwh / out.lower_bound_kwh
     out["cost_kwh"] = out.energy_kwh + out.curtailed_kwh
+    out["frontier_curtails"] = out.frontier_curtails.astype(bool)
     out["frontier_missing_steps"] = out.pop("frontier_missing")
     out["frontier_kwh"] = out.frontier_kwh.where(out.frontier_missing_steps == 0)
     out["frontier_bound_kwh"] = out.frontier_bound_kwh.where(out.pop("frontier_bound_missing") == 0)
@@ -377,6 +391,7 @@ def summarize(partials: list[pd.DataFrame], order: list[tuple]) -> pd.DataFrame:
         "gap_eq_pct",
         "share_eq_pct",
         "share_pct",
+        "frontier_curtails",
         "frontier_missing_steps",
         "below_frontier_steps",
         "not_ok_steps",
