@@ -16,7 +16,7 @@ import pytest
 
 from opfbench.data import paper_day
 from opfbench.formulations.acopf import run_acopf
-from opfbench.formulations.frontier import COVER_PU, EPSILONS, Frontier, excursion, frontier, widened
+from opfbench.formulations.frontier import COVER_PU, EPSILONS, Frontier, excursion, frontier, reference, widened
 from opfbench.io import load_network
 from opfbench.registry import DEFAULT_RUN, configuration, run_strategy
 from opfbench.scenario import Scenario
@@ -116,3 +116,19 @@ def test_rules_that_curtail_lie_on_or_above_the_frontier_of_the_optimum_that_may
         assert (res.losses_kw + res.curtailed_kw >= cost - 1e-4).all(), label
         curtailed += float(res.curtailed_kw.sum())
     assert curtailed > 1.0
+
+
+def test_a_reference_takes_the_curtailing_frontier_where_the_rule_curtailed(tight):
+    scenario, plain = tight
+    rows = np.array([1, 3, 4])
+    cutting = frontier(scenario.take(rows), 0.0, curtail=True)
+    e = np.zeros(scenario.n_snapshots)
+    curtailed = np.zeros(scenario.n_snapshots, dtype=bool)
+    curtailed[[3, 4]] = True
+    ref = reference(plain, e, cutting, rows, curtailed)
+    assert ref.curtails.tolist() == curtailed.tolist()
+    np.testing.assert_array_equal(ref.cost_kw[[3, 4]], cutting.cost_kw[[1, 2], 0])
+    np.testing.assert_array_equal(ref.cost_kw[~curtailed], plain.cost_kw[~curtailed, 0])
+    curtailed[0] = True  # a step the curtailing frontier was not computed on
+    with pytest.raises(ValueError, match="lacks a step"):
+        reference(plain, e, cutting, rows, curtailed)

@@ -23,7 +23,7 @@ import pytest
 
 from opfbench.data import paper_day
 from opfbench.formulations.acopf import run_acopf
-from opfbench.formulations.frontier import frontier, widened
+from opfbench.formulations.frontier import frontier, reference, widened
 from opfbench.io import load_network
 from opfbench.plugins import local_rule
 from opfbench.registry import run_strategy
@@ -68,7 +68,10 @@ def test_a_rule_that_ignores_the_band_ranks_neither_above_the_optimum_nor_above_
     results.append(replace(bounded, strategy="acopf"))
     time = pd.date_range("2016-06-28T10:00", periods=scenario.n_snapshots, freq="1min", tz="Europe/Zurich")
     night = np.zeros(scenario.n_snapshots, dtype=bool)
-    rows = [step_rows("tight", "connected", "off", time, 1 / 60, night, res, (), front) for res in results]
+    rows = [
+        step_rows("tight", "connected", "off", time, 1 / 60, night, res, (), reference(front, res.voltage_violation()))
+        for res in results
+    ]
     steps = stack(rows, step_columns(), time.tz)
     summary = summarize([partial_summary(steps)], [("tight", r.strategy, 0.0, "connected", "off") for r in results])
     board = leaderboard(summary).set_index("strategy")

@@ -168,3 +168,42 @@ def test_an_optimum_that_fell_back_but_reduced_losses_is_not_called_missing():
         for s, e in (("no-action", 10.0), ("acopf", 8.0))  # every step fallback-cold: still an optimum
     ]
     assert tables.without_optimum(pd.DataFrame(rows)) == []
+
+
+def test_the_frontier_figure_draws_the_frontier_as_a_staircase_and_every_configuration_as_a_point():
+    board = pd.DataFrame(
+        {
+            "case": ["grid"] * 3,
+            "k": [0.0] * 3,
+            "strategy": ["acopf", "lfma", "volt-watt"],
+            "cost_kwh": [100.0, 103.0, 104.0],
+            "max_violation_pu": [0.0, 0.004, 0.0],
+            "voltage_violation_min": [0.0, 75.0, 0.0],
+            "gap_eq_kwh": [0.0, 4.0, 4.0],
+            "share_eq_pct": [100.0, 60.0, 55.0],
+            "frontier_curtails": [False, False, True],
+        }
+    )
+    eps = [0.0, 0.0025, 0.005, 0.01, 0.02, 0.05, np.inf]
+    frontier = pd.DataFrame(
+        {
+            "case": "grid",
+            "k": 0.0,
+            "night_mode": "connected",
+            "curtail": [False] * 7 + [True],
+            "eps_pu": eps + [0.0],
+            "energy_kwh": [100.0, 99.5, 99.0, 98.8, 98.8, 98.8, 98.8, 99.0],
+        }
+    )
+    (plot,) = plots.frontier_vs_compliance(board, frontier)
+    data = json.loads(plot.json)["data"]
+    line, points = data[0], data[1:]
+    assert line["line"]["shape"] == "vh" and len(line["x"]) == 7 and line["x"][-1] > 0.05  # ∞ drawn at the right edge
+    assert [p["name"] for p in points] == ["lfma", "volt-watt", "acopf"] or {p["name"] for p in points} == {
+        "acopf",
+        "lfma",
+        "volt-watt",
+    }
+    symbols = {p["name"]: p["marker"]["symbol"] for p in points}
+    assert symbols["volt-watt"] == "diamond" and symbols["lfma"] == "circle"
+    assert plots.frontier_vs_compliance(board, None) == []

@@ -439,3 +439,11 @@ def test_curtailed_energy_is_a_column_of_every_strategy(tmp_path):
     by_step = der[der.strategy == vw].groupby("time").curtailed_mw.sum() * 1e3
     np.testing.assert_allclose(by_step.to_numpy(), steps[steps.strategy == vw].curtailed_kw.to_numpy(), rtol=1e-12)
     assert run.summary is not None and "curtailed_kwh" in run.summary
+    # where it curtails, a rule is compared with the optimum that may curtail; elsewhere with the plain one
+    rule = steps[steps.strategy == vw]
+    assert (rule.frontier_curtails == (rule.curtailed_kw > 0)).all() and not steps[
+        steps.strategy == "no-action"
+    ].frontier_curtails.any()
+    assert (steps.losses_kw + steps.curtailed_kw >= steps.frontier_kw - 1e-4).all()
+    front = pd.read_csv(tmp_path / "frontier.csv")
+    assert set(front.curtail) == {False, True} and (front[front.curtail].steps == rule.frontier_curtails.sum()).all()

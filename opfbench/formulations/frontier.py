@@ -13,8 +13,9 @@ optimum elsewhere) and the rule's point lying in the OPF's set (within its capab
 its active power its own).
 
 With `curtail` the frontier is that of the AC OPF that may curtail (`acopf:curtail=true`:
-objective losses + curtailed power): the reference of the configurations that curtail
-(Volt-Watt, reactive priority), whose points lie in its set and not in the plain one's.
+objective losses + curtailed power): the reference of a configuration at the steps where
+it curtails (Volt-Watt, reactive priority), whose points lie in its set and not in the
+plain one's (`reference`); at its other steps the plain frontier's point bounds it.
 
 The frontier point at ε = 0 is the `acopf` strategy's own answer (passed in where the run
 has it). Widening a band that does not bind changes no optimum: where the ε = 0 optimum
@@ -115,16 +116,53 @@ class Frontier:
         i = np.searchsorted(self.eps, np.nan_to_num(e, nan=0.0) - COVER_PU, side="left")
         return np.where(np.isnan(e), -1, np.minimum(i, self.eps.size - 1))
 
-    def at(self, excursion_pu: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """(cost_kw, bound_kw, eps_pu), each (S,): the frontier point at the smallest grid ε
-        covering each step's excursion; NaN where the excursion is NaN."""
+    def at(self, excursion_pu: np.ndarray, steps: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(cost_kw, bound_kw, eps_pu), each (n,): the frontier point at the smallest grid ε
+        covering each excursion, of the steps `steps` (default: 0, 1, … — an excursion per
+        step); NaN where the excursion is NaN."""
         i = self.index(excursion_pu)
-        rows = np.arange(i.size)
+        rows = np.arange(i.size) if steps is None else np.asarray(steps)
         pick = np.maximum(i, 0)
         missing = i < 0
         cost = np.where(missing, np.nan, self.cost_kw[rows, pick])
         bound = np.where(missing, np.nan, self.bound_kw[rows, pick])
         return cost, bound, np.where(missing, np.nan, self.eps[pick])
+
+
+@dataclass(frozen=True)
+class Reference:
+    """Each step's frontier point at a configuration's own compliance, (S,) each: the
+    optimum's cost (kW), its bound (kW), the ε covering the step's excursion (p.u.), and
+    whether it is the optimum's that may curtail."""
+
+    cost_kw: np.ndarray
+    bound_kw: np.ndarray
+    eps_pu: np.ndarray
+    curtails: np.ndarray
+
+
+def reference(
+    plain: Frontier,
+    excursion_pu: np.ndarray,
+    cutting: Frontier | None = None,
+    rows: np.ndarray | None = None,
+    curtailed: np.ndarray | None = None,
+) -> Reference:
+    """The plain frontier's point at each step's excursion (`Frontier.at`), and where the
+    configuration curtailed (`curtailed` (S,) bool) the point of `cutting`, the frontier of
+    the optimum that may curtail computed on the steps `rows` (sorted, holding those)."""
+    cost, bound, eps = plain.at(excursion_pu)
+    curtails = np.zeros(cost.size, dtype=bool)
+    if cutting is None or rows is None or curtailed is None or not curtailed.any():
+        return Reference(cost, bound, eps, curtails)
+    where = np.flatnonzero(curtailed)
+    at = np.searchsorted(rows, where)
+    if at.max() >= rows.size or not np.array_equal(rows[at], where):
+        raise ValueError("the curtailing frontier lacks a step where the configuration curtailed")
+    c_cost, c_bound, c_eps = cutting.at(np.asarray(excursion_pu, dtype=float)[where], at)
+    cost, bound, eps = cost.copy(), bound.copy(), eps.copy()
+    cost[where], bound[where], eps[where], curtails[where] = c_cost, c_bound, c_eps, True
+    return Reference(cost, bound, eps, curtails)
 
 
 def _cost(res: StrategyResult) -> np.ndarray:

@@ -300,41 +300,40 @@ def frontier_vs_compliance(board: pd.DataFrame, frontier: pd.DataFrame | None, n
     """Per case and k (forecast off, PV connected at night): losses plus curtailed energy
     against the worst excursion beyond the voltage band — the frontier as a line (the AC
     OPF with the band widened by ε: on (ε_i−1, ε_i] its energy at ε_i, the reference of
-    any point whose excursions stay within ε_i), and where the run has configurations that
-    curtail a second line for the optimum that may curtail, their reference — and each
-    rule and formulation a point (`tables.leaderboard`'s rows; its minutes outside, gap and
-    share in the hover): no point lies below its own line. `name` tells one run's figures
-    from another's."""
+    any point whose excursions stay within ε_i, so no point of a configuration that does
+    not curtail lies below it) and each rule and formulation a point (`tables.leaderboard`'s
+    rows; its minutes outside, gap and share in the hover). A configuration that curtails
+    (◆) is compared, where it curtails, with the optimum that may curtail: it could lie
+    below the line by what curtailing there saves. `name` tells one run's figures from
+    another's."""
     if frontier is None or frontier.empty or board.empty:
         return []
     out: list[Plot] = []
-    front = frontier[frontier["night_mode"] == REFERENCE_NIGHT]
+    front = frontier[(frontier["night_mode"] == REFERENCE_NIGHT) & ~frontier["curtail"].astype(bool)]
     for i, ((case, k), grp) in enumerate(board.groupby(["case", "k"], sort=False)):
-        lines = front[(front["case"] == case) & np.isclose(front["k"], k)].dropna(subset=["energy_kwh"])
+        line = front[(front["case"] == case) & np.isclose(front["k"], k)].dropna(subset=["energy_kwh"]).sort_values("eps_pu")
         points = grp.dropna(subset=["cost_kwh", "max_violation_pu"])
-        if lines.empty or points.empty:
+        if line.empty or points.empty:
             continue
-        finite = lines[np.isfinite(lines["eps_pu"])]
+        finite = line[np.isfinite(line["eps_pu"])]
         right = 1.15 * max(float(finite["eps_pu"].max()), float(points["max_violation_pu"].max()), 1e-3)
         fig = _figure()
-        for curtail, line in lines.groupby("curtail", sort=True):
-            line = line.sort_values("eps_pu")
-            xs = [e if np.isfinite(e) else right for e in line["eps_pu"]]
-            what = "AC OPF that may curtail" if curtail else "AC OPF"
-            fig.add_scatter(
-                x=xs,
-                y=list(line["energy_kwh"]),
-                mode="lines+markers",
-                line=dict(shape="vh", color="#000", dash="dash" if curtail else "solid"),
-                name=f"frontier: {what}, band widened by ε",
-                customdata=[f"{e:g}" if np.isfinite(e) else "∞ (physical limits)" for e in line["eps_pu"]],
-                hovertemplate="ε = %{customdata} p.u.<br>%{y:.2f} kWh<extra>" + what + "</extra>",
-            )
+        fig.add_scatter(
+            x=[e if np.isfinite(e) else right for e in line["eps_pu"]],
+            y=list(line["energy_kwh"]),
+            mode="lines+markers",
+            line=dict(shape="vh", color="#000"),
+            name="frontier: AC OPF, band widened by ε",
+            customdata=[f"{e:g}" if np.isfinite(e) else "∞ (physical limits)" for e in line["eps_pu"]],
+            hovertemplate="ε = %{customdata} p.u.<br>%{y:.2f} kWh<extra>frontier</extra>",
+        )
         for strategy, row in order(points).set_index("strategy").iterrows():
+            cut = bool(row.get("frontier_curtails", False) is True)
             fig.add_scatter(
                 x=[row["max_violation_pu"]],
                 y=[row["cost_kwh"]],
                 mode="markers",
+                marker=dict(symbol="diamond" if cut else "circle", size=9),
                 name=escape(str(strategy)),
                 customdata=[[row["voltage_violation_min"], row.get("gap_eq_kwh", np.nan), row.get("share_eq_pct", np.nan)]],
                 hovertemplate="worst excursion %{x:.4f} p.u., %{customdata[0]:.0f} min outside<br>"
@@ -344,8 +343,8 @@ def frontier_vs_compliance(board: pd.DataFrame, frontier: pd.DataFrame | None, n
             plot_json(
                 f"frontier-{re.sub(r'[^a-z0-9]+', '-', name.lower()).strip('-')}-{i}".replace("--", "-"),
                 f"{case}{name}, k={k:g}: losses + curtailed energy against the worst excursion beyond the voltage "
-                "band (PV connected at night, forecast off); the lines are the frontiers (dashed: the optimum that may "
-                "curtail, the reference of the rules that curtail), no point lies below its own",
+                "band (PV connected at night, forecast off); the line is the frontier, on or below every point of a "
+                "rule that does not curtail (◆: one that curtails, compared where it does with the optimum that may)",
                 fig,
                 "worst excursion beyond the voltage band (p.u.)",
                 "losses + curtailed energy (kWh)",

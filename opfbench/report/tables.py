@@ -471,15 +471,16 @@ def how_close(summary: pd.DataFrame, train: pd.DataFrame | None = None, model_of
     return out[LOCAL_COLUMNS].sort_values(["case", "k", "rank"], kind="stable", na_position="last").reset_index(drop=True)
 
 
-FRONTIER_SHOWN = ["case", "k", "curtail", "eps_pu", "energy_kwh", "bound_kwh", "voltage_violation_min", "max_violation_pu"]
+FRONTIER_SHOWN = ["case", "k", "curtail", "eps_pu", "steps", "energy_kwh", "bound_kwh", "voltage_violation_min"]
+FRONTIER_SHOWN += ["max_violation_pu"]
 FRONTIER_SHOWN += ["no_optimum_steps", "solved_steps"]
 
 
 def frontier_table(frontier: pd.DataFrame, night_mode: str = REFERENCE_NIGHT) -> pd.DataFrame:
     """The frontier of losses against compliance per case and k (one night mode), the plain
-    AC OPF's and, where the run has configurations that curtail, the one that may curtail
-    (losses + curtailed energy): per ε the optimum's energy, its certified bound's, its
-    minutes outside the (unwidened) band and worst excursion, the steps without an optimum,
-    the steps solved at that ε."""
+    AC OPF's over every step and, over the steps where a configuration curtailed, the one
+    that may curtail (losses + curtailed energy): per ε the steps, the optimum's energy,
+    its certified bound's, its minutes outside the (unwidened) band and worst excursion,
+    the steps without an optimum, the steps solved at that ε."""
     sub = frontier[frontier["night_mode"] == night_mode]
     return sub[FRONTIER_SHOWN].sort_values(["case", "k", "curtail", "eps_pu"], kind="stable").reset_index(drop=True)

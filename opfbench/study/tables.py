@@ -18,7 +18,7 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 
-from opfbench.formulations.frontier import Frontier
+from opfbench.formulations.frontier import Frontier, Reference
 from opfbench.registry import BASELINE, REFERENCE_OPTIMUM, configuration, describe
 from opfbench.result import NOT_SETTLED, OK, StrategyResult
 from opfbench.study.config import DETAIL_TABLES
@@ -89,15 +89,15 @@ def step_rows(
     night: np.ndarray,
     res: StrategyResult,
     extra_columns: tuple[str, ...] = (),
-    frontier: Frontier | None = None,
+    reference: Reference | None = None,
 ) -> Columns:
     """The columns of one row per step of `res` (see the contract), for `stack`; the
     `extra_columns` from `res.extra` (NaN where this strategy has none); the frontier point
-    at the step's compliance (`Frontier.at`; NaN without a frontier)."""
+    at the step's compliance (`formulations.frontier.reference`; NaN without one)."""
     n = res.n_snapshots
     nan = np.full(n, np.nan)
     violation = res.voltage_violation()
-    reference = frontier.at(violation) if frontier is not None else (nan, nan, nan)
+    ref = reference if reference is not None else Reference(nan, nan, nan, np.zeros(n, dtype=bool))
     extra = res.extra
     local = "fallback" not in extra
     lb = res.lower_bound_kw if res.lower_bound_kw is not None else nan
@@ -126,15 +126,16 @@ def step_rows(
         "certified_by": _certified_by(res).astype(str),
         "fallback": "" if local else np.asarray(extra["fallback"], dtype=str),
         "solver_status": "" if local else np.asarray(extra["solver_status"], dtype=str),
-        "frontier_kw": reference[0],
-        "frontier_bound_kw": reference[1],
-        "frontier_eps_pu": reference[2],
-        "frontier_curtails": frontier is not None and frontier.curtail,
+        "frontier_kw": ref.cost_kw,
+        "frontier_bound_kw": ref.bound_kw,
+        "frontier_eps_pu": ref.eps_pu,
+        "frontier_curtails": ref.curtails,
     } | {name: np.asarray(extra.get(name, nan), dtype=float) for name in extra_columns}
 
 
 def frontier_rows(case: str, k: float, night_mode: str, time: pd.DatetimeIndex, step_h: float, front: Frontier) -> Columns:
-    """The frontier's rows (see the contract: one per step and grid ε), for `stack`."""
+    """The frontier's rows (see the contract: one per step of `time` — its steps — and grid
+    ε), for `stack`."""
     n, m = front.cost_kw.shape
     return {
         "case": case,

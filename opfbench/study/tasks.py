@@ -4,9 +4,9 @@ A task is (case, k, chunk of steps) and runs every requested strategy, night mod
 forecast source of that group, and the frontier of losses against voltage compliance of
 each night mode (`formulations.frontier`, on the forecast-off scenario: the OPF reads no
 forecast), which every configuration's steps are compared with — computed once, the
-forecast-off `acopf` rows its point at ε = 0; where configurations curtail (Volt-Watt,
-reactive priority, `acopf:curtail=true`) also the frontier of the optimum that may
-curtail, which they are compared with. `acopf`, `acopf-paper` and `socp` share SOCP solves, and the
+forecast-off `acopf` rows its point at ε = 0; at the steps where a configuration that may
+curtail (Volt-Watt, reactive priority, `acopf:curtail=true`) did, also the frontier of the
+optimum that may curtail, which it is compared with there. `acopf`, `acopf-paper` and `socp` share SOCP solves, and the
 night modes — which differ only in the night hours, so their daytime snapshots are the
 same problems — solve each once: the formulations' solve cache is keyed on the data
 (`formulations.relaxation`), whatever Scenario objects carry it; and where two
@@ -26,7 +26,7 @@ import pandas as pd
 from threadpoolctl import threadpool_limits
 
 from opfbench.errors import InputError
-from opfbench.formulations.frontier import Frontier, frontier
+from opfbench.formulations.frontier import Frontier, frontier, reference
 from opfbench.plugins import PluginSource, ensure, loaded
 from opfbench.registry import REFERENCE_OPTIMUM, OptionValue, configuration, run_strategy
 from opfbench.result import StrategyResult
@@ -175,13 +175,16 @@ def fitted_options(fitted: tuple[Fitted, ...]) -> dict[str, dict[str, OptionValu
     return {f.label: configs[f.label].spec.fitted_options(f.ref) for f in fitted if configs[f.label].options()["train"]}
 
 
-CURTAILING_OPTIMUM = "acopf:curtail=true"  # the configuration whose answer is the curtailing frontier's point at ε = 0
-
-
 def curtails(label: str) -> bool:
-    """Whether a configuration's DER may deliver less active power than they have: it is
-    compared with the frontier of the optimum that may curtail (`Configuration.curtails`)."""
+    """Whether a configuration's DER may deliver less active power than they have: where
+    it curtails it is compared with the frontier of the optimum that may curtail
+    (`Configuration.curtails`)."""
     return configuration(label).curtails
+
+
+def _curtailed(res: StrategyResult) -> np.ndarray:
+    """(S,) the steps where `res` curtailed some power."""
+    return np.nan_to_num(res.curtailed_kw) > 0
 
 
 def run_task(inp: TaskInput) -> TaskOutput:
@@ -225,19 +228,20 @@ def run_task(inp: TaskInput) -> TaskOutput:
                 if same is None:
                     ran.append((scenario, results))
             plain = scenario_of(mode, "off")
-            fronts_of = {}
-            for curtail in sorted({curtails(name) for _, names in t.runs for name in names}):
-                front = next((f for earlier, f in drawn if earlier.same_data(plain) and f.curtail == curtail), None)
-                if front is None:
-                    zero = by_source.get("off", {}).get(CURTAILING_OPTIMUM if curtail else REFERENCE_OPTIMUM)
-                    front = frontier(plain, t.k, at_zero=zero, curtail=curtail)
-                    drawn.append((plain, front))
-                fronts_of[curtail] = front
-                fronts.append(frontier_rows(t.case, t.k, mode, time, inp.step_h, front))
+            front = next((f for earlier, f in drawn if earlier.same_data(plain)), None)
+            if front is None:
+                front = frontier(plain, t.k, at_zero=by_source.get("off", {}).get(REFERENCE_OPTIMUM))
+                drawn.append((plain, front))
+            fronts.append(frontier_rows(t.case, t.k, mode, time, inp.step_h, front))
+            cut = {(s, n): _curtailed(r) for s, results in by_source.items() for n, r in results.items() if curtails(n)}
+            rows = np.flatnonzero(np.logical_or.reduce([*cut.values(), np.zeros(inp.n_steps, dtype=bool)]))
+            cutting = frontier(plain.take(rows), t.k, curtail=True) if rows.size else None
+            if cutting is not None:
+                fronts.append(frontier_rows(t.case, t.k, mode, time[rows], inp.step_h, cutting))
             for source, results in by_source.items():
                 for name, res in results.items():
-                    front = fronts_of[curtails(name)]
-                    steps.append(step_rows(t.case, mode, source, time, inp.step_h, night, res, inp.columns, front))
+                    ref = reference(front, res.voltage_violation(), cutting, rows, cut.get((source, name)))
+                    steps.append(step_rows(t.case, mode, source, time, inp.step_h, night, res, inp.columns, ref))
                     for table, columns in detail_rows(t.case, mode, source, time, res, inp.detail).items():
                         detail[table].append(columns)
         table = stack(steps, step_columns(inp.columns), time.tz)
