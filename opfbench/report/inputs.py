@@ -424,16 +424,8 @@ def _summary(path: Path, command: str) -> pd.DataFrame | None:
     `DOMAINS`)."""
     if not _present(path, command):
         return None
-    try:
-        text = path.read_bytes().decode("utf-8")
-        keys = {"case": str, "strategy": str, "night_mode": str, "forecast": str}
-        summary = pd.read_csv(io.StringIO(text), dtype=keys, float_precision="round_trip")  # k exactly as written
-    except OSError as exc:
-        raise InputError(f"{path}: cannot read it ({exc.strerror})") from None
-    except UnicodeDecodeError as exc:
-        raise _damaged(path, f"not a UTF-8 text file (byte {exc.start})", command) from None
-    except (ValueError, pd.errors.ParserError, pd.errors.EmptyDataError) as exc:
-        raise _damaged(path, f"not a readable CSV table ({exc})", command) from None
+    keys = {"case": str, "strategy": str, "night_mode": str, "forecast": str}
+    summary = _csv(path, command, keys)
     missing = [c for c in (*_KEYS, *SUMMARY_NUMBERS) if c not in summary.columns]
     if missing:
         raise _damaged(path, f"no column {', '.join(missing)}", command)
@@ -458,20 +450,27 @@ def _summary(path: Path, command: str) -> pd.DataFrame | None:
     return summary
 
 
-def _frontier(path: Path, command: str) -> pd.DataFrame | None:
-    """frontier.csv (None when absent: a run written before the frontier); InputError unless
-    UTF-8 CSV text with the columns the report uses, numbers where numbers belong (ε may
-    be inf: the physical limits alone)."""
-    if not path.is_file():
-        return None
+def _csv(path: Path, command: str, text_columns: dict[str, type[str]]) -> pd.DataFrame:
+    """A CSV table (numbers read exactly as written); InputError naming the file unless it
+    is readable UTF-8 CSV text."""
     try:
-        frame = pd.read_csv(io.StringIO(path.read_bytes().decode("utf-8")), dtype={"case": str, "night_mode": str})
+        text = path.read_bytes().decode("utf-8")
+        return pd.read_csv(io.StringIO(text), dtype=text_columns, float_precision="round_trip")
     except OSError as exc:
         raise InputError(f"{path}: cannot read it ({exc.strerror})") from None
     except UnicodeDecodeError as exc:
         raise _damaged(path, f"not a UTF-8 text file (byte {exc.start})", command) from None
     except (ValueError, pd.errors.ParserError, pd.errors.EmptyDataError) as exc:
         raise _damaged(path, f"not a readable CSV table ({exc})", command) from None
+
+
+def _frontier(path: Path, command: str) -> pd.DataFrame | None:
+    """frontier.csv (None when absent: a run written before the frontier); InputError unless
+    UTF-8 CSV text with the columns the report uses, numbers where numbers belong (ε may
+    be inf: the physical limits alone)."""
+    if not path.is_file():
+        return None
+    frame = _csv(path, command, {"case": str, "night_mode": str})
     missing = [c for c in FRONTIER_KINDS if c not in frame.columns]
     if missing:
         raise _damaged(path, f"no column {', '.join(missing)}", command)
