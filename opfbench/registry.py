@@ -191,7 +191,12 @@ PRIORITY = Option(
 SETTLING_OPTIONS = (
     Option("max_steps", SETTLING.max_steps, "damped steps before a snapshot counts as not-settled", check=_non_negative),
     Option("tol_v_pu", SETTLING.tol_v_pu, "settled: largest bus-voltage change of the last step ≤ this, p.u.", check=_positive),
-    Option("tol_q_mvar", SETTLING.tol_q_mvar, "settled: largest change the rule still asks ≤ this, MVAr", check=_positive),
+    Option(
+        "tol_q_mvar",
+        SETTLING.tol_q_mvar,
+        "settled: largest change the rule still asks of Q (MVAr) or, where it curtails, of P (MW) ≤ this",
+        check=_positive,
+    ),
     Option("step_factor", SETTLING.step_factor, "damping α of Q += α·(target − Q), the first step's when adaptive", check=_step),
     Option("adaptive", SETTLING.adaptive, "adapt α per DER from successive voltage changes (OpenDSS InvControl)"),
 )
