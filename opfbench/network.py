@@ -13,11 +13,18 @@ DER kinds (`DER.kind`, capability in `opfbench.capability`): "PV" and "DFIG" are
 paper's units; "inverter" is a generic inverter-coupled unit (PV, wind, biomass, hydro
 static generators of real grids) with a nameplate S̄ and the VDE-AR-N 4105 power-factor
 range. `DER.energy` is its primary energy: the night modes act on the solar units.
+
+Every DER has a unique, stable name (`Network.der_names`): the source's element name where
+it has one (`DER.name`), else derived from its kind and bus number (`PV-18`,
+`inverter-24`, `inverter-24-2` for a second one of that kind at that bus). Several DER may
+share a bus: what a DER measures of its bus's load is its share of it, in proportion to
+the units' nameplate ratings S̄ (`Network.der_share`), so that the units at one bus
+together compensate the bus's load once.
 """
 
 from __future__ import annotations
 
-from collections import deque
+from collections import Counter, deque
 from dataclasses import dataclass, field, fields, replace
 from functools import cached_property
 from typing import Literal
@@ -58,13 +65,15 @@ class DER:
     """A DER unit: `bus` is the internal bus index, `rating_mw` its rated active power P̄
     (MW), `s_mva` its nameplate apparent power S̄ (MVA; None = P̄, as for the paper's PV
     and DFIG units), `energy` its primary energy (None = the kind's: PV solar, DFIG wind,
-    inverter solar)."""
+    inverter solar), `name` the source's element name (None: derived from kind and bus,
+    `Network.der_names`)."""
 
     bus: int
     kind: DerKind
     rating_mw: float
     s_mva: float | None = None
     energy: DerEnergy | None = None
+    name: str | None = None
 
     @property
     def s_rated_mva(self) -> float:
@@ -183,6 +192,9 @@ class Network:
                 f"{self.name}: branch {k + 1} ({self.bus_ids[self.f[k]]}-{self.bus_ids[self.t[k]]}) has negative "
                 f"resistance r = {self.r[k]:.6g} p.u.; negative r makes negative losses and is refused"
             )
+        repeated = sorted(n for n, c in Counter(d.name for d in self.ders if d.name is not None).items() if c > 1)
+        if repeated:
+            raise NetworkError(f"{self.name}: DER name {repeated[0]!r} is given to more than one DER; a DER's name is unique")
         for d in self.ders:
             if d.kind not in DER_KINDS:
                 raise NetworkError(f"{self.name}: unknown DER kind {d.kind!r}; expected one of {', '.join(DER_KINDS)}")
@@ -301,6 +313,36 @@ class Network:
     def der_s_mva(self) -> np.ndarray:
         """Nameplate apparent power S̄ of each DER (MVA)."""
         return np.array([d.s_rated_mva for d in self.ders], dtype=float)
+
+    @cached_property
+    def der_names(self) -> tuple[str, ...]:
+        """Each DER's unique name: `DER.name` where the source gives one, else
+        `KIND-BUS` (external bus number), with `-2`, `-3`, … for a further unit that would
+        take a name already used."""
+        used = {d.name for d in self.ders if d.name is not None}
+        out = []
+        for d in self.ders:
+            if d.name is not None:
+                out.append(d.name)
+                continue
+            base = f"{d.kind}-{int(self.bus_ids[d.bus])}"
+            name, n = base, 1
+            while name in used:
+                n += 1
+                name = f"{base}-{n}"
+            used.add(name)
+            out.append(name)
+        return tuple(out)
+
+    @cached_property
+    def der_share(self) -> np.ndarray:
+        """(n_der,) each DER's share of what it measures of its bus (the bus's load, the
+        flows its rule compensates): S̄ / Σ S̄ of the DER at that bus — 1 for a DER alone
+        at its bus, so the units at one bus together compensate its load once."""
+        s = self.der_s_mva
+        total = np.zeros(self.n_bus)
+        np.add.at(total, self.der_bus, s)
+        return _frozen(s / total[self.der_bus])
 
     @property
     def der_kinds(self) -> tuple[DerKind, ...]:
@@ -529,6 +571,8 @@ def _der_tuple(network: str, ders: object) -> tuple[DER, ...]:
         for label, value in (("rating_mw", d.rating_mw), ("s_mva", d.s_mva)):
             if value is not None and (isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, float, np.number))):
                 raise NetworkError(f"{network}: ders[{i}] has {label} {value!r}; it must be a real number")
+        if d.name is not None and not (isinstance(d.name, str) and d.name.strip() and d.name.isprintable()):
+            raise NetworkError(f"{network}: ders[{i}] has name {d.name!r}; a DER's name is printable, non-empty text")
     return tuple(d for d in units if isinstance(d, DER))  # every one is
 
 

@@ -137,14 +137,18 @@ class StrategyResult:
 
     def snapshot_json(self, i: int = 0) -> dict:
         """The JSON contract of one snapshot (keys stable; units MVAr, kW, p.u., ms); a
-        value that is not finite (no converged flow, no bound) is null."""
+        value that is not finite (no converged flow, no bound) is null. `q_mvar` is keyed by
+        DER name (`Network.der_names`: unique, also where several DER share a bus),
+        `der_bus` gives each DER's bus number."""
+        names = self.net.der_names
         bus_ids = self.net.bus_ids[self.net.der_bus]
         out = {
             "strategy": self.strategy,
             "k": float(self.k),
             "status": str(self.status[i]),
             "losses_kw": self.losses_kw[i],
-            "q_mvar": {str(int(b)): q for b, q in zip(bus_ids, self.q_mvar[i], strict=True)},
+            "q_mvar": dict(zip(names, self.q_mvar[i], strict=True)),
+            "der_bus": {name: int(b) for name, b in zip(names, bus_ids, strict=True)},
             "vmin": self.vmin[i],
             "vmax": self.vmax[i],
             "power_flows": int(self.power_flows[i]),

@@ -5,7 +5,8 @@ follows one profile, the special case the shipped cases use), or every load elem
 P and Q (S, n_load) MW/MVAr (`Scenario.from_series`: a real grid's per-load profiles).
 DER active power is given in MW per unit (P^C, the current output) and optionally a
 forecast P^F for Algorithm 3. Everything downstream reads the loads through the accessors
-`injections`, `load_q_at_der_mvar`, `load_p_at_der_mw` and `bus_load_mva`, and the
+`injections`, `load_q_at_der_mvar`, `load_p_at_der_mw` (each DER's share of its bus's
+load: `Network.der_share`) and `bus_load_mva`, and the
 capability through `qmax_mvar`, so both forms run every strategy and formulation alike.
 """
 
@@ -13,7 +14,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from functools import cached_property
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Callable
 
 import numpy as np
 
@@ -236,16 +237,23 @@ class Scenario:
         return bus_injections(self.net, p, der_q_mvar, self.load_scale)
 
     def load_q_at_der_mvar(self) -> np.ndarray:
-        """Reactive load at each DER's own bus (S, n_der) MVAr — what LLMA measures."""
-        if self.load_scale is None:
-            return np.ascontiguousarray(self._bus_load.imag[:, self.net.der_bus])
-        return self.load_scale[:, None] * self.net.load_q_mvar[self.net.der_bus][None, :]
+        """Each DER's share of the reactive load at its own bus (S, n_der) MVAr — what LLMA
+        measures: the bus's load × `Network.der_share` (S̄ / Σ S̄ of the DER at that bus,
+        1 for a DER alone), so the units at one bus compensate its load once."""
+        return self._at_der(self.net.load_q_mvar, lambda load: load.imag)
 
     def load_p_at_der_mw(self) -> np.ndarray:
-        """Active load at each DER's own bus (S, n_der) MW — what a DER's meter sees of it."""
+        """Each DER's share of the active load at its own bus (S, n_der) MW (shared as
+        `load_q_at_der_mvar`)."""
+        return self._at_der(self.net.load_p_mw, lambda load: load.real)
+
+    def _at_der(self, nominal: np.ndarray, part: Callable[[np.ndarray], np.ndarray]) -> np.ndarray:
+        """(S, n_der): the bus load's `part` (per-load form) or load_scale × `nominal`, at
+        each DER's bus, × its share of the bus."""
+        net = self.net
         if self.load_scale is None:
-            return np.ascontiguousarray(self._bus_load.real[:, self.net.der_bus])
-        return self.load_scale[:, None] * self.net.load_p_mw[self.net.der_bus][None, :]
+            return np.ascontiguousarray(part(self._bus_load)[:, net.der_bus] * net.der_share)
+        return self.load_scale[:, None] * nominal[net.der_bus][None, :] * net.der_share
 
     @classmethod
     def from_profiles(

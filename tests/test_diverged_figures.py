@@ -98,9 +98,12 @@ def test_a_run_where_every_step_diverges_reports_no_figure(tmp_path, capsys):
     for column in ("avg_loss_kw", "energy_kwh", "savings_pct", "vmin_pu", "vmax_pu"):
         assert np.isnan(row[column]), column  # not 0 kWh, not |V| from 5e-7 to 4e4 p.u.
     html = (out / "report.html").read_text()
-    assert "2 configuration(s) have steps whose power flow did not converge (pf-diverged: 24 steps in all)" in html
+    assert (
+        "2 configuration(s) have steps without a loss or voltage figure (pf-diverged, the power flow did not converge: 24 steps)"
+        in html
+    )
     claim = voltage_band(load_inputs(out))
-    assert claim.verdict == NA and claim.reason == "no local-rule step has a converged power flow"
+    assert claim.verdict == NA and claim.reason == "no local-rule step has a voltage figure"
 
 
 def test_a_partly_diverged_run_averages_over_the_converged_steps(tmp_path, capsys):

@@ -169,7 +169,17 @@ def test_bad_params_files_and_labels_are_refused(fitted, tmp_path, capsys):
         "missing field": (json.dumps({k: v for k, v in data.items() if k != "rho"}), "missing or malformed"),
         "DER count": (json.dumps(data | {"parameters": data["parameters"][:-1]}), "one entry per DER"),
         "NaN": (json.dumps(data).replace('"a": ' + json.dumps(data["parameters"][0]["a"]), '"a": NaN', 1), "not finite"),
-        "too steep": (json.dumps(data | {"slope_max_mvar_per_pu": [1e-6] * len(data["ders"])}), "exceeds its slope limit"),
+        "slope limit edited": (json.dumps(data | {"slope_max_mvar_per_pu": [1e6] * len(data["ders"])}), "is not rho / row sum"),
+        "too steep": (
+            json.dumps(
+                data | {"row_sum_pu_per_mvar": [9e5] * len(data["ders"]), "slope_max_mvar_per_pu": [1e-6] * len(data["ders"])}
+            ),
+            "exceeds its slope bound",
+        ),
+        "Q rising with |V|": (
+            json.dumps(data | {"parameters": [p | {"c": 0.01} for p in data["parameters"]]}),
+            "c = 0.01 > 0: its Q would rise with its own",
+        ),
     }
     for name, (text, message) in cases.items():
         bad = tmp_path / f"{name}.json"
@@ -185,7 +195,13 @@ def test_bad_params_files_and_labels_are_refused(fitted, tmp_path, capsys):
     assert "were fitted on paper33" in capsys.readouterr().err
     period = resolve_period(TEST, "20:00-05:00", 15)
     with pytest.raises(InputError, match="were fitted on paper33"):
-        check_learned((f"learned-affine:params={good}",), ("case69-der",), period)
+        check_learned((f"learned-affine:params={good}",), ("case69-der",), period, "20:00-05:00")
+    # paper33-meshed has paper33's DER (buses, ratings) on another grid: refused, named, before any work
+    assert main(["snapshot", "paper33-meshed", "--strategy", f"learned-affine:params={good}"]) == 2
+    assert "paper33-meshed is another grid" in capsys.readouterr().err
+    with pytest.raises(InputError, match="is another grid"):
+        check_learned((f"learned-affine:params={good}",), ("paper33-meshed",), period, "20:00-05:00")
+    check_learned((f"learned-affine:params={good}",), ("paper33?line-z=1.2",), period, "20:00-05:00")  # its model: allowed
     for label, message in {
         "learned-affine": "give train=START..END",
         f"learned-affine:train={TRAIN},params={good}": "one of them",
@@ -198,6 +214,21 @@ def test_bad_params_files_and_labels_are_refused(fitted, tmp_path, capsys):
             configuration(label)
     assert main(["snapshot", "paper33", "--strategy", f"learned-affine:train={TRAIN}"]) == 2
     assert "is fitted by opfbench run" in capsys.readouterr().err
+
+
+def test_a_der_without_enough_training_samples_is_named_before_any_work(training):
+    # a night: the PV units have no reactive limit at any step (the DFIG has one)
+    night = "2016-03-01T22:00..2016-03-02T04:00"
+    test = resolve_period(TEST, "20:00-05:00", 15)
+    with pytest.raises(InputError, match=r"learned-affine: DER PV-10 \(bus 10\) has 0 training samples .* need at least 8"):
+        check_learned((f"learned-affine:train={night}",), ("paper33",), test, "20:00-05:00")
+    # the fit itself counts the optimum's certified steps: with none, no rule is fitted
+    uncertified = learned.TrainingSet(
+        training.case, training.period, training.start, training.end, training.scenario, training.q_mvar, training.ok & False
+    )
+    for family in FAMILIES:
+        with pytest.raises(InputError, match=f"{family}: DER PV-10 \\(bus 10\\) has 0 training samples"):
+            fit_rule(family, uncertified)
 
 
 # ----- leakage ----------------------------------------------------------------------------
@@ -229,12 +260,12 @@ def test_training_data_hold_nothing_of_the_test_period(monkeypatch, training):
 def test_a_training_period_overlapping_the_test_period_is_refused(fitted, tmp_path):
     period = resolve_period("2016-03-02..2016-03-05", "20:00-05:00", 15)
     with pytest.raises(InputError, match="overlaps the test period"):
-        check_learned((f"learned-affine:train={TRAIN}",), ("paper33",), period)
+        check_learned((f"learned-affine:train={TRAIN}",), ("paper33",), period, "20:00-05:00")
     path = fitted[("learned-vv", 0.9)].write(tmp_path / "vv.json")  # fitted on TRAIN too
     with pytest.raises(InputError, match="overlaps the test period"):
-        check_learned((f"learned-vv:params={path}",), ("paper33",), period)
+        check_learned((f"learned-vv:params={path}",), ("paper33",), period, "20:00-05:00")
     adjacent = resolve_period(TEST, "20:00-05:00", 15)  # starts where the training ends: allowed
-    check_learned((f"learned-affine:train={TRAIN}", f"learned-vv:params={path}"), ("paper33",), adjacent)
+    check_learned((f"learned-affine:train={TRAIN}", f"learned-vv:params={path}"), ("paper33",), adjacent, "20:00-05:00")
     assert main(["run", "--period", "year", "--strategies", f"learned-affine:train={TRAIN}", "--out", str(tmp_path / "r")]) == 2
 
 

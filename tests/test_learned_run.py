@@ -29,7 +29,7 @@ def _run(
     return main(["run", "--case", *cases, "--strategies", *strategies, *ARGS, *extra, "--out", str(out)])
 
 
-def test_run_trains_on_the_model_and_tests_out_of_sample(tmp_path):
+def test_run_trains_on_the_model_and_tests_out_of_sample(tmp_path, capsys):
     out = tmp_path / "run"
     assert _run(out) == 0
     manifest = json.loads((out / "manifest.json").read_text())
@@ -61,6 +61,17 @@ def test_run_trains_on_the_model_and_tests_out_of_sample(tmp_path):
     assert _run(out) == 0
     assert (out / refs[("paper33", AFFINE)]).stat().st_mtime_ns == stamp
     assert sorted(p.stat().st_mtime_ns for p in (out / "tasks").glob("*.parquet")) == tasks
+    # a fitted file edited by hand is not the rule the run fitted: refused on resume, as edited case data are
+    fit_file = out / refs[("paper33", AFFINE)]
+    text = fit_file.read_text()
+    edited = json.loads(text)
+    edited["parameters"][0]["a"] += 0.05
+    fit_file.write_text(json.dumps(edited))
+    assert _run(out) == 2
+    assert "the fitted rule is not the one this run fitted and recorded" in capsys.readouterr().err
+    assert sorted(p.stat().st_mtime_ns for p in (out / "tasks").glob("*.parquet")) == tasks
+    fit_file.write_text(text)
+    assert _run(out) == 0 and sorted(p.stat().st_mtime_ns for p in (out / "tasks").glob("*.parquet")) == tasks
     # the fitted file is a rule elsewhere: on the perturbed grid it gives what the run gave there
     other = tmp_path / "other"
     label = f"learned-affine:params={out / refs[('paper33', AFFINE)]}"

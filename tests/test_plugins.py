@@ -255,3 +255,18 @@ def test_the_entry_point_group_loads_an_installed_plugin(tmp_path, monkeypatch):
     res = run_strategy("installed:share=0.2", Scenario.snapshot(load_network("paper33")), 0.0)
     assert res.status[0] == OK and res.q_mvar[0] == pytest.approx(0.2 * 0.8 * 0.6, abs=1e-12)
     plugins.unload("installed_rule")
+
+
+def test_rule_non_finite_steps_are_counted_under_their_own_name_in_the_summary_and_report(tmp_path):
+    ref = _plugin(tmp_path, NAN_RULE)
+    out = tmp_path / "run"
+    argv = ["run", "--plugin", ref, "--strategies", "no-action", "nan-above:threshold=0.5", "--k", "0"]
+    argv += ["--night-modes", "connected", "--forecast", "off", "--period", "2016-06-28T10:00..2016-06-28T11:00"]
+    assert main([*argv, "--step-minutes", "10", "--workers", "1", "--quiet", "--out", str(out)]) == 0
+    import pandas as pd
+
+    row = pd.read_csv(out / "summary.csv").set_index("strategy").loc["nan-above:threshold=0.5"]
+    assert (row.steps, row.rule_non_finite_steps, row.pf_diverged_steps, row.pf_converged_steps) == (6, 6, 0, 0)
+    html = (out / "report.html").read_text()
+    assert "rule-non-finite, the rule gave NaN or inf: no setpoint: 6 steps" in html
+    assert "pf-diverged, the power flow did not converge" not in html  # not counted as what it is not

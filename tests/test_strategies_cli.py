@@ -23,7 +23,8 @@ def test_json_contract(capsys: pytest.CaptureFixture, strategy: str, flows: int)
     assert KEYS <= set(out)
     assert out["strategy"] == strategy and out["k"] == 0.2 and out["status"] == "ok"
     assert out["power_flows"] == flows
-    assert set(out["q_mvar"]) == {"10", "16", "19", "29", "27"}  # the paper's DER buses
+    assert out["q_mvar"].keys() == {"PV-10", "PV-16", "PV-19", "PV-29", "DFIG-27"}  # the paper's DER, by name
+    assert out["der_bus"] == {"PV-10": 10, "PV-16": 16, "PV-19": 19, "PV-29": 29, "DFIG-27": 27}
     assert 0.9 < out["vmin"] <= out["vmax"] <= 1.1 and out["losses_kw"] > 0
     assert out["excursion_mvar"] == 0.0
     if strategy == "no-action":
@@ -48,7 +49,7 @@ def test_forecast_excursion_and_safe(capsys: pytest.CaptureFixture) -> None:
     plain = snapshot_json(capsys, "--strategy", "lfma", "--der-scale", "0.3")
     assert loose["excursion_mvar"] > 0 and safe["excursion_mvar"] == 0.0
     assert safe["q_mvar"] == plain["q_mvar"]  # here the safe cap is exactly the plain limit (k = 0)
-    pv = ("10", "16", "19", "29")
+    pv = ("PV-10", "PV-16", "PV-19", "PV-29")
     assert all(abs(loose["q_mvar"][b]) <= 0.225 + 1e-12 for b in pv)
     assert all(abs(safe["q_mvar"][b]) <= 0.135 + 1e-12 for b in pv)
     assert any(loose["q_mvar"][b] > 0.135 + 1e-6 for b in pv)

@@ -68,7 +68,7 @@ def test_table_is_tidy_and_complete(day_run):
     assert table.wall_ms.ge(0).all() and table.wall_ms[table.night_mode == "connected"].gt(0).all()
     manifest = json.loads((day_run.out / "manifest.json").read_text())
     assert manifest["period"]["steps"] == 1440 and all(t["done"] for t in manifest["tasks"])
-    assert manifest["cases"]["paper33"]["ders"][0] == {"bus": 10, "kind": "PV", "rating_mw": 0.6}
+    assert manifest["cases"]["paper33"]["ders"][0] == {"name": "PV-10", "bus": 10, "kind": "PV", "rating_mw": 0.6}
     assert manifest["config"]["detail"] is True and (day_run.out / "der_q.parquet").exists()
 
 

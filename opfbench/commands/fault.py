@@ -135,6 +135,7 @@ def _variants(args: argparse.Namespace) -> tuple[str, ...]:
 def run(args: argparse.Namespace) -> int:
     from opfbench.dynamics.study import FaultConfig, run_fault_study  # numba: only when a study runs
     from opfbench.io import load_case
+    from opfbench.study.learning import check_params
 
     case = load_case(case_spec(args.case, args))
     net = case.network
@@ -163,6 +164,7 @@ def run(args: argparse.Namespace) -> int:
         time=args.time,
     )
     config.check(net)  # before any work
+    check_params(config.strategies, [case.spec])
     try:
         study = run_fault_study(
             config,

@@ -91,10 +91,13 @@ def run(args: argparse.Namespace) -> int:
     from opfbench.io import load_network
     from opfbench.registry import run_strategy
     from opfbench.scenario import Scenario
+    from opfbench.study.learning import check_params
 
     (label,) = strategy_labels([args.strategy], args)
     options = _options(args, label)
-    net = load_network(case_spec(args.case, args))
+    spec = case_spec(args.case, args)
+    net = load_network(spec)
+    check_params([label], [spec])  # a fitted rule runs on the grid it was fitted on (or a perturbed one)
     scenario = Scenario.snapshot(net, args.load_scale, args.der_scale, args.forecast_der_scale)
     result = run_strategy(label, scenario, args.k, **options)
     out = result.snapshot_json(0)
@@ -113,7 +116,7 @@ def run(args: argparse.Namespace) -> int:
             f"  solver        {out['solver_status']} · {out['iterations']} iterations · {out['solve_ms']:.2f} ms"
             f" · fallback {out['fallback']}"
         )
-    print("  Q setpoints   " + ", ".join(f"bus {b}: {q:+.4f}" for b, q in out["q_mvar"].items()) + " MVAr")
+    print("  Q setpoints   " + ", ".join(f"{name}: {q:+.4f}" for name, q in out["q_mvar"].items()) + " MVAr")
     print(f"  power flows   {out['power_flows']}   excursion {out['excursion_mvar']:.4f} MVAr   wall {out['wall_ms']:.2f} ms")
     for key in result.extra:  # strategy diagnostics, e.g. LFMA's upstream disagreements
         print(f"  {key.replace('_', ' ')}: {out[key]}")

@@ -49,6 +49,7 @@ from __future__ import annotations
 
 import math
 import re
+from collections import Counter
 from dataclasses import dataclass
 
 import numpy as np
@@ -439,6 +440,16 @@ def _wye_delta(r: np.ndarray, x: np.ndarray, g: np.ndarray, b: np.ndarray) -> tu
     return r, x, g, b
 
 
+def _element_names(table: _Table, kept: np.ndarray) -> list[str | None]:
+    """Each row's `name` where it names that row alone among the `kept` rows (printable,
+    non-empty text, given once); None otherwise (the network then derives one from the
+    kind and bus, `Network.der_names`)."""
+    raw = table.frame["name"].tolist() if "name" in table.frame else [None] * len(table)
+    text = [v.strip() if isinstance(v, str) and v.strip() and v.isprintable() else None for v in raw]
+    count = Counter(t for t, keep in zip(text, kept, strict=True) if keep and t is not None)
+    return [t if t is not None and count[t] == 1 else None for t in text]
+
+
 def _energy(kind: object) -> str:
     text = "" if kind is None or (isinstance(kind, float) and math.isnan(kind)) else str(kind)
     for pattern, energy in ENERGY_OF_TYPE:
@@ -598,8 +609,9 @@ def from_pandapower(pnet, name: str, der_pf: float = DEFAULT_DER_PF, label: str 
     types = sgen.frame["type"].tolist() if "type" in sgen.frame else [None] * len(sgen)
     keep_sg = sg_at >= 0
     dropped_sgens = int((~keep_sg).sum())
+    names = _element_names(sgen, keep_sg)
     ders = tuple(
-        DER(int(sg_at[i]), "inverter", float(rating[i]), float(s_rated[i]), _energy(types[i]))  # type: ignore[arg-type]
+        DER(int(sg_at[i]), "inverter", float(rating[i]), float(s_rated[i]), _energy(types[i]), names[i])  # type: ignore[arg-type]
         for i in np.flatnonzero(keep_sg)
     )
     if dropped_loads or dropped_sgens:

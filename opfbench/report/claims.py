@@ -53,10 +53,10 @@ def _energy(summary: pd.DataFrame, strategies: list[str]) -> pd.DataFrame:
 
 def _complete(table: pd.DataFrame) -> tuple[pd.DataFrame, str]:
     """The rows of `table` with every figure, and a note on the rows left out (a
-    configuration with a step whose power flow did not converge has no energy)."""
+    configuration with a step without a figure — pf-diverged, rule-non-finite — has no energy)."""
     full = table.dropna()
     left_out = len(table) - len(full)
-    return full, (f"; {left_out} configuration(s) left out: a step without a converged power flow" if left_out else "")
+    return full, (f"; {left_out} configuration(s) left out: a step without a loss figure" if left_out else "")
 
 
 LLMA, LFMA = PAPER_RULES
@@ -303,18 +303,18 @@ def voltage_band(inputs: Inputs) -> Claim:
     s = inputs.summary[inputs.summary["strategy"].isin(PAPER_RULES)]
     if s.empty:
         return Claim(claim, figure, "—", NA, "the run has no llma/lfma configuration")
-    # voltages are over the steps with a converged power flow; a diverged step has none
+    # voltages are over the steps with a figure; a pf-diverged or rule-non-finite step has none
     measured = int(s["pf_converged_steps"].sum()) if "pf_converged_steps" in s else int(s["steps"].sum())
     no_figure = int(s["steps"].sum()) - measured
     if measured == 0:
-        return Claim(claim, figure, "—", NA, "no local-rule step has a converged power flow")
+        return Claim(claim, figure, "—", NA, "no local-rule step has a voltage figure")
     vmin, vmax = s["vmin_pu"].min(), s["vmax_pu"].max()
     ours = f"LLMA/LFMA voltages {vmin:.4f} … {vmax:.4f} p.u. over {measured} steps"
     if not (vmin >= lo - 1e-6 and vmax <= hi + 1e-6):
         return Claim(claim, figure, ours, FAILS, "some step leaves the band")
     if no_figure:
-        ours += f"; {no_figure} steps without a converged power flow"
-        return Claim(claim, figure, ours, NA, f"{no_figure} steps have no voltage figure (power flow did not converge)")
+        ours += f"; {no_figure} steps without a voltage figure"
+        return Claim(claim, figure, ours, NA, f"{no_figure} steps have no voltage figure (pf-diverged or rule-non-finite)")
     return Claim(claim, figure, ours, HOLDS, "every step of every local-rule configuration within the band")
 
 

@@ -136,7 +136,7 @@ SUMMARY_NUMBERS = (
     "certified_share",
 )
 """The numeric columns of summary.csv the report uses besides its keys (`_KEYS`);
-pf_converged_steps and pf_diverged_steps when present."""
+pf_converged_steps, pf_diverged_steps and rule_non_finite_steps when present."""
 FORECAST_METRICS = ("mse_scaled", "mape_pct", "mae_kw", "rmse_kw", "skill", "fit_s")
 """The metrics of a forecast JSON the report shows."""
 SUMMARY_COUNTS = (
@@ -148,11 +148,13 @@ SUMMARY_COUNTS = (
     "excursion_steps",
     "pf_converged_steps",
     "pf_diverged_steps",
+    "rule_non_finite_steps",
 )
 """Columns of summary.csv that count steps: whole numbers ≥ 0."""
 SUMMARY_OPTIONAL_NUMBERS = (
     "pf_converged_steps",
     "pf_diverged_steps",
+    "rule_non_finite_steps",
     "curtailed_kwh",
     "cost_kwh",
     "frontier_kwh",

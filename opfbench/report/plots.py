@@ -145,22 +145,24 @@ def der_q_day(der_q: pd.DataFrame) -> list[Plot]:
         strategies = [s for s in order(sub[["strategy"]].drop_duplicates())["strategy"] if s != BASELINE]
         if not strategies:
             continue
-        buses = sorted(sub["bus"].unique())
+        unit = "der" if "der" in sub.columns else "bus"  # a folder written before DER had names: one per bus
+        units = sorted(sub[unit].unique())
         fig = _subplots(
             rows=len(strategies), cols=1, shared_xaxes=True, subplot_titles=[escape(s) for s in strategies], vertical_spacing=0.06
         )
         for row, strategy in enumerate(strategies, start=1):
-            for bus, grp in sub[sub["strategy"] == strategy].groupby("bus"):
+            for der, grp in sub[sub["strategy"] == strategy].groupby(unit):
                 d = _decimate(grp.sort_values("time"), "q_mvar")
                 kind = escape(str(grp["kind"].iloc[0]))
-                color = _COLORS[buses.index(bus) % len(_COLORS)]  # a DER keeps its colour in every panel
+                color = _COLORS[units.index(der) % len(_COLORS)]  # a DER keeps its colour in every panel
+                bus = grp["bus"].iloc[0]
                 fig.add_scatter(
                     x=d["time"],
                     y=d["q_mvar"],
                     mode="lines",
-                    name=f"bus {bus} ({kind})",
+                    name=f"{escape(str(der))} (bus {bus})" if unit == "der" else f"bus {bus} ({kind})",
                     line=dict(color=color),
-                    legendgroup=str(bus),
+                    legendgroup=escape(str(der)),
                     showlegend=row == 1,
                     row=row,
                     col=1,

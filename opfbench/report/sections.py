@@ -147,18 +147,22 @@ def metadata(inputs: Inputs, price: tuple[float, str, str]) -> Section:
     return sec
 
 
-def _diverged_note(summary: pd.DataFrame) -> list[Block]:
-    """A note naming the configurations with steps whose power flow did not converge."""
-    bad = tables.diverged(summary)
+def _no_figure_note(summary: pd.DataFrame) -> list[Block]:
+    """A note on the configurations with steps that have no figure, by status."""
+    bad = tables.without_figures(summary)
     if bad.empty:
         return []
+    why = "; ".join(
+        f"{status}, {reason}: {int(bad[column].sum())} steps"
+        for column, (status, reason) in tables.NO_FIGURE.items()
+        if column in bad.columns and bad[column].sum() > 0
+    )
     return [
         Block(
             "note",
-            text=f"{len(bad)} configuration(s) have steps whose power flow did not converge (pf-diverged: "
-            f"{int(bad['pf_diverged_steps'].sum())} steps in all): such a step has no loss or voltage figure, so "
-            "their energy, savings and gap are not given (—), and their average loss and voltages are over the "
-            "steps that converged (pf_converged_steps).",
+            text=f"{len(bad)} configuration(s) have steps without a loss or voltage figure ({why}): their energy, "
+            "savings and gap are not given (—), and their average loss and voltages are over the steps with a "
+            "figure (pf_converged_steps).",
         )
     ]
 
@@ -200,7 +204,7 @@ def losses(inputs: Inputs, price: tuple[float, str, str]) -> Section:
     if inputs.summary is None:
         return sec.add(*_missing(inputs, "summary.csv"))
     s = inputs.summary
-    sec.blocks += _diverged_note(s)
+    sec.blocks += _no_figure_note(s)
     sec.blocks += _energy_tables(s, price)
     money = tables.losses(s, price[0])
     full = money.rename(columns={"money_per_day": f"{price[1]} per day", "money_per_year": f"{price[1]} per year"})
@@ -468,7 +472,7 @@ def voltage(inputs: Inputs) -> Section:
     limits = {name: (c.get("vmin_pu"), c.get("vmax_pu")) for name, c in ((inputs.manifest or {}).get("cases") or {}).items()}
     if limits:
         sec.add(Block("note", text="Limits: " + "; ".join(f"{n} [{lo}, {hi}] p.u." for n, (lo, hi) in limits.items())))
-    sec.blocks += _diverged_note(inputs.summary)
+    sec.blocks += _no_figure_note(inputs.summary)
     sec.add(table(tables.voltage(inputs.summary)))
     exc = tables.excursions(inputs.summary)
     if exc.empty:

@@ -14,14 +14,19 @@ from opfbench.dynamics.recovery import KEYS as RECOVERY_KEYS
 from opfbench.dynamics.recovery import recovery_table
 from opfbench.registry import BASELINE, PAPER_OPF, PAPER_RULES, REFERENCE_OPTIMUM, describe, is_formulation, is_relaxation, rank
 from opfbench.report import paper
-from opfbench.result import STATUSES
+from opfbench.result import PF_DIVERGED, RULE_NON_FINITE, STATUSES
 
 CONFIG = ["case", "strategy", "k", "night_mode", "forecast"]
 REFERENCE_NIGHT = "connected"
 TOL_KWH = 1e-6  # energies closer than this count as equal
 """The night mode of the tables that fix one (the paper's main setting)."""
-FIGURE_STEPS = ("pf_converged_steps", "pf_diverged_steps")
-"""summary.csv's counts of steps with and without a converged power flow (a summary
+NO_FIGURE = {
+    "pf_diverged_steps": (PF_DIVERGED, "the power flow did not converge"),
+    "rule_non_finite_steps": (RULE_NON_FINITE, "the rule gave NaN or inf: no setpoint"),
+}
+"""summary.csv's counts of the steps without a loss or voltage figure, by status, and why."""
+FIGURE_STEPS = ("pf_converged_steps", *NO_FIGURE)
+"""summary.csv's counts of steps with a figure and without one, by status (a summary
 written before they existed has none: every step there had a figure or none was counted)."""
 
 
@@ -30,11 +35,12 @@ def figure_steps(summary: pd.DataFrame) -> list[str]:
     return [c for c in FIGURE_STEPS if c in summary.columns]
 
 
-def diverged(summary: pd.DataFrame) -> pd.DataFrame:
-    """The configurations with steps whose power flow did not converge (no loss or voltage figure)."""
-    if "pf_diverged_steps" not in summary.columns:
+def without_figures(summary: pd.DataFrame) -> pd.DataFrame:
+    """The configurations with steps that have no loss or voltage figure (any `NO_FIGURE` status)."""
+    counts = [c for c in NO_FIGURE if c in summary.columns]
+    if not counts:
         return summary.iloc[:0]
-    return summary[summary["pf_diverged_steps"] > 0]
+    return summary[(summary[counts] > 0).any(axis=1)]
 
 
 def order(frame: pd.DataFrame) -> pd.DataFrame:

@@ -39,7 +39,8 @@ Statuses beyond "ok": "pf-diverged" (a flow did not converge: no figures), "not-
 `StrategyResult.power_flows` counts every flow a snapshot needed, including the one that
 evaluates the final setpoints; extra `residual_mvar` (S,): the last max|clip(target) − Q|.
 
-Each DER is assumed alone at its bus: two units at one bus would measure the same load.
+Several DER at one bus each measure their share of its load (`Network.der_share`, in
+proportion to S̄); the bus's line meters they read alike (`Measurements.bus_share`).
 """
 
 from __future__ import annotations
@@ -91,7 +92,8 @@ class _Plant:
             values["v_pu"] = np.abs(pf.v[:, self.scenario.net.der_bus])
         if pf is not None and "flows" in reads:
             values["line_mva"] = self.meters.outflow(pf)
-        return Measurements(reads, values, rows.size, self.s_rated, self.p_rated, self.kinds, self.meters.valid)
+        net = self.scenario.net
+        return Measurements(reads, values, rows.size, self.s_rated, self.p_rated, self.kinds, self.meters.valid, net.der_share)
 
 
 class Grid:

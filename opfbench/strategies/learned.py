@@ -84,7 +84,7 @@ if TYPE_CHECKING:
     from opfbench.scenario import Scenario
 
 FORMAT = "opfbench-learned-rule"
-VERSION = 1
+VERSION = 2  # 2: the network fitted on (network_sha256); slope limits = rho / row sums
 RHO = 0.9  # the default contraction factor of the slope bound
 KNOTS = 5  # learned-vv's default number of knots
 GRID_PU = 0.0025  # learned-1547's breakpoint grid, p.u. of voltage
@@ -94,6 +94,7 @@ RIDGE = 1e-9  # × the Gram matrix's mean diagonal: makes unidentifiable coeffic
 MIN_LIMIT_SHARE = 1e-3  # a step is used for a DER where its limit exceeds this share of S̄
 MARGINS = (0.0, 0.0025, 0.005, 0.01, 0.02, 0.03, 0.05)  # p.u.: the band's tightenings a compliant fit tries, in order
 VIOLATION_PU = 1e-6  # a step lies outside the band beyond this
+SAMPLES_PER_PARAMETER = 2  # a DER's fit needs twice as many samples as parameters (fewer: its ridge, not the data, decides)
 #: The k and night mode the optimum is fitted at: the DER's whole capability (k = 0), PV
 #: connected at night, no forecast; at evaluation the target is clipped to ±(1 − k)·Qmax.
 TRAIN_K = 0.0
@@ -178,6 +179,11 @@ class LearnedRule:
     hyper: ClassVar[tuple[str, ...]] = ()  # the constructor's hyper-parameters
     solver: ClassVar[str] = "clarabel (cvxpy)"
 
+    @property
+    def n_parameters(self) -> int:
+        """Parameters fitted per DER."""
+        raise NotImplementedError
+
     def __init__(self) -> None:
         self.s_rated_mva_ = np.zeros(0)  # (n_der,) S̄ of the DERs fitted, MVA
 
@@ -213,6 +219,10 @@ class AffineRule(LearnedRule):
     def __init__(self) -> None:
         super().__init__()
         self.coef_ = np.zeros((0, 4))
+
+    @property
+    def n_parameters(self) -> int:
+        return len(self.TERMS)
 
     def fit(self, x: Features, q_mvar: np.ndarray, slope_max: np.ndarray, use: np.ndarray) -> "AffineRule":
 
@@ -250,6 +260,13 @@ class AffineRule(LearnedRule):
             raise InputError(f"each DER's parameters must be numbers {', '.join(cls.TERMS)}") from None
         if not np.isfinite(rule.coef_).all():
             raise InputError("a parameter is not finite")
+        rising = np.flatnonzero(rule.coef_[:, 2] > 0)
+        if rising.size:
+            i = int(rising[0])
+            raise InputError(
+                f"DER {i + 1}'s c = {rule.coef_[i, 2]:.6g} > 0: its Q would rise with its own |V| (positive feedback); "
+                "the fit keeps c ≤ 0"
+            )
         return rule
 
 
@@ -313,6 +330,10 @@ class VoltVarRule(_CurveRule):
         super().__init__()
         self.knots = knots
 
+    @property
+    def n_parameters(self) -> int:
+        return self.knots
+
     def fit(self, x: Features, q_mvar: np.ndarray, slope_max: np.ndarray, use: np.ndarray) -> "VoltVarRule":
         import cvxpy as cp
 
@@ -373,6 +394,10 @@ class Ieee1547Rule(_CurveRule):
 
     name = "learned-1547"
     solver = f"grid search ({GRID_PU} p.u.)"
+
+    @property
+    def n_parameters(self) -> int:
+        return 4  # V1, V4 and q1, q4 (V2, V3 where q is 0)
 
     def fit(self, x: Features, q_mvar: np.ndarray, slope_max: np.ndarray, use: np.ndarray) -> "Ieee1547Rule":
         s = x.s_rated_mva
@@ -437,6 +462,12 @@ def _fit_1547(v: np.ndarray, y: np.ndarray, slope_max: float) -> tuple[np.ndarra
 
 
 FAMILIES: dict[str, type[LearnedRule]] = {f.name: f for f in (AffineRule, VoltVarRule, Ieee1547Rule)}
+
+
+def family_rule(family: str, options: dict) -> LearnedRule:
+    """An unfitted rule of `family` with the hyper-parameters among `options`."""
+    cls = FAMILIES[family]
+    return cls(**{key: options[key] for key in cls.hyper if key in options})
 
 
 # ----- training -----------------------------------------------------------------------------
@@ -511,6 +542,38 @@ def _closed_loop(rule: LearnedRule, scenario: Scenario) -> ClosedLoop:
     )
 
 
+def usable(scenario: Scenario) -> np.ndarray:
+    """(S, n_der) the steps where each DER has a reactive limit (above MIN_LIMIT_SHARE of
+    S̄): where a target can act, so where a fit can learn from the optimum."""
+    return scenario.qmax_mvar() > MIN_LIMIT_SHARE * scenario.net.der_s_mva
+
+
+def check_samples(rule: LearnedRule, net, samples: np.ndarray, where: str) -> None:
+    """InputError naming the DER (name, bus) that has fewer than SAMPLES_PER_PARAMETER ×
+    the family's parameters of training samples (`samples` (n_der,)): a rule is never
+    fitted to no data."""
+    need = SAMPLES_PER_PARAMETER * rule.n_parameters
+    short = np.flatnonzero(np.asarray(samples) < need)
+    if short.size:
+        i = int(short[0])
+        more = f" (and {short.size - 1} more DER)" if short.size > 1 else ""
+        raise InputError(
+            f"{rule.name}: DER {net.der_names[i]} (bus {int(net.bus_ids[net.der_bus[i]])}) has {int(samples[i])} training "
+            f"samples in {where}; its {rule.n_parameters} parameters need at least {need}{more} — train over a longer "
+            "period, or one with DER output (not only night)"
+        )
+
+
+def network_digest(net) -> str:
+    """sha256 of a network's model — buses, branches, loads, generators, DER — without its
+    name: the identity of the grid a rule was fitted on."""
+    from dataclasses import fields
+
+    from opfbench.digests import digest
+
+    return digest({f.name: getattr(net, f.name) for f in fields(net) if f.name != "name"})
+
+
 def _rank(loop: ClosedLoop) -> tuple[int, float]:
     """Fewer training steps outside the band first, then lower losses."""
     return loop.outside, loop.loss_kw
@@ -529,7 +592,9 @@ def _fit_at(
     pf = solve_pf_batch(net, sc.injections(q_mvar))
     converged = np.asarray(pf.converged, dtype=bool)
     x = features(sc, np.abs(pf.v[:, net.der_bus]))
-    use = (ok & converged)[:, None] & (sc.qmax_mvar() > MIN_LIMIT_SHARE * net.der_s_mva)
+    use = (ok & converged)[:, None] & usable(sc)
+    where = f"{training.case} over {training.period}"
+    check_samples(new(), net, use.sum(axis=0), f"{where} (steps whose optimum is certified and where it has a reactive limit)")
     rule = new().fit(x, q_mvar, slope_max, use)
     history: list[dict] = []
     if not rounds:
@@ -538,7 +603,9 @@ def _fit_at(
     loop = best_loop = _closed_loop(rule, sc)
     history.append({"round": 0} | loop.record())
     for r in range(1, rounds + 1):
-        rule = new().fit(x.with_v(loop.v_der), q_mvar, slope_max, use & np.isfinite(loop.v_der))
+        closed = use & np.isfinite(loop.v_der)
+        check_samples(new(), net, closed.sum(axis=0), f"{where}, round {r} (steps the rule settled in closed loop)")
+        rule = new().fit(x.with_v(loop.v_der), q_mvar, slope_max, closed)
         loop = _closed_loop(rule, sc)
         history.append({"round": r} | loop.record())
         if _rank(loop) < _rank(best_loop):
@@ -561,7 +628,7 @@ def fit_rule(
     hyper = {key: value for key, value in {"knots": knots}.items() if key in FAMILIES[family].hyper}
 
     def new() -> LearnedRule:
-        return FAMILIES[family](**hyper)
+        return family_rule(family, hyper)
 
     q_mvar, ok = training.q_mvar, training.ok
     rule, x, use, history, loop = _fit_at(new, training, q_mvar, ok, slope_max, rounds)
@@ -589,6 +656,7 @@ def fit_rule(
         network=net.name,
         der_bus=tuple(int(b) for b in net.bus_ids[net.der_bus]),
         s_rated_mva=tuple(float(v) for v in net.der_s_mva),
+        network_sha256=network_digest(net),
         train={
             "period": training.period,
             "start": training.start,
@@ -625,6 +693,7 @@ class LearnedParams:
     network: str
     der_bus: tuple[int, ...]
     s_rated_mva: tuple[float, ...]
+    network_sha256: str
     train: dict
     data_sha256: str
     rho: float
@@ -642,6 +711,7 @@ class LearnedParams:
             "case": self.case,
             "network": self.network,
             "ders": [{"bus": b, "s_mva": s} for b, s in zip(self.der_bus, self.s_rated_mva, strict=True)],
+            "network_sha256": self.network_sha256,
             "train": self.train,
             "data_sha256": self.data_sha256,
             "rho": self.rho,
@@ -694,26 +764,36 @@ class LearnedParams:
             slope_max = tuple(float(v) for v in data["slope_max_mvar_per_pu"])
             rho = float(data["rho"])
             case, network, digest = str(data["case"]), str(data["network"]), str(data["data_sha256"])
+            network_sha = str(data["network_sha256"])
             train, hyper = dict(data["train"]), dict(data.get("hyper") or {})
         except (KeyError, TypeError, ValueError) as exc:
             raise InputError(f"a field is missing or malformed ({type(exc).__name__}: {exc})") from None
         if not (len(row_sum) == len(slope_max) == len(bus)):
             raise InputError("the sensitivity and slope lists need one value per DER")
-        if not all(np.isfinite(v) and v > 0 for v in s) or not np.isfinite(slope_max).all() or not 0 < rho < 1:
-            raise InputError("S̄ must be positive, the slope limits finite and rho in (0, 1)")
+        if not all(np.isfinite(v) and v > 0 for v in (*s, *row_sum)) or not 0 < rho < 1:
+            raise InputError("S̄ and the sensitivity's row sums must be positive and finite, rho in (0, 1)")
+        bound = rho / np.array(row_sum)  # the slope bound the fit guarantees: ρ / Σ_j |X_ij|
+        if not np.allclose(slope_max, bound, rtol=1e-9, atol=0.0):
+            i = int(np.flatnonzero(~np.isclose(slope_max, bound, rtol=1e-9, atol=0.0))[0])
+            raise InputError(
+                f"DER at bus {bus[i]}: slope limit {slope_max[i]:.6g} MVAr/p.u. is not rho / row sum = "
+                f"{rho:g} / {row_sum[i]:.6g} = {bound[i]:.6g}"
+            )
         rule = FAMILIES[family].from_parameters(items, hyper)
         rule.s_rated_mva_ = np.array(s)
-        over = rule.v_slope() > np.array(slope_max) * (1 + 1e-6)
+        over = rule.v_slope() > bound * (1 + 1e-6)
         if over.any():
             i = int(np.flatnonzero(over)[0])
             raise InputError(
-                f"DER at bus {bus[i]}: |∂Q/∂|V|| = {rule.v_slope()[i]:.6g} MVAr/p.u. exceeds its slope limit {slope_max[i]:.6g}"
+                f"DER at bus {bus[i]}: |∂Q/∂|V|| = {rule.v_slope()[i]:.6g} MVAr/p.u. exceeds its slope bound "
+                f"rho / Σ|X| = {bound[i]:.6g}: the closed loop would not be a contraction"
             )
         fit = dict(data.get("fit") or {})
-        return cls(family, case, network, bus, s, train, digest, rho, hyper, row_sum, slope_max, rule, fit)
+        return cls(family, case, network, bus, s, network_sha, train, digest, rho, hyper, row_sum, slope_max, rule, fit)
 
     def check_network(self, net, ref: str) -> None:
-        """InputError unless `net` has this rule's DERs (bus numbers and S̄, in order)."""
+        """InputError unless `net` is the grid this rule was fitted on: its DERs (bus numbers
+        and S̄, in order) and its whole model (`network_digest`)."""
         buses = tuple(int(b) for b in net.bus_ids[net.der_bus])
         if len(buses) != len(self.der_bus):
             raise InputError(
@@ -724,6 +804,12 @@ class LearnedParams:
             raise InputError(
                 f"learned-rule parameters {ref} were fitted on {self.case} ({self.network}): its DERs (buses, S̄) are not "
                 f"those of {net.name}"
+            )
+        if network_digest(net) != self.network_sha256:
+            raise InputError(
+                f"learned-rule parameters {ref} were fitted on {self.case} ({self.network}); {net.name} is another "
+                "grid (its branches, loads, limits or DER differ, network sha256 "
+                f"{network_digest(net)[:12]}… ≠ {self.network_sha256[:12]}…): fit the rule on this case"
             )
 
     def check_measurements(self, m: Measured, ref: str) -> None:

@@ -7,8 +7,9 @@ answer after each LFMA step and the final evaluation — is one `solve_pf_batch`
 
 Units and signs: Q in MVAr, positive = injected by the DER. Q_up > 0 = the DER bus
 imports reactive power from its upstream line; Q_do > 0 = it exports into its other
-lines (see `opfbench.strategies.meters`). Each DER is assumed alone at its bus: two units
-at one bus would each measure, and each compensate, the same load.
+lines (see `opfbench.strategies.meters`). Several DER at one bus share what they
+compensate — the bus's load and the upstream inflow — in proportion to their ratings S̄
+(`Network.der_share`): together they act as one unit of their combined rating.
 
 Power flows counted per snapshot (`StrategyResult.power_flows`): no action 1 and LLMA 1
 (the evaluation of the setpoints: open-loop rules of the engine); LFMA 4 (the no-action
@@ -45,8 +46,8 @@ def no_action_target(m: Measurements) -> np.ndarray:
 
 
 def llma_target(m: Measurements) -> np.ndarray:
-    """Algorithm 1, (S, n_der) MVAr: the reactive load at the DER's own bus (the engine
-    clips it to ±L: Q^H = min(Q_load, L) for the usual positive load)."""
+    """Algorithm 1, (S, n_der) MVAr: the DER's share of the reactive load at its own bus
+    (the engine clips it to ±L: Q^H = min(Q_load, L) for the usual positive load)."""
     return m.load_q_mvar
 
 
@@ -108,10 +109,13 @@ def lfma_step4(
     limit: np.ndarray,
     running: np.ndarray,
     branch_node: np.ndarray,
+    share: np.ndarray | float = 1.0,
 ) -> tuple[np.ndarray, np.ndarray]:
     """LFMA step 4: (Q^F, rule), both (S, n_der), from the setpoints and measurements of
     steps 2 (H) and 3 (I). `running` (S,) marks the snapshots whose flows all converged so
-    far (the others are STOPPED); `branch_node` (n_der,) the non-leaf DER buses (LEAF).
+    far (the others are STOPPED); `branch_node` (n_der,) the non-leaf DER buses (LEAF);
+    `share` (n_der,) each DER's share of its bus (`Network.der_share`): what it subtracts
+    of the bus's inflow.
 
     Q_up changed sign iff Q_up^H·Q_up^I < 0; Q_do kept its sign iff Q_do^H·Q_do^I > 0 (a
     zero reading counts as a change). Subtracting |Q_up^I| is clipped to −L: on radial
@@ -122,7 +126,7 @@ def lfma_step4(
     flipped = q_up_h * q_up_i < 0
     do_kept = q_do_h * q_do_i > 0
     rule = np.select([leaf, stopped, ~flipped, do_kept], [LEAF, STOPPED, KEPT, SUBTRACTED], BACK_TO_LLMA)
-    q_f = np.select([rule == SUBTRACTED, rule == BACK_TO_LLMA], [clip(q_i - np.abs(q_up_i), limit), q_h], q_i)
+    q_f = np.select([rule == SUBTRACTED, rule == BACK_TO_LLMA], [clip(q_i - share * np.abs(q_up_i), limit), q_h], q_i)
     return q_f, rule
 
 
@@ -132,7 +136,8 @@ def lfma_trace(scenario: Scenario, k: float = 0.0, safe: bool = False) -> LfmaTr
     grid = Grid(scenario)
     meters = grid.meters
     limit = reactive_limit(scenario, k, safe)
-    q_load = scenario.load_q_at_der_mvar()
+    q_load = scenario.load_q_at_der_mvar()  # each DER's share of its bus's load
+    share = net.der_share  # … and of the inflow its bus's meters read
     branch_node = ~net.is_leaf[net.der_bus]  # (n_der,): more than one incident line
 
     def answer(q: np.ndarray) -> np.ndarray:
@@ -150,10 +155,10 @@ def lfma_trace(scenario: Scenario, k: float = 0.0, safe: bool = False) -> LfmaTr
     q_h = np.where(running(), llma_setpoints(scenario, limit), q_none)
     q_up_h, q_do_h = meters.split(answer(q_h), position)
     # Step 3: branch nodes add the measured upstream inflow.
-    q_i = np.where(running() & branch_node, clip(q_load + q_up_h, limit), q_h)
+    q_i = np.where(running() & branch_node, clip(q_load + share * q_up_h, limit), q_h)
     q_up_i, q_do_i = meters.split(answer(q_i), position)
     # Step 4: where Q_up changed sign, subtract |Q_up^I| or return to LLMA.
-    q_f, rule = lfma_step4(q_h, q_i, q_up_h, q_up_i, q_do_h, q_do_i, limit, grid.diverged == 0, branch_node)
+    q_f, rule = lfma_step4(q_h, q_i, q_up_h, q_up_i, q_do_h, q_do_i, limit, grid.diverged == 0, branch_node, share)
     answer(q_f)
     return LfmaTrace(limit, q_h, q_i, q_f, q_up_h, q_up_i, q_do_h, q_do_i, upstream, rule, tuple(grid.flows), grid.diverged)
 

@@ -54,10 +54,14 @@ class Measurements:
 
     v_pu ("v"): own-bus |V|, p.u. · p_mw ("p"): own active power P^C, MW · p_forecast_mw
     ("p_forecast"): forecast P^F, MW (P^C where the scenario has none) · load_p_mw,
-    load_q_mvar ("load"): own-bus load, MW / MVAr, positive = consumed · line_mva ("flows"):
+    load_q_mvar ("load"): the DER's share of its bus's load, MW / MVAr, positive = consumed
+    (`bus_share` × the bus's: several DER at one bus share it) · line_mva ("flows"):
     (S, n_der, m) complex MVA leaving the bus into each incident line (P + jQ; 0 in
-    padding, see `line_valid` (n_der, m)). Always there: shape (S, n_der), s_rated_mva
-    (n_der,) nameplate S̄, p_rated_mw (n_der,) rating P̄, kinds (n_der,) DER kinds.
+    padding, see `line_valid` (n_der, m)) — the bus's meters, the same for every DER at the
+    bus: a rule that compensates a flow takes its `bus_share` of it. Always there: shape
+    (S, n_der), s_rated_mva (n_der,) nameplate S̄, p_rated_mw (n_der,) rating P̄, kinds
+    (n_der,) DER kinds, bus_share (n_der,) the DER's share of its bus, S̄ / Σ S̄ of the DER
+    there (1 for a DER alone).
     """
 
     def __init__(
@@ -69,6 +73,7 @@ class Measurements:
         p_rated_mw: np.ndarray,
         kinds: np.ndarray,
         line_valid: np.ndarray,
+        bus_share: np.ndarray | None = None,
     ) -> None:
         self.reads = reads
         self.shape = (n_rows, len(s_rated_mva))
@@ -77,6 +82,7 @@ class Measurements:
         self.p_rated_mw = p_rated_mw
         self.kinds = kinds
         self.line_valid = line_valid
+        self.bus_share = np.ones(len(s_rated_mva)) if bus_share is None else bus_share
 
     def _get(self, read: str, field: str) -> np.ndarray:
         if read not in self.reads:

@@ -25,7 +25,7 @@ from opfbench.errors import InputError
 from opfbench.io import load_network, parse_spec
 from opfbench.registry import configuration
 from opfbench.scenario import Scenario
-from opfbench.strategies.learned import TRAIN_NIGHT, TrainingSet, load_params
+from opfbench.strategies.learned import TRAIN_NIGHT, TrainingSet, check_samples, family_rule, load_params, usable
 from opfbench.study.periods import Period, local_time
 
 Window = tuple[pd.Timestamp, pd.Timestamp]  # [start, end), local time
@@ -85,9 +85,12 @@ def model_case(case: str) -> str:
     return parse_spec(case).model.text
 
 
-def check_learned(labels: tuple[str, ...], cases: tuple[str, ...], period: Period) -> None:
-    """Every learned configuration's training period apart from the test period, and a
-    params file fitted on the cases it runs on (their models' DERs); InputError otherwise."""
+def check_learned(
+    labels: tuple[str, ...], cases: tuple[str, ...], period: Period, night: str, step_minutes: float | None = None
+) -> None:
+    """Every learned configuration's training period apart from the test period, with
+    enough samples for every DER of every case model (`check_training_samples`), and a
+    params file fitted on the cases it runs on (`check_params`); InputError otherwise."""
     test = test_window(period)
     trained = sorted({lc.train for lc in learned_configs(labels) if lc.train})
     if len(trained) > 1:
@@ -101,8 +104,32 @@ def check_learned(labels: tuple[str, ...], cases: tuple[str, ...], period: Perio
             continue
         params = load_params(lc.params)
         check_disjoint(lc.label, train_window(str(params.train.get("period")), lc.label), test, period.label)
-        for case in cases:
-            params.check_network(load_network(model_case(case)), lc.params)
+    check_params(labels, cases)
+    check_training_samples(labels, cases, night, step_minutes)
+
+
+def check_params(labels: tuple[str, ...] | list[str], cases: tuple[str, ...] | list[str]) -> None:
+    """Every `params=FILE` configuration among `labels` was fitted on the model of each of
+    `cases` (`LearnedParams.check_network`: its DER and its whole grid; a `line-z`
+    perturbed case runs on its model's rule); InputError naming the file otherwise."""
+    for lc in learned_configs(tuple(labels)):
+        if lc.params:
+            params = load_params(lc.params)
+            for case in cases:
+                params.check_network(load_network(model_case(case)), lc.params)
+
+
+def check_training_samples(labels: tuple[str, ...], cases: tuple[str, ...], night: str, step_minutes: float | None) -> None:
+    """Before any work: every DER of every case model has a reactive limit at enough steps
+    of the training period to fit each `train=` configuration (`learned.check_samples`; the
+    fit checks again with the optimum's certified steps); InputError naming the DER."""
+    trained = [lc for lc in learned_configs(labels) if lc.train]
+    for model in dict.fromkeys(model_case(case) for case in cases) if trained else ():
+        _, scenario = training_scenario(model, trained[0].train, night, step_minutes)
+        samples = usable(scenario).sum(axis=0)
+        for lc in trained:
+            rule = family_rule(configuration(lc.label).spec.name, lc.options)
+            check_samples(rule, scenario.net, samples, f"{model} over {lc.train} (steps where it has a reactive limit)")
 
 
 def training_scenario(case: str, train: str, night: str, step_minutes: float | None = None) -> tuple[Period, Scenario]:

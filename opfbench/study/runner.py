@@ -67,7 +67,10 @@ def _case_info(case: str) -> dict:
     net = loaded.network
     return {
         "buses": int(net.n_bus),
-        "ders": [{"bus": int(net.bus_ids[d.bus]), "kind": d.kind, "rating_mw": float(d.rating_mw)} for d in net.ders],
+        "ders": [
+            {"name": name, "bus": int(net.bus_ids[d.bus]), "kind": d.kind, "rating_mw": float(d.rating_mw)}
+            for name, d in zip(net.der_names, net.ders, strict=True)
+        ],
         "vmin_pu": float(net.vmin.min()),
         "vmax_pu": float(net.vmax.max()),
         "loads": int(net.n_load),
@@ -227,15 +230,16 @@ def fit_learned(config: StudyConfig, out: Path, options: dict[str, Any]) -> tupl
     runs of the folder `out` (`study.training`)."""
     from opfbench.study.learning import check_learned, learned_configs
     from opfbench.study.store import RunStore
-    from opfbench.study.training import train
+    from opfbench.study.training import recorded_fits, train
 
     if not learned_configs(config.strategies):
         return ()
     family = prepare(config)
-    check_learned(family.config.strategies, family.config.cases, family.period)
+    c = family.config
+    check_learned(c.strategies, c.cases, family.period, c.night, c.step_minutes)
     RunStore(Path(out), lambda msg: None).check(family, bool(options["fresh"]))
 
     def nested(sub: StudyConfig, folder: Path, rules: tuple[Fitted, ...]) -> StudyRun:
         return run_study(sub, folder, fitted=rules, **options)
 
-    return train(family.config, Path(out), nested)
+    return train(family.config, Path(out), nested, {} if options["fresh"] else recorded_fits(Path(out)))

@@ -20,7 +20,7 @@ import pandas as pd
 
 from opfbench.formulations.frontier import Frontier, Reference
 from opfbench.registry import BASELINE, REFERENCE_OPTIMUM, configuration, describe
-from opfbench.result import NOT_SETTLED, OK, StrategyResult
+from opfbench.result import NOT_SETTLED, OK, PF_DIVERGED, RULE_NON_FINITE, StrategyResult
 from opfbench.study.config import DETAIL_TABLES
 
 KEYS = ["case", "strategy", "k", "night_mode", "forecast"]
@@ -50,7 +50,10 @@ STEP_COLUMNS = [
     "frontier_eps_pu",
     "frontier_curtails",
 ]
-DETAIL_COLUMNS = {"der_q": [*KEYS, "time", "bus", "kind", "q_mvar", "curtailed_mw"], "bus_v": [*KEYS, "time", "bus", "v_pu"]}
+DETAIL_COLUMNS = {
+    "der_q": [*KEYS, "time", "der", "bus", "kind", "q_mvar", "curtailed_mw"],
+    "bus_v": [*KEYS, "time", "bus", "v_pu"],
+}
 FRONTIER_KEYS = ["case", "k", "night_mode", "curtail"]
 FRONTIER_COLUMNS = [*FRONTIER_KEYS, "time", "step_h", "eps_pu", "cost_kw", "bound_kw", "excursion_pu", "status", "solved"]
 VIOLATION_PU = 1e-6  # a step violates the voltage limits beyond this
@@ -162,7 +165,7 @@ def detail_rows(
     tables: tuple[str, ...] = DETAIL_TABLES,
 ) -> dict[str, Columns]:
     """The columns of the long tables named in `tables`, for `stack`: "der_q" per-DER
-    setpoints (bus id, kind, q_mvar, curtailed_mw), "bus_v" per-bus |V| (p.u.)."""
+    setpoints (DER name, bus id, kind, q_mvar, curtailed_mw), "bus_v" per-bus |V| (p.u.)."""
     net = res.net
     n = res.n_snapshots
     label: Columns = {"case": case, "strategy": res.strategy, "k": float(res.k), "night_mode": night_mode, "forecast": forecast}
@@ -172,6 +175,7 @@ def detail_rows(
         curtailed = np.zeros(n * n_der) if res.curtailed_mw is None else res.curtailed_mw.reshape(-1)
         return label | {
             "time": np.repeat(time.asi8, n_der),
+            "der": np.tile(np.asarray(net.der_names, dtype=str), n),
             "bus": np.tile(net.bus_ids[net.der_bus], n).astype(np.int64),
             "kind": np.tile(np.asarray(net.der_kinds, dtype=str), n),
             "q_mvar": res.q_mvar.reshape(-1),
@@ -232,6 +236,8 @@ def partial_summary(steps: pd.DataFrame) -> pd.DataFrame:
         lb_missing=steps.lower_bound_kw.isna().astype(np.int64),
         not_ok=(steps.status != OK).astype(np.int64),
         not_settled=(steps.status == NOT_SETTLED).astype(np.int64),
+        pf_diverged=(steps.status == PF_DIVERGED).astype(np.int64),
+        non_finite=(steps.status == RULE_NON_FINITE).astype(np.int64),
         vv=(steps.voltage_violation_pu > VIOLATION_PU).astype(np.int64),
         vv_h=steps.step_h.where(steps.voltage_violation_pu > VIOLATION_PU, 0.0),
         exc=(steps.excursion_mvar > EXCURSION_MVAR).astype(np.int64),
@@ -255,6 +261,8 @@ def partial_summary(steps: pd.DataFrame) -> pd.DataFrame:
             "frontier_curtails": g.frontier_curtails.max(),
             "not_ok_steps": g.not_ok.sum(),
             "not_settled_steps": g.not_settled.sum(),
+            "pf_diverged_steps": g.pf_diverged.sum(),
+            "rule_non_finite_steps": g.non_finite.sum(),
             "voltage_violation_steps": g.vv.sum(),
             "voltage_violation_h": g.vv_h.sum(),
             "max_violation_pu": g.voltage_violation_pu.max(),
@@ -288,6 +296,8 @@ PARTIAL_COLUMNS = (
     "frontier_curtails",
     "not_ok_steps",
     "not_settled_steps",
+    "pf_diverged_steps",
+    "rule_non_finite_steps",
     "voltage_violation_steps",
     "voltage_violation_h",
     "max_violation_pu",
@@ -315,10 +325,12 @@ EXTREMES = {
 
 def summarize(partials: list[pd.DataFrame], order: list[tuple]) -> pd.DataFrame:
     """The summary (one row per configuration, in `order` of KEYS tuples) from
-    `partial_summary` frames. A step whose power flow did not converge (pf-diverged) has
-    no loss or voltage figure: pf_diverged_steps counts them, pf_converged_steps the
-    others — the steps avg_loss_kw, vmin_pu, vmax_pu and voltage_violation_steps are
-    over; energy_kwh (the period's) is NaN unless every step has a figure, and so are the
+    `partial_summary` frames. A step whose power flow did not converge (pf-diverged) or
+    whose rule gave no finite target (rule-non-finite) has no loss or voltage figure: each
+    status is counted under its own name (pf_diverged_steps, rule_non_finite_steps),
+    pf_converged_steps counts the steps with a figure — the steps avg_loss_kw, vmin_pu,
+    vmax_pu and voltage_violation_steps are over; energy_kwh (the period's) is NaN unless
+    every step has a figure, and so are the
     savings and gaps built on it. no_action_kwh: the baseline's (`registry.BASELINE`)
     energy for the same case, k and night mode with forecast off; lower_bound_kwh: the
     certified bound over the same steps from the strategy at its default options with the
@@ -343,9 +355,8 @@ def summarize(partials: list[pd.DataFrame], order: list[tuple]) -> pd.DataFrame:
     for column, how in EXTREMES.items():
         out = out.join(g[column].agg(how))
     out = out.reindex(pd.MultiIndex.from_tuples(order, names=KEYS)).reset_index()
-    out["pf_diverged_steps"] = out.steps - out.pf_converged_steps
     out["avg_loss_kw"] = (out.energy_kwh / out.measured_hours).where(out.pf_converged_steps > 0)
-    out["energy_kwh"] = out.energy_kwh.where(out.pf_diverged_steps == 0)  # a period's energy needs every step's
+    out["energy_kwh"] = out.energy_kwh.where(out.pf_converged_steps == out.steps)  # a period's energy needs every step's
     out["solver_s"] = out.solver_s.where(out.solver_known > 0)
     out["certified_share"] = out.certified / out.steps
     out["voltage_violation_min"] = 60.0 * out.pop("voltage_violation_h")
@@ -412,6 +423,7 @@ def summarize(partials: list[pd.DataFrame], order: list[tuple]) -> pd.DataFrame:
         "certified_share",
         "pf_converged_steps",
         "pf_diverged_steps",
+        "rule_non_finite_steps",
     ]
     ints = [
         "steps",
@@ -423,6 +435,7 @@ def summarize(partials: list[pd.DataFrame], order: list[tuple]) -> pd.DataFrame:
         "excursion_steps",
         "pf_converged_steps",
         "pf_diverged_steps",
+        "rule_non_finite_steps",
     ]
     return out[KEYS + cols].astype({c: np.int64 for c in ints})
 

@@ -14,9 +14,10 @@ with the study runner itself, inside the run folder (layout: docs/CONTRACTS.md):
     RUN/train/summary.csv   both runs' summaries: the report's training-period column
 
 The cases trained on are the run's case models (`learning.model_case`: a `line-z`
-perturbed case is fitted on its unperturbed model). A fitted file is reused when its
-training data (their hash) and fit options are those of the run; otherwise it is fitted
-again. The fitted rules reach the run's tasks as `Fitted` records: the parameters' text
+perturbed case is fitted on its unperturbed model). A fitted file is reused (a resume)
+only when the folder's manifests recorded it — its sha256, as the case data's — and its
+training data (their hash) and fit options are those of the run; a file that differs from
+the recorded one (edited by hand) is refused, one never recorded is fitted again. The fitted rules reach the run's tasks as `Fitted` records: the parameters' text
 travels with each task (a worker needs no access to the run folder), and their hashes are
 part of the run's configuration, so a refit is another configuration.
 """
@@ -24,6 +25,7 @@ part of the run's configuration, so a refit is another configuration.
 from __future__ import annotations
 
 import io
+import json
 import re
 from dataclasses import replace
 from functools import lru_cache, partial
@@ -62,9 +64,26 @@ def given(labels: tuple[str, ...], cases: tuple[str, ...]) -> list[Fitted]:
     ]
 
 
-def train(config: Any, out: Path, run_nested: NestedRun) -> tuple[Fitted, ...]:
+def recorded_fits(out: Path) -> dict[str, str]:
+    """The sha256 of each fitted rule (by its ref, `learned/<file>.json`) that the run
+    folder `out`'s manifests recorded: the run's own and its in-sample training run's."""
+    recorded: dict[str, str] = {}
+    for manifest in (out / TRAIN_DIR / "learned" / "manifest.json", out / "manifest.json"):
+        try:
+            config = json.loads(manifest.read_bytes().decode("utf-8")).get("config")
+        except (OSError, ValueError, AttributeError):
+            continue
+        for fit in config.get("fitted", []) if isinstance(config, dict) else []:
+            if isinstance(fit, dict) and isinstance(fit.get("ref"), str) and isinstance(fit.get("sha256"), str):
+                recorded[fit["ref"]] = fit["sha256"]
+    return recorded
+
+
+def train(config: Any, out: Path, run_nested: NestedRun, recorded: dict[str, str] | None = None) -> tuple[Fitted, ...]:
     """Fit the `train=` configurations of the study `config` into the run folder `out`
-    (module docstring); returns every learned configuration's rules for the run's cases."""
+    (module docstring); returns every learned configuration's rules for the run's cases.
+    `recorded`: the fitted rules' sha256 by ref that the folder's run recorded
+    (`recorded_fits`; none: fit every rule anew)."""
     fitted = given(config.strategies, config.cases)
     trained = [lc for lc in learned_configs(config.strategies) if lc.train]
     if not trained:
@@ -95,8 +114,8 @@ def train(config: Any, out: Path, run_nested: NestedRun) -> tuple[Fitted, ...]:
         training = replace(training, tightened=lru_cache(partial(tightened, training.scenario, TRAIN_K, q_mvar=q, ok=ok)))
         for lc in trained:
             path = out / LEARNED_DIR / f"{_stem(model)}--{_stem(lc.label)}.json"
-            params = _fit(lc, training, path)
             ref = f"{LEARNED_DIR}/{path.name}"
+            params = _fit(lc, training, path, (recorded or {}).get(ref))
             on_models.append(Fitted.of(model, lc.label, ref, params))
             fitted += [Fitted.of(case, lc.label, ref, params) for case in config.cases if model_case(case) == model]
     in_sample = type(config).build(strategies=[BASELINE, *(lc.label for lc in trained)], ks=config.ks, detail=False, **common)
@@ -114,16 +133,23 @@ def _stem(text: str) -> str:
     return re.sub(r"[^A-Za-z0-9]+", "-", text).strip("-")
 
 
-def _fit(lc: LearnedConfig, training, path: Path) -> LearnedParams:
-    """The fitted rule of `lc` on `training`: the file at `path` where it was fitted to the
-    same data with the same options, else fitted now and written there."""
+def _fit(lc: LearnedConfig, training, path: Path, recorded: str | None) -> LearnedParams:
+    """The fitted rule of `lc` on `training`: the file at `path` where the run recorded it
+    (its sha256 `recorded`) and it was fitted to the same data with the same options, else
+    fitted now and written there. InputError for a file that is not the one recorded."""
     spec = configuration(lc.label).spec
-    if path.is_file():
+    if path.exists() and recorded is not None:
         try:
-            kept = LearnedParams.parse(path.read_text(encoding="utf-8"), str(path))
+            kept: LearnedParams | None = LearnedParams.parse(path.read_text(encoding="utf-8"), str(path))
         except (InputError, OSError, UnicodeDecodeError):
             kept = None
-        if kept is not None and kept.data_sha256 == training.digest() and kept.family == spec.name:
+        if kept is None or kept.digest != recorded:
+            now = "unreadable" if kept is None else f"{kept.digest[:12]}…"
+            raise InputError(
+                f"{path}: the fitted rule is not the one this run fitted and recorded (sha256 {recorded[:12]}… → {now}); "
+                "its figures would change under the same label: restore the file, or use --fresh to fit it again"
+            )
+        if kept.data_sha256 == training.digest() and kept.family == spec.name:
             fresh_options = {"rho": lc.options["rho"], "hyper": _hyper(lc.options)}
             if kept.rho == fresh_options["rho"] and kept.hyper == fresh_options["hyper"]:
                 return kept
