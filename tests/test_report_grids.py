@@ -92,3 +92,22 @@ def test_how_close_sets_train_beside_test_and_maps_a_perturbed_case_to_its_model
     assert np.isnan(table.loc[("grid-b", "lfma"), "train_loss_only_share_pct"])  # no training on grid-b
     alone = how_close(test)
     assert alone["train_loss_only_share_pct"].isna().all() and len(alone) == 6
+
+
+def test_at_equal_compliance_the_leaderboard_and_how_close_rank_by_the_gap():
+    """With the frontier's columns (a run since the frontier): ranked by the gap at equal
+    compliance, fewer minutes outside first on a tie, the share there beside the loss-only
+    one; a rule that leaves the band and loses least ranks below one that holds it."""
+    s = _summary().assign(voltage_violation_min=0.0, max_violation_pu=0.0, not_settled_steps=0, curtailed_kwh=0.0)
+    gaps = {"no-action": 5.0, "llma": 4.0, "lfma": 6.0, "acopf": 0.0, "socp": 0.0}
+    s["gap_eq_kwh"] = s["strategy"].map(gaps)
+    s["share_eq_pct"] = 100.0 - 10 * s["gap_eq_kwh"]
+    s.loc[s.strategy == "socp", "voltage_violation_min"] = 15.0  # ties acopf's gap, less compliant
+    board = leaderboard(s).set_index(["case", "strategy"])
+    assert [board.loc[("grid-a", n), "rank"] for n in ("acopf", "socp", "llma", "lfma")] == [1, 2, 3, 4]
+    assert board.loc[("grid-a", "lfma"), "energy_kwh"] < board.loc[("grid-a", "llma"), "energy_kwh"]  # lower losses, ranked below
+    assert board.loc[("grid-a", "lfma"), "loss_only_share_pct"] == pytest.approx(50.0)
+    table = how_close(s).set_index(["case", "strategy"])
+    ranks = [table.loc[("grid-a", n), "rank"] for n in ("llma", "no-action", "lfma")]  # the local rules alone
+    assert ranks == [1, 2, 3]
+    assert table.loc[("grid-a", "lfma"), "test_share_eq_pct"] == pytest.approx(40.0)
