@@ -13,7 +13,7 @@ import pytest
 
 from opfbench.capability import qmax
 from opfbench.io import load_network
-from opfbench.registry import run_strategy
+from opfbench.registry.catalog import run_strategy
 from opfbench.result import INFEASIBLE, OK
 from opfbench.scenario import Scenario
 
@@ -46,7 +46,8 @@ def test_curtailing_holds_the_band_where_q_alone_cannot_and_never_costs_more(tig
 def test_the_certified_point_is_ipopts_and_the_plain_opf_agrees_at_the_curtailed_powers(tight):
     fast = run_strategy("acopf:curtail=true", tight, 0.0)
     ipopt = run_strategy("acopf:curtail=true,solver=ipopt", tight, 0.0)
-    assert set(fast.extra["certified_by"]) >= {"socp"} and set(ipopt.extra["certified_by"]) == {"ipopt"}
+    assert fast.solver is not None and ipopt.solver is not None
+    assert set(fast.solver.certified_by) >= {"socp"} and set(ipopt.solver.certified_by) == {"ipopt"}
     cost = fast.losses_kw + fast.curtailed_kw
     np.testing.assert_allclose(cost, ipopt.losses_kw + ipopt.curtailed_kw, rtol=0, atol=1e-3)
     assert fast.curtailed_mw is not None

@@ -15,10 +15,11 @@ import numpy as np
 import pytest
 
 from opfbench.data import paper_day
-from opfbench.formulations.acopf import run_acopf
 from opfbench.formulations.frontier import COVER_PU, EPSILONS, Frontier, excursion, frontier, reference, widened
+from opfbench.formulations.opf_strategies import run_acopf
 from opfbench.io import load_network
-from opfbench.registry import DEFAULT_RUN, configuration, run_strategy
+from opfbench.registry.catalog import configuration, run_strategy
+from opfbench.registry.references import DEFAULT_RUN
 from opfbench.scenario import Scenario
 
 

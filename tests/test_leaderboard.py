@@ -22,15 +22,15 @@ import pandas as pd
 import pytest
 
 from opfbench.data import paper_day
-from opfbench.formulations.acopf import run_acopf
 from opfbench.formulations.frontier import frontier, reference, widened
+from opfbench.formulations.opf_strategies import run_acopf
 from opfbench.io import load_network
 from opfbench.plugins import local_rule
-from opfbench.registry import run_strategy
+from opfbench.registry.catalog import run_strategy
 from opfbench.report.tables import leaderboard
 from opfbench.scenario import Scenario
 from opfbench.strategies.limits import reactive_limit
-from opfbench.study.tables import partial_summary, stack, step_columns, step_rows, summarize
+from opfbench.study.run_tables import partial_summary, stack, step_columns, step_rows, summarize
 
 STEPS = slice(600, 720)  # 10:00–12:00 of the paper day, 1-min steps
 

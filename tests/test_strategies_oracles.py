@@ -29,7 +29,7 @@ from pandapower.converter.pypower import from_ppc
 from opfbench.capability import q_peak
 from opfbench.io import load_network
 from opfbench.io.matpower import to_ppc
-from opfbench.registry import configuration, run_strategy
+from opfbench.registry.catalog import configuration, run_strategy
 from opfbench.scenario import Scenario
 from opfbench.strategies.limits import Capability, reactive_limit
 from opfbench.strategies.standards import VOLT_VAR, VOLT_WATT

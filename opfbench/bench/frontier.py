@@ -24,9 +24,9 @@ from typing import Callable, TypeVar
 import numpy as np
 from threadpoolctl import threadpool_limits
 
-from opfbench.formulations.acopf import run_acopf
 from opfbench.formulations.frontier import frontier
-from opfbench.formulations.relaxation import forget_solves
+from opfbench.formulations.opf_strategies import run_acopf
+from opfbench.formulations.solves import forget_solves
 from opfbench.scenario import Scenario
 from opfbench.timing import elapsed_ms, now
 
@@ -43,7 +43,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def _scenario(case: str, period: str) -> Scenario:
-    from opfbench.study.learning import training_scenario
+    from opfbench.study.training_checks import training_scenario
 
     return training_scenario(case, period, NIGHT)[1]
 

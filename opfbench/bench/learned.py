@@ -12,7 +12,7 @@ evaluation over the test period, wall time in this process with single-threaded 
 `optimum_s` is the AC OPF over the training period, `reference_s` no action and the AC
 OPF over the test period (for the loss-only share the rule reaches, `test_share_pct`, beside
 its minutes outside the voltage band, `test_outside_min`). The fit is the run's: with its
-compliance refits (`strategies.learned`, `comply`), their margins in `comply_margin_pu`.
+compliance refits (`learned.rules`, `comply`), their margins in `comply_margin_pu`.
 """
 
 from __future__ import annotations
@@ -25,9 +25,9 @@ import numpy as np
 from threadpoolctl import threadpool_limits
 
 from opfbench.formulations.frontier import tightened
-from opfbench.registry import run_strategy
-from opfbench.strategies.learned import FAMILIES, TRAIN_K, VIOLATION_PU, fit_rule, install
-from opfbench.study.learning import training_scenario, training_set
+from opfbench.learned.rules import FAMILIES, TRAIN_K, VIOLATION_PU, fit_rule, install
+from opfbench.registry.catalog import run_strategy
+from opfbench.study.training_checks import training_scenario, training_set
 from opfbench.timing import elapsed_ms, now
 
 CASE = "simbench:1-MV-rural--0-sw"

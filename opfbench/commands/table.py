@@ -12,8 +12,8 @@ import argparse
 from typing import TYPE_CHECKING, Sequence
 
 from opfbench.capability import PAPER_KS
-from opfbench.commands.common import fraction, print_json, share
-from opfbench.registry import run_strategy, specs
+from opfbench.commands.arguments import fraction, print_json, share
+from opfbench.io.sources import formats
 
 if TYPE_CHECKING:
     import pandas as pd
@@ -23,7 +23,7 @@ FORECAST_FACTOR = 1.2
 
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("table", help="the local rules' loss table on one operating point, k × rule, ± forecast")
-    p.add_argument("case", nargs="?", default="paper33", help="shipped case name or MATPOWER .m path (default paper33)")
+    p.add_argument("case", nargs="?", default="paper33", help=f"the case (default paper33): {formats()}")
     p.add_argument("--load-scale", type=fraction, default=1.0, help="multiplier on every nominal load (default 1.0)")
     p.add_argument("--der-scale", type=share, default=0.8, help="P^C as a fraction of rating, 0..1 (default 0.8)")
     p.add_argument(
@@ -60,6 +60,7 @@ def loss_table(
     import pandas as pd
 
     from opfbench.io import load_network
+    from opfbench.registry.catalog import run_strategy
     from opfbench.scenario import Scenario
 
     net = load_network(case)
@@ -90,6 +91,8 @@ def loss_table(
 
 def local_rules() -> list:
     """Every registered local rule that runs at its default options (not the learned ones), in registry order."""
+    from opfbench.registry.catalog import specs
+
     return [s for s in specs() if s.kind == "local" and not s.learned]
 
 

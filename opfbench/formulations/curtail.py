@@ -18,25 +18,32 @@ from __future__ import annotations
 import numpy as np
 
 from opfbench.capability import p_for_q, qmax
-from opfbench.formulations.models.polar_ac import AcOpf, ac_opf
-from opfbench.formulations.models.soc import SocpSolve
-from opfbench.formulations.options import Fallback
+from opfbench.formulations.acopf_options import Fallback
+from opfbench.formulations.evaluation import evaluated_result, solver_record
+from opfbench.formulations.model import model_for
+from opfbench.formulations.models.conic import SnapshotSolve as SocpSolve
+from opfbench.formulations.models.polar_ac import AcOpf
 from opfbench.formulations.policy import CERTIFY_RTOL
 from opfbench.formulations.problem import CurtailData, OpfProblem, PqCapability, SnapshotData, curtail_data
-from opfbench.formulations.relaxation import curtail_solves
-from opfbench.formulations.results import (
+from opfbench.formulations.solver_cache import per_thread
+from opfbench.formulations.solvers.ipopt_adapter import IpoptSolve
+from opfbench.formulations.solves import curtail_solves
+from opfbench.powerflow import solve_pf_batch
+from opfbench.result import (
     CERTIFIED_BY_IPOPT,
     CERTIFIED_BY_SOCP,
+    FALLBACK_COLD,
+    FALLBACK_NO_ACTION,
+    FALLBACK_SOCP,
     FROM_COLD,
     FROM_NO_ACTION,
     FROM_SOCP,
     FROM_SOLVER,
-    diagnostics,
-    evaluated_result,
+    INFEASIBLE,
+    OK,
+    SOLVER_FAILED,
+    StrategyResult,
 )
-from opfbench.formulations.solvers.ipopt_adapter import IpoptSolve
-from opfbench.powerflow import solve_pf_batch
-from opfbench.result import FALLBACK_COLD, FALLBACK_NO_ACTION, FALLBACK_SOCP, INFEASIBLE, OK, SOLVER_FAILED, StrategyResult
 from opfbench.scenario import Scenario
 from opfbench.timing import elapsed_ms, now
 
@@ -77,10 +84,10 @@ class _Snapshot:
             "iterations": sum(a.iterations for a in self.attempts),
             "solve_ms": socp["solve_ms"] if by_socp else sum(a.solve_ms for a in self.attempts),
             "warm_start": bool(self.attempts and self.attempts[0].warm),
-            "objective_kw": accepted.objective_kw if accepted is not None else np.nan,
+            "objective_kw": self.socp.objective_kw if by_socp else accepted.objective_kw if accepted is not None else np.nan,
             "fallback": self.fallback,
             "certified_by": self.certified_by,
-            "relaxation_gap": socp["relaxation_gap"],
+            "relaxation_gap": self.socp.relaxation_gap,
             "socp_status": socp["solver_status"],
             "socp_ms": socp["solve_ms"],
         }
@@ -103,12 +110,13 @@ def run_curtailing(
     p0 = np.array([s.p_pu if s.p_pu is not None else data.p_avail[i] for i, s in enumerate(solves)]).reshape(-1, n_der)
     q0, p0 = _within(scenario, q0, p0, cap.share)
     pf = solve_pf_batch(net, scenario.injections(q0 * base, p0 * base))
-    bound = np.array([s.lower_bound_kw for s in solves])
+    bound = np.array([s.objective_kw for s in solves])
     optimal = np.array([s.optimal for s in solves], dtype=bool)
     with np.errstate(invalid="ignore"):
         close = np.abs(_cost_kw(pf.losses_kw, p0, data, base) - bound) <= CERTIFY_RTOL * np.abs(bound)
     certified = optimal & problem.feasible(pf, data.s_fixed) & close & (solver == "auto")
-    opf = ac_opf(net, slack_export, curtail=True)
+    exact = model_for("exact", net)
+    opf = per_thread(net, (f"{exact.name}-curtail", bool(slack_export)), lambda: AcOpf(net, slack_export, curtail=True))
     last: IpoptSolve | None = None
     settled = []
     for i, socp in enumerate(solves):
@@ -122,6 +130,7 @@ def run_curtailing(
             settled.append(snap)
     q = np.array([s.q for s in settled]).reshape(-1, n_der)
     p = np.array([s.p for s in settled]).reshape(-1, n_der)
+    record, extra = solver_record(exact, [s.diagnostics() for s in settled])
     return evaluated_result(
         "acopf",
         k,
@@ -132,7 +141,8 @@ def run_curtailing(
         elapsed_ms(start),
         status=np.array([s.status for s in settled], dtype=object),
         lower_bound_kw=bound,
-        extra=diagnostics(s.diagnostics() for s in settled),
+        solver=record,
+        extra=extra,
         power_flows=np.array([s.power_flows + 1 for s in settled]),
         p_pu=p,
     )

@@ -42,7 +42,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from opfbench.network import V_LIMIT_MAX_PU, Network
-from opfbench.result import FALLBACK_COLD, OK, StrategyResult
+from opfbench.result import FALLBACK_COLD, OK, Reference, StrategyResult
 from opfbench.scenario import Scenario
 
 #: The grid of band widenings ε (p.u.), smallest first; the last is ∞ (the physical limits).
@@ -129,18 +129,6 @@ class Frontier:
         return cost, bound, np.where(missing, np.nan, self.eps[pick])
 
 
-@dataclass(frozen=True)
-class Reference:
-    """Each step's frontier point at a configuration's own compliance, (S,) each: the
-    optimum's cost (kW), its bound (kW), the ε covering the step's excursion (p.u.), and
-    whether it is the optimum's that may curtail."""
-
-    cost_kw: np.ndarray
-    bound_kw: np.ndarray
-    eps_pu: np.ndarray
-    curtails: np.ndarray
-
-
 def reference(
     plain: Frontier,
     excursion_pu: np.ndarray,
@@ -195,7 +183,7 @@ def frontier(
 ) -> Frontier:
     """The frontier of `scenario` at reserve k (module docstring); `at_zero`: the AC OPF's
     result on the same scenario and k (with the same `curtail`), where the caller has it."""
-    from opfbench.formulations.acopf import run_acopf
+    from opfbench.formulations.opf_strategies import run_acopf
 
     grid = np.asarray(eps, dtype=float)
     if grid[0] != 0 or np.any(np.diff(grid) <= 0):
@@ -243,7 +231,7 @@ def tightened(scenario: Scenario, k: float, margin: float, q_mvar: np.ndarray, o
     limits keeps it; the others are solved on the tightened network. Returns (Q (S, n_der)
     MVAr, ok (S,)): where the tightened problem has no optimum, the step's ε = 0 point and
     its `ok`."""
-    from opfbench.formulations.acopf import run_acopf
+    from opfbench.formulations.opf_strategies import run_acopf
     from opfbench.powerflow import solve_pf_batch
 
     net = scenario.net

@@ -1,6 +1,6 @@
 """What a local rule is: a function of the DER's own measurements (`Measurements`) giving
 its Q target, and what it reads (`Rule.reads`); the engine that runs rules is
-`opfbench.strategies.engine`. Light to import (numpy only): the registry and the CLI use it.
+`opfbench.strategies.rule_engine`. Light to import (numpy only): the registry and the CLI use it.
 
 A rule's answer is each DER's Q target, or — a rule that also limits active power, as
 IEEE 1547's Volt-Watt does — `Targets`: the Q targets and a cap on each DER's active power

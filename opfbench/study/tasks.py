@@ -9,7 +9,7 @@ curtail (Volt-Watt, reactive priority, `acopf:curtail=true`) did, also the front
 optimum that may curtail, which it is compared with there. `acopf`, `acopf-paper` and `socp` share SOCP solves, and the
 night modes — which differ only in the night hours, so their daytime snapshots are the
 same problems — solve each once: the formulations' solve cache is keyed on the data
-(`formulations.relaxation`), whatever Scenario objects carry it; and where two
+(`formulations.solves`), whatever Scenario objects carry it; and where two
 night modes give the very same scenario (no PV output in the night hours of the chunk), the
 second takes the first's results (`Scenario.same_data`) with its wall time 0. Its input
 carries its slice of the period's profiles, so it runs the same in this process, in a
@@ -27,17 +27,18 @@ from threadpoolctl import threadpool_limits
 
 from opfbench.errors import InputError
 from opfbench.formulations.frontier import Frontier, frontier, reference
+from opfbench.learned.fitted import Fitted
+from opfbench.learned.rules import install
 from opfbench.plugins import PluginSource, ensure, loaded
-from opfbench.registry import REFERENCE_OPTIMUM, OptionValue, configuration, run_strategy
+from opfbench.registry.catalog import configuration, run_strategy
+from opfbench.registry.options import OptionValue
+from opfbench.registry.references import REFERENCE_OPTIMUM
 from opfbench.result import StrategyResult
 from opfbench.scenario import Scenario
-from opfbench.strategies.learned import install
 from opfbench.study.config import StudyConfig
 from opfbench.study.engine import Task, TaskOutput
-from opfbench.study.fitted import Fitted
 from opfbench.study.periods import Period
-from opfbench.study.scenarios import chunk_scenario
-from opfbench.study.tables import (
+from opfbench.study.run_tables import (
     DETAIL_COLUMNS,
     FRONTIER_COLUMNS,
     Columns,
@@ -50,6 +51,7 @@ from opfbench.study.tables import (
     step_columns,
     step_rows,
 )
+from opfbench.study.task_scenarios import chunk_scenario
 
 
 @dataclass(frozen=True)

@@ -13,7 +13,7 @@ cold or warm (`solvers.ipopt_adapter`). With `curtail` the DER's active power is
 variable too, within [min(P, 0), P] of the power P it has, Q within the capability at the
 power delivered (`problem.PqCapability`: linear pieces and the S̄ circle, their slopes,
 offsets and the share 1 − k parameters), and the objective the losses plus the power
-curtailed.
+curtailed (`solve_curtailing`).
 """
 
 from __future__ import annotations
@@ -24,7 +24,7 @@ import casadi as ca
 import numpy as np
 import scipy.sparse as sp
 
-from opfbench.formulations.cache import per_thread
+from opfbench.formulations.model import formulation
 from opfbench.formulations.problem import CurtailData, OpfProblem, PqCapability, Row, incidence
 from opfbench.formulations.solvers.ipopt_adapter import IpoptNlp, IpoptSolve
 from opfbench.network import Network
@@ -107,6 +107,12 @@ def _capability_rows(problem: OpfProblem, q: Sym, p: Sym, slope: Sym, offset: Sy
     return out
 
 
+@formulation(
+    "polar-ac",
+    role="exact",
+    serves_problem=True,
+    summary="the exact AC OPF in polar form (CasADi NLP, IPOPT)",
+)
 class AcOpf:
     """The polar AC OPF of one network, built once; `solve` per snapshot.
 
@@ -156,14 +162,3 @@ class AcOpf:
             np.concatenate([self.flat_start[: -2 * len(inf)], np.zeros(len(inf)), data.p_avail[i]]),
             start,
         )
-
-
-def build_acopf(net: Network, slack_export: bool = True, curtail: bool = False) -> AcOpf:
-    """A new AC OPF of `net` (the caller's own: its IPOPT instances keep per-solve state)."""
-    return AcOpf(net, slack_export, curtail)
-
-
-def ac_opf(net: Network, slack_export: bool = True, curtail: bool = False) -> AcOpf:
-    """The AC OPF of `net`, built once per network and option in this thread."""
-    key = ("acopf-curtail" if curtail else "acopf", bool(slack_export))
-    return per_thread(net, key, lambda: build_acopf(net, slack_export, curtail))

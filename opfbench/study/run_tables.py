@@ -1,4 +1,4 @@
-"""The run's tables (columns: docs/CONTRACTS.md, run folder): per-step rows of one
+"""The run's tables (columns: `opfbench.schema`, docs/CONTRACTS.md): per-step rows of one
 strategy result, the optional detail tables (per-DER Q, per-bus V), the frontier's steps,
 and the summaries, built from per-task partial sums so that a year never has to sit in
 memory at once.
@@ -18,44 +18,27 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 
-from opfbench.formulations.frontier import Frontier, Reference
-from opfbench.registry import BASELINE, REFERENCE_OPTIMUM, configuration, describe
-from opfbench.result import NOT_SETTLED, OK, PF_DIVERGED, RULE_NON_FINITE, StrategyResult
+from opfbench.formulations.frontier import Frontier
+from opfbench.registry.catalog import configuration, describe
+from opfbench.registry.references import BASELINE, REFERENCE_OPTIMUM
+from opfbench.result import NOT_SETTLED, OK, PF_DIVERGED, RULE_NON_FINITE, Reference, StrategyResult
+from opfbench.schema import (
+    BUS_V,
+    DER_Q,
+    FRONTIER,
+    FRONTIER_SUMMARY,
+    KEYS,
+    STEPS,
+    SUMMARY,
+    TASK_FRONTIER_SUMMARY,
+    TASK_SUMMARY,
+    StepContext,
+)
 from opfbench.study.config import DETAIL_TABLES
 
-KEYS = ["case", "strategy", "k", "night_mode", "forecast"]
-STEP_COLUMNS = [
-    *KEYS,
-    "time",
-    "step_h",
-    "night",
-    "status",
-    "losses_kw",
-    "vmin_pu",
-    "vmax_pu",
-    "voltage_violation_pu",
-    "q_total_mvar",
-    "curtailed_kw",
-    "excursion_mvar",
-    "lower_bound_kw",
-    "power_flows",
-    "wall_ms",
-    "solver_ms",
-    "iterations",
-    "certified_by",
-    "fallback",
-    "solver_status",
-    "frontier_kw",
-    "frontier_bound_kw",
-    "frontier_eps_pu",
-    "frontier_curtails",
-]
-DETAIL_COLUMNS = {
-    "der_q": [*KEYS, "time", "der", "bus", "kind", "q_mvar", "curtailed_mw"],
-    "bus_v": [*KEYS, "time", "bus", "v_pu"],
-}
+DETAIL_COLUMNS = {"der_q": DER_Q.names, "bus_v": BUS_V.names}
 FRONTIER_KEYS = ["case", "k", "night_mode", "curtail"]
-FRONTIER_COLUMNS = [*FRONTIER_KEYS, "time", "step_h", "eps_pu", "cost_kw", "bound_kw", "excursion_pu", "status", "solved"]
+FRONTIER_COLUMNS = FRONTIER.names
 VIOLATION_PU = 1e-6  # a step violates the voltage limits beyond this
 EXCURSION_MVAR = 1e-9  # a step's setpoint exceeds the physical capability beyond this
 BELOW_KW = 1e-4  # a cost this far below its frontier point counts as below it (solver tolerances)
@@ -69,15 +52,8 @@ def extra_columns(labels: tuple[str, ...]) -> tuple[str, ...]:
 
 
 def step_columns(extra: tuple[str, ...] = ()) -> list[str]:
-    """The per-step table's columns: STEP_COLUMNS, then the strategies' extra ones."""
-    return [*STEP_COLUMNS, *extra]
-
-
-def _certified_by(res: StrategyResult) -> np.ndarray:
-    """Per step: the formulations' own record ("socp" | "ipopt" | ""); "" for the local rules."""
-    if "certified_by" in res.extra:
-        return np.asarray(res.extra["certified_by"], dtype=object)
-    return np.full(res.n_snapshots, "", dtype=object)
+    """The per-step table's columns: `schema.STEPS`'s, then the strategies' extra ones."""
+    return [*STEPS.names, *extra]
 
 
 Columns = dict[str, np.ndarray | str | float | int | bool]  # name → the part's rows, or one value for all
@@ -94,46 +70,13 @@ def step_rows(
     extra_columns: tuple[str, ...] = (),
     reference: Reference | None = None,
 ) -> Columns:
-    """The columns of one row per step of `res` (see the contract), for `stack`; the
-    `extra_columns` from `res.extra` (NaN where this strategy has none); the frontier point
-    at the step's compliance (`formulations.frontier.reference`; NaN without one)."""
-    n = res.n_snapshots
-    nan = np.full(n, np.nan)
-    violation = res.voltage_violation()
-    ref = reference if reference is not None else Reference(nan, nan, nan, np.zeros(n, dtype=bool))
-    extra = res.extra
-    local = "fallback" not in extra
-    lb = res.lower_bound_kw if res.lower_bound_kw is not None else nan
-    return {
-        "case": case,
-        "strategy": res.strategy,
-        "k": float(res.k),
-        "night_mode": night_mode,
-        "forecast": forecast,
-        "time": time.asi8,
-        "step_h": float(step_h),
-        "night": np.asarray(night, dtype=bool),
-        "status": res.status.astype(str),
-        "losses_kw": res.losses_kw,
-        "vmin_pu": res.vmin,
-        "vmax_pu": res.vmax,
-        "voltage_violation_pu": violation,
-        "q_total_mvar": res.q_mvar.sum(axis=1),
-        "curtailed_kw": res.curtailed_kw,
-        "excursion_mvar": res.excursion_mvar,
-        "lower_bound_kw": np.asarray(lb, dtype=float),
-        "power_flows": np.asarray(res.power_flows, dtype=np.int64),
-        "wall_ms": res.wall_ms / n,
-        "solver_ms": np.asarray(extra.get("solve_ms", nan), dtype=float),
-        "iterations": np.asarray(extra.get("iterations", nan), dtype=float),
-        "certified_by": _certified_by(res).astype(str),
-        "fallback": "" if local else np.asarray(extra["fallback"], dtype=str),
-        "solver_status": "" if local else np.asarray(extra["solver_status"], dtype=str),
-        "frontier_kw": ref.cost_kw,
-        "frontier_bound_kw": ref.bound_kw,
-        "frontier_eps_pu": ref.eps_pu,
-        "frontier_curtails": ref.curtails,
-    } | {name: np.asarray(extra.get(name, nan), dtype=float) for name in extra_columns}
+    """The columns of one row per step of `res` (`schema.STEPS`, each computed by its
+    declaration), for `stack`; the `extra_columns` from `res.extra` (NaN where this
+    strategy has none); the frontier point at the step's compliance
+    (`formulations.frontier.reference`; NaN without one)."""
+    context = StepContext(case, night_mode, forecast, time.asi8, step_h, night, res, reference)
+    nan = np.full(res.n_snapshots, np.nan)
+    return STEPS.compute(context) | {name: np.asarray(res.extra.get(name, nan), dtype=float) for name in extra_columns}
 
 
 def frontier_rows(case: str, k: float, night_mode: str, time: pd.DatetimeIndex, step_h: float, front: Frontier) -> Columns:
@@ -281,37 +224,7 @@ def partial_summary(steps: pd.DataFrame) -> pd.DataFrame:
     return sums[list(PARTIAL_COLUMNS)].reset_index()
 
 
-PARTIAL_COLUMNS = (
-    "steps",
-    "hours",
-    "pf_converged_steps",
-    "measured_hours",
-    "energy_kwh",
-    "curtailed_kwh",
-    "frontier_kwh",
-    "frontier_missing",
-    "frontier_bound_kwh",
-    "frontier_bound_missing",
-    "below_frontier_steps",
-    "frontier_curtails",
-    "not_ok_steps",
-    "not_settled_steps",
-    "pf_diverged_steps",
-    "rule_non_finite_steps",
-    "voltage_violation_steps",
-    "voltage_violation_h",
-    "max_violation_pu",
-    "vmin_pu",
-    "vmax_pu",
-    "max_excursion_mvar",
-    "excursion_steps",
-    "lower_bound_kwh",
-    "lb_missing",
-    "wall_s",
-    "solver_s",
-    "solver_known",
-    "certified",
-)
+PARTIAL_COLUMNS = tuple(TASK_SUMMARY.names[len(KEYS) :])
 """The columns of a task's partial sums (`partial_summary`) besides KEYS."""
 EXTREMES = {
     "vmin_pu": "min",
@@ -388,56 +301,8 @@ def summarize(partials: list[pd.DataFrame], order: list[tuple]) -> pd.DataFrame:
     e_opt = pd.MultiIndex.from_frame(out[["case", "k", "night_mode"]]).map(optimum.to_dict().get).astype(float)
     plain = out.no_action_kwh - e_opt
     out["share_pct"] = (100 * (out.no_action_kwh - out.energy_kwh) / plain).where(plain > SHARE_MIN_KWH)
-    cols = [
-        "steps",
-        "hours",
-        "avg_loss_kw",
-        "energy_kwh",
-        "no_action_kwh",
-        "savings_pct",
-        "curtailed_kwh",
-        "cost_kwh",
-        "frontier_kwh",
-        "frontier_bound_kwh",
-        "gap_eq_kwh",
-        "gap_eq_pct",
-        "share_eq_pct",
-        "share_pct",
-        "frontier_curtails",
-        "frontier_missing_steps",
-        "below_frontier_steps",
-        "not_ok_steps",
-        "not_settled_steps",
-        "voltage_violation_steps",
-        "voltage_violation_min",
-        "max_violation_pu",
-        "vmin_pu",
-        "vmax_pu",
-        "max_excursion_mvar",
-        "excursion_steps",
-        "lower_bound_kwh",
-        "gap_kwh",
-        "gap_pct",
-        "wall_s",
-        "solver_s",
-        "certified_share",
-        "pf_converged_steps",
-        "pf_diverged_steps",
-        "rule_non_finite_steps",
-    ]
-    ints = [
-        "steps",
-        "frontier_missing_steps",
-        "below_frontier_steps",
-        "not_ok_steps",
-        "not_settled_steps",
-        "voltage_violation_steps",
-        "excursion_steps",
-        "pf_converged_steps",
-        "pf_diverged_steps",
-        "rule_non_finite_steps",
-    ]
-    return out[KEYS + cols].astype({c: np.int64 for c in ints})
+    integers = {c.name: np.int64 for c in SUMMARY if c.dtype == "integer"}
+    return out[SUMMARY.names].astype(integers)
 
 
 def _bound_rank(label: str) -> float:
@@ -470,31 +335,7 @@ def partial_frontier(front: pd.DataFrame) -> pd.DataFrame:
             "solved": g.solved.sum(),
         }
     )
-    return sums[list(PARTIAL_FRONTIER_COLUMNS)].reset_index()
-
-
-PARTIAL_FRONTIER_COLUMNS = (
-    "steps",
-    "energy_kwh",
-    "missing",
-    "bound_kwh",
-    "bound_missing",
-    "outside_h",
-    "max_excursion_pu",
-    "solved",
-)
-"""The columns of a task's frontier sums (`partial_frontier`) besides the keys and ε."""
-FRONTIER_SUMMARY_COLUMNS = [
-    *FRONTIER_KEYS,
-    "eps_pu",
-    "steps",
-    "energy_kwh",
-    "bound_kwh",
-    "no_optimum_steps",
-    "voltage_violation_min",
-    "max_violation_pu",
-    "solved_steps",
-]
+    return sums.reset_index()[TASK_FRONTIER_SUMMARY.names]
 
 
 def summarize_frontier(partials: list[pd.DataFrame]) -> pd.DataFrame:
@@ -504,7 +345,7 @@ def summarize_frontier(partials: list[pd.DataFrame]) -> pd.DataFrame:
     optimum lies outside the (unwidened) band and its worst excursion there, and the steps
     solved at that ε (the others take the answer of an ε that covers them)."""
     if not partials:
-        return pd.DataFrame(columns=FRONTIER_SUMMARY_COLUMNS)
+        return pd.DataFrame(columns=FRONTIER_SUMMARY.names)
     p = pd.concat(partials, ignore_index=True)
     g = p.groupby([*FRONTIER_KEYS, "eps_pu"], sort=False)
     out = g[["steps", "energy_kwh", "missing", "bound_kwh", "bound_missing", "outside_h", "solved"]].sum()
@@ -513,4 +354,5 @@ def summarize_frontier(partials: list[pd.DataFrame]) -> pd.DataFrame:
     out["bound_kwh"] = out.bound_kwh.where(out.pop("bound_missing") == 0)
     out = out.rename(columns={"missing": "no_optimum_steps", "max_excursion_pu": "max_violation_pu", "solved": "solved_steps"})
     out["voltage_violation_min"] = 60.0 * out.pop("outside_h")
-    return out[FRONTIER_SUMMARY_COLUMNS].astype({"steps": np.int64, "no_optimum_steps": np.int64, "solved_steps": np.int64})
+    integers = {c.name: np.int64 for c in FRONTIER_SUMMARY if c.dtype == "integer"}
+    return out[FRONTIER_SUMMARY.names].astype(integers)

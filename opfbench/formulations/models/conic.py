@@ -1,26 +1,29 @@
-"""What every second-order-cone relaxation of the OPF problem shares (cvxpy + Clarabel).
+"""What every conic model of the OPF problem shares (cvxpy + Clarabel): the relaxations
+(`distflow`, `jabr`) and the approximations (`lindistflow`).
 
 The OPF problem of `problem.OpfProblem` (as the AC OPF solves it), in v = |V|²: DER Q
 within ±(1 − k)·Qmax(P), v_slack², vmin² ≤ v ≤ vmax², the power balance and slack rule
-of `OpfProblem.balance`; objective = branch losses. With `curtail` (a `PqCapability`) the
-DER's active power is a variable too, within [min(P, 0), P] of the power P it has, Q within
-the capability at the power delivered (linear pieces and an S̄ cone, `PqCapability`), and
-the objective the losses plus the power curtailed (written as losses − ΣP_DER, the data
-ΣP added to the bound). A model (`distflow`, `jabr`) writes
-how the voltages couple the branch flows: its own variables, the bus mismatches and its
-cones (`SocpRelaxation._network_model`). Any AC-feasible point maps to a feasible point of
-such a relaxation with the same losses, so its optimum is a lower bound on the AC OPF's.
+of `OpfProblem.balance`; objective = the model's branch losses (linear, or convex
+quadratic). A model writes how the voltages couple the branch flows: its own variables,
+the bus mismatches, its objective and its constraints (`ConicModel._network_model`). For
+a relaxation, any AC-feasible point maps to a feasible point with the same losses, so its
+optimum is a lower bound on the AC OPF's; an approximation's optimum is an estimate.
 
-The bound reported is min(primal, dual) objective of Clarabel's solution (kW). Clarabel's
+With `curtail` (a `problem.PqCapability`) the DER's active power is a variable too, within
+[min(P, 0), P] of the power P it has, Q within the capability at the power delivered
+(linear pieces and an S̄ cone), and the objective the losses plus the power curtailed
+(written as losses − ΣP_DER, the data ΣP added to the optimum).
+
+The objective reported is min(primal, dual) objective of Clarabel's solution (kW). Clarabel's
 "AlmostSolved" (reduced tolerances met) counts as solved and is recorded as such in
 solver_status; a solve that stalls after an in-place data update is retried once on a
 fresh solver (`clarabel_adapter.ParametricConeProgram.solve`), recorded as e.g.
 "InsufficientProgress → Solved".
 
-`relaxation_gap` = max over branches of the model's cone residual at the optimum, in p.u.²
-(`_cone_residual`): 0 (in practice ≲ 1e-7, the solver's tolerance) means the relaxation is
-exact on every branch; the AC losses of the setpoints against the bound is the end-to-end
-measure.
+A relaxation's `relaxation_gap` = max over branches of its cone residual at the optimum,
+in p.u.² (`_cone_residual`): 0 (in practice ≲ 1e-7, the solver's tolerance) means the
+relaxation is exact on every branch; the AC losses of the setpoints against the bound is
+the end-to-end measure. A model without cones has none (NaN).
 """
 
 from __future__ import annotations
@@ -37,33 +40,35 @@ from opfbench.formulations.solvers.clarabel_adapter import ParametricConeProgram
 from opfbench.network import Network
 from opfbench.timing import elapsed_ms, now
 
-NOT_SOLVED = "not solved"  # a SocpSolve's outcome where the caller skipped the snapshot
+NOT_SOLVED = "not solved"  # a SnapshotSolve's outcome where the caller skipped the snapshot
 Reader = Callable[[cp.Variable], np.ndarray]  # a variable's values in stacked solutions, (S, size)
 
 
 @dataclass(frozen=True)
-class SocpSolve:
-    """One snapshot's relaxation solve. outcome: "optimal" | "infeasible" (certified by
-    Clarabel) | "failed" | "not solved" (`not_solved`: a caller had no use for it); solver_status: Clarabel's own status; solve_ms: wall time of
-    Clarabel's data updates and solves; iterations: the answering Clarabel solve's; solves:
-    every Clarabel solve the answer took (`clarabel_adapter.ConeSolve`); slack_p_pu: the
-    slack bus's active injection at the optimum (p.u., positive = import from the upstream
-    grid). Where not optimal, lower_bound_kw, relaxation_gap and slack_p_pu are NaN and
-    q_pu is None."""
+class SnapshotSolve:
+    """One snapshot's solve of a model that solves snapshots independently. outcome:
+    "optimal" | "infeasible" (certified by the solver) | "failed" | "not solved"
+    (`not_solved`: a caller had no use for it); solver_status: the solver's own status;
+    objective_kw: the model's optimum (kW; a relaxation's is a lower bound on the AC
+    OPF's); solve_ms: wall time of the data updates and solves; iterations: the answering
+    solve's; solves: every solve the answer took (`clarabel_adapter.ConeSolve`);
+    slack_p_pu: the slack bus's active injection at the optimum (p.u., positive = import
+    from the upstream grid). Where not optimal, objective_kw, relaxation_gap and slack_p_pu
+    are NaN and q_pu is None."""
 
     outcome: str
     solver_status: str
-    lower_bound_kw: float
+    objective_kw: float
     q_pu: np.ndarray | None
     relaxation_gap: float
     solve_ms: float
     iterations: int
     solves: int
     slack_p_pu: float = np.nan
-    p_pu: np.ndarray | None = None  # the DER's active power, where the relaxation curtails
+    p_pu: np.ndarray | None = None  # the DER's active power, where the model curtails
 
     @classmethod
-    def not_solved(cls) -> "SocpSolve":
+    def not_solved(cls) -> "SnapshotSolve":
         """The record of a snapshot left unsolved (no status, no time, NaN figures)."""
         return cls(NOT_SOLVED, "", np.nan, None, np.nan, 0.0, 0, 0)
 
@@ -82,7 +87,6 @@ class SocpSolve:
             "iterations": int(self.iterations),
             "solves": int(self.solves),
             "solver_status": self.solver_status,
-            "relaxation_gap": self.relaxation_gap,
         }
 
 
@@ -93,7 +97,7 @@ def data_vector(s_fixed: np.ndarray, q_limit: np.ndarray) -> np.ndarray:
 
 
 def curtail_vector(s_fixed: np.ndarray, p_avail: np.ndarray, p_low: np.ndarray, offset: np.ndarray) -> np.ndarray:
-    """A snapshot's data θ where the relaxation curtails = [Re s_fixed, Im s_fixed, P, min(P, 0),
+    """A snapshot's data θ where the model curtails = [Re s_fixed, Im s_fixed, P, min(P, 0),
     offsets of piece 0, of piece 1] (p.u.; `problem.CurtailData`'s arrays, (S, ·))."""
     return np.concatenate([s_fixed.real, s_fixed.imag, p_avail, p_low, offset[..., 0], offset[..., 1]], axis=-1)
 
@@ -117,15 +121,14 @@ def screens(net: Network) -> bool:
     return len(net.ders) < net.n_bus / 2
 
 
-class SocpRelaxation:
-    """The relaxation of one `OpfProblem`, built once; `solve` per snapshot.
+class ConicModel:
+    """A conic model of one `OpfProblem`, built once; `solve` per snapshot.
 
     Data (cvxpy variables that `ParametricConeProgram` holds fixed per solve): p_fixed,
     q_fixed (n_bus,) fixed injections and q_limit (n_der,) usable Q limit, all p.u.
-    A model subclasses it with its `model` name, `_network_model` and `_cone_residual`.
+    A model subclasses it with its `_network_model`; a relaxation with its `_cone_residual`;
+    a model whose objective is not the losses its balance carries with `_slack_p_pu`.
     """
-
-    model: str = ""
 
     def __init__(self, net: Network, slack_export: bool = True, curtail: PqCapability | None = None):
         self.problem = problem = OpfProblem.of(net, slack_export)
@@ -172,33 +175,40 @@ class SocpRelaxation:
             out += [self.q <= reach, -self.q <= reach]
         c = np.flatnonzero(cap.circle)
         if c.size:
-            share_p = cap.share * self.p[c]
-            out.append(cp.SOC(cap.share * cap.s_pu[c], cp.vstack([self.q[c], share_p]), axis=0))
+            out.append(cp.SOC(cap.share * cap.s_pu[c], cp.vstack([self.q[c], cap.share * self.p[c]]), axis=0))
         return out
 
     def _p_fixed_bus(self) -> cp.Expression:
         """The active power injected at every bus that the model's flows balance: the fixed
-        injections and, where the relaxation curtails, the DER's active power."""
+        injections and, where the model curtails, the DER's active power."""
         return self.p_fixed if self.p is None else self.p_fixed + self.problem.der_at_bus @ self.p
 
     def _network_model(self) -> tuple[cp.Expression, cp.Expression, cp.Expression, list[cp.Constraint]]:
         """(mismatch_p, mismatch_q, branch losses, model constraints), p.u., per `problem`."""
         raise NotImplementedError
 
-    def _cone_residual(self, value: Reader) -> np.ndarray:
+    def _cone_residual(self, value: Reader) -> np.ndarray | None:
         """Largest cone residual (p.u.²) of each of stacked solutions; `value(var)` reads a
-        variable as (S, size)."""
-        raise NotImplementedError
+        variable as (S, size). None: the model has no cones."""
+        return None
+
+    def _slack_p_pu(self, value: Reader, thetas: np.ndarray, objective_kw: np.ndarray) -> np.ndarray:
+        """The slack's active injection (p.u.) at each of stacked optima: summed over all
+        buses the mismatches are the branch losses plus the shunts' P minus the fixed
+        injections; every non-slack mismatch is 0, so where the objective is the branch
+        losses the balance carries, this is the slack's P."""
+        n = self.net.n_bus
+        return objective_kw / self.problem.kw_per_pu + value(self.v) @ self.problem.gsh - thetas[:, :n].sum(axis=1)
 
     def _der_q_at_buses(self) -> cp.Expression:
         return self.problem.der_at_bus @ self.q
 
-    def solve(self, s_fixed: np.ndarray, q_limit: np.ndarray) -> SocpSolve:
+    def solve(self, s_fixed: np.ndarray, q_limit: np.ndarray) -> SnapshotSolve:
         """Solve one snapshot: fixed injections `s_fixed` (n_bus,) complex p.u., usable
         Q limits `q_limit` (n_der,) p.u."""
         return self.solve_data(data_vector(s_fixed, q_limit)[None])[0]
 
-    def solve_data(self, thetas: np.ndarray) -> list[SocpSolve]:
+    def solve_data(self, thetas: np.ndarray) -> list[SnapshotSolve]:
         """Solve snapshots given as rows of data vectors (`data_vector`), one by one; the
         offsets before and the solutions' read-out after are done for all at once."""
         thetas = np.atleast_2d(thetas)
@@ -219,27 +229,23 @@ class SocpRelaxation:
         if self.p is None:
             q_limit = thetas[solved, 2 * n :]
             q_pu = np.clip(value(self.q), -q_limit, q_limit)  # within solver tolerance of the limits anyway
-        else:  # the bound: losses + curtailed = objective + ΣP
+            slack_p = self._slack_p_pu(value, thetas[solved], primal)
+        else:  # the optimum: losses + curtailed = objective + ΣP; the slack's P as the objective carries it
             p_avail, p_low = thetas[solved, 2 * n : 2 * n + n_der], thetas[solved, 2 * n + n_der : 2 * n + 2 * n_der]
             q_pu, p_pu = value(self.q), np.clip(value(self.p), p_low, p_avail)
+            slack_p = self._slack_p_pu(value, thetas[solved], primal)
             available = self.problem.kw_per_pu * p_avail.sum(axis=1)
             primal, dual = primal + available, dual + available
-        # Summed over all buses the mismatches are the branch losses plus the shunts' P minus
-        # the fixed injections (and the DER's P, where curtailing: the objective's −ΣP_DER,
-        # plus the ΣP added to the bound); every non-slack mismatch is 0, so this is the
-        # slack's P.
-        slack_p = primal / self.problem.kw_per_pu + value(self.v) @ self.problem.gsh - thetas[solved, :n].sum(axis=1)
-        if p_pu is not None:
-            slack_p = slack_p - available / self.problem.kw_per_pu
-        gap = self._cone_residual(value)
+        residual = self._cone_residual(value)
+        gap = np.full(primal.size, np.nan) if residual is None else residual
         out, j = [], 0
         for (a, solve_ms), ok in zip(raw, solved, strict=True):
             if not ok:
                 outcome = "infeasible" if a.final_status in CONIC_INFEASIBLE else "failed"
-                out.append(SocpSolve(outcome, a.status, np.nan, None, np.nan, solve_ms, a.iterations, a.solves))
+                out.append(SnapshotSolve(outcome, a.status, np.nan, None, np.nan, solve_ms, a.iterations, a.solves))
                 continue
             out.append(
-                SocpSolve(
+                SnapshotSolve(
                     "optimal",
                     a.status,
                     float(min(primal[j], dual[j])),
