@@ -40,6 +40,7 @@ from typing import TYPE_CHECKING, Any, Literal
 import numpy as np
 
 from opfbench.errors import InputError
+from opfbench.exact import number_text
 from opfbench.formulations.options import ACOPF_SOLVERS, FALLBACKS
 from opfbench.strategies.learned import KNOTS, RHO
 from opfbench.strategies.rules import DEFAULT_SETTLING as SETTLING
@@ -120,18 +121,21 @@ class Option:
             raise InputError(f"{self.format(value)} has a value that is not finite")
         if self.choices and value not in self.choices:
             raise InputError(f"{value!r} is not one of {', '.join(self.choices)}")
-        problem = self.check(value) if self.check is not None else None
+        try:
+            problem = self.check(value) if self.check is not None else None
+        except Exception as exc:  # a plugin's check with a bug of its own: named, never a traceback
+            raise InputError(f"its check failed on {self.format(value)} ({type(exc).__name__}: {exc})") from None
         if problem:
-            raise InputError(problem)
+            raise InputError(str(problem))
 
     def format(self, value: OptionValue) -> str:
         """`value` as written in a canonical label (numbers exactly: repr, no trailing .0)."""
         if isinstance(value, bool):
             return "true" if value else "false"
         if isinstance(value, float):
-            return _number_text(value)
+            return number_text(value)
         if isinstance(value, tuple):
-            return "/".join(_number_text(v) for v in value)
+            return "/".join(number_text(v) for v in value)
         return str(value)
 
     def describe(self) -> dict:
@@ -162,11 +166,6 @@ def _decimal(text: str) -> float:
     return value
 
 
-def _number_text(value: float) -> str:
-    text = repr(float(value))
-    return text[:-2] if text.endswith(".0") else text
-
-
 def _positive(value: OptionValue) -> str | None:
     return None if isinstance(value, (int, float)) and value > 0 else f"must be > 0, got {value}"
 
@@ -175,14 +174,21 @@ def _step(value: OptionValue) -> str | None:
     return None if isinstance(value, float) and 0 < value <= 1 else f"a step factor lies in (0, 1], got {value}"
 
 
-def _non_negative(value: OptionValue) -> str | None:
-    return None if isinstance(value, int) and value >= 0 else f"must be ≥ 0, got {value}"
+MAX_STEPS = 1000
+"""The closed loop's largest `max_steps` (10× the default): it sizes the work of every
+snapshot that does not settle; one the damped iteration has not settled by then is
+recorded not-settled."""
+
+
+def _steps(value: OptionValue) -> str | None:
+    ok = isinstance(value, int) and 0 <= value <= MAX_STEPS
+    return None if ok else f"lies in 0..{MAX_STEPS} (each step is a power flow of every snapshot not yet settled), got {value}"
 
 
 SAFE = Option("safe", False, "Algorithm 3: cap the forecast-aware limit at the physical capability at P^C")
 #: The closed-loop engine's options (`strategies.engine.Settling`), on every rule that reads |V| or flows.
 SETTLING_OPTIONS = (
-    Option("max_steps", SETTLING.max_steps, "damped steps before a snapshot counts as not-settled", check=_non_negative),
+    Option("max_steps", SETTLING.max_steps, "damped steps before a snapshot counts as not-settled", check=_steps),
     Option("tol_v_pu", SETTLING.tol_v_pu, "settled: largest bus-voltage change of the last step ≤ this, p.u.", check=_positive),
     Option("tol_q_mvar", SETTLING.tol_q_mvar, "settled: largest change the rule still asks ≤ this, MVAr", check=_positive),
     Option("step_factor", SETTLING.step_factor, "damping α of Q += α·(target − Q), the first step's when adaptive", check=_step),
@@ -650,6 +656,7 @@ def configuration(label: str) -> Configuration:
     name, _, rest = label.strip().partition(":")
     entry = spec(name)
     given: dict[str, OptionValue] = {}
+    seen: set[str] = set()  # a value equal to the default is not kept, but it was given
     known = entry.option
     for item in (part.strip() for part in rest.split(",")) if rest else ():
         if not item:
@@ -658,8 +665,9 @@ def configuration(label: str) -> Configuration:
         key, text = key.strip(), text.strip()
         if not eq or not key:
             raise InputError(f"strategy label {label!r}: {item!r} is not key=value")
-        if key in given:
-            raise InputError(f"strategy label {label!r}: option {key} given twice")
+        if key in seen:
+            raise InputError(f"strategy label {label!r}: option {key} given twice; give it once")
+        seen.add(key)
         if key not in known:
             raise InputError(f"strategy label {label!r}: {name} takes no option {key} (options: {', '.join(known) or 'none'})")
         try:
