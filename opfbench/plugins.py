@@ -22,12 +22,22 @@ report, `snapshot`, `run` and `fault`.
 Loading: `--plugin FILE.py|MODULE` (repeatable) on the commands, or the entry-point group
 `opfbench.strategies` of an installed package (loaded when a name is not known, or when
 every strategy is listed). A plugin is checked when it loads, before any work: it must
-import, register at least one strategy, have a signature that takes every declared
-option, and return finite targets of the right shape on a probe; otherwise one
-InputError names it. `opfbench run` records each plugin's reference and source digest in
-the run's config (a changed plugin is another configuration) and ships the source of a
-file plugin to the worker processes, which load it before running (`ensure`); a module
-plugin must be importable on the workers.
+import, register at least one strategy (each name once), have a signature that takes
+every declared option, and return finite targets of the right shape on a probe; otherwise
+one InputError names it (a plugin that calls `sys.exit` fails the same way). Before a
+study writes anything, each plugin rule also runs on the real case's first snapshots
+(`probe_case`: its DER kinds, shapes and read-only arrays).
+
+A file plugin is one plugin under any spelling of its path (`good.py`, `./good.py`, its
+absolute path). Its fingerprint (`PluginSource.digest`) covers its source and what its
+behaviour depends on that opfbench can see: the modules it imports from outside the
+standard library and installed packages (a helper module beside it), and the files it
+opens while it loads and on its probe (a table it reads). Files it opens only later, the
+environment and the network are not seen: the run says so in a note. `opfbench run`
+records each plugin's reference and fingerprint in the run's config (a changed plugin or
+helper is another configuration) and ships the source of a file plugin to the worker
+processes, which load it before running and check its fingerprint there (`ensure`); a
+module plugin must be importable on the workers.
 """
 
 from __future__ import annotations
@@ -35,22 +45,53 @@ from __future__ import annotations
 import hashlib
 import importlib
 import inspect
+import io
+import json
+import os
 import re
 import sys
+import sysconfig
 import types
 from collections.abc import Callable, Iterator, Mapping, Sequence
-from contextlib import contextmanager
+from contextlib import contextmanager, redirect_stderr, redirect_stdout
 from dataclasses import dataclass
-from importlib.metadata import entry_points
+from functools import lru_cache
+from importlib.metadata import entry_points, packages_distributions
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from opfbench.errors import InputError
-from opfbench.registry import CLOSED_LOOP_COLUMNS, SAFE, SETTLING_OPTIONS, STRATEGIES, Option, OptionValue, StrategySpec, register
+from opfbench.registry import (
+    CLOSED_LOOP_COLUMNS,
+    SAFE,
+    SETTLING_OPTIONS,
+    STRATEGIES,
+    Option,
+    OptionValue,
+    StrategySpec,
+    configuration,
+    register,
+)
 
-__all__ = ["Option", "PluginSource", "ensure", "load", "load_entry_points", "loaded", "local_rule", "probe", "unload"]
+__all__ = [
+    "Option",
+    "PluginSource",
+    "canonical_ref",
+    "ensure",
+    "load",
+    "load_entry_points",
+    "loaded",
+    "local_rule",
+    "probe",
+    "probe_case",
+    "unload",
+]
 from opfbench.strategies.rules import FEEDBACK, Measurements, Rule, targets
+
+if TYPE_CHECKING:
+    from opfbench.scenario import Scenario
 
 ENTRY_POINT_GROUP = "opfbench.strategies"
 _RESERVED = {o.name for o in (SAFE, *SETTLING_OPTIONS)}
@@ -58,15 +99,27 @@ _RESERVED = {o.name for o in (SAFE, *SETTLING_OPTIONS)}
 
 @dataclass(frozen=True)
 class PluginSource:
-    """A loaded plugin: `ref` as given (a .py path or a module name), the module it was
-    loaded as, the sha256 of its source, the source text of a file plugin (shipped to
-    workers; None for an installed module) and the strategies it registered."""
+    """A loaded plugin: `ref` (a file plugin's absolute path, or a module name), the module
+    it was loaded as, its fingerprint `digest` (the sha256 of its source, combined with
+    those of `depends`), the source text of a file plugin (shipped to workers; None for an
+    installed module), the strategies it registered, and `depends`: (path, sha256) of each
+    local module and file its behaviour was seen to depend on (module docstring)."""
 
     ref: str
     module: str
     digest: str
     text: str | None
     strategies: tuple[str, ...]
+    depends: tuple[tuple[str, str], ...] = ()
+
+    def note(self) -> str:
+        """What the fingerprint covers and what it cannot see, for a note at run time."""
+        seen = ", ".join(Path(path).name for path, _ in self.depends)
+        return (
+            f"note: plugin {self.ref} is fingerprinted by its source{' and ' + seen if seen else ''} (a change is another "
+            "configuration); files it opens only after loading and probing, the environment and the network are not in "
+            "its fingerprint"
+        )
 
 
 _loaded: dict[str, PluginSource] = {}
@@ -115,6 +168,8 @@ def local_rule(
         )
         _check_signature(spec, target, declared)
         probe(spec)
+        if name in STRATEGIES and STRATEGIES[name].source == source:
+            raise InputError(f"rule {name!r} is registered twice by {source}: give each rule its own name")
         register(spec)
         return target
 
@@ -127,10 +182,16 @@ def _option(key: str, value: OptionValue | Option, rule: str) -> Option:
     if key in _RESERVED:
         raise InputError(f"rule {rule!r}: option name {key!r} is the engine's ({', '.join(sorted(_RESERVED))})")
     if isinstance(value, Option):
-        return value
-    if not isinstance(value, (bool, int, float, str, tuple)):
+        option = value
+    elif not isinstance(value, (bool, int, float, str, tuple)):
         raise InputError(f"rule {rule!r}: option {key} has default {value!r}; use a bool, int, float, str or tuple of floats")
-    return Option(key, tuple(float(v) for v in value) if isinstance(value, tuple) else value, f"option of {rule}")
+    else:
+        option = Option(key, tuple(float(v) for v in value) if isinstance(value, tuple) else value, f"option of {rule}")
+    try:
+        option.validate(option.default)
+    except InputError as exc:
+        raise InputError(f"rule {rule!r}: option {option.name}'s default {option.format(option.default)}: {exc}") from None
+    return option
 
 
 def _check_signature(spec: StrategySpec, target: Callable, declared: tuple[Option, ...]) -> None:
@@ -174,6 +235,8 @@ def probe(spec: StrategySpec) -> None:
         "load_q_mvar": np.array([[0.06, -0.02], [0.1, 0.0], [0.03, 0.05]]),
         "line_mva": np.array([[[-0.2 - 0.1j, 0.1 + 0.05j]] * 2] * n_rows),
     }
+    for arr in values.values():
+        arr.setflags(write=False)  # as the engine's: a rule never writes into its measurements
     m = Measurements(frozenset(spec.reads), values, n_rows, rating, rating, np.array(["PV", "DFIG"]), np.ones((2, 2), dtype=bool))
     rule = Rule(spec.name, spec.rule, frozenset(spec.reads))  # type: ignore[arg-type]
     options = {o.name: o.default for o in spec.options if o.name not in _RESERVED}
@@ -185,12 +248,146 @@ def probe(spec: StrategySpec) -> None:
         )
 
 
+def probe_case(
+    labels: Sequence[str], scenario: Scenario, k: float, where: str, settings: Mapping[str, object] | None = None
+) -> None:
+    """Run each plugin configuration among `labels` on `scenario` — the real case's first
+    snapshots, with its DER kinds, shapes and read-only arrays — before a study writes
+    anything; InputError naming the plugin, the configuration and `where` otherwise."""
+    for label in labels:
+        config = configuration(label)
+        if config.spec.source == "opfbench":
+            continue
+        try:
+            config.run(scenario, k, settings)
+        except InputError as exc:
+            raise InputError(f"plugin {config.spec.source}: {label} fails on {where}: {exc}") from None
+
+
 def _digest(text: str | bytes) -> str:
     return hashlib.sha256(text.encode() if isinstance(text, str) else text).hexdigest()
 
 
 def _is_path(ref: str) -> bool:
     return ref.endswith(".py") or "/" in ref or "\\" in ref
+
+
+def canonical_ref(ref: str) -> str:
+    """The one name of a plugin: a file's absolute path (every spelling of it alike), or
+    the module name."""
+    return str(Path(ref).resolve()) if _is_path(ref) else ref
+
+
+# ----- what a plugin's behaviour depends on -------------------------------------------------
+_opened: set[str] | None = None  # the files opened while a plugin loads or is probed
+
+
+def _audit(event: str, args: tuple) -> None:
+    if _opened is not None and event == "open" and isinstance(args[0], (str, bytes, os.PathLike)):
+        _opened.add(os.fsdecode(args[0]))
+
+
+@lru_cache(maxsize=1)
+def _install_audit() -> None:
+    sys.addaudithook(_audit)  # cannot be removed: records only while `_opened` is a set
+
+
+@contextmanager
+def _watching() -> Iterator[tuple[set[str], set[str]]]:
+    """(modules imported, files opened) while the block runs (nested: the outer's too)."""
+    global _opened
+    _install_audit()
+    before, outer = set(sys.modules), _opened
+    _opened = set() if outer is None else outer
+    modules: set[str] = set()
+    try:
+        yield modules, _opened
+    finally:
+        modules.update(set(sys.modules) - before)
+        _opened = outer
+
+
+@lru_cache(maxsize=1)
+def _installed_roots() -> tuple[frozenset[str], tuple[str, ...]]:
+    """(top-level names of installed distributions and the standard library, the folders
+    they live in): what a plugin's fingerprint leaves to the run's recorded versions."""
+    names = frozenset(packages_distributions()) | frozenset(sys.stdlib_module_names) | {"opfbench"}
+    paths = {sysconfig.get_path(key) for key in ("stdlib", "platstdlib", "purelib", "platlib")}
+    paths |= {sys.prefix, sys.base_prefix, str(Path(__file__).resolve().parent)}
+    return names, tuple(str(Path(p).resolve()) for p in paths if p)
+
+
+_SYSTEM = ("/proc", "/sys", "/dev")  # kernel views, not data: their content changes by itself
+
+
+def _local(path: str) -> bool:
+    """A file of the user's own (not the interpreter's, an installed package's, opfbench's
+    or the kernel's)."""
+    _, roots = _installed_roots()
+    resolved = str(Path(path).resolve())
+    return (
+        Path(resolved).is_file()
+        and "__pycache__" not in resolved
+        and not any(resolved == root or resolved.startswith(root + os.sep) for root in (*roots, *_SYSTEM))
+    )
+
+
+def _reachable(module: types.ModuleType) -> set[str]:
+    """The modules a plugin module refers to, directly or through its own local modules."""
+    names, todo, seen = set(), [module], {id(module)}
+    while todo:
+        for value in list(vars(todo.pop()).values()):
+            owner = getattr(value, "__module__", None)
+            target = value if isinstance(value, types.ModuleType) else sys.modules.get(owner) if isinstance(owner, str) else None
+            if isinstance(target, types.ModuleType) and id(target) not in seen:
+                seen.add(id(target))
+                names.add(target.__name__)
+                file = getattr(target, "__file__", None)
+                if file and _local(file):
+                    todo.append(target)
+    return names
+
+
+def _dependencies(module_name: str, modules: set[str], files: set[str], own: str | None) -> tuple[tuple[str, str], ...]:
+    """(path, sha256) of the local modules among `modules` and those `module_name` refers
+    to, and of the local files among `files` (not `own`, the plugin's file; not compiled
+    code), sorted by path."""
+    installed, _ = _installed_roots()
+    module = sys.modules.get(module_name)
+    names = modules | (_reachable(module) if module is not None else set())
+    paths = set()
+    for name in names:
+        file = getattr(sys.modules.get(name), "__file__", None)
+        if file and name.partition(".")[0] not in installed and not name.startswith("opfbench_plugin_") and _local(file):
+            paths.add(str(Path(file).resolve()))
+    paths |= {str(Path(f).resolve()) for f in files if _local(f) and not f.endswith((".pyc", ".so"))}
+    paths.discard(own or "")
+    return tuple((path, _digest(Path(path).read_bytes())) for path in sorted(paths))
+
+
+def _fingerprint(source: str, depends: tuple[tuple[str, str], ...]) -> str:
+    """A plugin's digest: its source's sha256, combined with its dependencies' (where it has any)."""
+    return source if not depends else _digest(json.dumps([source, [list(d) for d in depends]]))
+
+
+# ----- loading ---------------------------------------------------------------------------------
+@contextmanager
+def _quiet_import(ref: str) -> Iterator[None]:
+    """Run a plugin's import with its printed output held back (passed on afterwards); a
+    `sys.exit` in it is the plugin's failure, named with what it printed (a script given
+    as a plugin prints its own usage)."""
+    held = io.StringIO()
+    try:
+        with redirect_stdout(held), redirect_stderr(held):
+            yield
+    except SystemExit as exc:
+        said = " ".join(held.getvalue().split())
+        raise InputError(
+            f"plugin {ref}: it exited while being imported (sys.exit({exc.code!r}))"
+            + (f", printing: {said[:300]}" if said else "")
+            + " — a plugin registers rules, it is not a script to run"
+        ) from None
+    sys.stderr.write(held.getvalue())  # what it printed (stderr: stdout may be a --json answer)
 
 
 def _exec_text(ref: str, text: str, filename: str) -> str:
@@ -203,7 +400,7 @@ def _exec_text(ref: str, text: str, filename: str) -> str:
     module.__file__ = filename
     sys.modules[module_name] = module
     try:
-        with _as_source(ref):
+        with _as_source(ref), _quiet_import(ref):
             exec(compile(text, filename, "exec"), module.__dict__)
     except BaseException:
         sys.modules.pop(module_name, None)
@@ -213,34 +410,40 @@ def _exec_text(ref: str, text: str, filename: str) -> str:
 
 def load(ref: str) -> PluginSource:
     """Load the plugin `ref` (a .py file path, or an importable module name) and check it;
-    InputError naming it if it cannot be loaded or registers no (valid) strategy."""
+    InputError naming it if it cannot be loaded or registers no (valid) strategy. A file
+    plugin is known by its absolute path (`canonical_ref`): any spelling loads it once."""
+    given, ref = ref, canonical_ref(ref)
     if ref in _loaded:
         return _loaded[ref]
+    own = None
     try:
-        if _is_path(ref):
-            path = Path(ref)
-            if not path.is_file():
-                raise InputError(f"plugin {ref}: no such file")
-            try:
-                text = path.read_text(encoding="utf-8")
-            except (OSError, UnicodeDecodeError) as exc:
-                raise InputError(f"plugin {ref}: cannot read it ({exc})") from None
-            module, digest = _exec_text(ref, text, str(path.resolve())), _digest(text)
-        else:
-            with _as_source(ref):
-                imported = importlib.import_module(ref)
-            module, text, digest = ref, None, _file_digest(imported)
+        with _watching() as (modules, files):
+            if _is_path(ref):
+                path = Path(ref)
+                if not path.is_file():
+                    raise InputError(f"plugin {given}: no such file")
+                try:
+                    text = path.read_text(encoding="utf-8")
+                except (OSError, UnicodeDecodeError) as exc:
+                    raise InputError(f"plugin {given}: cannot read it ({exc})") from None
+                module, own, source = _exec_text(ref, text, ref), ref, _digest(text)
+            else:
+                with _as_source(ref), _quiet_import(ref):
+                    imported = importlib.import_module(ref)
+                module, text, source = ref, None, _file_digest(imported)
+                own = getattr(imported, "__file__", None)
+        depends = _dependencies(module, modules, files, own and str(Path(own).resolve()))
     except Exception as exc:  # nothing of a plugin that fails half-way stays registered
         for name in [n for n, s in STRATEGIES.items() if s.source == ref]:
             del STRATEGIES[name]
         if isinstance(exc, InputError):
-            message = str(exc)
-            raise InputError(message if message.startswith(f"plugin {ref}") else f"plugin {ref}: {message}") from None
-        raise InputError(f"plugin {ref}: cannot import it ({type(exc).__name__}: {exc})") from None
+            message = str(exc).replace(f"plugin {ref}", f"plugin {given}")
+            raise InputError(message if message.startswith(f"plugin {given}") else f"plugin {given}: {message}") from None
+        raise InputError(f"plugin {given}: cannot import it ({type(exc).__name__}: {exc})") from None
     names = tuple(n for n, s in STRATEGIES.items() if s.source == ref)
     if not names:
-        raise InputError(f"plugin {ref} registers no strategy: decorate a function with @opfbench.plugins.local_rule(...)")
-    _loaded[ref] = PluginSource(ref, module, digest, text if _is_path(ref) else None, names)
+        raise InputError(f"plugin {given} registers no strategy: decorate a function with @opfbench.plugins.local_rule(...)")
+    _loaded[ref] = PluginSource(ref, module, _fingerprint(source, depends), text, names, depends)
     return _loaded[ref]
 
 
@@ -254,22 +457,30 @@ def ensure(sources: Sequence[PluginSource]) -> None:
     plugin from its shipped text, a module by name; InputError if a module's source is
     not the one the run recorded."""
     for src in sources:
-        if src.ref in _loaded:
+        held = _loaded.get(src.ref)
+        if held is not None and held.digest == src.digest:
             continue
+        if held is not None:  # another version of it (a worker kept from an earlier run): loaded anew
+            unload(src.ref)
         if src.text is not None:
-            _exec_text(src.ref, src.text, src.ref)
-            _loaded[src.ref] = src
-            continue
-        got = load(src.ref)
-        if src.digest and got.digest != src.digest:
+            with _watching() as (modules, files):
+                module = _exec_text(src.ref, src.text, src.ref)
+            digest = _fingerprint(_digest(src.text), _dependencies(module, modules, files, src.ref))
+        else:
+            digest = load(src.ref).digest
+        if src.digest and digest != src.digest:
+            unload(src.ref)
             raise InputError(
-                f"plugin {src.ref}: its source on this worker differs from the run's (digest {got.digest[:12]} ≠ {src.digest[:12]})"
+                f"plugin {src.ref}: its source or a module or file it depends on differs on this worker from the run's "
+                f"(fingerprint {digest[:12]} ≠ {src.digest[:12]})"
             )
+        _loaded[src.ref] = src
 
 
 def unload(ref: str) -> None:
     """Forget the plugin `ref`: its strategies leave the registry (a notebook reloading an
     edited plugin, or a test cleaning up)."""
+    ref = canonical_ref(ref)
     for name in [n for n, s in STRATEGIES.items() if s.source == ref]:
         del STRATEGIES[name]
     source = _loaded.pop(ref, None)
@@ -278,8 +489,9 @@ def unload(ref: str) -> None:
 
 
 def loaded(refs: Sequence[str] | None = None) -> tuple[PluginSource, ...]:
-    """The loaded plugins (those of `refs` where given), in load order."""
-    return tuple(src for ref, src in _loaded.items() if refs is None or ref in refs)
+    """The loaded plugins (those of `refs`, any spelling, where given), in load order."""
+    wanted = None if refs is None else {canonical_ref(r) for r in refs}
+    return tuple(src for ref, src in _loaded.items() if wanted is None or ref in wanted)
 
 
 def source_of(strategy_source: str) -> PluginSource | None:

@@ -124,16 +124,19 @@ class Rule:
 
 
 def targets(rule: Rule, m: Measurements, options: dict, n_rows: int) -> np.ndarray:
-    """The rule's targets (rows, n_der) MVAr; InputError naming the rule for an exception,
-    a non-numeric answer or a wrong shape (non-finite values are the caller's to handle)."""
+    """The rule's targets (rows, n_der) MVAr; InputError naming the rule for an exception
+    (a `sys.exit` too), an answer that is not real numbers (complex included) or a wrong
+    shape (non-finite values are the caller's to handle)."""
     n_der = m.shape[1]
     try:
-        raw = rule.target(m, **options)
-        out = np.asarray(raw, dtype=float)
+        raw = np.asarray(rule.target(m, **options))
+        if raw.dtype.kind not in "biuf":  # complex (its imaginary part would be dropped), text, objects
+            raise InputError(f"rule {rule.name!r} returned {raw.dtype} values; a Q target is real numbers (MVAr)")
+        out = raw.astype(float)
     except InputError:
         raise
-    except Exception as exc:  # a rule's own bug: named, never a traceback
-        raise InputError(f"rule {rule.name!r} failed: {type(exc).__name__}: {exc}") from exc
+    except (Exception, SystemExit) as exc:  # a rule's own bug, or its sys.exit: named, never a traceback or an exit
+        raise InputError(f"rule {rule.name!r} failed: {type(exc).__name__}: {exc}") from None
     if out.shape != (n_rows, n_der):
         raise InputError(f"rule {rule.name!r} returned shape {out.shape}; it must return (S, n_der) = ({n_rows}, {n_der})")
     return out

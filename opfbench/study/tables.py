@@ -8,6 +8,7 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 
+from opfbench.errors import InputError
 from opfbench.registry import BASELINE, configuration, describe
 from opfbench.result import NOT_SETTLED, OK, PF_DIVERGED, RULE_NON_FINITE, StrategyResult
 from opfbench.study.config import DETAIL_TABLES
@@ -41,7 +42,16 @@ EXCURSION_MVAR = 1e-9  # a step's setpoint exceeds the physical capability beyon
 
 def extra_columns(labels: tuple[str, ...]) -> tuple[str, ...]:
     """The extra per-step columns the strategies of `labels` declare (`StrategySpec.columns`),
-    each once, in the order they first appear."""
+    each once, in the order they first appear; InputError naming the strategy that
+    declares one of the table's own columns (before any work)."""
+    for label in labels:
+        spec = configuration(label).spec
+        clash = [c for c in spec.columns if c in STEP_COLUMNS]
+        if clash:
+            raise InputError(
+                f"strategy {spec.name} ({spec.source}) declares the extra column {clash[0]!r}, one of the steps table's "
+                f"own ({', '.join(STEP_COLUMNS)}): give its column another name"
+            )
     return tuple(dict.fromkeys(c for label in labels for c in configuration(label).spec.columns))
 
 
