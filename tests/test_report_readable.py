@@ -168,3 +168,25 @@ def test_an_optimum_that_fell_back_but_reduced_losses_is_not_called_missing():
         for s, e in (("no-action", 10.0), ("acopf", 8.0))  # every step fallback-cold: still an optimum
     ]
     assert tables.without_optimum(pd.DataFrame(rows)) == []
+
+
+def test_a_leaderboard_without_a_share_says_why():
+    def rows(case: str, energies: dict[str, float]) -> list[dict]:
+        return [
+            {"case": case, "strategy": s, "k": 0.0, "night_mode": "connected", "forecast": "off", "energy_kwh": e}
+            | {"no_action_kwh": 10.0, "steps": 4, "not_ok_steps": 0, "voltage_violation_min": 0.0}
+            for s, e in energies.items()
+        ]
+
+    summary = pd.DataFrame(
+        rows("no-opf", {"no-action": 10.0, "lfma": 9.0})
+        + rows("saves-nothing", {"no-action": 10.0, "lfma": 9.0, "acopf": 10.0})
+        + rows("fine", {"no-action": 10.0, "lfma": 9.0, "acopf": 8.0})
+    )
+    notes = [b.text for b in sections.grids(Inputs(run_dir=Path(), summary=summary)).blocks if b.kind == "note"]
+    assert [n for n in notes if "no share" in n] == [
+        "no-opf, k=0: no share of the AC OPF's loss reduction (—): the run has no acopf configuration (add it to "
+        "--strategies: the share is of its loss reduction).",
+        "saves-nothing, k=0: no share of the AC OPF's loss reduction (—): the acopf saves no loss here (10 kWh "
+        "against 10 kWh with no action).",
+    ]

@@ -205,13 +205,14 @@ def run_family(
     silences the progress only; `notes=False` keeps the family's planning notes unsaid (a
     nested run's, which its parent says). Ctrl-C: `Stopped` (or, in process, exit 130 at once)."""
     from opfbench.study.progress import Progress
-    from opfbench.study.store import RunStore
+    from opfbench.study.store import RunStore, finished_tasks
 
     start = now()
     if scheduler is not None:
         execution.scheduler_endpoint(scheduler)
     temporary = out is None
     folder = Path(tempfile.mkdtemp(prefix="opfbench-")) if out is None else Path(out)
+    made = _first_missing(folder)  # a refused run leaves no folder it made behind (nor its made parents)
     try:
         store = RunStore(folder, _note)
 
@@ -274,10 +275,24 @@ def run_family(
             run.wall_s = elapsed_ms(start) / 1e3
             store.finish_manifest(run.wall_s, run.workers, scheduler, run.task_wall, family.timings(run.wall_s))
         return run
+    except Exception:
+        if made is not None and not finished_tasks(folder):  # refused, or failed before any task finished
+            _remove(made, True)
+        raise
     finally:
         _remove(folder, temporary)
 
 
-def _remove(folder: Path, temporary: bool) -> None:
-    if temporary:
+def _first_missing(folder: Path) -> Path | None:
+    """The outermost folder of `folder`'s path that does not exist yet (None: it exists)."""
+    if folder.exists():
+        return None
+    top = folder.absolute()
+    while not top.parent.exists():
+        top = top.parent
+    return top
+
+
+def _remove(folder: Path, remove: bool) -> None:
+    if remove:
         shutil.rmtree(folder, ignore_errors=True)
