@@ -16,7 +16,7 @@ from opfbench.errors import NetworkError
 from opfbench.io import load_network
 from opfbench.io.matpower import load_case_file
 from opfbench.powerflow import bus_injections, solve_pf
-from opfbench.registry import specs
+from opfbench.registry.catalog import specs
 from tests.support.matpower_texts import CASE4_PV
 
 PF_KEYS = {

@@ -15,7 +15,7 @@ import pytest
 
 from opfbench.cli import main
 from opfbench.io import load_network
-from opfbench.registry import run_strategy
+from opfbench.registry.catalog import run_strategy
 from opfbench.report.claims import NA, voltage_band
 from opfbench.report.inputs import load_inputs
 from opfbench.result import PF_DIVERGED

@@ -12,7 +12,7 @@ from opfbench.dynamics.params import FaultParams, ModelParams, MotorParams
 from opfbench.dynamics.simulate import simulate
 from opfbench.io import load_network
 from opfbench.powerflow import solve_pf
-from opfbench.registry import run_strategy
+from opfbench.registry.catalog import run_strategy
 from opfbench.scenario import Scenario
 
 NET = load_network("paper33")

@@ -161,7 +161,7 @@ def test_an_isolated_bus_is_refused_not_turned_into_a_load_bus(tmp_path):
 
 
 def test_strategy_options_are_type_checked(net):
-    from opfbench.registry import run_strategy
+    from opfbench.registry.catalog import run_strategy
 
     scenario = Scenario.snapshot(net)
     for name, options, message in (
@@ -302,7 +302,7 @@ def test_with_changes_refuses_an_inconsistent_network():
 def test_wrong_types_through_the_python_api_name_what_is_wrong():
     from opfbench.errors import NetworkError
     from opfbench.network import DER
-    from opfbench.registry import run_strategy
+    from opfbench.registry.catalog import run_strategy
 
     net = load_network("paper33")
     scenario = Scenario.snapshot(net)

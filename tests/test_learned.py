@@ -14,7 +14,7 @@ from opfbench.cli import main
 from opfbench.errors import InputError
 from opfbench.io import load_case, load_network, parse_spec
 from opfbench.powerflow import solve_pf, solve_pf_batch
-from opfbench.registry import configuration, run_strategy
+from opfbench.registry.catalog import configuration, run_strategy
 from opfbench.strategies import learned
 from opfbench.strategies.learned import (
     FAMILIES,

@@ -13,7 +13,7 @@ import pandas as pd
 import pytest
 
 from opfbench.cli import main
-from opfbench.registry import run_strategy
+from opfbench.registry.catalog import run_strategy
 from opfbench.study.learning import training_scenario
 
 TRAIN = "2016-03-01..2016-03-02"

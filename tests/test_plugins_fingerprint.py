@@ -138,6 +138,6 @@ def test_a_plugin_registering_a_name_twice_is_refused(tmp_path):
             return 0.1 * m.p_mw
         """,
     )
-    with pytest.raises(InputError, match=f"plugin {path}: rule 'twice' is registered twice by"):
+    with pytest.raises(InputError, match=f"plugin {path}: strategy 'twice' is registered twice by"):
         plugins.load(str(path))
     assert "twice" not in {name for src in plugins.loaded() for name in src.strategies}

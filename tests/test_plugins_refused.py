@@ -16,7 +16,7 @@ from opfbench import plugins
 from opfbench.cli import main
 from opfbench.errors import InputError
 from opfbench.io import load_network
-from opfbench.registry import configuration, run_strategy
+from opfbench.registry.catalog import configuration, run_strategy
 from opfbench.scenario import Scenario
 
 pytestmark = pytest.mark.usefixtures("isolated_registry")

@@ -152,3 +152,58 @@ def test_a_cold_batched_flow_answers_the_same_input_from_the_memo(paper33):
     small = FlowMemo(limit_bytes=4 * s.nbytes)
     small.put(paper33, "o", np.ascontiguousarray(s), first)
     assert small.get(paper33, "o", np.ascontiguousarray(s)) is None and small.used == 0
+
+
+@pytest.mark.parametrize("name, sparse", [("paper33", False), ("case69-der", False), ("case141-der", True), ("paper33", True)])
+def test_each_snapshot_answer_is_its_own_whatever_else_is_in_the_batch(name, sparse):
+    """A snapshot's voltages and iteration count are the same bit for bit solved alone, in
+    any subset of the batch, at any position, cold or warm — what lets one flow answer
+    several configurations (the dense mat-mul's columns are padded, `fixed_point.PAD`)."""
+    from opfbench.powerflow.memo import forget_flows
+
+    points = list(_random_points(name, 23, seed=11))
+    net = points[0][0]
+    s = np.array([bus_injections(net, p, q, ls) for _, ls, p, q in points])
+    full = solve_pf_batch(net, s, sparse=sparse)
+    rng = np.random.default_rng(5)
+    start = full.v * (1 + 1e-3 * rng.standard_normal(full.v.shape))
+    warm = solve_pf_batch(net, s, v0=start, sparse=sparse)
+    for size in (1, 3, 5, 9, 17):
+        rows = rng.permutation(len(s))[:size]
+        forget_flows()
+        part = solve_pf_batch(net, s[rows], sparse=sparse)
+        np.testing.assert_array_equal(part.v, full.v[rows])
+        np.testing.assert_array_equal(part.iterations, full.iterations[rows])
+        np.testing.assert_array_equal(solve_pf_batch(net, s[rows], v0=start[rows], sparse=sparse).v, warm.v[rows])
+
+
+def test_the_compiled_fixed_point_is_the_numpy_iteration_bit_for_bit(paper33):
+    """The fused passes of `fixed_point` compute what the plain numpy iteration
+    V ← Z·(conj(S)·V·(1/|V|²)) + V₀ computes, every snapshot stopping at its own step
+    (on a multiple of PAD snapshots, where numpy's mat-mul has no edge columns)."""
+    from opfbench.powerflow import SWEEP_TOLERANCE, _zbus
+    from opfbench.powerflow.fixed_point import PAD
+
+    rng = np.random.default_rng(2)
+    n = 4 * PAD
+    s = np.array(
+        [bus_injections(paper33, rng.uniform(0, 1, 5) * paper33.der_rating_mw, 0.0, x) for x in rng.uniform(0.2, 1.5, n)]
+    )
+    fac = _zbus(paper33, False)
+    s_conj = np.conj(s[:, fac.keep] / paper33.base_mva).T
+    v = np.repeat(fac.v_noload[:, None], n, axis=1)
+    expected, steps = np.empty_like(v), np.zeros(n, dtype=int)
+    going = np.ones(n, dtype=bool)
+    while going.any():
+        mag2 = np.square(v.real) + np.square(v.imag)
+        new = fac.z.z @ (s_conj * v * np.reciprocal(mag2)) + fac.v_noload[:, None]
+        change = new - v
+        step2 = (np.square(change.real) + np.square(change.imag)).max(axis=0)
+        v = np.where(going, new, v)
+        steps += going
+        stop = going & (step2 < SWEEP_TOLERANCE**2)
+        expected[:, stop] = v[:, stop]
+        going &= ~stop
+    result = solve_pf_batch(paper33, s)
+    np.testing.assert_array_equal(result.v[:, fac.keep], expected.T)
+    np.testing.assert_array_equal(result.iterations, steps)

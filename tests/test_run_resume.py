@@ -7,7 +7,7 @@ import shutil
 import pandas as pd
 
 from opfbench.cli import main
-from opfbench.formulations import relaxation
+from opfbench.formulations import solves as relaxation
 from opfbench.study import StudyConfig, run_study
 from opfbench.study.store import finished_tasks
 from tests.support.checkpoints import KINDS, damage

@@ -14,7 +14,7 @@ from opfbench.commands.table import format_table, local_rules, loss_table
 from opfbench.errors import InputError
 from opfbench.io import load_network
 from opfbench.powerflow import PowerFlowResult, solve_pf_batch
-from opfbench.registry import run_strategy
+from opfbench.registry.catalog import run_strategy
 from opfbench.scenario import Scenario
 
 

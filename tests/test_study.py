@@ -12,7 +12,8 @@ import pytest
 from opfbench.capability import PAPER_KS
 from opfbench.cli import main
 from opfbench.errors import DataError, InputError
-from opfbench.registry import BASELINE, DEFAULT_FORECAST, DEFAULT_RUN, get_strategy
+from opfbench.registry.catalog import get_strategy
+from opfbench.registry.references import BASELINE, DEFAULT_FORECAST, DEFAULT_RUN
 from opfbench.study import StudyConfig
 from opfbench.study.periods import resolve_period
 from opfbench.study.runner import prepare, run_study

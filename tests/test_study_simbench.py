@@ -57,7 +57,7 @@ def test_the_tasks_use_the_case_series(dawn_run):
 
 
 def run_strategy_energy(scenario, name: str) -> float:
-    from opfbench.registry import run_strategy
+    from opfbench.registry.catalog import run_strategy
 
     return float(np.nansum(run_strategy(name, scenario, 0.0).losses_kw))
 

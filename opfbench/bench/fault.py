@@ -19,7 +19,7 @@ from opfbench.dynamics.point import operating_point
 from opfbench.dynamics.simulate import simulate
 from opfbench.dynamics.study import FaultConfig, run_fault_study
 from opfbench.io import load_case
-from opfbench.registry import run_strategy
+from opfbench.registry.catalog import run_strategy
 from opfbench.timing import best_ms
 
 

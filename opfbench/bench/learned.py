@@ -20,7 +20,7 @@ import argparse
 import numpy as np
 from threadpoolctl import threadpool_limits
 
-from opfbench.registry import run_strategy
+from opfbench.registry.catalog import run_strategy
 from opfbench.strategies.learned import FAMILIES, TRAIN_K, fit_rule, install
 from opfbench.study.learning import training_scenario, training_set
 from opfbench.timing import elapsed_ms, now

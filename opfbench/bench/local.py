@@ -17,7 +17,7 @@ import numpy as np
 
 from opfbench.bench.profiles import paper_day_scenario
 from opfbench.powerflow.memo import cold
-from opfbench.registry import run_strategy, specs
+from opfbench.registry.catalog import run_strategy, specs
 from opfbench.scenario import Scenario
 from opfbench.timing import best_ms
 

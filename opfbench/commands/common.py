@@ -173,7 +173,7 @@ def load_plugins(args: argparse.Namespace) -> None:
 def strategy_labels(labels: list[str], args: argparse.Namespace) -> list[str]:
     """The --plugin modules loaded, then every label of `labels` checked and canonical
     (`registry.configuration`; InputError naming a bad one), before any work."""
-    from opfbench.registry import canonical
+    from opfbench.registry.catalog import canonical
 
     load_plugins(args)
     return [canonical(label) for label in labels]

@@ -26,7 +26,7 @@ from opfbench.commands.common import (
 from opfbench.dynamics.params import FORECASTS, SENSITIVITY_VARIANTS, FaultParams, ModelParams
 from opfbench.errors import InputError
 from opfbench.jsonio import print_json
-from opfbench.registry import DEFAULT_FAULT
+from opfbench.registry.references import DEFAULT_FAULT
 
 if TYPE_CHECKING:
     from opfbench.io.case import Case

@@ -22,7 +22,7 @@ from opfbench.commands.common import (
 )
 from opfbench.formulations.options import ACOPF_SOLVERS
 from opfbench.jsonio import print_json
-from opfbench.registry import DEFAULT_FORECAST, DEFAULT_RUN
+from opfbench.registry.references import DEFAULT_FORECAST, DEFAULT_RUN
 from opfbench.study.config import CHUNKS, DEFAULT_NIGHT, NIGHT_MODES, StudyConfig
 from opfbench.study.price import DEFAULT_CURRENCY, DEFAULT_PRICE_PER_KWH, DEFAULT_PRICE_SOURCE
 

@@ -64,7 +64,7 @@ def register(sub: argparse._SubParsersAction) -> None:
 def _options(args: argparse.Namespace, label: str) -> dict:
     """The strategy options the flags set; a flag the strategy does not take is an error
     (which strategies take it is the registry's word)."""
-    from opfbench.registry import configuration, specs
+    from opfbench.registry.catalog import configuration, specs
 
     spec = configuration(label).spec
     given = {
@@ -89,7 +89,7 @@ def _options(args: argparse.Namespace, label: str) -> dict:
 
 def run(args: argparse.Namespace) -> int:
     from opfbench.io import load_network
-    from opfbench.registry import run_strategy
+    from opfbench.registry.catalog import run_strategy
     from opfbench.scenario import Scenario
     from opfbench.study.learning import check_params
 

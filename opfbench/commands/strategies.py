@@ -17,7 +17,7 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from opfbench.registry import specs
+    from opfbench.registry.catalog import specs
 
     load_plugins(args)
     entries = [s.describe() for s in specs()]

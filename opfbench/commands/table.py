@@ -13,7 +13,6 @@ from typing import TYPE_CHECKING, Sequence
 
 from opfbench.capability import PAPER_KS
 from opfbench.commands.common import fraction, print_json, share
-from opfbench.registry import run_strategy, specs
 
 if TYPE_CHECKING:
     import pandas as pd
@@ -60,6 +59,7 @@ def loss_table(
     import pandas as pd
 
     from opfbench.io import load_network
+    from opfbench.registry.catalog import run_strategy
     from opfbench.scenario import Scenario
 
     net = load_network(case)
@@ -90,6 +90,8 @@ def loss_table(
 
 def local_rules() -> list:
     """Every registered local rule that runs at its default options (not the learned ones), in registry order."""
+    from opfbench.registry.catalog import specs
+
     return [s for s in specs() if s.kind == "local" and not s.learned]
 
 

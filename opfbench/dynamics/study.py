@@ -32,7 +32,8 @@ from opfbench.errors import InputError
 from opfbench.io import Case
 from opfbench.network import Network
 from opfbench.parquetio import ParquetStream, arrow_table, write_parquet
-from opfbench.registry import DEFAULT_FAULT, get_strategy, run_strategy
+from opfbench.registry.catalog import get_strategy, run_strategy
+from opfbench.registry.references import DEFAULT_FAULT
 from opfbench.scenario import Scenario
 from opfbench.study.config import check_something_to_run, strategies_for, unique_grid
 from opfbench.study.engine import EngineRun, Task, TaskOutput, run_family

@@ -25,6 +25,7 @@ from dataclasses import dataclass
 from functools import lru_cache
 
 import numpy as np
+import scipy.sparse as sp
 from threadpoolctl import ThreadpoolController
 
 from opfbench.network import Network
@@ -42,6 +43,7 @@ from opfbench.powerflow.common import (
     uses_sparse,
 )
 from opfbench.powerflow.dense import DenseNewton, DenseZbus
+from opfbench.powerflow.fixed_point import fixed_point, max_mismatch
 from opfbench.powerflow.memo import flow_memo
 from opfbench.powerflow.sparse import SparseNewton, SparseZbus
 
@@ -119,6 +121,7 @@ class _ZbusFactor:
     z: DenseZbus | SparseZbus  # applies Y[keep, keep]⁻¹
     v_noload: np.ndarray  # -Z·Y[keep, slack]·V_slack
     v_noload_full: np.ndarray  # (n_bus,) no-load voltages including the slack
+    y_rows: sp.csr_matrix  # Y[keep, :], for the mismatch check
 
 
 @lru_cache(maxsize=16)
@@ -130,63 +133,7 @@ def _zbus(net: Network, sparse: bool) -> _ZbusFactor:
     z.apply(-y_slack * net.v_slack, v_noload)
     full = np.full(net.n_bus, net.v_slack, dtype=complex)
     full[keep] = v_noload[:, 0]
-    return _ZbusFactor(keep, z, v_noload[:, 0], full)
-
-
-@dataclass
-class _Sweep:
-    v: np.ndarray  # (m, S) complex voltages of the non-slack buses
-    iterations: np.ndarray  # (S,)
-    settled: np.ndarray  # (S,) bool: update fell below tol
-
-
-def _fixed_point(fac: _ZbusFactor, s_conj: np.ndarray, tol: float, max_iter: int, v_start: np.ndarray | None) -> _Sweep:
-    """Iterate V ← Z·conj(S/V) + V₀ on all columns of `s_conj` (conj(S), shape (m, S)),
-    starting from `v_start` (m, S) or, without it, from the no-load voltages.
-
-    Written with preallocated buffers and in-place ufuncs: at 1440 snapshots the
-    temporaries of the plain expression cost more than the mat-mul itself.
-    """
-    m, n_snap = s_conj.shape
-    order = fac.z.order  # memory layout the Z kernel works in without copies
-    start = np.repeat(fac.v_noload[:, None], n_snap, axis=1) if v_start is None else v_start
-    out = _Sweep(np.array(start, dtype=complex, order=order), np.zeros(n_snap, dtype=np.int64), np.zeros(n_snap, dtype=bool))
-    active = np.arange(n_snap)
-    v, s_act = out.v.copy(order=order), np.asarray(s_conj, order=order)
-    v_new, cur = np.empty_like(v), np.empty_like(v)
-    mag2, tmp = np.empty(v.shape), np.empty(v.shape)
-    v0 = fac.v_noload[:, None]
-    with np.errstate(all="ignore"):
-        for it in range(1, max_iter + 1):
-            np.square(v.real, out=mag2)
-            np.square(v.imag, out=tmp)
-            mag2 += tmp
-            np.reciprocal(mag2, out=mag2)
-            np.multiply(s_act, v, out=cur)
-            cur *= mag2  # conj(S/V) = conj(S)·V/|V|²
-            fac.z.apply(cur, v_new)
-            v_new += v0
-            np.subtract(v_new, v, out=cur)
-            np.square(cur.real, out=mag2)
-            np.square(cur.imag, out=tmp)
-            mag2 += tmp
-            step2 = mag2.max(axis=0)
-            v, v_new = v_new, v
-            out.iterations[active] = it
-            done = step2 < tol * tol
-            going = ~done & np.isfinite(step2)
-            if going.all():
-                continue
-            out.v[:, active] = v
-            out.settled[active[done]] = True
-            if not going.any():
-                return out
-            active = active[going]
-            v, s_act = np.asarray(v[:, going], order=order), np.asarray(s_act[:, going], order=order)
-            v_new, cur = np.empty_like(v), np.empty_like(v)
-            mag2, tmp = np.empty(v.shape), np.empty(v.shape)
-    out.v[:, active] = v
-    return out
+    return _ZbusFactor(keep, z, v_noload[:, 0], full, net.ybus_sparse[keep])
 
 
 def solve_pf_batch(
@@ -230,20 +177,17 @@ def _batch(net: Network, s: np.ndarray, v0: np.ndarray | None, tol: float, max_i
             np.array([r.iterations for r in results]),
         )
     fac = _zbus(net, sparse)
+    v = np.empty((n_snap, net.n_bus), dtype=complex)
+    v[:, net.slack] = net.v_slack
     with _BLAS.limit(limits=1, user_api="blas"):
         start = None
         if v0 is not None:
             v0 = np.asarray(v0, dtype=complex).reshape(n_snap, net.n_bus)
-            start = np.where(
-                np.isfinite(v0).all(axis=1, keepdims=True) & (np.abs(v0) > 0).all(axis=1, keepdims=True), v0, fac.v_noload_full
-            )[:, fac.keep].T.copy()
-        sweep = _fixed_point(fac, np.conj(s[:, fac.keep]).T, tol, max_iter, start)
-        v = np.empty((n_snap, net.n_bus), dtype=complex)
-        v[:, fac.keep] = sweep.v.T
-        v[:, net.slack] = net.v_slack
-        # Certify: the power-flow equations themselves must hold, not only the fixed point.
-        with np.errstate(all="ignore"):
-            mismatch = np.abs(v[:, fac.keep] * np.conj(fac.z.currents(v)) - s[:, fac.keep]).max(axis=1)
+            usable = np.isfinite(v0).all(axis=1, keepdims=True) & (np.abs(v0) > 0).all(axis=1, keepdims=True)
+            start = np.where(usable, v0, fac.v_noload_full)
+        sweep = fixed_point(fac.z, fac.keep, fac.v_noload, s, tol, max_iter, start, v)
+    # Certify: the power-flow equations themselves must hold, not only the fixed point.
+    mismatch = max_mismatch(v, s, fac.keep, fac.y_rows)
     iterations, settled = sweep.iterations, sweep.settled
     settled &= mismatch < MISMATCH_CHECK
     converged = settled.copy()

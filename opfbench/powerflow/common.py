@@ -9,7 +9,7 @@ into the grid). Results carry complex bus voltages (p.u.), branch flows at both 
 from __future__ import annotations
 
 from dataclasses import dataclass
-from functools import cached_property
+from functools import cached_property, lru_cache
 
 import numpy as np
 
@@ -140,11 +140,17 @@ def check_injections(net: Network, s_mw: np.ndarray) -> np.ndarray:
 
 
 def flat_start(net: Network) -> np.ndarray:
-    """1 p.u. everywhere, PV buses at their setpoint, the slack at its voltage."""
+    """1 p.u. everywhere, PV buses at their setpoint, the slack at its voltage (a new array)."""
+    return _flat(net).copy()
+
+
+@lru_cache(maxsize=16)
+def _flat(net: Network) -> np.ndarray:
     v = np.ones(net.n_bus, dtype=complex)
     at_pv = np.isin(net.gen_bus, net.pv_buses)
     v[net.gen_bus[at_pv]] = net.gen_vset[at_pv]
     v[net.slack] = net.v_slack
+    v.setflags(write=False)
     return v
 
 

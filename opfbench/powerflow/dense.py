@@ -19,7 +19,7 @@ class DenseNewton:
         self.pv, self.pq, self.pvpq = bus_types(net)
         y = net.ybus
         self.y_rows = y[self.pvpq]  # Y[pvpq, :]
-        self.y_sub = y[np.ix_(self.pvpq, self.pvpq)]
+        self.y_sub_conj = np.conj(y[np.ix_(self.pvpq, self.pvpq)])
         n = len(self.pvpq)
         self._jac = np.empty((n + len(self.pq), n + len(self.pq)))
 
@@ -31,16 +31,15 @@ class DenseNewton:
     def step(self, v: np.ndarray, f: np.ndarray) -> np.ndarray | None:
         """Newton step [ΔVa at pvpq, ΔVm at pq] solving J·dx = −f; None if J is singular."""
         n_pv, n = len(self.pv), len(self.pvpq)
-        rows = np.arange(n)
         vs = v[self.pvpq]
         ibus = self.y_rows @ v
         vnorm = vs / np.abs(vs)
         # dS/dVa and dS/dVm restricted to rows and columns pvpq (MATPOWER dSbus_dV).
-        vy = vs[:, None] * np.conj(self.y_sub)
+        vy = vs[:, None] * self.y_sub_conj
         ds_dva = -1j * vy * np.conj(vs)
-        ds_dva[rows, rows] += 1j * vs * np.conj(ibus)
+        ds_dva.reshape(-1)[:: n + 1] += 1j * vs * np.conj(ibus)  # the diagonal
         ds_dvm = vy * np.conj(vnorm)
-        ds_dvm[rows, rows] += np.conj(ibus) * vnorm
+        ds_dvm.reshape(-1)[:: n + 1] += np.conj(ibus) * vnorm
         jac = self._jac
         jac[:n, :n] = ds_dva.real
         jac[:n, n:] = ds_dvm[:, n_pv:].real
@@ -58,14 +57,10 @@ class DenseZbus:
     def __init__(self, net: Network, keep: np.ndarray) -> None:
         y = net.ybus
         self.z = np.linalg.inv(y[np.ix_(keep, keep)])
-        self.y_keep_t = np.ascontiguousarray(y[keep].T)  # for the mismatch check
 
     order: Literal["C", "F"] = "C"  # row-major: the mat-mul writes into `out` directly
+    padded = True  # a mat-mul: the fixed point pads its columns (`fixed_point.PAD`)
 
     def apply(self, rhs: np.ndarray, out: np.ndarray) -> None:
         """out ← Z·rhs for rhs (m, S)."""
         np.matmul(self.z, rhs, out=out)
-
-    def currents(self, v: np.ndarray) -> np.ndarray:
-        """(S, m) bus currents Y[keep, :]·V for voltages v (S, n_bus)."""
-        return v @ self.y_keep_t

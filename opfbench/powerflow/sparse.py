@@ -103,14 +103,10 @@ class SparseZbus:
     def __init__(self, net: Network, keep: np.ndarray) -> None:
         y = net.ybus_sparse
         self.lu = factorize(y[keep][:, keep])
-        self.y_keep = y[keep]  # CSR rows keep, for the mismatch check
 
     order: Literal["C", "F"] = "F"  # column-major: SuperLU's solve reads and writes Fortran arrays
+    padded = False  # SuperLU solves column by column
 
     def apply(self, rhs: np.ndarray, out: np.ndarray) -> None:
         """out ← Y[keep, keep]⁻¹·rhs for rhs (m, S)."""
         out[...] = self.lu.solve(rhs)
-
-    def currents(self, v: np.ndarray) -> np.ndarray:
-        """(S, m) bus currents Y[keep, :]·V for voltages v (S, n_bus)."""
-        return (self.y_keep @ v.T).T

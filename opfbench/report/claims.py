@@ -17,7 +17,7 @@ from typing import Callable
 import numpy as np
 import pandas as pd
 
-from opfbench.registry import BASELINE, PAPER_OPF, PAPER_RULES, REFERENCE_OPTIMUM
+from opfbench.registry.references import BASELINE, PAPER_OPF, PAPER_RULES, REFERENCE_OPTIMUM
 from opfbench.report import paper, tables
 from opfbench.report.inputs import Inputs
 

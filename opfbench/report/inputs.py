@@ -23,7 +23,7 @@ import pyarrow.parquet as pq
 import opfbench
 from opfbench.errors import InputError
 from opfbench.io.spec import parse_spec
-from opfbench.registry import is_formulation
+from opfbench.registry.catalog import is_formulation
 from opfbench.report.sources import check_given, report_sources
 from opfbench.report.tables import REFERENCE_NIGHT
 from opfbench.study.store import SCHEMA

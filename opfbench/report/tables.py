@@ -12,7 +12,8 @@ import pandas as pd
 
 from opfbench.dynamics.recovery import KEYS as RECOVERY_KEYS
 from opfbench.dynamics.recovery import recovery_table
-from opfbench.registry import BASELINE, PAPER_OPF, PAPER_RULES, REFERENCE_OPTIMUM, describe, is_formulation, is_relaxation, rank
+from opfbench.registry.catalog import describe, is_formulation, is_relaxation, rank
+from opfbench.registry.references import BASELINE, PAPER_OPF, PAPER_RULES, REFERENCE_OPTIMUM
 from opfbench.report import paper
 from opfbench.result import PF_DIVERGED, RULE_NON_FINITE, STATUSES
 

@@ -25,10 +25,12 @@ import numpy as np
 
 from opfbench.capability import check_reserve
 from opfbench.powerflow import PowerFlowResult
+from opfbench.registry.specs import strategy
 from opfbench.result import StrategyResult
 from opfbench.scenario import Scenario
 from opfbench.strategies.engine import Grid, run_rule
 from opfbench.strategies.limits import clip, reactive_limit
+from opfbench.strategies.registration import SAFE, local_rule
 from opfbench.strategies.rules import Measurements, Rule
 from opfbench.timing import elapsed_ms, now
 
@@ -40,11 +42,13 @@ BACK_TO_LLMA = 3  # Q_up and Q_do both changed sign (or Q_do hit zero): Q^F = Q^
 STOPPED = 4  # a power flow of this snapshot diverged earlier: setpoint frozen
 
 
+@local_rule("no-action", reads=(), uses_forecast=False, summary="every DER at Q = 0")
 def no_action_target(m: Measurements) -> np.ndarray:
     """No action: every DER at Q = 0 MVAr."""
     return np.zeros(m.shape)
 
 
+@local_rule("llma", reads=("load",), summary="Algorithm 1: Q = the load's Q at the DER's own bus, within (1 − k)·Qmax")
 def llma_target(m: Measurements) -> np.ndarray:
     """Algorithm 1, (S, n_der) MVAr: the DER's share of the reactive load at its own bus
     (the engine clips it to ±L: Q^H = min(Q_load, L) for the usual positive load)."""
@@ -178,6 +182,14 @@ def upstream_disagreements(scenario: Scenario, trace: LfmaTrace) -> np.ndarray:
     return out
 
 
+@strategy(
+    "lfma",
+    kind="local",
+    summary="Algorithm 2: LLMA plus the measured upstream Q inflow, sign-change rules",
+    reads=("load", "flows"),
+    options=(SAFE,),
+    uses_forecast=True,
+)
 def lfma(scenario: Scenario, k: float = 0.0, safe: bool = False) -> StrategyResult:
     """LFMA (Algorithm 2) with the bound L of `reactive_limit`. Snapshots whose power flow
     diverged at any step get status "pf-diverged" and NaN losses. extra: `diverged_step`

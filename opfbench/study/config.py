@@ -19,7 +19,9 @@ from opfbench.capability import PAPER_KS, check_reserve
 from opfbench.errors import InputError
 from opfbench.forecasting.names import MODEL_NAMES
 from opfbench.formulations.options import ACOPF_SOLVERS, check_option
-from opfbench.registry import DEFAULT_RUN, StrategySpec, configuration, specs
+from opfbench.registry.catalog import configuration, specs
+from opfbench.registry.references import DEFAULT_RUN
+from opfbench.registry.specs import StrategySpec
 from opfbench.study.fitted import Fitted
 from opfbench.study.price import DEFAULT_CURRENCY, DEFAULT_PRICE_PER_KWH, DEFAULT_PRICE_SOURCE
 

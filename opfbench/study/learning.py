@@ -23,7 +23,7 @@ import pandas as pd
 
 from opfbench.errors import InputError
 from opfbench.io import load_network, parse_spec
-from opfbench.registry import configuration
+from opfbench.registry.catalog import configuration
 from opfbench.scenario import Scenario
 from opfbench.strategies.learned import TRAIN_NIGHT, TrainingSet, check_samples, family_rule, load_params, usable
 from opfbench.study.periods import Period, local_time

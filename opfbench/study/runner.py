@@ -15,7 +15,7 @@ import pyarrow as pa
 from opfbench.io import load_case
 from opfbench.jsonio import write_atomic
 from opfbench.parquetio import ParquetStream
-from opfbench.registry import configuration
+from opfbench.registry.catalog import configuration
 from opfbench.study.config import LABEL_FIELDS, StudyConfig
 from opfbench.study.engine import EngineRun, TaskOutput, run_family
 from opfbench.study.fitted import LEARNED_DIR, TRAIN_DIR, Fitted
@@ -173,16 +173,17 @@ def prepare(config: StudyConfig) -> RunFamily:
 
 def _probe_plugins(tasks: list[RunTask], config: StudyConfig, period: Period) -> None:
     """Every plugin configuration run on the first steps of each case's first task that
-    has it (`plugins.probe_case`: the real DER kinds, shapes and read-only arrays), each
-    night mode: InputError before anything is written."""
+    has it under each forecast (`plugins.probe_case`: the real DER kinds, shapes and
+    read-only arrays), each night mode: InputError before anything is written."""
     from opfbench.plugins import probe_case
 
-    probed: set[tuple[str, str]] = set()
+    probed: set[tuple[str, str, str]] = set()
     for task in tasks:
-        labels = [s for s in task.strategies if configuration(s).spec.source != "opfbench" and (task.case, s) not in probed]
+        key = (task.case, task.forecast)
+        labels = [s for s in task.strategies if configuration(s).spec.source != "opfbench" and (*key, s) not in probed]
         if not labels:
             continue
-        probed.update((task.case, s) for s in labels)
+        probed.update((*key, s) for s in labels)
         inp = task_input(task, config, period)
         step = pd.Timedelta(hours=inp.step_h)
         for mode in task.night_modes:

@@ -9,7 +9,8 @@ import numpy as np
 import pandas as pd
 
 from opfbench.errors import InputError
-from opfbench.registry import BASELINE, configuration, describe
+from opfbench.registry.catalog import configuration, describe
+from opfbench.registry.references import BASELINE
 from opfbench.result import NOT_SETTLED, OK, PF_DIVERGED, RULE_NON_FINITE, StrategyResult
 from opfbench.study.config import DETAIL_TABLES
 
@@ -60,13 +61,6 @@ def step_columns(extra: tuple[str, ...] = ()) -> list[str]:
     return [*STEP_COLUMNS, *extra]
 
 
-def _certified_by(res: StrategyResult) -> np.ndarray:
-    """Per step: the formulations' own record ("socp" | "ipopt" | ""); "" for the local rules."""
-    if "certified_by" in res.extra:
-        return np.asarray(res.extra["certified_by"], dtype=object)
-    return np.full(res.n_snapshots, "", dtype=object)
-
-
 Columns = dict[str, np.ndarray | str | float | int | bool]  # name → the part's rows, or one value for all
 
 
@@ -84,8 +78,7 @@ def step_rows(
     `extra_columns` from `res.extra` (NaN where this strategy has none)."""
     n = res.n_snapshots
     nan = np.full(n, np.nan)
-    extra = res.extra
-    local = "fallback" not in extra
+    solver = res.solver  # a formulation's typed record; None for a local rule
     lb = res.lower_bound_kw if res.lower_bound_kw is not None else nan
     return {
         "case": case,
@@ -106,12 +99,12 @@ def step_rows(
         "lower_bound_kw": np.asarray(lb, dtype=float),
         "power_flows": np.asarray(res.power_flows, dtype=np.int64),
         "wall_ms": res.wall_ms / n,
-        "solver_ms": np.asarray(extra.get("solve_ms", nan), dtype=float),
-        "iterations": np.asarray(extra.get("iterations", nan), dtype=float),
-        "certified_by": _certified_by(res).astype(str),
-        "fallback": "" if local else np.asarray(extra["fallback"], dtype=str),
-        "solver_status": "" if local else np.asarray(extra["solver_status"], dtype=str),
-    } | {name: np.asarray(extra.get(name, nan), dtype=float) for name in extra_columns}
+        "solver_ms": nan if solver is None else np.asarray(solver.solve_ms, dtype=float),
+        "iterations": nan if solver is None else np.asarray(solver.iterations, dtype=float),
+        "certified_by": "" if solver is None else np.asarray(solver.certified_by, dtype=str),
+        "fallback": "" if solver is None else np.asarray(solver.fallback, dtype=str),
+        "solver_status": "" if solver is None else np.asarray(solver.solver_status, dtype=str),
+    } | {name: np.asarray(res.extra.get(name, nan), dtype=float) for name in extra_columns}
 
 
 def detail_rows(

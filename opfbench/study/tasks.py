@@ -4,7 +4,7 @@ A task is (case, forecast, k, chunk of steps) and runs every requested strategy 
 night mode of that group. `acopf`, `acopf-paper` and `socp` share SOCP solves, and the
 night modes — which differ only in the night hours, so their daytime snapshots are the
 same problems — solve each once: the formulations' solve cache is keyed on the data
-(`formulations.relaxation`), whatever Scenario objects carry it; and where two
+(`formulations.solves`), whatever Scenario objects carry it; and where two
 night modes give the very same scenario (no PV output in the night hours of the chunk), the
 second takes the first's results (`Scenario.same_data`) with its wall time 0. Its input
 carries its slice of the period's profiles, so it runs the same in this process, in a
@@ -22,7 +22,8 @@ from threadpoolctl import threadpool_limits
 
 from opfbench.errors import InputError
 from opfbench.plugins import PluginSource, ensure, loaded
-from opfbench.registry import OptionValue, configuration, run_strategy
+from opfbench.registry.catalog import configuration, run_strategy
+from opfbench.registry.options import OptionValue
 from opfbench.result import StrategyResult
 from opfbench.scenario import Scenario
 from opfbench.strategies.learned import install

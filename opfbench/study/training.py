@@ -36,7 +36,8 @@ import pandas as pd
 from opfbench.errors import InputError
 from opfbench.io import load_network
 from opfbench.jsonio import write_atomic
-from opfbench.registry import BASELINE, REFERENCE_OPTIMUM, configuration, is_formulation
+from opfbench.registry.catalog import configuration, is_formulation
+from opfbench.registry.references import BASELINE, REFERENCE_OPTIMUM
 from opfbench.strategies.learned import TRAIN_K, TRAIN_NIGHT, LearnedParams
 from opfbench.study.fitted import LEARNED_DIR, TRAIN_DIR, Fitted
 from opfbench.study.learning import LearnedConfig, learned_configs, model_case, training_set

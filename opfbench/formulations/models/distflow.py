@@ -25,7 +25,8 @@ import cvxpy as cp
 import numpy as np
 
 from opfbench.errors import NetworkError
-from opfbench.formulations.models.soc import Reader, SocpRelaxation
+from opfbench.formulations.model import formulation
+from opfbench.formulations.models.conic import ConicModel, Reader
 from opfbench.formulations.problem import incidence
 from opfbench.network import Network
 
@@ -77,10 +78,15 @@ class RadialBranches:
         return cls(child, parent, branch, net.r[branch], net.x[branch], tapped, parent_scale, child_scale, charging, conductance)
 
 
-class DistFlowSocp(SocpRelaxation):
+@formulation(
+    "distflow",
+    role="relaxation",
+    networks=("radial",),
+    serves_problem=True,
+    summary="DistFlow branch-flow SOC relaxation (radial feeders)",
+)
+class DistFlowSocp(ConicModel):
     """Branch-flow (DistFlow) relaxation for radial feeders; see the module docstring."""
-
-    model = "distflow"
 
     def _network_model(self) -> tuple[cp.Expression, cp.Expression, cp.Expression, list[cp.Constraint]]:
         net = self.net
