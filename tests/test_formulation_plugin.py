@@ -6,6 +6,8 @@ solver record in the tables) and the report — with no file under opfbench/ edi
 from __future__ import annotations
 
 import json
+import subprocess
+import sys
 import textwrap
 
 import pandas as pd
@@ -59,5 +61,20 @@ def test_a_formulation_plugin_runs_through_snapshot_run_and_the_report(tmp_path,
     flat = steps[steps["strategy"] == "flat-v"]
     assert len(flat) == 5 and (flat["status"] == "ok").all() and (flat["solver_status"] == "Solved").all()
     assert (flat["iterations"] > 0).all() and (flat["certified_by"] == "").all() and flat["lower_bound_kw"].isna().all()
-    html = (out / "report.html").read_text()
-    assert "flat-v" in html and "Leaderboard" in html
+    manifest = json.loads((out / "manifest.json").read_text())
+    assert manifest["strategies"]["flat-v"] == {
+        "kind": "formulation",
+        "summary": "test: the flattest voltages on LinDistFlow",
+        "source": str(plugin),
+        "uses_forecast": False,
+        "lower_bound": False,
+        "role": "approximation",
+        "objective": "estimate",
+    }
+    # the report, rebuilt in a process that never loaded the plugin, counts flat-v among the
+    # formulations — by what the run folder says (the registry there does not know it)
+    rebuilt = tmp_path / "rebuilt.html"
+    subprocess.run([sys.executable, "-m", "opfbench", "report", str(out), "--out", str(rebuilt)], check=True, capture_output=True)
+    for html in ((out / "report.html").read_text(), rebuilt.read_text()):
+        convergence = html.split('<section id="convergence"')[1].split("<section")[0]
+        assert '<td class="nw">flat-v</td>' in convergence and '<td class="nw">no-action</td>' not in convergence

@@ -35,7 +35,7 @@ LAYERS: tuple[tuple[str, tuple[str, ...]], ...] = (
     ("network", ("opfbench.network", "opfbench.capability")),
     ("cases", ("opfbench.io", "opfbench.cases")),
     ("powerflow", ("opfbench.powerflow",)),
-    ("records", ("opfbench.scenario", "opfbench.result")),
+    ("records", ("opfbench.scenario", "opfbench.result", "opfbench.schema")),
     ("specs", ("opfbench.registry.options", "opfbench.registry.references", "opfbench.registry.specs")),
     ("strategies", ("opfbench.strategies",)),
     ("formulations", ("opfbench.formulations",)),
@@ -44,6 +44,7 @@ LAYERS: tuple[tuple[str, tuple[str, ...]], ...] = (
     ("study", ("opfbench.study",)),
     ("dynamics", ("opfbench.dynamics",)),
     ("report", ("opfbench.report",)),
+    ("api", ("opfbench.api",)),
     ("commands", ("opfbench.commands", "opfbench.cli", "opfbench.__main__")),
     ("bench", ("opfbench.bench",)),
 )

@@ -20,11 +20,12 @@ pytestmark = pytest.mark.usefixtures("isolated_registry")
 PERIOD = {"period": "2016-06-28T10:00..2016-06-28T12:00", "step_minutes": 30.0, "forecast": ["off"]}
 
 
-def _run(plugin: str, strategy: str, out: Path) -> None:
-    """A small study of one plugin rule (the library's run: the CLI's checks, no report)."""
+def _run(plugin: str, strategy: str, out: Path) -> str:
+    """A small study of one plugin rule (the library's run: the CLI's checks, no report);
+    returns its notes."""
     plugins.load(plugin)
     config = StudyConfig.build(cases=["paper33"], strategies=[strategy], ks=[0.0], night_modes=["connected"], **PERIOD)
-    run_study(config, out, workers=1, quiet=True)
+    return "\n".join(run_study(config, out, workers=1).notes)
 
 
 def _tasks(out: Path) -> list[int]:
@@ -70,10 +71,9 @@ def _forget(source: plugins.PluginSource, *modules: str) -> None:
         sys.modules.pop(name, None)
 
 
-def test_a_helper_module_or_table_edited_before_a_resume_is_another_configuration(tmp_path, capsys):
+def test_a_helper_module_or_table_edited_before_a_resume_is_another_configuration(tmp_path):
     plugin, out = str(_helped(tmp_path, "gain_helper")), tmp_path / "run"
-    _run(plugin, "helped", out)
-    err = capsys.readouterr().err
+    err = _run(plugin, "helped", out)
     assert "gain_helper.py" in err and "offset.csv" in err  # what the fingerprint covers
     assert "files it opens only after loading and probing" in err  # and what it cannot see
     for name, edited in (("gain_helper.py", "GAIN = 9.0\n"), ("offset.csv", "0.01\n")):

@@ -71,7 +71,7 @@ def test_ctrl_c_stops_keeps_and_resumes(tmp_path):
         period=PERIOD,
         detail=False,
     )
-    resumed = run_study(config, out, quiet=True)
+    resumed = run_study(config, out)
     assert resumed.ran == len(KS) - kept and len(resumed.summary) == 2 * len(KS)
 
 

@@ -133,6 +133,7 @@ def _variants(args: argparse.Namespace) -> tuple[str, ...]:
 
 
 def run(args: argparse.Namespace) -> int:
+    from opfbench.commands.progress import console
     from opfbench.dynamics.study import FaultConfig, run_fault_study  # numba: only when a study runs
     from opfbench.io import load_case
     from opfbench.study.learning import check_params
@@ -173,8 +174,8 @@ def run(args: argparse.Namespace) -> int:
             workers=args.workers,
             scheduler=args.scheduler,
             fresh=args.fresh,
-            quiet=args.quiet or args.json,
             command=["opfbench", "fault", *sys.argv[2:]],
+            reporter=console(args.quiet or args.json),
         )
     except MemoryError:
         raise InputError(

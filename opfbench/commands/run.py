@@ -165,6 +165,7 @@ def _forecast_strategies(args: argparse.Namespace) -> list[str] | None:
 
 def run(args: argparse.Namespace) -> int:
     source = DEFAULT_PRICE_SOURCE if args.price == DEFAULT_PRICE_PER_KWH else "--price"
+    from opfbench.commands.progress import console
     from opfbench.report.inputs import checked_sources
     from opfbench.report.sources import holds_forecasts
     from opfbench.study.runner import run_study
@@ -195,8 +196,8 @@ def run(args: argparse.Namespace) -> int:
         workers=args.workers,
         scheduler=args.scheduler,
         fresh=args.fresh,
-        quiet=args.quiet,
         command=["opfbench", *sys.argv[1:]],
+        reporter=console(args.quiet),
     )
     return finish_run(result, args)
 

@@ -22,6 +22,7 @@ from opfbench.errors import CaseFormatError, InputError
 from opfbench.io.case import Case, CaseSeries
 from opfbench.io.spec import CaseSpec, parse_der_list, parse_spec
 from opfbench.network import DER, Network
+from opfbench.state import PROCESS
 
 __all__ = ["NO_DER_NOTE", "Case", "CaseSeries", "CaseSpec", "load_case", "load_network", "parse_spec"]
 
@@ -32,6 +33,14 @@ NO_DER_NOTE = (
 )
 _cache: OrderedDict[tuple, Case] = OrderedDict()
 _lock = threading.Lock()
+
+
+def _forget_cases() -> None:
+    with _lock:
+        _cache.clear()
+
+
+PROCESS.on_reset("cases read", _forget_cases)
 
 
 def _stamp(spec: CaseSpec) -> tuple:

@@ -163,6 +163,20 @@ class StrategySpec:
             out |= {"role": self.role, "objective": self.meaning}
         return out
 
+    def record(self) -> dict:
+        """What a run folder records of the strategy (its manifest's `strategies`): what a
+        report needs to classify its rows without the strategy loaded (a plugin's)."""
+        out: dict[str, object] = {
+            "kind": self.kind,
+            "summary": self.summary,
+            "source": self.source,
+            "uses_forecast": self.uses_forecast,
+            "lower_bound": self.bound_rank is not None,
+        }
+        if self.role is not None:
+            out |= {"role": self.role, "objective": self.meaning}
+        return out
+
     def run(self, scenario: Scenario, k: float, label: str, options: dict[str, OptionValue]) -> StrategyResult:
         """Run on every snapshot of `scenario` with the full, checked `options`; the result
         is named `label`."""

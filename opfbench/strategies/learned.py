@@ -69,6 +69,7 @@ import numpy as np
 from opfbench.errors import InputError
 from opfbench.jsonio import dumps, write_atomic
 from opfbench.registry.options import Option, OptionValue
+from opfbench.state import PROCESS
 from opfbench.strategies.registration import local_rule
 
 if TYPE_CHECKING:
@@ -743,9 +744,19 @@ class LearnedParams:
 
 
 # ----- parameters at run time ---------------------------------------------------------------
-_installed: dict[str, LearnedParams] = {}
-_files: dict[tuple, LearnedParams] = {}
+_installed: dict[str, LearnedParams] = PROCESS.table("installed learned rules")
+_files: dict[tuple, LearnedParams] = PROCESS.table("learned-rule files read")
 _lock = threading.Lock()
+
+
+def forget() -> None:
+    """Forget every installed fitted rule and every file read."""
+    with _lock:
+        _installed.clear()
+        _files.clear()
+
+
+PROCESS.on_reset("learned rules", forget)
 
 
 def install(params: dict[str, LearnedParams]) -> None:
