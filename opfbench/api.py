@@ -136,7 +136,7 @@ def run_study(
     …). The checks are the CLI's; the state the study leaves is reset when it ends (module
     docstring)."""
     from opfbench.plugins import load
-    from opfbench.study.runner import run_study as run
+    from opfbench.study.run_family import run_study as run
 
     folder = Path(tempfile.mkdtemp(prefix="opfbench-study-")) if out is None else Path(out)
     sink = None if progress is None else (lambda total, done: _Progress(progress, total, done))

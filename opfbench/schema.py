@@ -6,7 +6,7 @@ rewrites its tables; `tests/test_contracts.py` checks the page against this modu
 
 Adding a column is one edit: a `Column` in its table — for the per-step table with the
 function that computes it from a `StepContext` (a strategy's result on a task's steps); a
-summary column also needs its sum in `study.tables`. Types are the page's: text, number
+summary column also needs its sum in `study.run_tables`. Types are the page's: text, number
 (a float), integer, true/false, time.
 """
 
@@ -109,7 +109,7 @@ def _keys(table: str | None = None) -> tuple[Column, ...]:
             "case",
             "text",
             NO_UNIT,
-            "the case spec (`paper33`, a file path, `simbench:CODE`, with `?der=…` options)",
+            "the case spec (`opfbench.io.sources`: a shipped name, a file path, `simbench:CODE`, with `?der=…` options)",
             lambda c: c.case,
         ),
         Column("strategy", "text", NO_UNIT, "the registered strategy (configuration label)", lambda c: c.res.strategy),
@@ -242,7 +242,7 @@ STEPS = Table(
         "closed-loop rules), each once",
     ),
 )
-"""One row per case × strategy × k × night mode × forecast × step (`study.tables.step_rows`)."""
+"""One row per case × strategy × k × night mode × forecast × step (`study.run_tables.step_rows`)."""
 
 KEYS = [c.name for c in _keys()]
 
@@ -257,7 +257,7 @@ DER_Q = Table(
         Column("q_mvar", "number", "MVAr", "its reactive setpoint (positive = injected)"),
     ),
 )
-"""One row per configuration × step × DER (`study.tables.detail_rows`)."""
+"""One row per configuration × step × DER (`study.run_tables.detail_rows`)."""
 
 BUS_V = Table(
     "bus_v.parquet",
@@ -268,7 +268,7 @@ BUS_V = Table(
         Column("v_pu", "number", "p.u.", "its |V| (NaN where the flow did not converge)"),
     ),
 )
-"""One row per configuration × step × bus (`study.tables.detail_rows`)."""
+"""One row per configuration × step × bus (`study.run_tables.detail_rows`)."""
 
 TASK_SUMMARY = Table(
     "tasks/<id>.summary.parquet",
@@ -300,8 +300,8 @@ TASK_SUMMARY = Table(
         Column("certified", "integer", NO_UNIT, "steps whose point is certified optimal"),
     ),
 )
-"""A task's partial sums per configuration (`study.tables.partial_summary`), combined into
-the summary by `study.tables.summarize`."""
+"""A task's partial sums per configuration (`study.run_tables.partial_summary`), combined into
+the summary by `study.run_tables.summarize`."""
 
 SUMMARY = Table(
     "summary.csv",
@@ -352,7 +352,7 @@ SUMMARY = Table(
         ),
     ),
 )
-"""One row per configuration (`study.tables.summarize`); figures written to 6 significant digits."""
+"""One row per configuration (`study.run_tables.summarize`); figures written to 6 significant digits."""
 
 _FAULT_LABELS = (
     Column("case", "text", NO_UNIT, "the case spec"),

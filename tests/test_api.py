@@ -17,9 +17,9 @@ import pytest
 from opfbench import api, plugins
 from opfbench.errors import InputError
 from opfbench.formulations import solves
+from opfbench.learned import rules as learned
 from opfbench.registry.specs import STRATEGIES
 from opfbench.state import PROCESS
-from opfbench.strategies import learned
 from opfbench.study.store import finished_tasks
 from tests.support.processes import ROOT
 

@@ -10,8 +10,8 @@ import pytest
 import opfbench.bench.local as bench_local
 import opfbench.bench.opf as bench_opf
 import opfbench.bench.pf as bench_pf
+from opfbench.bench.paper_day import paper_day_scenario
 from opfbench.bench.pf_large import measure, scaling
-from opfbench.bench.profiles import paper_day_scenario
 from opfbench.errors import NetworkError
 from opfbench.io import load_network
 from opfbench.io.matpower import load_case_file

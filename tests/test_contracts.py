@@ -12,7 +12,7 @@ import pytest
 
 from opfbench import schema
 from opfbench.cli import main
-from opfbench.study.tables import extra_columns
+from opfbench.study.run_tables import extra_columns
 from tests.support.contracts import DOC, check_folder, check_json, check_table, parse
 from tests.support.forecast_synthetic import use_tiny_synthetic
 

@@ -18,7 +18,7 @@ from opfbench.formulations.infeasibility import SLACK_MUST_EXPORT, VOLTAGES_OUT_
 from opfbench.formulations.model import build_problem_model
 from opfbench.formulations.models import polar_ac
 from opfbench.formulations.models.polar_ac import AcOpf
-from opfbench.formulations.opf import run_acopf, run_socp
+from opfbench.formulations.opf_strategies import run_acopf, run_socp
 from opfbench.formulations.problem import VOLTAGE_TOLERANCE, snapshot_data
 from opfbench.powerflow import solve_pf
 from opfbench.result import STATUSES

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from opfbench.errors import InputError
-from opfbench.formulations.opf import run_acopf
+from opfbench.formulations.opf_strategies import run_acopf
 from opfbench.io import load_network
 from opfbench.registry.catalog import run_strategy
 from opfbench.result import StrategyResult

@@ -10,13 +10,13 @@ import pytest
 from opfbench.errors import InputError, NetworkError
 from opfbench.formulations import runner as acopf_module
 from opfbench.formulations import solves as relaxation_module
-from opfbench.formulations.cache import EXACT_KEY_BYTES, PER_THREAD, SolveCache, per_thread
 from opfbench.formulations.infeasibility import VOLTAGES_OUT_OF_REACH
 from opfbench.formulations.model import build_problem_model, built, model_for
 from opfbench.formulations.models.conic import ConicModel, data_vector
-from opfbench.formulations.opf import run_acopf, run_socp
+from opfbench.formulations.opf_strategies import run_acopf, run_socp
 from opfbench.formulations.policy import CERTIFY_RTOL
 from opfbench.formulations.problem import snapshot_data
+from opfbench.formulations.solver_cache import EXACT_KEY_BYTES, PER_THREAD, SolveCache, per_thread
 from opfbench.formulations.solves import relaxation_solves
 from opfbench.io import load_network
 from opfbench.registry.catalog import run_strategy
@@ -56,7 +56,7 @@ def test_fast_path_equals_ipopt_on_random_snapshots(case, n):
 @pytest.mark.slow
 @pytest.mark.parametrize("case", ["paper33", "case69-der", "case141-der"])
 def test_fast_path_equals_ipopt_on_100_random_snapshots_and_the_paper_day(case):
-    from opfbench.bench.profiles import paper_day_scenario
+    from opfbench.bench.paper_day import paper_day_scenario
 
     shares = {"random": _compare(random_snapshots(case, 100, seed=11), 0.0), "paper day": _compare(paper_day_scenario(case), 0.0)}
     print(case, "certified by the SOCP:", shares)

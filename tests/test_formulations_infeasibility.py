@@ -11,7 +11,7 @@ import pytest
 
 from opfbench.formulations import runner as acopf_module
 from opfbench.formulations.infeasibility import SLACK_MUST_EXPORT, VOLTAGES_OUT_OF_REACH, flow_bounds, proven_infeasible
-from opfbench.formulations.opf import run_acopf
+from opfbench.formulations.opf_strategies import run_acopf
 from opfbench.formulations.problem import VOLTAGE_TOLERANCE, OpfProblem, slack_p_mw, snapshot_data
 from opfbench.io import load_case, load_network
 from opfbench.powerflow import solve_pf_batch

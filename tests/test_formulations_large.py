@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 
 from opfbench.formulations.model import build_problem_model
-from opfbench.formulations.opf import run_acopf
+from opfbench.formulations.opf_strategies import run_acopf
 from opfbench.io import load_network
 from opfbench.network import DER, Network
 from opfbench.scenario import Scenario

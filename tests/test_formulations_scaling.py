@@ -10,7 +10,7 @@ from opfbench.bench.pf_large import day96
 from opfbench.formulations.model import build_problem_model
 from opfbench.formulations.models import distflow
 from opfbench.formulations.models.distflow import branch_scale
-from opfbench.formulations.opf import run_acopf
+from opfbench.formulations.opf_strategies import run_acopf
 from opfbench.formulations.policy import CERTIFY_RTOL
 from opfbench.formulations.problem import snapshot_data
 from opfbench.io import load_network

@@ -7,7 +7,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from opfbench.bench.profiles import paper_day_scenario
+from opfbench.bench.paper_day import paper_day_scenario
 from opfbench.formulations.model import build_problem_model
 from opfbench.formulations.models.conic import data_vector
 from opfbench.formulations.problem import snapshot_data

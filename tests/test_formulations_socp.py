@@ -11,7 +11,7 @@ from opfbench.formulations.model import build_problem_model
 from opfbench.formulations.models.conic import data_vector
 from opfbench.formulations.models.distflow import DistFlowSocp
 from opfbench.formulations.models.jabr import JabrSocp
-from opfbench.formulations.opf import run_acopf, run_socp
+from opfbench.formulations.opf_strategies import run_acopf, run_socp
 from opfbench.formulations.problem import snapshot_data
 from opfbench.io import load_network
 from opfbench.scenario import Scenario

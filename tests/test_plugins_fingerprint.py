@@ -14,7 +14,7 @@ from opfbench import plugins
 from opfbench.cli import main
 from opfbench.errors import InputError
 from opfbench.study.config import StudyConfig
-from opfbench.study.runner import run_study
+from opfbench.study.run_family import run_study
 
 pytestmark = pytest.mark.usefixtures("isolated_registry")
 PERIOD = {"period": "2016-06-28T10:00..2016-06-28T12:00", "step_minutes": 30.0, "forecast": ["off"]}

@@ -6,10 +6,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-import opfbench.strategies.engine as engine
 import opfbench.strategies.paper as paper
+import opfbench.strategies.rule_engine as engine
 from opfbench.bench.local import bench_local
-from opfbench.bench.profiles import paper_day_scenario
+from opfbench.bench.paper_day import paper_day_scenario
 from opfbench.commands.table import format_table, local_rules, loss_table
 from opfbench.errors import InputError
 from opfbench.io import load_network

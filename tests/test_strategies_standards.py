@@ -15,8 +15,8 @@ from opfbench.registry.catalog import configuration, run_strategy
 from opfbench.result import NOT_SETTLED, OK
 from opfbench.scenario import Scenario
 from opfbench.strategies import standards
-from opfbench.strategies.engine import adapt_step_factor
 from opfbench.strategies.limits import reactive_limit
+from opfbench.strategies.rule_engine import adapt_step_factor
 from opfbench.strategies.rules import Measurements
 
 TOL_Q = 1e-6  # MVAr: the engine settles to 1e-7 MVAr and 1e-7 p.u.

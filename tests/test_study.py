@@ -16,8 +16,8 @@ from opfbench.registry.catalog import get_strategy
 from opfbench.registry.references import BASELINE, DEFAULT_FORECAST, DEFAULT_RUN
 from opfbench.study import StudyConfig
 from opfbench.study.periods import resolve_period
-from opfbench.study.runner import prepare, run_study
-from opfbench.study.scenarios import chunk_scenario
+from opfbench.study.run_family import prepare, run_study
+from opfbench.study.task_scenarios import chunk_scenario
 
 LOCAL = ("no-action", "llma", "lfma")
 HOURS = "2016-06-28T18:00..2016-06-29T02:00"  # evening PV, the night window and midnight

@@ -14,8 +14,8 @@ from opfbench.errors import InputError
 from opfbench.io import load_case
 from opfbench.scenario import Scenario
 from opfbench.study import StudyConfig
-from opfbench.study.runner import prepare, run_study
-from opfbench.study.scenarios import chunk_scenario
+from opfbench.study.run_family import prepare, run_study
+from opfbench.study.task_scenarios import chunk_scenario
 
 SPEC = "simbench:1-LV-rural1--0-sw"
 DAWN = "2016-06-21T03:00..2016-06-21T07:00"  # night until 05:00, PV rising after

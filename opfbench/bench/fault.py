@@ -13,9 +13,9 @@ from __future__ import annotations
 
 import os
 
-from opfbench.dynamics.model import build_model
 from opfbench.dynamics.params import FaultParams, ModelParams
 from opfbench.dynamics.point import operating_point
+from opfbench.dynamics.rms_model import build_model
 from opfbench.dynamics.simulate import simulate
 from opfbench.dynamics.study import FaultConfig, run_fault_study
 from opfbench.io import load_case

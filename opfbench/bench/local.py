@@ -15,7 +15,7 @@ from functools import partial
 
 import numpy as np
 
-from opfbench.bench.profiles import paper_day_scenario
+from opfbench.bench.paper_day import paper_day_scenario
 from opfbench.powerflow.memo import cold
 from opfbench.registry.catalog import run_strategy, specs
 from opfbench.scenario import Scenario

@@ -45,7 +45,7 @@ import numpy as np
 import pandas as pd
 
 from opfbench.bench.pandapower_opf import PandapowerOpf
-from opfbench.bench.profiles import paper_day_scenario
+from opfbench.bench.paper_day import paper_day_scenario
 from opfbench.formulations.model import build_problem_model
 from opfbench.formulations.problem import snapshot_data
 from opfbench.formulations.solves import forget_solves

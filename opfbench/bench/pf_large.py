@@ -46,7 +46,7 @@ TIME_LIMIT_S = {"pf": 300, "batch96": 300, "acopf": 900, "lfma96": 600}
 
 def day96(case: str):
     """The paper day on `case` at 15-minute steps (96 snapshots)."""
-    from opfbench.bench.profiles import paper_day_scenario
+    from opfbench.bench.paper_day import paper_day_scenario
 
     return paper_day_scenario(case).take(slice(0, 1440, 1440 // SNAPSHOTS))
 

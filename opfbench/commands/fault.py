@@ -10,7 +10,7 @@ from dataclasses import replace
 from typing import TYPE_CHECKING
 
 from opfbench.capability import PAPER_KS
-from opfbench.commands.common import (
+from opfbench.commands.arguments import (
     CASE_HELP,
     STRATEGY_HELP,
     add_case_options,
@@ -136,7 +136,7 @@ def run(args: argparse.Namespace) -> int:
     from opfbench.commands.progress import console
     from opfbench.dynamics.study import FaultConfig, run_fault_study  # numba: only when a study runs
     from opfbench.io import load_case
-    from opfbench.study.learning import check_params
+    from opfbench.study.training_checks import check_params
 
     case = load_case(case_spec(args.case, args))
     net = case.network

@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import argparse
 
-from opfbench.commands.common import add_plugin_option, load_plugins, print_json
+from opfbench.commands.arguments import add_plugin_option, load_plugins, print_json
 
 
 def register(sub: argparse._SubParsersAction) -> None:

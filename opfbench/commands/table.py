@@ -12,7 +12,8 @@ import argparse
 from typing import TYPE_CHECKING, Sequence
 
 from opfbench.capability import PAPER_KS
-from opfbench.commands.common import fraction, print_json, share
+from opfbench.commands.arguments import fraction, print_json, share
+from opfbench.io.sources import formats
 
 if TYPE_CHECKING:
     import pandas as pd
@@ -22,7 +23,7 @@ FORECAST_FACTOR = 1.2
 
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("table", help="the local rules' loss table on one operating point, k × rule, ± forecast")
-    p.add_argument("case", nargs="?", default="paper33", help="shipped case name or MATPOWER .m path (default paper33)")
+    p.add_argument("case", nargs="?", default="paper33", help=f"the case (default paper33): {formats()}")
     p.add_argument("--load-scale", type=fraction, default=1.0, help="multiplier on every nominal load (default 1.0)")
     p.add_argument("--der-scale", type=share, default=0.8, help="P^C as a fraction of rating, 0..1 (default 0.8)")
     p.add_argument(

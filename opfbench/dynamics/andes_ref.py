@@ -22,8 +22,8 @@ from dataclasses import replace
 
 import numpy as np
 
-from opfbench.dynamics.model import DynamicModel, build_model
 from opfbench.dynamics.params import FaultParams, InverterParams, ModelParams
+from opfbench.dynamics.rms_model import DynamicModel, build_model
 from opfbench.dynamics.simulate import recovery_ms, simulate
 from opfbench.timing import elapsed_ms, now
 

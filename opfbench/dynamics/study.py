@@ -23,10 +23,10 @@ from threadpoolctl import threadpool_limits
 
 from opfbench.capability import PAPER_KS, check_reserve
 from opfbench.digests import digest
-from opfbench.dynamics.model import build_model, check_modelled, prefault_flow
 from opfbench.dynamics.params import DIVERGED, FORECASTS, NOT_RECOVERED, RECOVERED, RECOVERY_PU, FaultParams, ModelParams
 from opfbench.dynamics.point import OperatingPoint, operating_point
 from opfbench.dynamics.recovery import recovery_table
+from opfbench.dynamics.rms_model import build_model, check_modelled, prefault_flow
 from opfbench.dynamics.simulate import MARGIN_WINDOW_S, TRACE_EVERY_S, Simulation, check_fault, simulate
 from opfbench.errors import InputError
 from opfbench.io import Case

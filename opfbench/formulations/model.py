@@ -19,7 +19,7 @@ slack rule (`build(net, slack_export)`, once per thread) and answers snapshots:
 
 With `serves_problem=True` a model is a candidate for the OPF problem's model of its role —
 the exact model behind `acopf` and `acopf-paper`, the relaxation behind `socp` and the AC
-OPF's bound and fast path (`formulations.opf`); among the candidates that model a
+OPF's bound and fast path (`formulations.opf_strategies`); among the candidates that model a
 network's class (`networks`), the lowest `preference` serves it. Otherwise the model is a
 strategy of its own, named as the model, run by the generic runner (`formulations.runner`:
 its setpoints AC-evaluated, statuses, fallback to no action). Either way the setpoints are
@@ -36,8 +36,8 @@ from typing import TYPE_CHECKING, Any, Protocol, TypeVar
 import numpy as np
 
 from opfbench.errors import NetworkError
-from opfbench.formulations.cache import per_thread
 from opfbench.formulations.problem import OpfProblem, check_supported
+from opfbench.formulations.solver_cache import per_thread
 from opfbench.registry.options import Option
 from opfbench.registry.specs import (
     MODELS,

@@ -32,9 +32,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from opfbench.formulations.acopf_options import Fallback
 from opfbench.formulations.model import ExactModel
 from opfbench.formulations.models.conic import SnapshotSolve
-from opfbench.formulations.options import Fallback
 from opfbench.formulations.problem import OpfProblem, SnapshotData
 from opfbench.formulations.solvers.ipopt_adapter import IpoptSolve
 from opfbench.powerflow import PowerFlowResult, solve_pf, solve_pf_batch

@@ -1,6 +1,6 @@
 """The one runner of every formulation model: the model's setpoints on every snapshot of a
 scenario, AC-evaluated, with statuses, the fallback chain and certification
-(`model` says what a model is; `results` builds the one result record).
+(`model` says what a model is; `evaluation` builds the one result record).
 
 - An exact model (`run_exact`, the OPF problem's exact model behind `acopf`): with
   `solver="auto"` (default) the interval bounds (`infeasibility`) and the OPF problem's
@@ -27,12 +27,12 @@ from __future__ import annotations
 
 import numpy as np
 
+from opfbench.formulations.acopf_options import ACOPF_SOLVERS, FALLBACKS, AcopfSolver, Fallback, check_option
+from opfbench.formulations.evaluation import evaluated_result, solver_record
 from opfbench.formulations.infeasibility import proven_infeasible
 from opfbench.formulations.model import built, model_for
-from opfbench.formulations.options import ACOPF_SOLVERS, FALLBACKS, AcopfSolver, Fallback, check_option
 from opfbench.formulations.policy import IpoptPolicy, fast_path, merge_flows
 from opfbench.formulations.problem import OpfProblem, snapshot_data
-from opfbench.formulations.results import evaluated_result, solver_record
 from opfbench.formulations.solves import model_solves, relaxation_solves
 from opfbench.powerflow import solve_pf_batch
 from opfbench.registry.specs import ModelSpec, Role

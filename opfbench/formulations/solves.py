@@ -22,10 +22,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from opfbench.formulations.cache import SolveCache
 from opfbench.formulations.model import BatchModel, built, model_for
 from opfbench.formulations.models.conic import SnapshotSolve, data_vector
 from opfbench.formulations.problem import SnapshotData, snapshot_data
+from opfbench.formulations.solver_cache import SolveCache
 from opfbench.network import Network
 from opfbench.registry.specs import ModelSpec
 from opfbench.scenario import Scenario

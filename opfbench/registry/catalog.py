@@ -44,15 +44,16 @@ if TYPE_CHECKING:
 BUILT_IN = (
     "opfbench.strategies.paper",
     "opfbench.strategies.standards",
-    "opfbench.strategies.learned",
-    "opfbench.formulations.opf",
+    "opfbench.learned.rules",
+    "opfbench.formulations.opf_strategies",
 )
 
 
 def _load_rules() -> None:
     """Register the built-in local rules (imported on first need: this module stays light
     for the CLI's parser)."""
-    from opfbench.strategies import learned, paper, standards
+    from opfbench.learned import rules as learned
+    from opfbench.strategies import paper, standards
 
     assert {paper.__name__, standards.__name__, learned.__name__} <= set(BUILT_IN)
 
@@ -60,7 +61,7 @@ def _load_rules() -> None:
 def _load_formulations() -> None:
     """Register the built-in formulations (the OPF problem's strategies and every model
     module): imported on first need, as they load cvxpy, Clarabel and CasADi."""
-    from opfbench.formulations import opf
+    from opfbench.formulations import opf_strategies as opf
     from opfbench.formulations.model import load_models
 
     assert opf.__name__ in BUILT_IN

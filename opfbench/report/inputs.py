@@ -526,7 +526,7 @@ def load_study(folder: Path) -> Inputs:
 
 
 def _learned_row(path: Path, command: str) -> dict:
-    """A fitted rule's parameters file (`strategies.learned.LearnedParams`) as a table row."""
+    """A fitted rule's parameters file (`learned.rules.LearnedParams`) as a table row."""
     data = _json(path, command) or {}
     try:
         train, fit = data["train"], data.get("fit") or {}

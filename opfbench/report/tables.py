@@ -17,7 +17,7 @@ from opfbench.dynamics.recovery import KEYS as RECOVERY_KEYS
 from opfbench.dynamics.recovery import recovery_table
 from opfbench.registry.catalog import describe, rank
 from opfbench.registry.references import BASELINE, PAPER_OPF, PAPER_RULES, REFERENCE_OPTIMUM
-from opfbench.report import paper
+from opfbench.report import paper_figures as paper
 from opfbench.result import CERTIFIED_BY_IPOPT, CERTIFIED_BY_SOCP, PF_DIVERGED, RULE_NON_FINITE, STATUSES
 
 CONFIG = ["case", "strategy", "k", "night_mode", "forecast"]

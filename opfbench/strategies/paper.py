@@ -1,4 +1,4 @@
-"""The paper's rules on the local-rule engine (`opfbench.strategies.engine`): no action,
+"""The paper's rules on the local-rule engine (`opfbench.strategies.rule_engine`): no action,
 LLMA (Algorithm 1) and LFMA (Algorithm 2), with Algorithm 3 (forecast-aware limits)
 whenever the scenario carries a forecast P^F.
 
@@ -28,9 +28,9 @@ from opfbench.powerflow import PowerFlowResult
 from opfbench.registry.specs import strategy
 from opfbench.result import StrategyResult
 from opfbench.scenario import Scenario
-from opfbench.strategies.engine import Grid, run_rule
 from opfbench.strategies.limits import clip, reactive_limit
 from opfbench.strategies.registration import SAFE, local_rule
+from opfbench.strategies.rule_engine import Grid, run_rule
 from opfbench.strategies.rules import Measurements, Rule
 from opfbench.timing import elapsed_ms, now
 

@@ -24,7 +24,7 @@ from opfbench.registry.options import Option, OptionValue
 from opfbench.registry.specs import OPFBENCH, StrategySpec, register, source_of
 from opfbench.result import StrategyResult
 from opfbench.scenario import Scenario
-from opfbench.strategies.engine import run_rule
+from opfbench.strategies.rule_engine import run_rule
 from opfbench.strategies.rules import DEFAULT_SETTLING, FEEDBACK, READS, RESIDUAL, Measurements, Rule, Target, targets
 
 

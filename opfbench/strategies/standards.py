@@ -1,5 +1,5 @@
 """The reactive-power rules grid codes mandate, as targets of the local-rule engine
-(`opfbench.strategies.engine`: every target then passes through the (1 − k)·Qmax limits,
+(`opfbench.strategies.rule_engine`: every target then passes through the (1 − k)·Qmax limits,
 Algorithm 3 and the night modes, and rules of |V| are solved for their closed-loop steady
 state).
 

@@ -1,5 +1,5 @@
 """The one study engine: a task family's tasks → checkpoint store → in this process or on
-Dask → tables, the same for every family (`opfbench run`'s study, `study.runner`;
+Dask → tables, the same for every family (`opfbench run`'s study, `study.run_family`;
 `opfbench fault`'s, `dynamics.study`).
 
 A family (`TaskFamily`) says what to run:

@@ -21,18 +21,17 @@ import pandas as pd
 from threadpoolctl import threadpool_limits
 
 from opfbench.errors import InputError
+from opfbench.learned.fitted import Fitted
+from opfbench.learned.rules import install
 from opfbench.plugins import PluginSource, ensure, loaded
 from opfbench.registry.catalog import configuration, run_strategy
 from opfbench.registry.options import OptionValue
 from opfbench.result import StrategyResult
 from opfbench.scenario import Scenario
-from opfbench.strategies.learned import install
 from opfbench.study.config import StudyConfig
 from opfbench.study.engine import Task, TaskOutput
-from opfbench.study.fitted import Fitted
 from opfbench.study.periods import Period
-from opfbench.study.scenarios import chunk_scenario
-from opfbench.study.tables import (
+from opfbench.study.run_tables import (
     DETAIL_COLUMNS,
     Columns,
     detail_rows,
@@ -42,6 +41,7 @@ from opfbench.study.tables import (
     step_columns,
     step_rows,
 )
+from opfbench.study.task_scenarios import chunk_scenario
 
 
 @dataclass(frozen=True)

@@ -8,6 +8,7 @@ import re
 from pathlib import Path
 
 from opfbench.exact import number_text
+from opfbench.io.sources import formats
 from opfbench.jsonio import print_json
 
 __all__ = [
@@ -28,11 +29,7 @@ __all__ = [
     "workers",
 ]
 
-CASE_HELP = (
-    "a shipped case (see `opfbench cases`), a MATPOWER .m or pandapower .json file, or simbench:CODE "
-    "(a SimBench LV/MV grid with its own profiles, e.g. simbench:1-MV-rural--0-sw); options ?der=…&der-pf=… "
-    "as --der/--der-pf"
-)
+CASE_HELP = f"{formats()}; options ?der=…&der-pf=… as --der/--der-pf"
 
 STRATEGY_HELP = (
     "strategy configurations NAME or NAME:key=value,… (e.g. lfma volt-var volt-var:curve=a cosphi-p:pf_min=0.95); "

@@ -27,7 +27,7 @@ from opfbench.io.case import Case, CaseSeries
 from opfbench.network import Network
 
 #: Source files whose change invalidates every entry (the conversion and the records).
-_SOURCES = ("io/pandapower.py", "io/simbench.py", "io/case.py", "io/cache.py", "network.py", "data/simbench.py")
+_SOURCES = ("io/pandapower.py", "io/simbench.py", "io/case.py", "io/disk_cache.py", "network.py", "data/simbench_profiles.py")
 _FORMAT = 1
 
 

@@ -14,15 +14,15 @@ import pyarrow as pa
 
 from opfbench.io import load_case
 from opfbench.jsonio import write_atomic
+from opfbench.learned.fitted import LEARNED_DIR, TRAIN_DIR, Fitted
 from opfbench.parquetio import ParquetStream
 from opfbench.registry.catalog import configuration
 from opfbench.schema import KEYS, TASK_SUMMARY
 from opfbench.study.config import LABEL_FIELDS, StudyConfig
 from opfbench.study.engine import SILENT, EngineRun, Reporter, TaskOutput, run_family
-from opfbench.study.fitted import LEARNED_DIR, TRAIN_DIR, Fitted
 from opfbench.study.periods import Period
-from opfbench.study.scenarios import check_model_forecasts, chunk_scenario, study_period
-from opfbench.study.tables import DETAIL_COLUMNS, extra_columns, step_columns, summarize
+from opfbench.study.run_tables import DETAIL_COLUMNS, extra_columns, step_columns, summarize
+from opfbench.study.task_scenarios import check_model_forecasts, chunk_scenario, study_period
 from opfbench.study.tasks import RunTask, TaskInput, plan_tasks, task_input
 
 RUN_OUTPUTS = ("steps.parquet", "summary.csv", "der_q.parquet", "bus_v.parquet", "report.html")
@@ -240,9 +240,9 @@ def fit_learned(config: StudyConfig, out: Path, options: dict[str, Any]) -> tupl
     itself (its input, the training periods apart from the test period, a params file's
     case, the folder's earlier run) — before any work: the `train=` ones fitted in nested
     runs of the folder `out` (`study.training`)."""
-    from opfbench.study.learning import check_learned, learned_configs
     from opfbench.study.store import RunStore
     from opfbench.study.training import recorded_fits, train
+    from opfbench.study.training_checks import check_learned, learned_configs
 
     if not learned_configs(config.strategies):
         return ()

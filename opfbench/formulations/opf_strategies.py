@@ -6,8 +6,8 @@ DistFlow on radial feeders, Jabr's on meshed ones); the generic runner runs them
 
 from __future__ import annotations
 
+from opfbench.formulations.acopf_options import ACOPF_SOLVERS, FALLBACKS, AcopfSolver, Fallback
 from opfbench.formulations.model import SLACK_EXPORT, model_for
-from opfbench.formulations.options import ACOPF_SOLVERS, FALLBACKS, AcopfSolver, Fallback
 from opfbench.formulations.problem import check_supported
 from opfbench.formulations.runner import run_problem_model
 from opfbench.network import Network

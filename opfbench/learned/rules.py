@@ -2,7 +2,7 @@
 get? Each family is fitted per DER to the AC OPF's optimal Q over a training period, from
 what that DER measures in closed loop — its own-bus |V| (p.u.), its own P (MW), its
 own-bus load P (MW) and Q (MVAr); no time stamp, no other DER's data — and runs as a local
-rule on the engine (`opfbench.strategies.engine`): the target is clipped to ±(1 − k)·Qmax
+rule on the engine (`opfbench.strategies.rule_engine`): the target is clipped to ±(1 − k)·Qmax
 like every rule's, and a rule of |V| is solved for its closed-loop steady state.
 
 Families (Q positive = injected; q = Q/S̄ in p.u. of the DER's nameplate S̄):
@@ -51,7 +51,7 @@ A fitted rule is written as JSON (`LearnedParams.write`, format FORMAT): the fam
 case and its DERs (bus, S̄, P̄), the training period, the hash of the training data, the
 sensitivity's row sums, the slope limits and the per-DER parameters. `params=FILE` makes
 it a rule anywhere; the run's training (`train=START..END`) is fitted by `opfbench run`
-(`opfbench.study.learning`), which ships the fitted parameters to its workers
+(`opfbench.study.training_checks`), which ships the fitted parameters to its workers
 (`install`).
 """
 
@@ -495,7 +495,7 @@ def features(scenario: Scenario, v_pu: np.ndarray) -> Features:
 def _closed_loop(rule: LearnedRule, scenario: Scenario) -> tuple[np.ndarray, float, int]:
     """(|V| at the DER buses (S, n_der), mean losses kW, not-settled steps) of `rule` in
     closed loop on `scenario` at TRAIN_K."""
-    from opfbench.strategies.engine import run_rule
+    from opfbench.strategies.rule_engine import run_rule
     from opfbench.strategies.rules import Rule
 
     res = run_rule(rule.name, Rule(rule.name, lambda m: rule.predict(m), frozenset(rule.reads)), scenario, TRAIN_K, {})
