@@ -23,7 +23,8 @@ A formulation model is a class decorated with `@formulation` (`formulations.mode
 a `formulations.models.conic.ConicModel` whose `_network_model` writes its variables,
 bus mismatches, objective and constraints. It becomes a strategy of its own, run by the
 generic runner (its setpoints AC-evaluated), exactly as a built-in model under
-`opfbench/formulations/models/` — `docs/custom_formulation.py` is one.
+`opfbench/formulations/models/` (`lindistflow.py` is one; tests/test_formulation_plugin.py
+loads one from a file).
 
 Loading: `--plugin FILE.py|MODULE` (repeatable) on the commands, or the entry-point group
 `opfbench.strategies` of an installed package (loaded when a name is not known, or when
