@@ -5,12 +5,9 @@ prints nothing, and Ctrl-C stops a study with `Stopped`, not an exit."""
 
 from __future__ import annotations
 
-import os
-import signal
 import subprocess
 import sys
 import textwrap
-import time
 
 import pytest
 
@@ -21,7 +18,7 @@ from opfbench.learned import rules as learned
 from opfbench.registry.specs import STRATEGIES
 from opfbench.state import PROCESS
 from opfbench.study.store import finished_tasks
-from tests.support.processes import ROOT
+from tests.support.processes import ROOT, ctrl_c_when
 
 SHORT = {"ks": [0.0], "night_modes": ["connected"], "forecast": ["off"], "period": "2016-06-28T11:00..2016-06-28T12:00"}
 DROOP = """
@@ -94,23 +91,7 @@ except Stopped as exc:
 @pytest.mark.slow  # a fresh process and AC OPF tasks until the first is saved
 def test_ctrl_c_stops_a_library_study_with_stopped_not_an_exit(tmp_path):
     out = tmp_path / "run"
-    proc = subprocess.Popen(
-        [sys.executable, "-c", SCRIPT, str(out)],
-        cwd=ROOT,
-        stdout=subprocess.PIPE,
-        stderr=subprocess.PIPE,
-        text=True,
-        preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL),
-    )
-    try:
-        deadline = time.monotonic() + 240
-        while not finished_tasks(out):
-            assert proc.poll() is None and time.monotonic() < deadline, proc.stderr.read()
-            time.sleep(0.05)
-        os.kill(proc.pid, signal.SIGINT)
-        stdout, stderr = proc.communicate(timeout=120)
-    finally:
-        proc.kill()
+    proc, stdout, stderr, _ = ctrl_c_when([sys.executable, "-c", SCRIPT, str(out)], lambda: finished_tasks(out) > 0)
     assert proc.returncode == 0, stderr
     kept = finished_tasks(out)
     assert f"caught: {kept} tasks kept in {out}; rerun the same command to resume" in stdout and stderr == ""

@@ -196,6 +196,15 @@ def test_bad_params_files_and_labels_are_refused(fitted, tmp_path, capsys):
     period = resolve_period(TEST, "20:00-05:00", 15)
     with pytest.raises(InputError, match="were fitted on paper33"):
         check_learned((f"learned-affine:params={good}",), ("case69-der",), period, "20:00-05:00")
+    # row sums halved with the slope limits made consistent: the grid's own sensitivity refuses the steeper loop
+    rows = [v * 0.25 for v in data["row_sum_pu_per_mvar"]]
+    steep = dict(data, row_sum_pu_per_mvar=rows, slope_max_mvar_per_pu=[data["rho"] / v for v in rows])
+    steep["parameters"] = [  # each slope at the (false) bound: 4 × what the grid allows
+        p | {"c": -data["rho"] / r / d["s_mva"]} for p, r, d in zip(data["parameters"], rows, data["ders"], strict=True)
+    ]
+    (tmp_path / "steep.json").write_text(json.dumps(steep))
+    assert main(["snapshot", "paper33", "--strategy", f"learned-affine:params={tmp_path / 'steep.json'}"]) == 2
+    assert "its slopes make the closed loop no contraction" in capsys.readouterr().err
     # paper33-meshed has paper33's DER (buses, ratings) on another grid: refused, named, before any work
     assert main(["snapshot", "paper33-meshed", "--strategy", f"learned-affine:params={good}"]) == 2
     assert "paper33-meshed is another grid" in capsys.readouterr().err

@@ -207,3 +207,25 @@ def test_the_frontier_figure_draws_the_frontier_as_a_staircase_and_every_configu
     symbols = {p["name"]: p["marker"]["symbol"] for p in points}
     assert symbols["volt-watt"] == "diamond" and symbols["lfma"] == "circle"
     assert plots.frontier_vs_compliance(board, None) == []
+
+
+def test_a_leaderboard_without_a_share_says_why():
+    def rows(case: str, energies: dict[str, float]) -> list[dict]:
+        return [
+            {"case": case, "strategy": s, "k": 0.0, "night_mode": "connected", "forecast": "off", "energy_kwh": e}
+            | {"no_action_kwh": 10.0, "steps": 4, "not_ok_steps": 0, "voltage_violation_min": 0.0}
+            for s, e in energies.items()
+        ]
+
+    summary = pd.DataFrame(
+        rows("no-opf", {"no-action": 10.0, "lfma": 9.0})
+        + rows("saves-nothing", {"no-action": 10.0, "lfma": 9.0, "acopf": 10.0})
+        + rows("fine", {"no-action": 10.0, "lfma": 9.0, "acopf": 8.0})
+    )
+    notes = [b.text for b in sections.grids(Inputs(run_dir=Path(), summary=summary)).blocks if b.kind == "note"]
+    assert [n for n in notes if "no loss-only share" in n] == [
+        "no-opf, k=0: no loss-only share of the AC OPF's loss reduction (—): the run has no acopf configuration (add it to "
+        "--strategies: the share is of its loss reduction).",
+        "saves-nothing, k=0: no loss-only share of the AC OPF's loss reduction (—): the acopf saves no loss here (10 kWh "
+        "against 10 kWh with no action).",
+    ]

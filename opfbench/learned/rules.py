@@ -577,6 +577,17 @@ def network_digest(net) -> str:
     return digest({f.name: getattr(net, f.name) for f in fields(net) if f.name != "name"})
 
 
+def grid_contraction(net, slope_mvar_per_pu: np.ndarray) -> float:
+    """The closed loop's contraction factor max_i |c_i|·Σ_j |X_ij| (`sensitivity`) on `net`
+    with X measured at its nominal loads, DER at 0 and at 0.8 of rating (the larger)."""
+    from opfbench.scenario import Scenario
+    from opfbench.strategies.sensitivity import contraction_factor, voltage_sensitivity
+
+    return max(
+        contraction_factor(voltage_sensitivity(Scenario.snapshot(net, der_scale=d)), slope_mvar_per_pu) for d in (0.0, 0.8)
+    )
+
+
 def _rank(loop: ClosedLoop) -> tuple[int, float]:
     """Fewer training steps outside the band first, then lower losses."""
     return loop.outside, loop.loss_kw
@@ -795,8 +806,10 @@ class LearnedParams:
         return cls(family, case, network, bus, s, network_sha, train, digest, rho, hyper, row_sum, slope_max, rule, fit)
 
     def check_network(self, net, ref: str) -> None:
-        """InputError unless `net` is the grid this rule was fitted on: its DERs (bus numbers
-        and S̄, in order) and its whole model (`network_digest`)."""
+        """InputError unless `net` is the grid this rule was fitted on — its DERs (bus numbers
+        and S̄, in order) and its whole model (`network_digest`) — and its slopes make the
+        closed loop a contraction there (`grid_contraction` < 1: a file's row sums are its
+        own word; the grid's sensitivity is measured anew)."""
         buses = tuple(int(b) for b in net.bus_ids[net.der_bus])
         if len(buses) != len(self.der_bus):
             raise InputError(
@@ -813,6 +826,13 @@ class LearnedParams:
                 f"learned-rule parameters {ref} were fitted on {self.case} ({self.network}); {net.name} is another "
                 "grid (its branches, loads, limits or DER differ, network sha256 "
                 f"{network_digest(net)[:12]}… ≠ {self.network_sha256[:12]}…): fit the rule on this case"
+            )
+        factor = grid_contraction(net, self.rule.v_slope())
+        if factor >= 1:
+            raise InputError(
+                f"learned-rule parameters {ref}: on {net.name} its slopes make the closed loop no contraction (factor "
+                f"{factor:.3g} ≥ 1 with the grid's own sensitivity at its nominal loads; the fit keeps it at rho = "
+                f"{self.rho:g} on its training states): its sensitivities (row sums) are not this grid's"
             )
 
     def check_measurements(self, m: Measured, ref: str) -> None:

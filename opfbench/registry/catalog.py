@@ -171,6 +171,7 @@ def configuration(label: str) -> Configuration:
     name, _, rest = label.strip().partition(":")
     entry = spec(name)
     given: dict[str, OptionValue] = {}
+    seen: set[str] = set()  # a value equal to the default is not kept, but it was given
     known = entry.option
     for item in (part.strip() for part in rest.split(",")) if rest else ():
         if not item:
@@ -179,8 +180,9 @@ def configuration(label: str) -> Configuration:
         key, text = key.strip(), text.strip()
         if not eq or not key:
             raise InputError(f"strategy label {label!r}: {item!r} is not key=value")
-        if key in given:
-            raise InputError(f"strategy label {label!r}: option {key} given twice")
+        if key in seen:
+            raise InputError(f"strategy label {label!r}: option {key} given twice; give it once")
+        seen.add(key)
         if key not in known:
             raise InputError(f"strategy label {label!r}: {name} takes no option {key} (options: {', '.join(known) or 'none'})")
         try:

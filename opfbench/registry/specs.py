@@ -232,11 +232,13 @@ def _check_name(what: str, name: str, source: str, held: StrategySpec | ModelSpe
         raise InputError(f"{source}: {what} name {name!r} must be lower-case letters, digits, '.', '_', '+' or '-'")
     if held is not None and held.source != source:
         raise InputError(f"{source}: {what} name {name!r} is taken (by {held.source})")
+    if held is not None:  # one source, one entry a name: the second would silently replace the first
+        raise InputError(f"{what} {name!r} is registered twice by {source}: give each its own name")
 
 
 def register(spec: StrategySpec) -> None:
-    """Add a strategy; InputError for a name that is taken by another source or not a valid
-    name (lower-case letters, digits, '.', '_', '+', '-')."""
+    """Add a strategy; InputError for a name that is taken (by another source, or already
+    by this one) or not a valid name (lower-case letters, digits, '.', '_', '+', '-')."""
     _check_name("strategy", spec.name, spec.source, STRATEGIES.get(spec.name))
     STRATEGIES[spec.name] = spec
 

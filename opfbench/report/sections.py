@@ -223,6 +223,17 @@ NO_OPTIMUM = (
     "{case}, k={k:g}: the AC OPF has no optimum at any of the {steps} steps (infeasible or failed: see the "
     "convergence section), so there is no reference and no share of its loss reduction (—)."
 )
+NO_SHARE = "{case}, k={k:g}: no loss-only share of the AC OPF's loss reduction (—): {why}."
+
+
+def _share_notes(summary: pd.DataFrame, night_mode: str = tables.REFERENCE_NIGHT) -> list[Block]:
+    """Why a leaderboard's share column is — for a case and k (`tables.share_undefined`,
+    `tables.without_optimum`)."""
+    notes = [Block("note", text=NO_OPTIMUM.format(case=c, k=k, steps=n)) for c, k, n in tables.without_optimum(summary)]
+    notes = notes if night_mode == tables.REFERENCE_NIGHT else []
+    return notes + [
+        Block("note", text=NO_SHARE.format(case=c, k=k, why=why)) for c, k, why in tables.share_undefined(summary, night_mode)
+    ]
 
 
 def _shown(board: pd.DataFrame) -> pd.DataFrame:
@@ -252,8 +263,7 @@ def grids(inputs: Inputs) -> Section:
     ]
     for case, note in notes:
         sec.add(Block("note", text=f"{case}: {note}"))
-    for case, k, steps in tables.without_optimum(inputs.summary):
-        sec.add(Block("note", text=NO_OPTIMUM.format(case=case, k=k, steps=steps)))
+    sec.blocks += _share_notes(inputs.summary)
     if not tables.at_equal_compliance(inputs.summary):
         sec.add(Block("note", text=BEFORE_FRONTIER))
     recovery = tables.recovery(inputs.fault) if inputs.fault is not None else None
@@ -399,6 +409,7 @@ def field_year(inputs: Inputs, price: tuple[float, str, str]) -> Section:
         board = tables.leaderboard(s, night_mode=mode)
         if board.empty:
             continue
+        sec.blocks += _share_notes(s, mode)
         sec.add(
             table(_shown(board), f"Leaderboard over the year, PV {mode} at night (rank 1 = smallest gap at equal compliance)")
         )

@@ -439,6 +439,33 @@ def without_optimum(summary: pd.DataFrame) -> list[tuple[str, float, int]]:
     return [(str(r.case), float(r.k), int(r.steps)) for r in none.itertuples()]
 
 
+def share_undefined(summary: pd.DataFrame, night_mode: str = REFERENCE_NIGHT) -> list[tuple[str, float, str]]:
+    """(case, k, why) wherever the `leaderboard`'s loss-only share of the AC OPF's loss reduction is
+    not given (—) for every row: the run has no AC OPF (or no baseline) there, one of
+    their energies is not known (a step without a figure), or the optimum saves nothing.
+    The case of an optimum that exists at no step is `without_optimum`'s, left to it."""
+    sub = summary[(summary["forecast"] == "off") & (summary["night_mode"] == night_mode)]
+    none = {(c, k) for c, k, _ in without_optimum(summary)} if night_mode == REFERENCE_NIGHT else set()
+    out = []
+    for (case, k), grp in sub.groupby(["case", "k"], sort=False):
+        if (str(case), float(k)) in none:
+            continue
+        ref = grp.loc[grp["strategy"] == REFERENCE_OPTIMUM, "energy_kwh"]
+        na = grp["no_action_kwh"].iloc[0]
+        if ref.empty:
+            why = f"the run has no {REFERENCE_OPTIMUM} configuration (add it to --strategies: the share is of its loss reduction)"
+        elif not np.isfinite(na):
+            why = f"the run has no {BASELINE} row (forecast off) to measure the reduction from"
+        elif not np.isfinite(ref.iloc[0]):
+            why = f"the {REFERENCE_OPTIMUM}'s energy is not known (a step without a figure)"
+        elif not na - float(ref.iloc[0]) > TOL_KWH:
+            why = f"the {REFERENCE_OPTIMUM} saves no loss here ({float(ref.iloc[0]):.6g} kWh against {na:.6g} kWh with no action)"
+        else:
+            continue
+        out.append((str(case), float(k), why))
+    return out
+
+
 LOCAL_COLUMNS = [
     "case",
     "k",

@@ -30,8 +30,8 @@ from opfbench.result import StrategyResult
 from opfbench.scenario import Scenario
 from opfbench.strategies.limits import clip, reactive_limit
 from opfbench.strategies.registration import SAFE, local_rule
-from opfbench.strategies.rule_engine import Grid, run_rule
-from opfbench.strategies.rules import Measurements, Rule
+from opfbench.strategies.rule_engine import Grid
+from opfbench.strategies.rules import Measurements
 from opfbench.timing import elapsed_ms, now
 
 # What LFMA step 4 did at each DER (LfmaTrace.rule).
@@ -55,24 +55,9 @@ def llma_target(m: Measurements) -> np.ndarray:
     return m.load_q_mvar
 
 
-NO_ACTION = Rule("no-action", no_action_target, frozenset())
-LLMA = Rule("llma", llma_target, frozenset({"load"}))
-
-
-def no_action(scenario: Scenario, k: float = 0.0) -> StrategyResult:
-    """Every DER at Q = 0 MVAr (k is validated and recorded; the limits of a zero target
-    change nothing)."""
-    return run_rule("no-action", NO_ACTION, scenario, k, {})
-
-
 def llma_setpoints(scenario: Scenario, limit_mvar: np.ndarray) -> np.ndarray:
     """Algorithm 1, (S, n_der) MVAr: Q^H = min(Q_load at the DER's own bus, L), clipped to ±L."""
     return clip(scenario.load_q_at_der_mvar(), limit_mvar)
-
-
-def llma(scenario: Scenario, k: float = 0.0, safe: bool = False) -> StrategyResult:
-    """LLMA (Algorithm 1) with the bound L of `reactive_limit` (reserve k, forecast, safe)."""
-    return run_rule("llma", LLMA, scenario, k, {}, safe=safe)
 
 
 @dataclass(frozen=True, eq=False)

@@ -48,8 +48,15 @@ def _step(value: OptionValue) -> str | None:
     return None if isinstance(value, float) and 0 < value <= 1 else f"a step factor lies in (0, 1], got {value}"
 
 
-def _non_negative(value: OptionValue) -> str | None:
-    return None if isinstance(value, int) and value >= 0 else f"must be ≥ 0, got {value}"
+MAX_STEPS = 1000
+"""The closed loop's largest `max_steps` (10× the default): it sizes the work of every
+snapshot that does not settle; one the damped iteration has not settled by then is
+recorded not-settled."""
+
+
+def _steps(value: OptionValue) -> str | None:
+    ok = isinstance(value, int) and 0 <= value <= MAX_STEPS
+    return None if ok else f"lies in 0..{MAX_STEPS} (each step is a power flow of every snapshot not yet settled), got {value}"
 
 
 SAFE = Option("safe", False, "Algorithm 3: cap the forecast-aware limit at the physical capability at P^C")
@@ -62,7 +69,7 @@ PRIORITY = Option(
 )
 #: The closed-loop engine's options (`rules.Settling`), on every rule that reads |V| or flows.
 SETTLING_OPTIONS = (
-    Option("max_steps", DEFAULT_SETTLING.max_steps, "damped steps before a snapshot counts as not-settled", check=_non_negative),
+    Option("max_steps", DEFAULT_SETTLING.max_steps, "damped steps before a snapshot counts as not-settled", check=_steps),
     Option(
         "tol_v_pu",
         DEFAULT_SETTLING.tol_v_pu,
@@ -173,10 +180,16 @@ def _option(key: str, value: OptionValue | Option, rule: str) -> Option:
     if key in ENGINE_OPTIONS:
         raise InputError(f"rule {rule!r}: option name {key!r} is the engine's ({', '.join(sorted(ENGINE_OPTIONS))})")
     if isinstance(value, Option):
-        return value
-    if not isinstance(value, (bool, int, float, str, tuple)):
+        option = value
+    elif not isinstance(value, (bool, int, float, str, tuple)):
         raise InputError(f"rule {rule!r}: option {key} has default {value!r}; use a bool, int, float, str or tuple of floats")
-    return Option(key, tuple(float(v) for v in value) if isinstance(value, tuple) else value, f"option of {rule}")
+    else:
+        option = Option(key, tuple(float(v) for v in value) if isinstance(value, tuple) else value, f"option of {rule}")
+    try:
+        option.validate(option.default)
+    except InputError as exc:
+        raise InputError(f"rule {rule!r}: option {option.name}'s default {option.format(option.default)}: {exc}") from None
+    return option
 
 
 def _check_signature(spec: StrategySpec, target: Callable, declared: tuple[Option, ...]) -> None:
@@ -220,6 +233,8 @@ def probe(spec: StrategySpec, target: Target) -> None:
         "load_q_mvar": np.array([[0.06, -0.02], [0.1, 0.0], [0.03, 0.05]]),
         "line_mva": np.array([[[-0.2 - 0.1j, 0.1 + 0.05j]] * 2] * n_rows),
     }
+    for arr in values.values():
+        arr.setflags(write=False)  # as the engine's: a rule never writes into its measurements
     m = Measurements(frozenset(spec.reads), values, n_rows, rating, rating, np.array(["PV", "DFIG"]), np.ones((2, 2), dtype=bool))
     rule = Rule(spec.name, target, frozenset(spec.reads), spec.curtails)
     options = {o.name: o.default for o in spec.options if o.name not in ENGINE_OPTIONS}

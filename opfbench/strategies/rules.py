@@ -148,22 +148,31 @@ class Rule:
         return bool(self.reads & FEEDBACK)
 
 
+def _real(rule: Rule, values: object, should: str) -> np.ndarray:
+    """`values` as floats; InputError (`should`: what they must be) unless they are real
+    numbers (complex: its imaginary part would be dropped; text, objects)."""
+    arr = np.asarray(values)
+    if arr.dtype.kind not in "biuf":
+        raise InputError(f"rule {rule.name!r} returned {arr.dtype} values; {should}")
+    return arr.astype(float)
+
+
 def targets(rule: Rule, m: Measurements, options: dict, n_rows: int) -> Targets:
-    """The rule's targets (rows, n_der); InputError naming the rule for an exception, a
-    non-numeric answer, a wrong shape or a cap on active power from a rule that does not
-    declare it curtails (non-finite values are the caller's to handle)."""
+    """The rule's targets (rows, n_der): Q (MVAr) and, for a rule that curtails, a cap on
+    active power (MW); InputError naming the rule for an exception (a `sys.exit` too), an
+    answer that is not real numbers (complex included), a wrong shape or a cap on active
+    power from a rule that does not declare it curtails (non-finite values are the
+    caller's to handle)."""
     n_der = m.shape[1]
     try:
         raw = rule.target(m, **options)
         answer = raw if isinstance(raw, Targets) else Targets(raw)
-        out = Targets(
-            np.asarray(answer.q_mvar, dtype=float),
-            None if answer.p_max_mw is None else np.asarray(answer.p_max_mw, dtype=float),
-        )
+        caps = None if answer.p_max_mw is None else _real(rule, answer.p_max_mw, "a cap on active power is real numbers (MW)")
+        out = Targets(_real(rule, answer.q_mvar, "a Q target is real numbers (MVAr)"), caps)
     except InputError:
         raise
-    except Exception as exc:  # a rule's own bug: named, never a traceback
-        raise InputError(f"rule {rule.name!r} failed: {type(exc).__name__}: {exc}") from exc
+    except (Exception, SystemExit) as exc:  # a rule's own bug, or its sys.exit: named, never a traceback or an exit
+        raise InputError(f"rule {rule.name!r} failed: {type(exc).__name__}: {exc}") from None
     for what, arr in (("", out.q_mvar), (" active-power caps of", out.p_max_mw)):
         if arr is not None and arr.shape != (n_rows, n_der):
             raise InputError(

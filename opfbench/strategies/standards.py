@@ -270,6 +270,11 @@ def cosphi_p(m: Measurements, pf_min: float = COSPHI_P_MIN, p_start: float = COS
 
 # ----- VDE-AR-N 4110 ------------------------------------------------------------------------
 def check_q_u(options: dict) -> None:
+    preset = [key for key, default in (("deadband", False), ("q_max", Q_U_MAX)) if options[key] != default]
+    if preset and options["v"]:
+        raise InputError(
+            f"q-u: give {'= or '.join(preset)}= (the characteristic) or the points v=/q=, not both: the points replace it"
+        )
     if not 0 <= options["q_max"] <= 1:
         raise InputError(f"q-u: q_max is per unit of P̄ and must lie in [0, 1], got {options['q_max']:g}")
     check_points("q-u", "v", options["v"], options["q"], (0.5, 1.5))

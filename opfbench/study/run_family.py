@@ -22,7 +22,7 @@ from opfbench.study.config import LABEL_FIELDS, StudyConfig
 from opfbench.study.engine import SILENT, EngineRun, Reporter, TaskOutput, run_family
 from opfbench.study.periods import Period
 from opfbench.study.run_tables import DETAIL_COLUMNS, extra_columns, step_columns, summarize, summarize_frontier
-from opfbench.study.task_scenarios import check_model_forecasts, study_period
+from opfbench.study.task_scenarios import check_model_forecasts, chunk_scenario, study_period
 from opfbench.study.tasks import RunTask, TaskInput, plan_tasks, task_input
 
 RUN_OUTPUTS = (
@@ -180,6 +180,7 @@ def prepare(config: StudyConfig) -> RunFamily:
     models = [s for s in config.forecast if s not in ("off", "oracle") and config.strategies_for(s)]
     check_model_forecasts(config.forecast_dir, models, period)  # a missing or incomplete forecast file: here, not in a worker
     running = {label for source in config.forecast for label in config.strategies_for(source)}
+    extra_columns(config.strategies)  # a plugin's column that is one of the table's own: refused here
     data = {}
     for case in config.cases:
         loaded = load_case(case)
@@ -187,7 +188,38 @@ def prepare(config: StudyConfig) -> RunFamily:
         for label in config.strategies:
             if label in running:
                 configuration(label).spec.check_network(loaded.network)
-    return RunFamily(config, period, plan_tasks(config, period, data))
+    tasks = plan_tasks(config, period, data)
+    _probe_plugins(tasks, config, period)
+    return RunFamily(config, period, tasks)
+
+
+def _probe_plugins(tasks: list[RunTask], config: StudyConfig, period: Period) -> None:
+    """Every plugin configuration run on the first steps of each case's first task that
+    has it under each forecast (`plugins.probe_case`: the real DER kinds, shapes and
+    read-only arrays), each night mode: InputError before anything is written."""
+    from opfbench.plugins import probe_case
+
+    probed: set[tuple[str, str, str]] = set()
+    for task in tasks:
+        for forecast, strategies in task.runs:
+            key = (task.case, forecast)
+            labels = [s for s in strategies if configuration(s).spec.source != "opfbench" and (*key, s) not in probed]
+            if not labels:
+                continue
+            probed.update((*key, s) for s in labels)
+            inp = task_input(task, config, period)
+            step = pd.Timedelta(hours=inp.step_h)
+            for mode in task.night_modes:
+                scenario = chunk_scenario(
+                    task.case, mode, forecast, inp.profiles, inp.night, min(2, inp.n_steps), step, inp.forecast_dir
+                )
+                probe_case(
+                    labels,
+                    scenario,
+                    task.k,
+                    f"{task.case}'s first steps (night mode {mode}, forecast {forecast})",
+                    dict(inp.settings),
+                )
 
 
 def run_study(

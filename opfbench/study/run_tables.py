@@ -18,6 +18,7 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 
+from opfbench.errors import InputError
 from opfbench.formulations.frontier import Frontier
 from opfbench.registry.catalog import configuration, describe
 from opfbench.registry.references import BASELINE, REFERENCE_OPTIMUM
@@ -47,7 +48,16 @@ SHARE_MIN_KWH = 1e-6  # a reduction below this defines no share
 
 def extra_columns(labels: tuple[str, ...]) -> tuple[str, ...]:
     """The extra per-step columns the strategies of `labels` declare (`StrategySpec.columns`),
-    each once, in the order they first appear."""
+    each once, in the order they first appear; InputError naming the strategy that
+    declares one of the table's own columns (before any work)."""
+    for label in labels:
+        spec = configuration(label).spec
+        clash = [c for c in spec.columns if c in STEPS.names]
+        if clash:
+            raise InputError(
+                f"strategy {spec.name} ({spec.source}) declares the extra column {clash[0]!r}, one of the steps table's "
+                f"own ({', '.join(STEPS.names)}): give its column another name"
+            )
     return tuple(dict.fromkeys(c for label in labels for c in configuration(label).spec.columns))
 
 

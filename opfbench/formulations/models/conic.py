@@ -114,10 +114,9 @@ def _rows(row: Row) -> list[cp.Constraint]:
 def screens(net: Network) -> bool:
     """Whether the relaxation of `net` uses bound screening (`solvers.clarabel_adapter`):
     not on feeders with a DER at every other bus or more (SimBench's MV grids). There the
-    active set moves with almost every 15-min step and is often degenerate — measured on
-    1-MV-rural's paper day (102 DER, 101 buses): the last step's guess failed on 73 % of
-    the steps and the screened program at a step's own active set passed its check on
-    43 %, ~3 Clarabel solves per step (8.0 ms) against one full solve (2.2 ms)."""
+    active set moves with almost every 15-min step and is often degenerate: the last
+    step's guess mostly fails its check and a step costs several Clarabel solves where one
+    full solve answers (`python -m opfbench.bench opf`'s `mv_*` keys time them)."""
     return len(net.ders) < net.n_bus / 2
 
 

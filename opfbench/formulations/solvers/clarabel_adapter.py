@@ -23,8 +23,8 @@ buses; the parameter-free compile is linear in the problem size.
 Bound screening. Most nonnegative rows are variable bounds a·x_j ≤ b_r (a single nonzero:
 v within its limits, DER Q within ±its limit), and at an optimum only a few are active. A
 screened program keeps the zero, other nonnegative and SOC rows, writes a set S of bound
-rows as equalities and drops the other bounds: fewer rows and barrier terms (paper33,
-paper day, k = 0: 9.4 instead of 12.3 Clarabel iterations, each cheaper). Its solution
+rows as equalities and drops the other bounds: fewer rows and barrier terms (fewer Clarabel
+iterations, each cheaper; `python -m opfbench.bench opf` times it). Its solution
 (x, z) answers the full program when every dropped bound holds with slack ≥ MARGIN and every bound in S
 has multiplier z_r ≥ MARGIN: then x is feasible, and z with zeros on the dropped rows is
 dual feasible, for the full program, so x is its optimum and the screened dual objective
@@ -66,16 +66,14 @@ def relaxation_settings() -> clarabel.DefaultSettings:
     settings.verbose = False
     settings.max_iter = MAX_ITER
     settings.tol_gap_abs = settings.tol_gap_rel = settings.tol_feas = TOLERANCE
-    # Iterative refinement roughly doubles the solve time on the paper day (paper33) for
-    # objectives within 2e-6 kW; one thread and QDLDL (deterministic, no thread pool on tiny
-    # KKT systems) are faster again (`python -m opfbench.bench opf` times the result).
+    # Iterative refinement costs solve time for objectives within the tolerance; one thread
+    # and QDLDL (deterministic, no thread pool on tiny KKT systems) are faster again
+    # (`python -m opfbench.bench opf` times the result).
     settings.iterative_refinement_enable = False
     settings.max_threads = 1
     settings.direct_solve_method = "qdldl"
-    # Mean Clarabel iterations per answer on the paper day at k = 0 / 0.4 (screened, as
-    # solved), step fraction 0.99 (Clarabel's default) → 0.98: paper33 10.5 → 9.4 / 11.1 →
-    # 8.9, case69-der 9.9 → 9.5 / 10.1 → 9.7, case141-der 9.5 → 9.9 / 9.4 → 9.5, feeder1k
-    # (every 20th step) 11.1 → 9.9 / 10.7 → 10.1; 0.97: more again.
+    # A step fraction of 0.98 instead of Clarabel's 0.99 takes fewer iterations per answer on
+    # the shipped feeders' paper day (0.97: more again); `bench opf` counts them.
     settings.max_step_fraction = 0.98
     return settings
 
