@@ -35,6 +35,19 @@ def _measurements(v: np.ndarray | None = None, p: np.ndarray | None = None, rati
     )
 
 
+def _measured_v(net, pf) -> Measurements:
+    """One snapshot's |V| at the DER buses of `net` as a rule measures it (from the flow `pf`)."""
+    return Measurements(
+        frozenset({"v"}),
+        {"v_pu": pf.vm[net.der_bus][None, :]},
+        1,
+        net.der_s_mva,
+        net.der_rating_mw,
+        np.array(net.der_kinds),
+        np.ones((len(net.der_bus), 1), bool),
+    )
+
+
 def test_volt_var_category_b_and_a_are_the_ieee_1547_curves_flat_beyond_the_ends():
     v = np.array([[0.85, 0.92], [0.95, 0.98], [1.0, 1.05], [1.08, 1.2]])
     q = standards.volt_var(_measurements(v=v), curve="b") / 0.6  # p.u. of S̄ = 0.6 MVA
@@ -110,15 +123,7 @@ def test_closed_loop_steady_state_is_a_fixed_point_of_an_independent_power_flow(
     limit = reactive_limit(scenario, 0.2)
     for s in range(3):
         pf = solve_pf(net, scenario.injections(res.q_mvar)[s])
-        m = Measurements(
-            frozenset({"v"}),
-            {"v_pu": pf.vm[net.der_bus][None, :]},
-            1,
-            net.der_s_mva,
-            net.der_rating_mw,
-            np.array(net.der_kinds),
-            np.ones((5, 1), bool),
-        )
+        m = _measured_v(net, pf)
         rule = {
             o: v
             for o, v in config.options().items()
@@ -219,15 +224,7 @@ def test_active_and_reactive_power_settle_to_a_fixed_point_of_an_independent_pow
     p = scenario.der_p_mw - res.curtailed_mw
     for s in range(2):
         pf = solve_pf(net, scenario.injections(res.q_mvar, p)[s])
-        m = Measurements(
-            frozenset({"v"}),
-            {"v_pu": pf.vm[net.der_bus][None, :]},
-            1,
-            net.der_s_mva,
-            net.der_rating_mw,
-            np.array(net.der_kinds),
-            np.ones((5, 1), bool),
-        )
+        m = _measured_v(net, pf)
         asked = rule(m, **own)
         asked = asked if isinstance(asked, Targets) else Targets(asked)
         q, p_wanted = capability.setpoints(np.array([s]), asked.q_mvar, asked.p_max_mw)
