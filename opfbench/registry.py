@@ -255,6 +255,7 @@ class StrategySpec:
     relaxation: bool = False
     source: str = "opfbench"
     fit: str | Callable | None = None
+    snapshot_wise: bool = False
 
     def __post_init__(self) -> None:
         if (self.runner is None) == (self.rule is None):
@@ -333,6 +334,7 @@ class StrategySpec:
             "learned": self.learned,
             "uses_forecast": self.uses_forecast,
             "lower_bound": self.bound_rank is not None,
+            "snapshot_wise": self.snapshot_wise,
             "supports": list(self.supports),
             "options": [o.describe() for o in self.options],
             "fixed": {k: v for k, v in self.fixed.items()},
@@ -444,11 +446,12 @@ def _builtin() -> tuple[StrategySpec, ...]:
             check=f"{learned}:check_{family}",
             columns=CLOSED_LOOP_COLUMNS,
             fit=f"{learned}:fit_configuration",
+            snapshot_wise=True,
         )
 
     check = "opfbench.formulations.problem:check_supported"
     return (
-        StrategySpec("no-action", "local", "every DER at Q = 0", rule=f"{paper}:no_action_target"),
+        StrategySpec("no-action", "local", "every DER at Q = 0", rule=f"{paper}:no_action_target", snapshot_wise=True),
         StrategySpec(
             "llma",
             "local",
@@ -457,6 +460,7 @@ def _builtin() -> tuple[StrategySpec, ...]:
             reads=("load",),
             options=(SAFE,),
             uses_forecast=True,
+            snapshot_wise=True,
         ),
         StrategySpec(
             "lfma",
@@ -466,6 +470,7 @@ def _builtin() -> tuple[StrategySpec, ...]:
             reads=("load", "flows"),
             options=(SAFE,),
             uses_forecast=True,
+            snapshot_wise=True,
         ),
         StrategySpec(
             "volt-var",
@@ -478,6 +483,7 @@ def _builtin() -> tuple[StrategySpec, ...]:
             uses_forecast=True,
             check=f"{std}:check_volt_var",
             columns=CLOSED_LOOP_COLUMNS,
+            snapshot_wise=True,
         ),
         StrategySpec(
             "watt-var",
@@ -488,6 +494,7 @@ def _builtin() -> tuple[StrategySpec, ...]:
             options=(curve, *points("p", "P/P̄"), SAFE),
             uses_forecast=True,
             check=f"{std}:check_watt_var",
+            snapshot_wise=True,
         ),
         StrategySpec(
             "const-pf",
@@ -502,6 +509,7 @@ def _builtin() -> tuple[StrategySpec, ...]:
             ),
             uses_forecast=True,
             check=f"{std}:check_const_pf",
+            snapshot_wise=True,
         ),
         StrategySpec(
             "cosphi-p",
@@ -516,6 +524,7 @@ def _builtin() -> tuple[StrategySpec, ...]:
             ),
             uses_forecast=True,
             check=f"{std}:check_cosphi_p",
+            snapshot_wise=True,
         ),
         StrategySpec(
             "q-u",
@@ -532,6 +541,7 @@ def _builtin() -> tuple[StrategySpec, ...]:
             uses_forecast=True,
             check=f"{std}:check_q_u",
             columns=CLOSED_LOOP_COLUMNS,
+            snapshot_wise=True,
         ),
         learned_rule(
             "learned-affine",
@@ -583,6 +593,7 @@ def _builtin() -> tuple[StrategySpec, ...]:
             bound_rank=0,
             network_check=check,
             relaxation=True,
+            snapshot_wise=True,
         ),
     )
 

@@ -107,6 +107,30 @@ class StrategyResult:
     def n_snapshots(self) -> int:
         return self.q_mvar.shape[0]
 
+    def take(self, rows: np.ndarray, wall_ms: float) -> "StrategyResult":
+        """The result of the snapshots `rows` (extra arrays of length S taken likewise, the
+        other extra values kept), with wall time `wall_ms`."""
+        n = self.n_snapshots
+
+        def part(value: object) -> object:
+            return value[rows] if isinstance(value, np.ndarray) and value.ndim and value.shape[0] == n else value
+
+        lower = None if self.lower_bound_kw is None else self.lower_bound_kw[rows]
+        return StrategyResult(
+            self.strategy,
+            self.k,
+            self.net,
+            self.q_mvar[rows],
+            self.losses_kw[rows],
+            self.vm[rows],
+            self.status[rows],
+            self.power_flows[rows],
+            float(wall_ms),
+            self.excursion_mvar[rows],
+            lower,
+            {key: part(value) for key, value in self.extra.items()},
+        )
+
     @property
     def vmin(self) -> np.ndarray:
         return self.vm.min(axis=1)

@@ -4,9 +4,13 @@ A task is (case, forecast, k, chunk of steps) and runs every requested strategy 
 night mode of that group. `acopf`, `acopf-paper` and `socp` share SOCP solves, and the
 night modes — which differ only in the night hours, so their daytime snapshots are the
 same problems — solve each once: the formulations' solve cache is keyed on the data
-(`formulations.relaxation`), whatever Scenario objects carry it; and where two
-night modes give the very same scenario (no PV output in the night hours of the chunk), the
-second takes the first's results (`Scenario.same_data`) with its wall time 0. Its input
+(`formulations.relaxation`), whatever Scenario objects carry it; a snapshot-wise strategy
+(`StrategySpec.snapshot_wise`: every local rule, the SOCP) runs once on the distinct
+snapshots of the night modes (`scenarios.SharedSnapshots`: by day, and at night where the
+PV units produce nothing, the modes' snapshots are the same) and each mode takes its rows,
+charged the wall time of the snapshots it brought; and where two night modes give the very
+same scenario (no PV output in the night hours of the chunk), the second takes the first's
+results (`Scenario.same_data`) with its wall time 0. Its input
 carries its slice of the period's profiles, so it runs the same in this process, in a
 local worker process or on a remote Dask worker; the AC OPF starts cold at each chunk and
 warm-starts inside it — the same whatever the number of workers.
@@ -30,7 +34,7 @@ from opfbench.study.config import StudyConfig
 from opfbench.study.engine import Task, TaskOutput
 from opfbench.study.fitted import Fitted
 from opfbench.study.periods import Period
-from opfbench.study.scenarios import chunk_scenario
+from opfbench.study.scenarios import SharedSnapshots, chunk_scenario
 from opfbench.study.tables import (
     DETAIL_COLUMNS,
     Columns,
@@ -167,8 +171,9 @@ def fitted_options(fitted: tuple[Fitted, ...]) -> dict[str, dict[str, OptionValu
 
 
 def run_task(inp: TaskInput) -> TaskOutput:
-    """Run every night mode and strategy of the task, the strategies of a night mode on one
-    scenario (single-threaded BLAS, so results are bit-identical wherever it runs)."""
+    """Run every night mode and strategy of the task (the module docstring: snapshot-wise
+    strategies once on the night modes' distinct snapshots; single-threaded BLAS, so results
+    are bit-identical wherever it runs)."""
     from opfbench.io import load_case
     from opfbench.timing import elapsed_ms, now
 
@@ -182,19 +187,29 @@ def run_task(inp: TaskInput) -> TaskOutput:
     with threadpool_limits(1):
         step = pd.Timedelta(hours=inp.step_h)
         time, night = inp.profiles.index[: inp.n_steps], inp.night[: inp.n_steps]
+        scenarios = [
+            chunk_scenario(t.case, mode, t.forecast, inp.profiles, inp.night, inp.n_steps, step, inp.forecast_dir)
+            for mode in t.night_modes
+        ]
+        shared = SharedSnapshots.of(scenarios) if len(scenarios) > 1 else None
+        union: dict[str, StrategyResult] = {}  # snapshot-wise strategies, run once on `shared.union`
+
+        def result(j: int, name: str) -> StrategyResult:
+            """Strategy `name` on night mode j: its rows of the union run, or its own run."""
+            if shared is not None and configuration(name).spec.snapshot_wise:
+                if name not in union:
+                    union[name] = run_strategy(name, shared.union, t.k, settings, **overrides.get(name, {}))
+                return union[name].take(shared.rows[j], union[name].wall_ms * shared.share(j))
+            return run_strategy(name, scenarios[j], t.k, settings, **overrides.get(name, {}))
+
         steps: list[Columns] = []
         detail: dict[str, list[Columns]] = {name: [] for name in inp.detail}
         ran: list[tuple[Scenario, dict[str, StrategyResult]]] = []
-        for mode in t.night_modes:
-            scenario = chunk_scenario(t.case, mode, t.forecast, inp.profiles, inp.night, inp.n_steps, step, inp.forecast_dir)
+        for j, (mode, scenario) in enumerate(zip(t.night_modes, scenarios, strict=True)):
             same = next((results for earlier, results in ran if earlier.same_data(scenario)), None)
             results = {}
             for name in t.strategies:
-                res = results[name] = (
-                    replace(same[name], wall_ms=0.0)
-                    if same is not None
-                    else run_strategy(name, scenario, t.k, settings, **overrides.get(name, {}))
-                )
+                res = results[name] = replace(same[name], wall_ms=0.0) if same is not None else result(j, name)
                 steps.append(step_rows(t.case, mode, t.forecast, time, inp.step_h, night, res, inp.columns))
                 for table, columns in detail_rows(t.case, mode, t.forecast, time, res, inp.detail).items():
                     detail[table].append(columns)
