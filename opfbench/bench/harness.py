@@ -1,0 +1,94 @@
+"""Run one benchmark module in this process between two timings of a fixed reference
+workload, and print its figures and the workload's time as one JSON object:
+
+    python PATH/TO/harness.py NAME [the benchmark's options]
+
+`calibration_ms` is the median of the two timings (each the best of CALIBRATION_REPEATS):
+a peer measured in the same process as the benchmark, for the keys that have no peer of
+their own (`opfbench.bench.record`). Run as a script by path, it imports nothing of
+opfbench but `opfbench.bench.NAME` — so an older checkout's benchmarks run under it too
+(`python -m opfbench.bench all --tree DIR` puts DIR first on PYTHONPATH).
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import json
+import math
+import sys
+import time
+
+import numpy as np
+import scipy.sparse as sp
+from scipy.sparse.linalg import splu
+from threadpoolctl import threadpool_limits
+
+CALIBRATION_REPEATS = 5
+
+
+def _workload() -> float:
+    """The reference work (single-threaded): small complex mat-muls, a sparse LU solve and
+    a loop of Python calls — what the benchmarks' own code mixes. Returns a checksum."""
+    rng = np.random.default_rng(0)
+    z = rng.standard_normal((32, 32)) + 1j * rng.standard_normal((32, 32))
+    x = rng.standard_normal((32, 1440)) + 1j * rng.standard_normal((32, 1440))
+    total = 0.0
+    for _ in range(20):
+        x = z @ x
+        x /= np.abs(x).max()
+    n = 2000
+    lap = sp.diags([-np.ones(n - 1), 2.5 * np.ones(n), -np.ones(n - 1)], [-1, 0, 1], format="csc")
+    lu = splu(lap)
+    total += float(lu.solve(np.ones((n, 64))).sum())
+    d: dict[int, float] = {}
+    for i in range(50_000):
+        d[i % 97] = d.get(i % 97, 0.0) + math.sqrt(i)
+    return total + float(abs(x).sum()) + sum(d.values())
+
+
+def calibration_ms() -> float:
+    """Best wall time (ms) of CALIBRATION_REPEATS runs of the reference workload."""
+    best = math.inf
+    with threadpool_limits(1):
+        for _ in range(CALIBRATION_REPEATS):
+            start = time.perf_counter()
+            _workload()
+            best = min(best, (time.perf_counter() - start) * 1e3)
+    return best
+
+
+def _plain(value: object) -> object:
+    """JSON-ready: numpy → Python, NaN/inf → None, tuples → lists."""
+    if isinstance(value, np.ndarray):
+        return _plain(value.tolist())
+    if isinstance(value, np.generic):
+        return _plain(value.item())
+    if isinstance(value, float):
+        return value if math.isfinite(value) else None
+    if isinstance(value, dict):
+        return {str(k): _plain(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_plain(v) for v in value]
+    return value if value is None or isinstance(value, (bool, int, str)) else str(value)
+
+
+def main(argv: list[str]) -> int:
+    name, options = argv[0], argv[1:]
+    module = importlib.import_module(f"opfbench.bench.{name}")
+    before = calibration_ms()
+    if hasattr(module, "add_arguments"):
+        parser = argparse.ArgumentParser(prog=f"bench {name}")
+        module.add_arguments(parser)
+        figures = module.run(parser.parse_args(options))
+    else:
+        figures = module.run()
+    after = calibration_ms()
+    figures["calibration_ms"] = float(np.median([before, after]))
+    figures["calibration_ms_runs"] = [before, after]
+    print(json.dumps(_plain(figures)))
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main(sys.argv[1:]))
