@@ -7,7 +7,7 @@
 
 Each DER asks for Q = −gain·(|V| − v_ref)·S̄ MVAr (positive = injected): it injects below
 v_ref and absorbs above it, `gain` p.u. of its nameplate S̄ per p.u. of voltage. The
-engine (`opfbench.strategies.engine`) does the rest, as for every built-in rule: it clips
+engine (`opfbench.strategies.rule_engine`) does the rest, as for every built-in rule: it clips
 the target to ±(1 − k)·Qmax (PV, DFIG or inverter capability, Algorithm 3's limit under a
 forecast, "Q at night"), and — since the rule reads its own bus voltage, which its own Q
 changes — solves it for the closed-loop steady state the inverter settles to (status

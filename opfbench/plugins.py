@@ -1,4 +1,4 @@
-"""Your own local rule in one file, with no edit to opfbench.
+"""Your own local rule or formulation in one file, with no edit to opfbench.
 
 A plugin is a Python module (a file `my_rule.py`, or an installed module) that decorates
 a function of the DER's local measurements:
@@ -12,48 +12,54 @@ a function of the DER's local measurements:
         # doubled below 0.95 p.u.
         return share * m.load_q_mvar * np.where(m.v_pu < 0.95, 2.0, 1.0)
 
-The function receives `strategies.engine.Measurements` (only what `reads` declares) and
+The function receives `strategies.rules.Measurements` (only what `reads` declares) and
 the options as keywords, and returns each DER's Q target (S, n_der) in MVAr. The engine
 clips it to the usual limits (reserve k, capability, Algorithm 3, "Q at night"), and
 solves a rule that reads |V| or line flows for its closed-loop steady state. It is then a
 strategy like the built-in ones: labels with options (`my-rule:share=0.8`), every table, the
 report, `snapshot`, `run` and `fault`.
 
+A formulation model is a class decorated with `@formulation` (`formulations.model`): e.g.
+a `formulations.models.conic.ConicModel` whose `_network_model` writes its variables,
+bus mismatches, objective and constraints. It becomes a strategy of its own, run by the
+generic runner (its setpoints AC-evaluated), exactly as a built-in model under
+`opfbench/formulations/models/` (`lindistflow.py` is one; tests/test_formulation_plugin.py
+loads one from a file).
+
 Loading: `--plugin FILE.py|MODULE` (repeatable) on the commands, or the entry-point group
 `opfbench.strategies` of an installed package (loaded when a name is not known, or when
 every strategy is listed). A plugin is checked when it loads, before any work: it must
-import, register at least one strategy, have a signature that takes every declared
-option, and return finite targets of the right shape on a probe; otherwise one
+import and register at least one strategy; a rule must have a signature that takes every
+declared option and return finite targets of the right shape on a probe; otherwise one
 InputError names it. `opfbench run` records each plugin's reference and source digest in
 the run's config (a changed plugin is another configuration) and ships the source of a
 file plugin to the worker processes, which load it before running (`ensure`); a module
-plugin must be importable on the workers.
+plugin must be importable on the workers. What a plugin registered leaves the registry
+with it (`unload`) or when the process state is reset (`state.PROCESS`).
 """
 
 from __future__ import annotations
 
 import hashlib
 import importlib
-import inspect
 import re
 import sys
 import types
-from collections.abc import Callable, Iterator, Mapping, Sequence
-from contextlib import contextmanager
+from collections.abc import Sequence
 from dataclasses import dataclass
 from importlib.metadata import entry_points
 from pathlib import Path
 
-import numpy as np
-
 from opfbench.errors import InputError
-from opfbench.registry import CLOSED_LOOP_COLUMNS, SAFE, SETTLING_OPTIONS, STRATEGIES, Option, OptionValue, StrategySpec, register
+from opfbench.formulations.model import formulation
+from opfbench.registry.options import Option
+from opfbench.registry.specs import STRATEGIES, forget_source, loading
+from opfbench.state import PROCESS
+from opfbench.strategies.registration import local_rule
 
-__all__ = ["Option", "PluginSource", "ensure", "load", "load_entry_points", "loaded", "local_rule", "probe", "unload"]
-from opfbench.strategies.rules import FEEDBACK, Measurements, Rule, targets
+__all__ = ["Option", "PluginSource", "ensure", "formulation", "load", "load_entry_points", "loaded", "local_rule", "unload"]
 
 ENTRY_POINT_GROUP = "opfbench.strategies"
-_RESERVED = {o.name for o in (SAFE, *SETTLING_OPTIONS)}
 
 
 @dataclass(frozen=True)
@@ -69,120 +75,8 @@ class PluginSource:
     strategies: tuple[str, ...]
 
 
-_loaded: dict[str, PluginSource] = {}
-_loading: list[str] = []
-_entry_points_loaded = False
-
-
-@contextmanager
-def _as_source(ref: str) -> Iterator[None]:
-    _loading.append(ref)
-    try:
-        yield
-    finally:
-        _loading.pop()
-
-
-def local_rule(
-    name: str,
-    *,
-    reads: Sequence[str],
-    options: Mapping[str, OptionValue | Option] | None = None,
-    summary: str = "",
-    columns: Mapping[str, str] | None = None,
-) -> Callable[[Callable], Callable]:
-    """Register the decorated function `target(m, **options) -> (S, n_der)` MVAr as the
-    local rule `name` (see the module docstring). `options`: name → default (bool, int,
-    float, str or a tuple of floats; the default's type is the option's) or an `Option`.
-    The rule reads a forecast (its limit is Algorithm 3's), so it takes `safe`; a rule of
-    |V| or flows also takes the engine's settling options. InputError for a bad name,
-    reads, option or signature, or targets of the wrong shape or not finite on a probe."""
-
-    def decorate(target: Callable) -> Callable:
-        source = _loading[-1] if _loading else getattr(target, "__module__", "plugin")
-        declared = tuple(_option(key, value, name) for key, value in (options or {}).items())
-        closed = bool(FEEDBACK & set(reads))
-        spec = StrategySpec(
-            name,
-            "local",
-            summary or (inspect.getdoc(target) or f"local rule {name}").splitlines()[0],
-            rule=target,
-            reads=tuple(reads),
-            options=(*declared, SAFE, *(SETTLING_OPTIONS if closed else ())),
-            uses_forecast=True,
-            columns=dict(CLOSED_LOOP_COLUMNS if closed else {}) | dict(columns or {}),
-            source=source,
-        )
-        _check_signature(spec, target, declared)
-        probe(spec)
-        register(spec)
-        return target
-
-    return decorate
-
-
-def _option(key: str, value: OptionValue | Option, rule: str) -> Option:
-    if not key.isidentifier():
-        raise InputError(f"rule {rule!r}: option name {key!r} must be a Python identifier")
-    if key in _RESERVED:
-        raise InputError(f"rule {rule!r}: option name {key!r} is the engine's ({', '.join(sorted(_RESERVED))})")
-    if isinstance(value, Option):
-        return value
-    if not isinstance(value, (bool, int, float, str, tuple)):
-        raise InputError(f"rule {rule!r}: option {key} has default {value!r}; use a bool, int, float, str or tuple of floats")
-    return Option(key, tuple(float(v) for v in value) if isinstance(value, tuple) else value, f"option of {rule}")
-
-
-def _check_signature(spec: StrategySpec, target: Callable, declared: tuple[Option, ...]) -> None:
-    """The target takes the measurements first, and every declared option by keyword."""
-    try:
-        params = list(inspect.signature(target).parameters.values())
-    except (TypeError, ValueError):
-        raise InputError(f"rule {spec.name!r}: {target!r} is not a function with a signature") from None
-    positional = (inspect.Parameter.POSITIONAL_ONLY, inspect.Parameter.POSITIONAL_OR_KEYWORD)
-    if not params or params[0].kind not in positional:
-        raise InputError(
-            f"rule {spec.name!r}: the function must take the measurements as its first argument, e.g. def {spec.name.replace('-', '_')}(m, ...)"
-        )
-    rest = params[1:]
-    by_kw = any(p.kind is inspect.Parameter.VAR_KEYWORD for p in rest)
-    names = {p.name for p in rest if p.kind is not inspect.Parameter.VAR_POSITIONAL}
-    missing = [o.name for o in declared if o.name not in names and not by_kw]
-    if missing:
-        raise InputError(f"rule {spec.name!r}: the function takes no argument {', '.join(missing)} for its declared option(s)")
-    extra = [
-        p.name
-        for p in rest
-        if p.default is inspect.Parameter.empty
-        and p.name not in {o.name for o in declared}
-        and p.kind not in (inspect.Parameter.VAR_KEYWORD, inspect.Parameter.VAR_POSITIONAL)
-    ]
-    if extra:
-        raise InputError(f"rule {spec.name!r}: the function's argument(s) {', '.join(extra)} are neither options nor defaulted")
-
-
-def probe(spec: StrategySpec) -> None:
-    """Call a rule on made-up measurements (3 snapshots, 2 DER: |V| 0.9–1.1 p.u., P at
-    0–100 % of rating, loads and line flows of both signs) with its default options:
-    InputError unless it returns finite targets shaped (3, 2)."""
-    n_rows, rating = 3, np.array([0.6, 0.5])
-    values = {
-        "v_pu": np.array([[0.95, 1.0], [1.02, 1.05], [0.9, 1.1]]),
-        "p_mw": np.array([[0.0, 0.25], [0.3, 0.5], [0.6, 0.1]]),
-        "p_forecast_mw": np.array([[0.1, 0.2], [0.3, 0.5], [0.5, 0.2]]),
-        "load_p_mw": np.array([[0.1, 0.06], [0.2, 0.0], [0.05, 0.1]]),
-        "load_q_mvar": np.array([[0.06, -0.02], [0.1, 0.0], [0.03, 0.05]]),
-        "line_mva": np.array([[[-0.2 - 0.1j, 0.1 + 0.05j]] * 2] * n_rows),
-    }
-    m = Measurements(frozenset(spec.reads), values, n_rows, rating, rating, np.array(["PV", "DFIG"]), np.ones((2, 2), dtype=bool))
-    rule = Rule(spec.name, spec.rule, frozenset(spec.reads))  # type: ignore[arg-type]
-    options = {o.name: o.default for o in spec.options if o.name not in _RESERVED}
-    out = targets(rule, m, options, n_rows)
-    if not np.all(np.isfinite(out)):
-        raise InputError(
-            f"rule {spec.name!r} returned NaN or inf on a probe (|V| 0.9–1.1 p.u., P 0–100 % of rating, default "
-            "options); a rule must give a finite Q target for every DER"
-        )
+_loaded: dict[str, PluginSource] = PROCESS.table("plugins")
+_entry_points: dict[str, bool] = PROCESS.table("entry points loaded")
 
 
 def _digest(text: str | bytes) -> str:
@@ -203,7 +97,7 @@ def _exec_text(ref: str, text: str, filename: str) -> str:
     module.__file__ = filename
     sys.modules[module_name] = module
     try:
-        with _as_source(ref):
+        with loading(ref):
             exec(compile(text, filename, "exec"), module.__dict__)
     except BaseException:
         sys.modules.pop(module_name, None)
@@ -227,19 +121,21 @@ def load(ref: str) -> PluginSource:
                 raise InputError(f"plugin {ref}: cannot read it ({exc})") from None
             module, digest = _exec_text(ref, text, str(path.resolve())), _digest(text)
         else:
-            with _as_source(ref):
+            with loading(ref):
                 imported = importlib.import_module(ref)
             module, text, digest = ref, None, _file_digest(imported)
     except Exception as exc:  # nothing of a plugin that fails half-way stays registered
-        for name in [n for n, s in STRATEGIES.items() if s.source == ref]:
-            del STRATEGIES[name]
+        forget_source(ref)
         if isinstance(exc, InputError):
             message = str(exc)
             raise InputError(message if message.startswith(f"plugin {ref}") else f"plugin {ref}: {message}") from None
         raise InputError(f"plugin {ref}: cannot import it ({type(exc).__name__}: {exc})") from None
     names = tuple(n for n, s in STRATEGIES.items() if s.source == ref)
     if not names:
-        raise InputError(f"plugin {ref} registers no strategy: decorate a function with @opfbench.plugins.local_rule(...)")
+        raise InputError(
+            f"plugin {ref} registers no strategy: decorate a function with @opfbench.plugins.local_rule(...) "
+            "or a model class with @opfbench.plugins.formulation(...)"
+        )
     _loaded[ref] = PluginSource(ref, module, digest, text if _is_path(ref) else None, names)
     return _loaded[ref]
 
@@ -268,12 +164,11 @@ def ensure(sources: Sequence[PluginSource]) -> None:
 
 
 def unload(ref: str) -> None:
-    """Forget the plugin `ref`: its strategies leave the registry (a notebook reloading an
-    edited plugin, or a test cleaning up)."""
-    for name in [n for n, s in STRATEGIES.items() if s.source == ref]:
-        del STRATEGIES[name]
+    """Forget the plugin `ref`: its strategies and models leave the registry (a notebook
+    reloading an edited plugin, a study ending, a test cleaning up)."""
+    forget_source(ref)
     source = _loaded.pop(ref, None)
-    if source is not None and source.text is not None:  # a file plugin's module: loaded anew next time
+    if source is not None:  # its module runs (and registers) anew when loaded next time
         sys.modules.pop(source.module, None)
 
 
@@ -288,13 +183,23 @@ def source_of(strategy_source: str) -> PluginSource | None:
 
 
 def load_entry_points() -> None:
-    """Load every plugin of the `opfbench.strategies` entry-point group, once per process."""
-    global _entry_points_loaded
-    if _entry_points_loaded:
+    """Load every plugin of the `opfbench.strategies` entry-point group, once per process
+    state (`state.PROCESS.reset` forgets them)."""
+    if _entry_points:
         return
-    _entry_points_loaded = True
+    _entry_points[ENTRY_POINT_GROUP] = True
     for ep in entry_points(group=ENTRY_POINT_GROUP):
         try:
             load(ep.module)
         except InputError as exc:
             raise InputError(f"entry point {ep.name} = {ep.value} ({ENTRY_POINT_GROUP}): {exc}") from None
+
+
+def _unload_all() -> None:
+    """Every loaded plugin unloaded, entry points to be loaded again on need."""
+    for ref in list(_loaded):
+        unload(ref)
+    _entry_points.clear()
+
+
+PROCESS.on_reset("plugins", _unload_all)

@@ -41,6 +41,65 @@ STATUSES = (
 )
 
 
+# ----- where a formulation's setpoints come from (SolverRecord.fallback) --------------------
+FROM_SOLVER = "none"  # the model's own solution
+FROM_COLD = "cold"  # IPOPT started cold after the warm start failed
+FROM_SOCP = "socp"  # the relaxation's setpoints
+FROM_NO_ACTION = "no-action"  # Q = 0
+# ----- which solver proved the point the AC optimum (SolverRecord.certified_by; "" = none) ----
+CERTIFIED_BY_SOCP = "socp"  # AC-feasible and within the relaxation's bound (the fast path)
+CERTIFIED_BY_IPOPT = "ipopt"  # IPOPT converged to it
+
+
+@dataclass(frozen=True, eq=False)
+class SolverRecord:
+    """What a formulation's solvers did at each of S snapshots — the typed diagnostics the
+    study's tables and the report read (a local rule's result has none).
+
+    model: the formulation model that answered (`formulations.model`); meaning: what its
+    objective is for the benchmark ("optimum", "bound" or "estimate"); objective_kw (S,)
+    the model's own objective where it gave one (NaN elsewhere; kW); solver_status (S,)
+    the solver's return status (attempts joined by " → "; the proof's reason where bounds
+    proved infeasibility); fallback (S,) where the setpoints come from (`FROM_*`);
+    certified_by (S,) who proved the point the AC optimum (`CERTIFIED_BY_*`, "" none);
+    solve_ms (S,) the answering solver's time, ms; iterations (S,) its iterations."""
+
+    model: str
+    meaning: str
+    objective_kw: np.ndarray
+    solver_status: np.ndarray
+    fallback: np.ndarray
+    certified_by: np.ndarray
+    solve_ms: np.ndarray
+    iterations: np.ndarray
+
+    def take(self, rows: np.ndarray) -> "SolverRecord":
+        """The record of the snapshots `rows`."""
+        return SolverRecord(
+            self.model,
+            self.meaning,
+            self.objective_kw[rows],
+            self.solver_status[rows],
+            self.fallback[rows],
+            self.certified_by[rows],
+            self.solve_ms[rows],
+            self.iterations[rows],
+        )
+
+    def snapshot(self, i: int) -> dict:
+        """Snapshot i as `StrategyResult.snapshot_json` lists it."""
+        return {
+            "model": self.model,
+            "objective": self.meaning,
+            "objective_kw": self.objective_kw[i],
+            "solver_status": str(self.solver_status[i]),
+            "fallback": str(self.fallback[i]),
+            "certified_by": str(self.certified_by[i]),
+            "solve_ms": self.solve_ms[i],
+            "iterations": int(self.iterations[i]),
+        }
+
+
 @dataclass(eq=False)
 class StrategyResult:
     """Outcome of one strategy over S snapshots.
@@ -54,8 +113,9 @@ class StrategyResult:
     capability at the current P (Algorithm 3 without `safe` can do that); lower_bound_kw
     (S,) a certified lower bound on the losses of any point meeting the strategy's limits,
     given where the strategy provides one and its own point meets them (so losses_kw ≥
-    lower_bound_kw up to solver tolerance), NaN otherwise; extra: per-strategy
-    diagnostics (arrays of length S or scalars).
+    lower_bound_kw up to solver tolerance), NaN otherwise; solver: a formulation's typed
+    diagnostics (`SolverRecord`; None for a local rule); extra: per-strategy diagnostics
+    (arrays of length S or scalars).
     """
 
     strategy: str
@@ -69,6 +129,7 @@ class StrategyResult:
     wall_ms: float
     excursion_mvar: np.ndarray
     lower_bound_kw: np.ndarray | None = None
+    solver: SolverRecord | None = None
     extra: dict = field(default_factory=dict)
 
     @classmethod
@@ -108,8 +169,8 @@ class StrategyResult:
         return self.q_mvar.shape[0]
 
     def take(self, rows: np.ndarray, wall_ms: float) -> "StrategyResult":
-        """The result of the snapshots `rows` (extra arrays of length S taken likewise, the
-        other extra values kept), with wall time `wall_ms`."""
+        """The result of the snapshots `rows` (the solver record's and the extra arrays of
+        length S taken likewise, the other extra values kept), with wall time `wall_ms`."""
         n = self.n_snapshots
 
         def part(value: object) -> object:
@@ -128,6 +189,7 @@ class StrategyResult:
             float(wall_ms),
             self.excursion_mvar[rows],
             lower,
+            None if self.solver is None else self.solver.take(rows),
             {key: part(value) for key, value in self.extra.items()},
         )
 
@@ -168,6 +230,8 @@ class StrategyResult:
         }
         if self.lower_bound_kw is not None:
             out["lower_bound_kw"] = self.lower_bound_kw[i]
+        if self.solver is not None:
+            out |= self.solver.snapshot(i)
         for key, value in self.extra.items():
             out[key] = value[i] if isinstance(value, np.ndarray) and value.ndim else value
         return json_safe(out)  # type: ignore[return-value]

@@ -32,12 +32,16 @@ def isolated_registry() -> Iterator[None]:
     """Plugins loaded inside the test are forgotten after it: the registry's entries and
     the loaded-plugin list are restored (every plugin registers into the one registry)."""
     from opfbench import plugins
-    from opfbench.registry import STRATEGIES
+    from opfbench.registry.catalog import specs
+    from opfbench.registry.specs import MODELS, STRATEGIES
 
-    entries, before = dict(STRATEGIES), {p.ref for p in plugins.loaded()}
+    specs()  # the built-ins loaded (on first need) before the registry is taken
+    entries, models, before = dict(STRATEGIES), dict(MODELS), {p.ref for p in plugins.loaded()}
     yield
     for source in plugins.loaded():
         if source.ref not in before:
             plugins.unload(source.ref)
     STRATEGIES.clear()
     STRATEGIES.update(entries)
+    MODELS.clear()
+    MODELS.update(models)

@@ -11,13 +11,13 @@ import pytest
 import opfbench.bench.local as bench_local
 import opfbench.bench.opf as bench_opf
 import opfbench.bench.pf as bench_pf
+from opfbench.bench.paper_day import paper_day_scenario
 from opfbench.bench.pf_large import measure, scaling
-from opfbench.bench.profiles import paper_day_scenario
 from opfbench.errors import InputError, NetworkError
 from opfbench.io import load_network
 from opfbench.io.matpower import load_case_file
 from opfbench.powerflow import bus_injections, solve_pf
-from opfbench.registry import specs
+from opfbench.registry.catalog import specs
 from tests.support.matpower_texts import CASE4_PV
 
 PF_KEYS = {

@@ -10,9 +10,10 @@ import json
 import pandas as pd
 import pytest
 
+from opfbench import schema
 from opfbench.cli import main
-from opfbench.study.tables import extra_columns
-from tests.support.contracts import check_folder, check_json, check_table, parse
+from opfbench.study.run_tables import extra_columns
+from tests.support.contracts import DOC, check_folder, check_json, check_table, parse
 from tests.support.forecast_synthetic import use_tiny_synthetic
 
 CONTRACT = parse()
@@ -42,6 +43,23 @@ def test_the_page_declares_every_folder_file_and_block():
     assert {"steps.parquet", "summary.csv", "tasks/<id>.summary.parquet"} <= {f for _, f in CONTRACT.columns}
     assert set(CONTRACT.blocks) == {"timings", "model", "fault"}
     assert ("run", "manifest.json") in CONTRACT.fields and ("fault", "manifest.json") in CONTRACT.fields
+
+
+def test_the_page_and_the_schema_cannot_disagree(monkeypatch):
+    """Every table `opfbench.schema` declares is on the page exactly as the schema writes
+    it (name, type, unit, meaning, in order) — regenerate with `python -m opfbench.schema
+    docs/CONTRACTS.md` — and the check sees a declaration the page does not have."""
+    text = DOC.read_text(encoding="utf-8")
+    assert schema.contracts_page(text) == text, (
+        "docs/CONTRACTS.md differs from opfbench.schema: python -m opfbench.schema docs/CONTRACTS.md"
+    )
+    for folder, tables in schema.TABLES.items():
+        for table in tables:
+            extra = ["<extra>"] if table.extra is not None else []
+            assert [name for name, _ in CONTRACT.columns[(folder, table.file)]] == table.names + extra, table.file
+    added = schema.Table(schema.STEPS.file, (*schema.STEPS.columns, schema.Column("vuf_pct", "number", "%", "a new one")))
+    monkeypatch.setitem(schema.TABLES, "run", (added, *schema.TABLES["run"][1:]))
+    assert schema.contracts_page(text) != text
 
 
 def test_a_fresh_run_folder(run_folder):

@@ -11,7 +11,7 @@ import pytest
 from opfbench.data.bsrn import fill_bsrn_gaps, parse_bsrn_lr0100
 from opfbench.data.cleaning import check_bounds, check_finite, check_rating, check_time_index, fill_gaps_linear
 from opfbench.data.dwd_try import parse_try
-from opfbench.data.simbench import parse_simbench_profiles
+from opfbench.data.simbench_profiles import parse_simbench_profiles
 from opfbench.data.sites import PAYERNE
 from opfbench.errors import DataError
 

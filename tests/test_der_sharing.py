@@ -13,7 +13,7 @@ from opfbench.cli import main
 from opfbench.errors import NetworkError
 from opfbench.io import load_network
 from opfbench.network import DER
-from opfbench.registry import run_strategy
+from opfbench.registry.catalog import run_strategy
 from opfbench.scenario import Scenario
 
 # bus 6 of case33bw is a branch node (lines to 7 and to 26), bus 18 the main feeder's end

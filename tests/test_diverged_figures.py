@@ -15,12 +15,12 @@ import pytest
 
 from opfbench.cli import main
 from opfbench.io import load_network
-from opfbench.registry import run_strategy
+from opfbench.registry.catalog import run_strategy
 from opfbench.report.claims import NA, voltage_band
 from opfbench.report.inputs import load_inputs
 from opfbench.result import PF_DIVERGED
 from opfbench.scenario import Scenario
-from opfbench.study.tables import partial_summary, summarize
+from opfbench.study.run_tables import partial_summary, summarize
 
 CASE33 = Path(str(resources.files("opfbench.cases") / "matpower" / "case33bw.m"))
 

@@ -9,9 +9,9 @@ import pytest
 pytest.importorskip("andes")
 
 from opfbench.dynamics.andes_ref import CROSS_CHECK_PARAMS, MILD_FAULT, andes_system, mild_fault_comparison  # noqa: E402
-from opfbench.dynamics.model import build_model  # noqa: E402
+from opfbench.dynamics.rms_model import build_model  # noqa: E402
 from opfbench.io import load_network  # noqa: E402
-from opfbench.registry import run_strategy  # noqa: E402
+from opfbench.registry.catalog import run_strategy  # noqa: E402
 from opfbench.scenario import Scenario  # noqa: E402
 
 

@@ -6,13 +6,13 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from opfbench.dynamics.model import build_model, prefault_flow
 from opfbench.dynamics.motor import impedance, steady_state
 from opfbench.dynamics.params import FaultParams, ModelParams, MotorParams
+from opfbench.dynamics.rms_model import build_model, prefault_flow
 from opfbench.dynamics.simulate import simulate
 from opfbench.io import load_network
 from opfbench.powerflow import solve_pf
-from opfbench.registry import run_strategy
+from opfbench.registry.catalog import run_strategy
 from opfbench.scenario import Scenario
 
 NET = load_network("paper33")

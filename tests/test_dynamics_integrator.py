@@ -6,11 +6,11 @@ import pytest
 from scipy.integrate import solve_ivp
 from threadpoolctl import threadpool_limits
 
-from opfbench.dynamics.model import build_model
 from opfbench.dynamics.params import FaultParams, ModelParams
+from opfbench.dynamics.rms_model import build_model
 from opfbench.dynamics.simulate import recovery_ms, segments, simulate
 from opfbench.io import load_network
-from opfbench.registry import run_strategy
+from opfbench.registry.catalog import run_strategy
 from opfbench.scenario import Scenario
 
 NET = load_network("paper33")

@@ -16,7 +16,7 @@ NET = CASE.network
 
 
 def _table(config: FaultConfig, **kw) -> pd.DataFrame:
-    study = run_fault_study(config, CASE, quiet=True, **kw)
+    study = run_fault_study(config, CASE, **kw)
     assert study.timings["simulations"] == study.timings["models"] * len(config.fault_buses)
     return study.table
 

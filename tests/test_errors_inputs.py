@@ -18,6 +18,7 @@ from opfbench.cli import main
 from opfbench.errors import DataError, InputError
 from opfbench.forecasting.outputs import load_forecast
 from opfbench.io import load_network
+from opfbench.io.sources import formats
 from opfbench.scenario import Scenario
 from tests.support.matpower_texts import TINY_CASE, with_entry
 
@@ -161,7 +162,7 @@ def test_an_isolated_bus_is_refused_not_turned_into_a_load_bus(tmp_path):
 
 
 def test_strategy_options_are_type_checked(net):
-    from opfbench.registry import run_strategy
+    from opfbench.registry.catalog import run_strategy
 
     scenario = Scenario.snapshot(net)
     for name, options, message in (
@@ -302,7 +303,7 @@ def test_with_changes_refuses_an_inconsistent_network():
 def test_wrong_types_through_the_python_api_name_what_is_wrong():
     from opfbench.errors import NetworkError
     from opfbench.network import DER
-    from opfbench.registry import run_strategy
+    from opfbench.registry.catalog import run_strategy
 
     net = load_network("paper33")
     scenario = Scenario.snapshot(net)
@@ -317,7 +318,7 @@ def test_wrong_types_through_the_python_api_name_what_is_wrong():
         (
             InputError,
             lambda: load_network(None),
-            "a case is a shipped case's name, a MATPOWER .m or pandapower .json file's path or simbench:CODE, got None",
+            f"a case is {formats()}, got None",  # every format, as every help text names them
         ),
         (InputError, lambda: Scenario("paper33", np.ones(1), np.zeros((1, 5))), "scenario: net must be a Network"),
         (InputError, lambda: Scenario(net, "1", np.zeros((1, 5))), "scenario: load_scale must be numeric, got <U1"),

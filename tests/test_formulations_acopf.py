@@ -13,13 +13,13 @@ from opfbench.bench.opf import daily_scenario
 from opfbench.capability import qmax
 from opfbench.cli import main
 from opfbench.errors import InputError
-from opfbench.formulations import policy
-from opfbench.formulations.acopf import run_acopf
+from opfbench.formulations import runner
 from opfbench.formulations.infeasibility import SLACK_MUST_EXPORT, VOLTAGES_OUT_OF_REACH
+from opfbench.formulations.model import build_problem_model
 from opfbench.formulations.models import polar_ac
-from opfbench.formulations.models.polar_ac import AcOpf, build_acopf
+from opfbench.formulations.models.polar_ac import AcOpf
+from opfbench.formulations.opf_strategies import run_acopf, run_socp
 from opfbench.formulations.problem import VOLTAGE_TOLERANCE, snapshot_data
-from opfbench.formulations.socp import run_socp
 from opfbench.powerflow import solve_pf
 from opfbench.result import STATUSES
 from opfbench.scenario import Scenario
@@ -38,14 +38,14 @@ def test_paper33_reference_optimum(paper33, nominal):
     assert nominal.status[0] == "ok"
     assert nominal.losses_kw[0] == pytest.approx(33.23, abs=0.02)
     assert np.all(np.abs(nominal.q_mvar[0]) <= limits + 1e-12)
-    assert nominal.extra["iterations"][0] > 0 and nominal.extra["solve_ms"][0] > 0
+    assert nominal.solver.iterations[0] > 0 and nominal.solver.solve_ms[0] > 0
 
 
 def test_opf_point_is_reproduced_by_ac_power_flow(paper33, nominal):
     scenario = Scenario.snapshot(paper33, 1.0, 0.8)
     pf = solve_pf(paper33, scenario.injections(nominal.q_mvar)[0])
     assert pf.converged
-    assert float(pf.losses_kw) == pytest.approx(nominal.extra["objective_kw"][0], abs=1e-3)
+    assert float(pf.losses_kw) == pytest.approx(nominal.solver.objective_kw[0], abs=1e-3)
     assert np.all(pf.vm >= paper33.vmin - VOLTAGE_TOLERANCE)
     assert np.all(pf.vm <= paper33.vmax + VOLTAGE_TOLERANCE)
     assert nominal.extra["ac_feasible"][0]
@@ -77,24 +77,24 @@ def test_voltage_band_too_tight_is_infeasible(paper33, policy):
     scenario = Scenario.snapshot(tight, 1.2, 0.5)
     res = run_acopf(scenario, 0.0, fallback=policy)
     assert res.status[0] == "infeasible"
-    assert res.extra["fallback"][0] == "no-action"
+    assert res.solver.fallback[0] == "no-action"
     # the interval bounds prove it before the relaxation is solved (`infeasibility`)
-    assert res.extra["solver_status"][0] == VOLTAGES_OUT_OF_REACH and res.extra["socp_status"][0] == ""
+    assert res.solver.solver_status[0] == VOLTAGES_OUT_OF_REACH and res.extra["socp_status"][0] == ""
     assert np.all(res.q_mvar == 0) and np.isfinite(res.losses_kw[0])  # no action's losses, labelled
     assert not res.extra["ac_feasible"][0]
     ipopt = run_acopf(scenario, 0.0, fallback=policy, solver="ipopt")  # every step solved: the relaxation proves it too
     assert ipopt.status[0] == "infeasible" and ipopt.extra["socp_status"][0] == "PrimalInfeasible"
-    assert "Infeasible" in ipopt.extra["solver_status"][0]
+    assert "Infeasible" in ipopt.solver.solver_status[0]
     np.testing.assert_array_equal(ipopt.losses_kw, res.losses_kw)
 
 
 def test_reverse_flow_without_slack_export_is_infeasible(paper33):
     scenario = Scenario.snapshot(paper33, 0.2, 1.0)
     proven = run_acopf(scenario, 0.0, slack_export=False)  # the interval bounds prove it (`infeasibility`)
-    assert proven.status[0] == "infeasible" and proven.extra["solver_status"][0] == SLACK_MUST_EXPORT
+    assert proven.status[0] == "infeasible" and proven.solver.solver_status[0] == SLACK_MUST_EXPORT
     res = run_acopf(scenario, 0.0, slack_export=False, solver="ipopt")
     assert res.status[0] == "infeasible"
-    assert res.extra["fallback"][0] == "no-action"
+    assert res.solver.fallback[0] == "no-action"
     assert not res.extra["ac_feasible"][0]
     np.testing.assert_array_equal(proven.losses_kw, res.losses_kw)
     # The relaxation is feasible but only by inventing losses (not exact): its bound
@@ -128,29 +128,29 @@ class _Failing:
 
 
 def _with_failing(monkeypatch, net, fail_cold):
-    real = build_acopf(net, True)
-    monkeypatch.setattr(policy, "ac_opf", lambda *_: _Failing(real, fail_cold))
+    real = build_problem_model("exact", net, True)
+    monkeypatch.setattr(runner, "built", lambda *_: _Failing(real, fail_cold))
 
 
 def test_chain_recovers_from_warm_failure_with_cold_start(paper33, monkeypatch):
     _with_failing(monkeypatch, paper33, fail_cold=False)
     res = run_acopf(daily_scenario(paper33, 4), 0.0, solver="ipopt")
     assert list(res.status) == ["ok", "fallback-cold", "fallback-cold", "fallback-cold"]
-    assert list(res.extra["fallback"]) == ["none", "cold", "cold", "cold"]
+    assert list(res.solver.fallback) == ["none", "cold", "cold", "cold"]
     assert list(res.extra["warm_start"]) == [False, True, True, True]
-    assert res.extra["solver_status"][1] == "Maximum_Iterations_Exceeded → Solve_Succeeded"
+    assert res.solver.solver_status[1] == "Maximum_Iterations_Exceeded → Solve_Succeeded"
 
 
 def test_chain_falls_back_to_socp_then_paper_to_no_action(paper33, monkeypatch, nominal):
     _with_failing(monkeypatch, paper33, fail_cold=True)
     scenario = Scenario.snapshot(paper33, 1.0, 0.8)
     chain = run_acopf(scenario, 0.0, solver="ipopt")
-    assert chain.status[0] == "fallback-socp" and chain.extra["fallback"][0] == "socp"
+    assert chain.status[0] == "fallback-socp" and chain.solver.fallback[0] == "socp"
     socp = run_socp(scenario, 0.0)
     np.testing.assert_allclose(chain.q_mvar, socp.q_mvar)
     assert chain.losses_kw[0] == pytest.approx(nominal.losses_kw[0], rel=1e-5)  # exact relaxation
     paper = run_acopf(scenario, 0.0, fallback="paper", solver="ipopt")
-    assert paper.status[0] == "fallback-no-action" and paper.extra["fallback"][0] == "no-action"
+    assert paper.status[0] == "fallback-no-action" and paper.solver.fallback[0] == "no-action"
     assert np.all(paper.q_mvar == 0) and paper.losses_kw[0] > nominal.losses_kw[0] + 1
 
 
@@ -158,9 +158,9 @@ def test_mx_and_sx_models_agree(paper33, monkeypatch):
     """The NLP in CasADi MX (large feeders) is the SX one's: same optimum and setpoints."""
     scenario = daily_scenario(paper33, 4)
     data = snapshot_data(scenario, 0.3)
-    sx = build_acopf(paper33)
+    sx = build_problem_model("exact", paper33)
     monkeypatch.setattr(polar_ac, "MX_MIN_BUSES", 0)
-    mx = build_acopf(paper33)
+    mx = build_problem_model("exact", paper33)
     assert isinstance(mx.ipopt.nlp["x"], ca.MX) and isinstance(sx.ipopt.nlp["x"], ca.SX)
     for i in range(4):
         a, b = (o.solve(data.s_fixed[i], data.q_limit[i]) for o in (sx, mx))
@@ -173,7 +173,7 @@ def test_warm_start_saves_iterations(paper33):
     """Warm vs cold IPOPT over a smooth day (figures in the report; bench for 200)."""
     scenario = daily_scenario(paper33, 48)
     data = snapshot_data(scenario, 0.0)
-    opf = build_acopf(paper33)
+    opf = build_problem_model("exact", paper33)
     warm, start = [], opf.solve(data.s_fixed[0], data.q_limit[0])
     for i in range(1, 48):
         start = opf.solve(data.s_fixed[i], data.q_limit[i], start)
@@ -191,9 +191,9 @@ def test_sequence_run_records_every_solve(paper33):
     assert set(res.status) <= set(STATUSES)
     assert list(res.status) == ["ok"] * 12
     assert list(res.extra["warm_start"]) == [False] + [True] * 11
-    assert np.all(res.extra["iterations"] > 0) and np.all(res.extra["solve_ms"] > 0)
+    assert np.all(res.solver.iterations > 0) and np.all(res.solver.solve_ms > 0)
     assert np.all(res.extra["ac_feasible"])
-    np.testing.assert_allclose(res.losses_kw, res.extra["objective_kw"], atol=1e-3)
+    np.testing.assert_allclose(res.losses_kw, res.solver.objective_kw, atol=1e-3)
 
 
 def test_snapshot_cli_json_has_solver_fields(capsys):

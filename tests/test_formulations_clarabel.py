@@ -49,3 +49,36 @@ def test_values_read_at_those_columns_are_cvxpys_own(theta_value):
 def test_a_cvxpy_without_the_internal_fails_loudly():
     with pytest.raises(RuntimeError, match=r"var_id_to_col.*pinned in opfbench's pyproject.toml"):
         variable_columns({"A": None})
+
+
+def _quadratic() -> tuple[cp.Problem, cp.Variable, cp.Variable]:
+    """min ‖x − c‖² + x₀·x₁ terms (a full P) + 3  s.t.  x ≥ θ (data), Σx ≤ 4, x ≤ 2: the
+    optimum moves with θ wherever a bound binds, so a zero P gives another answer."""
+    theta, x = cp.Variable(3, name="theta"), cp.Variable(3, name="x")
+    weight = np.array([[2.0, 0.5, 0.0], [0.5, 1.0, 0.2], [0.0, 0.2, 3.0]])
+    objective = cp.quad_form(x, weight) - np.array([1.0, -2.0, 4.0]) @ x + 3.0
+    return cp.Problem(cp.Minimize(objective), [x >= theta, cp.sum(x) <= 4, x <= 2]), theta, x
+
+
+@pytest.mark.parametrize("screening", [True, False])
+def test_a_quadratic_objective_is_solved_as_cvxpy_solves_it(screening):
+    """The P matrix reaches Clarabel (issue 28: a zero P returned a wrong optimum silently),
+    the objective's constant is reported, and bound screening keeps the answer."""
+    problem, theta, x = _quadratic()
+    program = ParametricConeProgram(problem, (theta,), relaxation_settings(), screening=screening)
+    thetas = np.array([[0.0, -1.0, 0.0], [0.6, 0.3, 1.0], [-1.0, -1.0, -1.0], [0.6, 0.3, 1.0]])
+    for b, theta_value in zip(program.offsets(thetas), thetas, strict=True):
+        answer = program.solve(b)
+        pinned = cp.Problem(problem.objective, problem.constraints + [theta == theta_value])
+        pinned.solve(solver=cp.CLARABEL)
+        assert answer.solved
+        np.testing.assert_allclose(program.reader(answer.x)(x), x.value, atol=1e-6)
+        assert answer.primal == pytest.approx(pinned.value, abs=1e-6) and answer.dual == pytest.approx(pinned.value, abs=1e-6)
+
+
+def test_a_data_variable_in_the_objective_is_refused():
+    """A term of θ itself in c or P would make a solve depend on θ beyond the offsets."""
+    theta, x = cp.Variable(2, name="theta"), cp.Variable(2, name="x")
+    for objective in (cp.sum_squares(x) + cp.sum_squares(theta), cp.quad_form(theta, np.eye(2)), cp.sum(x) + theta[0]):
+        with pytest.raises(ValueError, match="data variables must not enter the objective"):
+            ParametricConeProgram(cp.Problem(cp.Minimize(objective), [x >= theta]), (theta,), relaxation_settings())

@@ -8,9 +8,9 @@ import numpy as np
 import pytest
 
 from opfbench.errors import InputError
-from opfbench.formulations.acopf import run_acopf
+from opfbench.formulations.opf_strategies import run_acopf
 from opfbench.io import load_network
-from opfbench.registry import run_strategy
+from opfbench.registry.catalog import run_strategy
 from opfbench.result import StrategyResult
 from opfbench.scenario import Scenario
 from tests.support.dominance import opf_dominance

@@ -8,19 +8,18 @@ import numpy as np
 import pytest
 
 from opfbench.errors import InputError, NetworkError
-from opfbench.formulations import acopf as acopf_module
-from opfbench.formulations import relaxation as relaxation_module
-from opfbench.formulations.acopf import run_acopf
-from opfbench.formulations.cache import EXACT_KEY_BYTES, PER_THREAD, SolveCache, per_thread
+from opfbench.formulations import runner as acopf_module
+from opfbench.formulations import solves as relaxation_module
 from opfbench.formulations.infeasibility import VOLTAGES_OUT_OF_REACH
-from opfbench.formulations.models.polar_ac import ac_opf
-from opfbench.formulations.models.soc import SocpRelaxation, data_vector
+from opfbench.formulations.model import build_problem_model, built, model_for
+from opfbench.formulations.models.conic import ConicModel, data_vector
+from opfbench.formulations.opf_strategies import run_acopf, run_socp
 from opfbench.formulations.policy import CERTIFY_RTOL
 from opfbench.formulations.problem import snapshot_data
-from opfbench.formulations.relaxation import build_socp, relaxation, socp_solves
-from opfbench.formulations.socp import run_socp
+from opfbench.formulations.solver_cache import EXACT_KEY_BYTES, PER_THREAD, SolveCache, per_thread
+from opfbench.formulations.solves import relaxation_solves
 from opfbench.io import load_network
-from opfbench.registry import run_strategy
+from opfbench.registry.catalog import run_strategy
 from opfbench.scenario import Scenario
 
 
@@ -39,10 +38,10 @@ def _compare(scenario: Scenario, k: float) -> float:
     assert list(fast.status) == list(ipopt.status)
     ok = fast.status == "ok"
     np.testing.assert_allclose(fast.losses_kw[ok], ipopt.losses_kw[ok], rtol=1e-6, atol=0)
-    by = fast.extra["certified_by"]
-    assert set(by[ok]) <= {"socp", "ipopt"} and set(ipopt.extra["certified_by"][ok]) == {"ipopt"}
+    by = fast.solver.certified_by
+    assert set(by[ok]) <= {"socp", "ipopt"} and set(ipopt.solver.certified_by[ok]) == {"ipopt"}
     socp = by == "socp"
-    assert np.all(fast.extra["iterations"][socp] == 0) and np.all(fast.extra["iterations"][by == "ipopt"] > 0)
+    assert np.all(fast.solver.iterations[socp] == 0) and np.all(fast.solver.iterations[by == "ipopt"] > 0)
     assert np.all(fast.losses_kw[socp] <= fast.lower_bound_kw[socp] * (1 + CERTIFY_RTOL))
     assert np.all(fast.extra["ac_feasible"][ok])
     return float(socp.mean())
@@ -57,7 +56,7 @@ def test_fast_path_equals_ipopt_on_random_snapshots(case, n):
 @pytest.mark.slow
 @pytest.mark.parametrize("case", ["paper33", "case69-der", "case141-der"])
 def test_fast_path_equals_ipopt_on_100_random_snapshots_and_the_paper_day(case):
-    from opfbench.bench.profiles import paper_day_scenario
+    from opfbench.bench.paper_day import paper_day_scenario
 
     shares = {"random": _compare(random_snapshots(case, 100, seed=11), 0.0), "paper day": _compare(paper_day_scenario(case), 0.0)}
     print(case, "certified by the SOCP:", shares)
@@ -71,7 +70,7 @@ def test_reported_objective_never_below_the_bound():
     scenario = random_snapshots("case69-der", 15, seed=3)
     res = run_acopf(scenario, 0.3, solver="ipopt")
     tol = 5e-8 * np.abs(res.lower_bound_kw)
-    assert np.all(res.extra["objective_kw"] >= res.lower_bound_kw - tol)
+    assert np.all(res.solver.objective_kw >= res.lower_bound_kw - tol)
     assert np.all(res.losses_kw >= res.lower_bound_kw - tol)
     usable = (1 - 0.3) * scenario.qmax_mvar()
     assert np.all(np.abs(res.q_mvar) <= usable)
@@ -80,13 +79,13 @@ def test_reported_objective_never_below_the_bound():
 def _count_solves(monkeypatch) -> list:
     """Count Clarabel solves, with an empty solve cache."""
     calls = []
-    real = SocpRelaxation.solve_data
+    real = ConicModel.solve_data
 
     def counting(self, thetas):
         calls.extend([1] * len(np.atleast_2d(thetas)))
         return real(self, thetas)
 
-    monkeypatch.setattr(SocpRelaxation, "solve_data", counting)
+    monkeypatch.setattr(ConicModel, "solve_data", counting)
     relaxation_module.forget_solves()
     return calls
 
@@ -111,12 +110,12 @@ def test_a_solve_depends_on_its_data_alone():
     scenario = random_snapshots("paper33", 12, seed=3)
     data = snapshot_data(scenario, 0.3)
     thetas = data_vector(data.s_fixed, data.q_limit)
-    a, b = build_socp(scenario.net), build_socp(scenario.net)
+    a, b = build_problem_model("relaxation", scenario.net), build_problem_model("relaxation", scenario.net)
     forward = a.solve_data(thetas)  # in order, in one call
     backward = [b.solve_data(t)[0] for t in thetas[::-1]][::-1]  # one by one, in reverse
     for x, y in zip(forward, backward, strict=True):
         np.testing.assert_array_equal(x.q_pu, y.q_pu)
-        assert x.lower_bound_kw == y.lower_bound_kw and x.slack_p_pu == y.slack_p_pu
+        assert x.objective_kw == y.objective_kw and x.slack_p_pu == y.slack_p_pu
 
 
 def test_paper_slack_rule_reuses_the_unrestricted_optimum_only_where_the_slack_imports(monkeypatch):
@@ -128,40 +127,41 @@ def test_paper_slack_rule_reuses_the_unrestricted_optimum_only_where_the_slack_i
     n = 16
     scenario = Scenario(net, rng.uniform(0.1, 1.0, n), rng.uniform(0.5, 1.0, (n, len(net.ders))) * net.der_rating_mw)
     calls = _count_solves(monkeypatch)
-    free = socp_solves(scenario, 0.0, slack_export=True)
+    free = relaxation_solves(scenario, 0.0, slack_export=True)
     exporting = np.array([s.optimal and s.slack_p_pu < 0 for s in free])
     assert 0 < exporting.sum() < n
-    ruled = socp_solves(scenario, 0.0, slack_export=False)
+    ruled = relaxation_solves(scenario, 0.0, slack_export=False)
     assert len(calls) == n + exporting.sum()
     assert all((r is f) != e for r, f, e in zip(ruled, free, exporting, strict=True))
-    direct = build_socp(net, slack_export=False)
+    direct = build_problem_model("relaxation", net, slack_export=False)
     data = snapshot_data(scenario, 0.0)
     for i, r in enumerate(ruled):
         ref = direct.solve(data.s_fixed[i], data.q_limit[i])
         assert r.outcome == ref.outcome
         if ref.optimal:
-            assert r.lower_bound_kw == pytest.approx(ref.lower_bound_kw, rel=1e-6)
+            assert r.objective_kw == pytest.approx(ref.objective_kw, rel=1e-6)
             assert r.slack_p_pu >= -1e-7
 
 
 def test_paper_setup_takes_the_fast_path_unless_ipopt_is_asked_for():
     scenario = random_snapshots("paper33", 4)
     fast = run_strategy("acopf-paper", scenario, 0.0)
-    assert "socp" in set(fast.extra["certified_by"])
+    assert "socp" in set(fast.solver.certified_by)
     res = run_strategy("acopf-paper", scenario, 0.0, solver="ipopt")
-    assert np.all(res.extra["iterations"] > 0)
-    assert set(res.extra["certified_by"]) <= {"ipopt", ""}
+    assert np.all(res.solver.iterations > 0)
+    assert set(res.solver.certified_by) <= {"ipopt", ""}
 
 
 def test_solver_objects_are_not_shared_between_threads_or_callers():
     net = load_network("paper33")
-    assert build_socp(net) is not build_socp(net)
-    assert relaxation(net) is relaxation(net) and ac_opf(net) is ac_opf(net)
+    assert build_problem_model("relaxation", net) is not build_problem_model("relaxation", net)
+    relaxation, exact = model_for("relaxation", net), model_for("exact", net)
+    assert built(relaxation, net) is built(relaxation, net) and built(exact, net) is built(exact, net)
     other = {}
-    thread = threading.Thread(target=lambda: other.update(socp=relaxation(net), opf=ac_opf(net)))
+    thread = threading.Thread(target=lambda: other.update(socp=built(relaxation, net), opf=built(exact, net)))
     thread.start()
     thread.join()
-    assert other["socp"] is not relaxation(net) and other["opf"] is not ac_opf(net)
+    assert other["socp"] is not built(relaxation, net) and other["opf"] is not built(exact, net)
 
 
 @pytest.mark.parametrize("run", [run_acopf, run_socp])
@@ -203,15 +203,15 @@ def test_an_infeasible_relaxation_settles_the_step_without_ipopt(monkeypatch):
     scenario = Scenario(net, np.array([1.0, 2.0, 3.0]), np.zeros((3, len(net.ders))))
     fast = run_acopf(scenario, 1.0)
     assert list(fast.status) == ["ok", "infeasible", "infeasible"]
-    assert list(fast.extra["solver_status"][1:]) == [VOLTAGES_OUT_OF_REACH] * 2
+    assert list(fast.solver.solver_status[1:]) == [VOLTAGES_OUT_OF_REACH] * 2
     monkeypatch.setattr(acopf_module, "proven_infeasible", lambda problem, data: np.full(data.n_snapshots, "", dtype=object))
     by_socp = run_acopf(scenario, 1.0)
-    assert list(by_socp.extra["solver_status"][1:]) == ["PrimalInfeasible"] * 2
+    assert list(by_socp.solver.solver_status[1:]) == ["PrimalInfeasible"] * 2
     for res in (fast, by_socp):
         assert list(res.status) == list(fast.status) and np.array_equal(res.losses_kw, fast.losses_kw)
-        assert np.all(res.extra["iterations"][1:] == 0) and np.all(res.q_mvar[1:] == 0)
+        assert np.all(res.solver.iterations[1:] == 0) and np.all(res.q_mvar[1:] == 0)
     ipopt = run_acopf(Scenario(net, scenario.load_scale, scenario.der_p_mw), 1.0, solver="ipopt")
-    assert list(ipopt.status) == list(fast.status) and np.all(ipopt.extra["iterations"][1:] > 0)
+    assert list(ipopt.status) == list(fast.status) and np.all(ipopt.solver.iterations[1:] > 0)
 
 
 def test_the_solve_cache_is_keyed_on_the_data_and_bounded(paper33):

@@ -9,9 +9,9 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from opfbench.formulations import acopf as acopf_module
-from opfbench.formulations.acopf import run_acopf
+from opfbench.formulations import runner as acopf_module
 from opfbench.formulations.infeasibility import SLACK_MUST_EXPORT, VOLTAGES_OUT_OF_REACH, flow_bounds, proven_infeasible
+from opfbench.formulations.opf_strategies import run_acopf
 from opfbench.formulations.problem import VOLTAGE_TOLERANCE, OpfProblem, slack_p_mw, snapshot_data
 from opfbench.io import load_case, load_network
 from opfbench.powerflow import solve_pf_batch
@@ -106,8 +106,8 @@ def _same_results(fast, plain, proven) -> None:
     assert list(plain.status) == list(fast.status)
     np.testing.assert_array_equal(plain.q_mvar, fast.q_mvar)
     np.testing.assert_array_equal(plain.losses_kw, fast.losses_kw)
-    np.testing.assert_array_equal(plain.extra["iterations"][~proven], fast.extra["iterations"][~proven])
-    assert list(plain.extra["solver_status"][~proven]) == list(fast.extra["solver_status"][~proven])
+    np.testing.assert_array_equal(plain.solver.iterations[~proven], fast.solver.iterations[~proven])
+    assert list(plain.solver.solver_status[~proven]) == list(fast.solver.solver_status[~proven])
 
 
 def test_acopf_paper_with_the_proofs_equals_it_without(monkeypatch):
@@ -118,9 +118,9 @@ def test_acopf_paper_with_the_proofs_equals_it_without(monkeypatch):
     scenario = june_scenario("1-LV-rural1--0-sw", "2016-06-21T06:00", "2016-06-21T18:00")
     options = {"slack_export": False, "fallback": "paper"}
     fast = run_acopf(scenario, 0.0, **options)
-    proven = fast.extra["solver_status"] == SLACK_MUST_EXPORT
+    proven = fast.solver.solver_status == SLACK_MUST_EXPORT
     assert 0 < proven.sum() < proven.size and np.all(fast.status[proven] == "infeasible")
-    assert np.all(fast.q_mvar[proven] == 0) and np.all(fast.extra["iterations"][proven] == 0)
+    assert np.all(fast.q_mvar[proven] == 0) and np.all(fast.solver.iterations[proven] == 0)
     ipopt = run_acopf(scenario, 0.0, solver="ipopt", **options)
     assert np.all(ipopt.status[proven] == "infeasible")
     assert list(ipopt.status) == list(fast.status)
@@ -143,9 +143,9 @@ def test_a_voltage_limit_out_of_reach(monkeypatch):
         unit = np.random.default_rng(2).uniform(-1, 1, data.q_limit.shape)
         assert not within_limits(net, solve_pf_batch(net, s.injections(unit * data.q_limit * net.base_mva))).any()
     fast = run_acopf(day, 0.0)
-    assert set(fast.extra["solver_status"]) == {VOLTAGES_OUT_OF_REACH} and set(fast.status) == {"infeasible"}
+    assert set(fast.solver.solver_status) == {VOLTAGES_OUT_OF_REACH} and set(fast.status) == {"infeasible"}
     ipopt = run_acopf(day, 0.0, solver="ipopt")
-    assert set(ipopt.status) == {"infeasible"} and set(ipopt.extra["solver_status"]) <= {
+    assert set(ipopt.status) == {"infeasible"} and set(ipopt.solver.solver_status) <= {
         "Infeasible_Problem_Detected → Infeasible_Problem_Detected",
         "Infeasible_Problem_Detected",
     }
@@ -167,7 +167,7 @@ def test_the_bound_never_contradicts_ipopt_over_a_june_day(code):
         ipopt = run_acopf(scenario, k, solver="ipopt", slack_export=False, fallback="paper")
         assert proven.any() and set(ipopt.status[proven]) <= {"infeasible", "solver-failed"}
         auto = run_acopf(scenario, k, slack_export=False, fallback="paper")
-        assert np.all(auto.status[proven] == "infeasible") and np.all(auto.extra["solver_status"][proven] == SLACK_MUST_EXPORT)
+        assert np.all(auto.status[proven] == "infeasible") and np.all(auto.solver.solver_status[proven] == SLACK_MUST_EXPORT)
         infeasible = ipopt.status == "infeasible"
         print(code, k, f"IPOPT infeasible {infeasible.sum()}, proven by the bound {proven.sum()}")
         assert proven.sum() >= 0.9 * infeasible.sum()

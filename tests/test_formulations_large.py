@@ -14,9 +14,8 @@ import casadi as ca
 import numpy as np
 import pytest
 
-from opfbench.formulations.acopf import run_acopf
-from opfbench.formulations.models.polar_ac import build_acopf
-from opfbench.formulations.relaxation import build_socp
+from opfbench.formulations.model import build_problem_model
+from opfbench.formulations.opf_strategies import run_acopf
 from opfbench.io import load_network
 from opfbench.network import DER, Network
 from opfbench.scenario import Scenario
@@ -75,9 +74,9 @@ def test_models_are_sparse():
     """The NLP's constraint Jacobian and the SOCP's conic matrix have O(n) nonzeros, and
     the SOCP's offset map one entry per data value (no dense n×n anywhere)."""
     net = replicated_feeder(20)
-    nlp = build_acopf(net).ipopt.nlp
+    nlp = build_problem_model("exact", net).ipopt.nlp
     assert ca.jacobian(nlp["g"], nlp["x"]).nnz() < 16 * net.n_bus  # dense: 4·n²
-    program = build_socp(net).program
+    program = build_problem_model("relaxation", net).program
     assert program._a.nnz < 25 * net.n_bus
     assert program._b_theta.nnz <= 2 * net.n_bus + 2 * len(net.ders)
     # The bound screening's own data is linear in the bound rows too (a pairing by

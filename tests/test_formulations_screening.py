@@ -7,10 +7,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from opfbench.bench.profiles import paper_day_scenario
-from opfbench.formulations.models.soc import data_vector
+from opfbench.bench.paper_day import paper_day_scenario
+from opfbench.formulations.model import build_problem_model
+from opfbench.formulations.models.conic import data_vector
 from opfbench.formulations.problem import snapshot_data
-from opfbench.formulations.relaxation import build_socp
 from opfbench.io import load_network
 from opfbench.scenario import Scenario
 
@@ -27,7 +27,7 @@ def test_screened_answers_are_the_full_programs_optimum_on_the_paper_day(k):
     program's within 3e-7 relative (measured ≤ 1.9e-7) and never above the full program's
     primal objective by more than that."""
     day = paper_day_scenario("paper33")
-    relax = build_socp(day.net)
+    relax = build_problem_model("relaxation", day.net)
     program, problem = relax.program, relax.problem
     offsets = _offsets(relax, day, k)[::6]
     data = snapshot_data(day, k)
@@ -52,7 +52,7 @@ def test_a_wrong_guess_is_refused_and_changes_no_digit():
     """Guessing that every DER sits at its upper Q limit at light load (where they do not)
     fails the check; the answer is the one a solver without that guess gives, to the digit."""
     net = load_network("paper33")
-    relax, fresh = build_socp(net), build_socp(net)
+    relax, fresh = build_problem_model("relaxation", net), build_problem_model("relaxation", net)
     b = _offsets(relax, Scenario.snapshot(net, 0.5, 0.7), 0.0)[0]
     program = relax.program
     upper = tuple(
@@ -73,7 +73,7 @@ def test_a_q_limit_of_zero_fixes_the_der_at_zero():
     """At night with the PV disconnected its Q limit is 0 (its two bounds coincide): the
     screened program keeps its upper row as Q = 0 and accepts a multiplier of either sign."""
     net = load_network("paper33")
-    relax = build_socp(net)
+    relax = build_problem_model("relaxation", net)
     scenario = Scenario.snapshot(net, 0.8, 0.0)
     data = snapshot_data(scenario, 0.0)
     limit = data.q_limit[0].copy()

@@ -7,13 +7,12 @@ import numpy as np
 import pytest
 
 from opfbench.errors import NetworkError
-from opfbench.formulations.acopf import run_acopf
+from opfbench.formulations.model import build_problem_model
+from opfbench.formulations.models.conic import data_vector
 from opfbench.formulations.models.distflow import DistFlowSocp
 from opfbench.formulations.models.jabr import JabrSocp
-from opfbench.formulations.models.soc import data_vector
+from opfbench.formulations.opf_strategies import run_acopf, run_socp
 from opfbench.formulations.problem import snapshot_data
-from opfbench.formulations.relaxation import build_socp
-from opfbench.formulations.socp import run_socp
 from opfbench.io import load_network
 from opfbench.scenario import Scenario
 
@@ -51,7 +50,7 @@ def test_relaxation_setpoints_are_optimal_when_exact():
     net = load_network("paper33")
     scenario = random_scenario(net, 10, seed=3)
     socp, opf = run_socp(scenario, 0.0), run_acopf(scenario, 0.0)
-    assert np.all(socp.status == "ok") and set(socp.extra["model"]) == {"distflow"}
+    assert np.all(socp.status == "ok") and socp.solver.model == "distflow"
     np.testing.assert_allclose(socp.losses_kw, opf.losses_kw, rtol=1e-5)
     assert np.all(socp.lower_bound_kw <= socp.losses_kw * (1 + BOUND_SLACK))
     assert np.all(socp.extra["ac_feasible"])
@@ -60,7 +59,7 @@ def test_relaxation_setpoints_are_optimal_when_exact():
 def test_meshed_feeder_uses_jabr_and_its_point_is_ac_evaluated():
     net = load_network("paper33-meshed")
     res = run_socp(Scenario.snapshot(net, 1.0, 0.8), 0.0)
-    assert res.extra["model"][0] == "jabr" and res.status[0] == "ok"
+    assert res.solver.model == "jabr" and res.status[0] == "ok"
     assert res.lower_bound_kw[0] < res.losses_kw[0]
 
 
@@ -69,7 +68,7 @@ def test_jabr_and_distflow_agree_on_a_radial_feeder():
     data = snapshot_data(Scenario.snapshot(net, 0.9, 0.6), 0.2)
     args = (data.s_fixed[0], data.q_limit[0])
     dist, jabr = DistFlowSocp(net).solve(*args), JabrSocp(net).solve(*args)
-    assert jabr.lower_bound_kw == pytest.approx(dist.lower_bound_kw, rel=1e-6)
+    assert jabr.objective_kw == pytest.approx(dist.objective_kw, rel=1e-6)
     np.testing.assert_allclose(jabr.q_pu, dist.q_pu, atol=1e-6)
 
 
@@ -96,7 +95,7 @@ def test_direct_clarabel_path_matches_cvxpy_solve(model):
         assert min(full.obj_val, full.obj_val_dual) == pytest.approx(pinned.value, rel=1e-7)
         np.testing.assert_allclose(program.reader(np.array(full.x))(relax.q), relax.q.value, atol=1e-5)
         answer = relax.solve(data.s_fixed[0], data.q_limit[0])
-        assert answer.lower_bound_kw == pytest.approx(pinned.value, rel=5e-7)
+        assert answer.objective_kw == pytest.approx(pinned.value, rel=5e-7)
         np.testing.assert_allclose(answer.q_pu, relax.q.value, atol=1e-5)
 
 
@@ -104,7 +103,7 @@ def test_infeasible_voltage_band_is_certified():
     net = load_network("paper33")
     tight = net.with_changes(vmin=np.full(net.n_bus, 0.99), vmax=np.full(net.n_bus, 1.0))
     res = run_socp(Scenario.snapshot(tight, 1.2, 0.5), 0.0)
-    assert res.status[0] == "infeasible" and res.extra["fallback"][0] == "no-action"
+    assert res.status[0] == "infeasible" and res.solver.fallback[0] == "no-action"
     assert np.isnan(res.lower_bound_kw[0]) and np.all(res.q_mvar == 0)
 
 
@@ -126,16 +125,19 @@ def test_distflow_models_transformers_exactly():
     data = snapshot_data(scenario, 0.0)
     args = (data.s_fixed[0], data.q_limit[0])
     dist, jabr = DistFlowSocp(tapped).solve(*args), JabrSocp(tapped).solve(*args)
-    assert type(build_socp(tapped)) is DistFlowSocp and dist.optimal and jabr.optimal
-    assert dist.lower_bound_kw == pytest.approx(jabr.lower_bound_kw, rel=1e-6)
+    assert type(build_problem_model("relaxation", tapped)) is DistFlowSocp and dist.optimal and jabr.optimal
+    assert dist.objective_kw == pytest.approx(jabr.objective_kw, rel=1e-6)
     socp = run_socp(scenario, 0.0)
-    assert socp.losses_kw[0] == pytest.approx(dist.lower_bound_kw, rel=1e-6)
-    assert run_acopf(scenario, 0.0).losses_kw[0] == pytest.approx(dist.lower_bound_kw, rel=1e-6)
+    assert socp.losses_kw[0] == pytest.approx(dist.objective_kw, rel=1e-6)
+    assert run_acopf(scenario, 0.0).losses_kw[0] == pytest.approx(dist.objective_kw, rel=1e-6)
     plain = snapshot_data(Scenario.snapshot(net, 1.0, 0.8), 0.0)
-    assert abs(DistFlowSocp(net).solve(plain.s_fixed[0], plain.q_limit[0]).lower_bound_kw - dist.lower_bound_kw) > 1.0
+    assert abs(DistFlowSocp(net).solve(plain.s_fixed[0], plain.q_limit[0]).objective_kw - dist.objective_kw) > 1.0
     with pytest.raises(NetworkError, match="radial"):
         DistFlowSocp(load_network("paper33-meshed"))
-    assert type(build_socp(net)) is DistFlowSocp and type(build_socp(load_network("paper33-meshed"))) is JabrSocp
+    assert (
+        type(build_problem_model("relaxation", net)) is DistFlowSocp
+        and type(build_problem_model("relaxation", load_network("paper33-meshed"))) is JabrSocp
+    )
 
 
 def test_line_charging_is_modelled_exactly():

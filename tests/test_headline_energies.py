@@ -15,7 +15,8 @@ import pytest
 
 from opfbench.data import paper_day
 from opfbench.io import load_network
-from opfbench.registry import DEFAULT_RUN, run_strategy
+from opfbench.registry.catalog import run_strategy
+from opfbench.registry.references import DEFAULT_RUN
 from opfbench.result import OK
 from opfbench.scenario import Scenario
 

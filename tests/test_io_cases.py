@@ -12,8 +12,8 @@ from opfbench.cases import _matpower_file
 from opfbench.cli import main
 from opfbench.errors import CaseFormatError, InputError
 from opfbench.io import NO_DER_NOTE, load_case, load_network, parse_spec
-from opfbench.io.cache import cached_case
 from opfbench.io.case import Case
+from opfbench.io.disk_cache import cached_case
 
 GEN_CASE = """function mpc = gens
 mpc.version = '2';
@@ -131,3 +131,23 @@ def test_cases_command_lists_loads_and_series(capsys):
     assert main(["cases", "case33bw", str(_matpower_file("case69"))]) == 0
     out = capsys.readouterr().out
     assert "case33bw" in out and "loads" in out and "series" in out
+
+
+def test_every_help_and_error_text_names_the_formats_as_the_sources_declare_them(capsys):
+    """The formats a case spec accepts are listed once (`opfbench.io.sources`): the commands'
+    help, `opfbench cases` and the errors of a bad spec all say `formats()`."""
+    from opfbench.cli import main
+    from opfbench.io.sources import SOURCES, formats
+
+    def squeezed(text: str) -> str:
+        return "".join(text.split())
+
+    assert {s.kind for s in SOURCES} >= {"shipped", "matpower", "pandapower", "simbench"}
+    for command in ("run", "pf", "snapshot", "fault", "table"):
+        assert main([command, "--help"]) == 0
+        assert squeezed(formats()) in squeezed(capsys.readouterr().out), command
+    assert main(["cases"]) == 0 and squeezed(formats(without="shipped")) in squeezed(capsys.readouterr().out)
+    for spec, expected in (("nope", formats(without="shipped")), ("missing.m", formats()), ("", formats())):
+        with pytest.raises(InputError) as raised:
+            load_network(spec)
+        assert expected in str(raised.value), spec

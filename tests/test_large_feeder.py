@@ -12,7 +12,7 @@ from opfbench.cases import feeder, place_ders
 from opfbench.cli import main
 from opfbench.io import load_network
 from opfbench.powerflow import bus_injections, solve_pf, solve_pf_batch
-from opfbench.registry import run_strategy
+from opfbench.registry.catalog import run_strategy
 from opfbench.strategies.paper import lfma_trace
 
 

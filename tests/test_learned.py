@@ -13,10 +13,8 @@ import pytest
 from opfbench.cli import main
 from opfbench.errors import InputError
 from opfbench.io import load_case, load_network, parse_spec
-from opfbench.powerflow import solve_pf, solve_pf_batch
-from opfbench.registry import configuration, run_strategy
-from opfbench.strategies import learned
-from opfbench.strategies.learned import (
+from opfbench.learned import rules as learned
+from opfbench.learned.rules import (
     FAMILIES,
     AffineRule,
     Features,
@@ -25,10 +23,12 @@ from opfbench.strategies.learned import (
     VoltVarRule,
     fit_rule,
 )
+from opfbench.powerflow import solve_pf, solve_pf_batch
+from opfbench.registry.catalog import configuration, run_strategy
 from opfbench.strategies.limits import reactive_limit
 from opfbench.strategies.sensitivity import contraction_factor, voltage_sensitivity
-from opfbench.study.learning import check_learned, training_scenario, training_set
 from opfbench.study.periods import resolve_period
+from opfbench.study.training_checks import check_learned, training_scenario, training_set
 
 TRAIN = "2016-03-01..2016-03-03"  # two days at 15 min (SimBench PV3 outside June)
 TEST = "2016-03-03..2016-03-04"

@@ -13,8 +13,8 @@ import pandas as pd
 import pytest
 
 from opfbench.cli import main
-from opfbench.registry import run_strategy
-from opfbench.study.learning import training_scenario
+from opfbench.registry.catalog import run_strategy
+from opfbench.study.training_checks import training_scenario
 
 TRAIN = "2016-03-01..2016-03-02"
 TEST = "2016-03-02T00:00..2016-03-02T06:00"

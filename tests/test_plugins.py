@@ -15,7 +15,7 @@ from opfbench import plugins
 from opfbench.cli import main
 from opfbench.errors import InputError
 from opfbench.io import load_network
-from opfbench.registry import STRATEGIES, configuration, run_strategy, spec
+from opfbench.registry.catalog import STRATEGIES, configuration, run_strategy, spec
 from opfbench.result import OK, RULE_NON_FINITE
 from opfbench.scenario import Scenario
 
@@ -221,7 +221,7 @@ def test_the_entry_point_group_loads_an_installed_plugin(tmp_path, monkeypatch):
         name, value, module = "installed", "installed_rule", "installed_rule"
 
     monkeypatch.setattr(plugins, "entry_points", lambda group: [EntryPoint()] if group == plugins.ENTRY_POINT_GROUP else [])
-    monkeypatch.setattr(plugins, "_entry_points_loaded", False)
+    monkeypatch.setattr(plugins, "_entry_points", {})  # not loaded yet in this process
     assert spec("installed").source == "installed_rule"  # loaded on first need
     res = run_strategy("installed:share=0.2", Scenario.snapshot(load_network("paper33")), 0.0)
     assert res.status[0] == OK and res.q_mvar[0] == pytest.approx(0.2 * 0.8 * 0.6, abs=1e-12)

@@ -6,30 +6,35 @@ import pytest
 
 from opfbench.errors import InputError
 from opfbench.io import load_network
-from opfbench.registry import (
-    BASELINE,
-    DEFAULT_RUN,
-    REFERENCE_OPTIMUM,
-    STRATEGIES,
-    canonical,
-    configuration,
-    get_strategy,
-    run_strategy,
-    specs,
-)
+from opfbench.registry.catalog import STRATEGIES, canonical, configuration, get_strategy, run_strategy, specs
+from opfbench.registry.references import BASELINE, DEFAULT_RUN, PAPER_OPF, REFERENCE_OPTIMUM
+from opfbench.registry.specs import MODELS
 from opfbench.result import StrategyResult
 from opfbench.scenario import Scenario
 
 
-def test_registry_lists_every_builtin_strategy_once():
-    kinds = {s.name: s.kind for s in specs()}
-    assert {"no-action", "llma", "lfma", "volt-var", "watt-var", "const-pf", "cosphi-p", "q-u"} <= {
-        n for n, k in kinds.items() if k == "local"
-    }
-    assert {"acopf", "acopf-paper", "socp"} == {n for n, k in kinds.items() if k == "formulation"}
-    assert set(DEFAULT_RUN) == {s.name for s in specs() if s.source == "opfbench" and not s.learned}
-    assert {s.name for s in specs() if s.learned} == {"learned-affine", "learned-vv", "learned-1547"}
-    assert STRATEGIES[BASELINE].kind == "local" and STRATEGIES[REFERENCE_OPTIMUM].bound_rank is not None
+def test_the_catalog_lists_every_strategy_once_as_its_declarations_say():
+    """What the registry promises, not a count: names unique, in the catalog's order; the
+    default grid is the declared one (built-in, not learned, in that order); the reference
+    configurations have the kind and role the comparisons need; every formulation model
+    that is not the OPF problem's is a strategy of its own with its role; a learned entry
+    is one with a fit."""
+    entries = specs()
+    names = [s.name for s in entries]
+    assert len(names) == len(set(names)) and set(names) == set(STRATEGIES)
+    assert all(STRATEGIES[n].source == "opfbench" and not STRATEGIES[n].learned for n in DEFAULT_RUN)
+    assert [n for n in names if n in DEFAULT_RUN] == list(DEFAULT_RUN)
+    assert STRATEGIES[BASELINE].kind == "local" and STRATEGIES[BASELINE].target is not None
+    assert {STRATEGIES[n].role for n in (REFERENCE_OPTIMUM, PAPER_OPF)} == {"exact"}
+    bounds = sorted((s.bound_rank, s.name) for s in entries if s.bound_rank is not None)
+    assert STRATEGIES[bounds[0][1]].role == "relaxation" and STRATEGIES[REFERENCE_OPTIMUM].bound_rank is not None
+    for s in entries:
+        assert (s.kind == "formulation") == (s.role is not None)
+    for model in MODELS.values():
+        assert model.serves_problem or (
+            STRATEGIES[model.name].role == model.role and STRATEGIES[model.name].kind == "formulation"
+        )
+    assert all(s.kind == "local" and s.fit_options for s in entries if s.learned)
 
 
 @pytest.mark.parametrize("name", DEFAULT_RUN)

@@ -122,5 +122,6 @@ def test_year_convergence_leaves_the_socp_uncertified(folders):
     from opfbench.report.tables import convergence_summary
 
     run, _ = folders
-    table = convergence_summary(load_inputs(run).summary).set_index("strategy")["certified optimal %"]
+    inputs = load_inputs(run)
+    table = convergence_summary(inputs.summary, inputs.kinds()).set_index("strategy")["certified optimal %"]
     assert table.loc["socp"].isna().all() and table.loc["acopf"].notna().all()

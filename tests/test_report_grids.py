@@ -8,7 +8,7 @@ import pandas as pd
 import pytest
 
 from opfbench.report.claims import FAILS, HOLDS, ranking_per_case
-from opfbench.report.tables import how_close, leaderboard
+from opfbench.report.tables import Kinds, how_close, leaderboard
 
 
 def _summary() -> pd.DataFrame:
@@ -83,12 +83,13 @@ def test_how_close_sets_train_beside_test_and_maps_a_perturbed_case_to_its_model
     perturbed = test[test["case"] == "grid-a"].assign(case="grid-a?line-z=1.2")
     train = test[test["case"] == "grid-a"].copy()
     train.loc[train["strategy"] == "lfma", "energy_kwh"] = 85.0  # train: 75 % of the OPF's reduction
-    table = how_close(pd.concat([test, perturbed]), train, {"grid-a?line-z=1.2": "grid-a"}).set_index(["case", "strategy"])
+    both = pd.concat([test, perturbed])
+    table = how_close(both, Kinds.of(both["strategy"]), train, {"grid-a?line-z=1.2": "grid-a"}).set_index(["case", "strategy"])
     assert "acopf" not in table.index.get_level_values(1) and "socp" not in table.index.get_level_values(1)
     assert table.loc[("grid-a", "no-action"), "test_share_pct"] == 0.0
     assert table.loc[("grid-a", "lfma"), "test_share_pct"] == pytest.approx(50.0)
     assert table.loc[("grid-a", "lfma"), "train_share_pct"] == pytest.approx(75.0)
     assert table.loc[("grid-a?line-z=1.2", "lfma"), "train_share_pct"] == pytest.approx(75.0)  # the model's training
     assert np.isnan(table.loc[("grid-b", "lfma"), "train_share_pct"])  # no training on grid-b
-    alone = how_close(test)
+    alone = how_close(test, Kinds.of(test["strategy"]))
     assert alone["train_share_pct"].isna().all() and len(alone) == 6

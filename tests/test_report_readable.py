@@ -10,7 +10,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from opfbench.registry import DEFAULT_RUN
+from opfbench.registry.references import DEFAULT_RUN
 from opfbench.report import plots, sections, tables
 from opfbench.report.inputs import DOCS_FIELD_YEAR, DOCS_LEARNED, Inputs, load_study
 from opfbench.report.page import heading, table_html

@@ -19,7 +19,7 @@ TIMING = ["wall_ms", "solver_ms"]
 
 
 def test_cluster_equals_in_process(dask_cluster, tmp_path):
-    local = run_study(CONFIG, tmp_path / "local", quiet=True)
+    local = run_study(CONFIG, tmp_path / "local")
     assert len(local.tasks) == 4
     args = [
         "run",

@@ -14,7 +14,7 @@ import pytest
 
 from opfbench.study import StudyConfig, run_study
 from opfbench.study.store import finished_tasks
-from tests.support.processes import ROOT
+from tests.support.processes import ROOT, ctrl_c_when
 
 PERIOD = "2016-06-28T10:00..2016-06-28T11:00"
 KS = ("0", "0.2", "0.4", "0.6", "0.8")
@@ -42,24 +42,9 @@ def test_ctrl_c_stops_keeps_and_resumes(tmp_path):
         "--out",
         str(out),
     ]
-    proc = subprocess.Popen(
-        [sys.executable, "-m", "opfbench", *args],
-        cwd=ROOT,
-        stderr=subprocess.PIPE,
-        text=True,
-        preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL),
-    )
-    try:
-        deadline = time.monotonic() + 240
-        while not finished_tasks(out):
-            assert proc.poll() is None and time.monotonic() < deadline, proc.stderr.read()
-            time.sleep(0.05)
-        proc.send_signal(signal.SIGINT)  # the second task is solving
-        sent = time.monotonic()
-        _, err = proc.communicate(timeout=60)
-    finally:
-        proc.kill()
-    assert proc.returncode == 130 and time.monotonic() - sent < 30, err
+    # Ctrl-C once the first task is saved: the second one is solving
+    proc, _, err, after_s = ctrl_c_when([sys.executable, "-m", "opfbench", *args], lambda: finished_tasks(out) > 0)
+    assert proc.returncode == 130 and after_s < 30, err
     kept = finished_tasks(out)
     assert 1 <= kept < len(KS) and f"stopped; {kept} tasks kept" in err
     assert not (out / ".lock").exists()
@@ -71,7 +56,7 @@ def test_ctrl_c_stops_keeps_and_resumes(tmp_path):
         period=PERIOD,
         detail=False,
     )
-    resumed = run_study(config, out, quiet=True)
+    resumed = run_study(config, out)
     assert resumed.ran == len(KS) - kept and len(resumed.summary) == 2 * len(KS)
 
 

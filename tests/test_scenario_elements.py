@@ -11,7 +11,8 @@ from opfbench.errors import InputError
 from opfbench.io import load_network
 from opfbench.network import DER
 from opfbench.powerflow import solve_pf_batch
-from opfbench.registry import DEFAULT_RUN, run_strategy
+from opfbench.registry.catalog import run_strategy
+from opfbench.registry.references import DEFAULT_RUN
 from opfbench.scenario import Scenario
 
 

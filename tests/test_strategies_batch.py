@@ -6,16 +6,17 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-import opfbench.strategies.engine as engine
 import opfbench.strategies.paper as paper
+import opfbench.strategies.rule_engine as engine
 from opfbench.bench.local import bench_local
-from opfbench.bench.profiles import paper_day_scenario
-from opfbench.commands.table import format_table, local_rules, loss_table
+from opfbench.bench.paper_day import paper_day_scenario
+from opfbench.commands.table import format_table
 from opfbench.errors import InputError
 from opfbench.io import load_network
 from opfbench.powerflow import PowerFlowResult, solve_pf_batch
-from opfbench.registry import run_strategy
+from opfbench.registry.catalog import run_strategy
 from opfbench.scenario import Scenario
+from opfbench.study.loss_table import local_rules, loss_table
 
 
 def paper33(load_scales: list[float]) -> Scenario:

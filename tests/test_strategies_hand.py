@@ -13,9 +13,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from opfbench.registry.catalog import run_strategy
 from opfbench.scenario import Scenario
 from opfbench.strategies.meters import LocalMeters
-from opfbench.strategies.paper import BACK_TO_LLMA, KEPT, LEAF, STOPPED, SUBTRACTED, lfma, lfma_step4, lfma_trace, llma, no_action
+from opfbench.strategies.paper import BACK_TO_LLMA, KEPT, LEAF, STOPPED, SUBTRACTED, lfma, lfma_step4, lfma_trace
 from tests.support.feeders import radial_feeder
 
 TOL = 1e-3  # MVAr, see module docstring
@@ -98,7 +99,11 @@ def test_lfma_result_matches_trace_and_beats_llma_here() -> None:
     assert res.power_flows.tolist() == [4] and res.status.tolist() == ["ok"]
     assert res.extra["upstream_disagreements"][0] == []
     # Q supplied next to the loads instead of through the lines: fewer losses.
-    assert res.losses_kw[0] < llma(scenario, 0.0).losses_kw[0] < no_action(scenario).losses_kw[0]
+    assert (
+        res.losses_kw[0]
+        < run_strategy("llma", scenario, 0.0).losses_kw[0]
+        < run_strategy("no-action", scenario, 0.0).losses_kw[0]
+    )
 
 
 def test_step4_decision_table() -> None:
@@ -160,8 +165,8 @@ def test_forecast_limits_by_hand(k: float, safe: bool) -> None:
     net = radial_feeder(parent=[0, 1], load_p_mw=[0, 0, 0], load_q_mvar=[0, 1.0, 0.1], ders=[(1, "PV", 1.0)])
     scenario = Scenario(net, np.ones(3), np.array(P_CURRENT)[:, None], np.array(P_FORECAST)[:, None])
     want_q, want_excursion = ALG3[(k, safe)]
-    res = llma(scenario, k, safe=safe)
+    res = run_strategy("llma", scenario, k, safe=safe)
     np.testing.assert_allclose(res.q_mvar[:, 0], want_q, atol=1e-12)
     np.testing.assert_allclose(res.excursion_mvar, want_excursion, atol=1e-12)
-    plain = llma(Scenario(net, np.ones(3), np.array(P_CURRENT)[:, None]), k, safe=safe)
+    plain = run_strategy("llma", Scenario(net, np.ones(3), np.array(P_CURRENT)[:, None]), k, safe=safe)
     np.testing.assert_allclose(plain.q_mvar[:, 0], (1 - k) * np.array([0.3, 0.45, 0.6]), atol=1e-12)

@@ -26,7 +26,7 @@ from pandapower.converter.pypower import from_ppc
 
 from opfbench.io import load_network
 from opfbench.io.matpower import to_ppc
-from opfbench.registry import run_strategy
+from opfbench.registry.catalog import run_strategy
 from opfbench.scenario import Scenario
 from opfbench.strategies.limits import reactive_limit
 from opfbench.strategies.standards import VOLT_VAR

@@ -11,8 +11,9 @@ from hypothesis import strategies as st
 
 from opfbench.capability import qmax
 from opfbench.io import load_network
+from opfbench.registry.catalog import run_strategy
 from opfbench.scenario import Scenario
-from opfbench.strategies.paper import lfma, lfma_trace, llma, no_action
+from opfbench.strategies.paper import lfma, lfma_trace
 from tests.support.feeders import radial_feeder
 
 SNAPSHOTS = 4
@@ -66,7 +67,7 @@ def check_rules(scenario: Scenario, k: float, safe: bool) -> None:
         assert np.all(np.abs(q) <= bound + EPS)
     leaf = net.is_leaf[net.der_bus]
     np.testing.assert_array_equal(trace.q_final[:, leaf], trace.q_llma[:, leaf])
-    res_llma, res_lfma = llma(scenario, k, safe=safe), lfma(scenario, k, safe=safe)
+    res_llma, res_lfma = run_strategy("llma", scenario, k, safe=safe), lfma(scenario, k, safe=safe)
     np.testing.assert_array_equal(res_lfma.q_mvar, trace.q_final)
     q_load = scenario.load_scale[:, None] * net.load_q_mvar[net.der_bus]
     np.testing.assert_allclose(res_llma.q_mvar, np.minimum(q_load, bound), rtol=0, atol=EPS)
@@ -85,10 +86,10 @@ def test_rules_on_random_radial_feeders(scenario: Scenario, k: float, safe: bool
 @settings(max_examples=50, deadline=None)
 @given(scenario=random_scenarios())
 def test_k_one_is_exactly_no_action(scenario: Scenario) -> None:
-    reference = no_action(scenario)
-    for rule in (llma, lfma):
+    reference = run_strategy("no-action", scenario, 0.0)
+    for rule in ("llma", "lfma"):
         for safe in (False, True):
-            res = rule(scenario, 1.0, safe=safe)
+            res = run_strategy(rule, scenario, 1.0, safe=safe)
             assert np.all(res.q_mvar == 0.0)
             np.testing.assert_allclose(res.losses_kw, reference.losses_kw, rtol=0, atol=1e-6)  # warm-started flows
 

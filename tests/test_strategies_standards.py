@@ -11,12 +11,12 @@ import pytest
 
 from opfbench.io import load_network
 from opfbench.powerflow import solve_pf
-from opfbench.registry import configuration, run_strategy
+from opfbench.registry.catalog import configuration, run_strategy
 from opfbench.result import NOT_SETTLED, OK
 from opfbench.scenario import Scenario
 from opfbench.strategies import standards
-from opfbench.strategies.engine import adapt_step_factor
 from opfbench.strategies.limits import reactive_limit
+from opfbench.strategies.rule_engine import adapt_step_factor
 from opfbench.strategies.rules import Measurements
 
 TOL_Q = 1e-6  # MVAr: the engine settles to 1e-7 MVAr and 1e-7 p.u.
@@ -123,7 +123,7 @@ def test_closed_loop_steady_state_is_a_fixed_point_of_an_independent_power_flow(
             for o, v in config.options().items()
             if o in config.spec.option and o not in ("safe", "max_steps", "tol_v_pu", "tol_q_mvar", "step_factor", "adaptive")
         }
-        target = np.clip(getattr(standards, config.spec.rule.split(":")[1])(m, **rule)[0], -limit[s], limit[s])
+        target = np.clip(config.spec.target(m, **rule)[0], -limit[s], limit[s])
         assert np.abs(target - res.q_mvar[s]).max() < TOL_Q
         assert np.abs(pf.vm - res.vm[s]).max() < 1e-7
         assert res.losses_kw[s] == pytest.approx(float(pf.losses_kw), abs=1e-4)

@@ -12,11 +12,12 @@ import pytest
 from opfbench.capability import PAPER_KS
 from opfbench.cli import main
 from opfbench.errors import DataError, InputError
-from opfbench.registry import BASELINE, DEFAULT_FORECAST, DEFAULT_RUN, get_strategy
+from opfbench.registry.catalog import get_strategy
+from opfbench.registry.references import BASELINE, DEFAULT_FORECAST, DEFAULT_RUN
 from opfbench.study import StudyConfig
 from opfbench.study.periods import resolve_period
-from opfbench.study.runner import prepare, run_study
-from opfbench.study.scenarios import chunk_scenario
+from opfbench.study.run_family import prepare, run_study
+from opfbench.study.task_scenarios import chunk_scenario
 
 LOCAL = ("no-action", "llma", "lfma")
 HOURS = "2016-06-28T18:00..2016-06-29T02:00"  # evening PV, the night window and midnight
@@ -25,7 +26,7 @@ HOURS = "2016-06-28T18:00..2016-06-29T02:00"  # evening PV, the night window and
 @pytest.fixture(scope="module")
 def day_run(tmp_path_factory):
     config = StudyConfig(strategies=LOCAL, ks=(0.0, 0.8), night_modes=("connected", "disconnected"), detail=True)
-    return run_study(config, tmp_path_factory.mktemp("day"), quiet=True)
+    return run_study(config, tmp_path_factory.mktemp("day"))
 
 
 CONFIG_KEYS = ["case", "strategy", "k", "night_mode", "forecast"]
@@ -119,7 +120,7 @@ def test_night_q_lowers_night_losses(tmp_path):
     config = StudyConfig(
         strategies=("lfma",), ks=(0.0,), night_modes=("connected", "connected-q"), forecast=("off",), period=HOURS
     )
-    steps = pd.read_parquet(run_study(config, tmp_path, quiet=True).out / "steps.parquet")
+    steps = pd.read_parquet(run_study(config, tmp_path).out / "steps.parquet")
     wide = steps.pivot_table(index="time", columns="night_mode", values="losses_kw")
     night = steps.groupby("time").night.first()
     assert (wide["connected-q"][night] < wide["connected"][night] - 1e-3).all()
@@ -143,8 +144,8 @@ def test_periods():
 
 def test_chunking_does_not_change_local_rules(tmp_path):
     kw = dict(strategies=LOCAL, ks=(0.4,), night_modes=("disconnected",), period="2016-06-28T22:00..2016-06-29T02:00")
-    a = run_study(StudyConfig(chunk="day", **kw), tmp_path / "a", quiet=True)
-    b = run_study(StudyConfig(chunk="month", **kw), tmp_path / "b", quiet=True)
+    a = run_study(StudyConfig(chunk="day", **kw), tmp_path / "a")
+    b = run_study(StudyConfig(chunk="month", **kw), tmp_path / "b")
     assert len(a.tasks) == 2 * len(b.tasks)
     cols = ["strategy", "forecast", "time"]
     ta = pd.read_parquet(a.out / "steps.parquet").sort_values(cols, kind="stable").drop(columns="wall_ms")
@@ -290,7 +291,7 @@ def _check_day(table):
 
 
 def test_whole_day_every_strategy_at_k0(tmp_path):
-    run = run_study(StudyConfig(ks=(0.0,), night_modes=("connected",), forecast=("off",), detail=False), tmp_path, quiet=True)
+    run = run_study(StudyConfig(ks=(0.0,), night_modes=("connected",), forecast=("off",), detail=False), tmp_path)
     table = pd.read_parquet(run.out / "steps.parquet")
     assert (table.status == "ok").all() and (table.voltage_violation_pu < 1e-6).all()
     _check_day(table)
@@ -303,7 +304,7 @@ def test_whole_day_every_strategy_at_k0(tmp_path):
 def test_whole_default_grid(tmp_path):
     """The main job's full grid (`opfbench run` defaults): every step solved, orderings hold."""
     config = StudyConfig(forecast_strategies=DEFAULT_FORECAST)
-    run = run_study(config, tmp_path, workers=os.cpu_count() or 1, quiet=True)
+    run = run_study(config, tmp_path, workers=os.cpu_count() or 1)
     table = pd.read_parquet(run.out / "steps.parquet")
     assert (table.status == "ok").all()
     _check_day(table[table.forecast == "off"])
@@ -370,7 +371,7 @@ def test_acopf_solver_ipopt_runs_ipopt_on_every_step(tmp_path):
             period="2016-06-28T11:00..2016-06-28T11:20",
             acopf_solver=solver,
         )
-        run_study(config, tmp_path / solver, workers=1, quiet=True)
+        run_study(config, tmp_path / solver, workers=1)
         tables[solver] = pd.read_parquet(tmp_path / solver / "steps.parquet")
     assert set(tables["ipopt"]["certified_by"]) == {"ipopt"}
     assert (tables["auto"]["certified_by"] == "socp").mean() > 0.5
@@ -385,7 +386,7 @@ def test_default_detail_is_the_der_q_table_on_short_periods(tmp_path):
         forecast=("off",),
         period="2016-06-28T10:00..2016-06-28T11:00",
     )
-    run = run_study(config, tmp_path / "run", quiet=True)
+    run = run_study(config, tmp_path / "run")
     assert run.config.detail_tables == ("der_q",)
     assert len(pd.read_parquet(run.out / "der_q.parquet")) == 2 * 60 * 5 and not (run.out / "bus_v.parquet").exists()
     assert pd.read_parquet(run.out / "der_q.parquet")["strategy"].dtype == object  # text, not categorical
@@ -397,7 +398,7 @@ def test_a_night_mode_with_the_same_scenario_takes_the_results_of_the_first(tmp_
     config = StudyConfig(
         strategies=("no-action", "lfma", "acopf"), ks=(0.2,), forecast=("off",), period="2016-01-10T22:00..2016-01-10T23:00"
     )
-    steps = pd.read_parquet(run_study(config, tmp_path / "run", quiet=True).out / "steps.parquet")
+    steps = pd.read_parquet(run_study(config, tmp_path / "run").out / "steps.parquet")
     by_mode = {m: g.drop(columns=["night_mode"]).reset_index(drop=True) for m, g in steps.groupby("night_mode")}
     on, off, night_q = by_mode["connected"], by_mode["disconnected"], by_mode["connected-q"]
     pd.testing.assert_frame_equal(on.drop(columns=["wall_ms"]), off.drop(columns=["wall_ms"]), check_exact=True)

@@ -11,7 +11,7 @@ import pytest
 from opfbench.cli import main
 from opfbench.study import StudyConfig
 from opfbench.study.engine import slug
-from opfbench.study.runner import prepare
+from opfbench.study.run_family import prepare
 from tests.support.matpower_texts import TINY_CASE
 
 RUN = ["run", "--period", "2016-06-28T10:00..2016-06-28T10:20", "--strategies", "no-action", "--night-modes", "connected"]

@@ -1,14 +1,14 @@
 """A snapshot-wise strategy (`StrategySpec.snapshot_wise`) runs once on the distinct
-snapshots of a chunk's night modes (`study.scenarios.SharedSnapshots`): every mode's rows
+snapshots of a chunk's night modes (`study.task_scenarios.SharedSnapshots`): every mode's rows
 are what its own run gives, bit for bit."""
 
 import numpy as np
 import pytest
 
-from opfbench.registry import run_strategy, specs
+from opfbench.registry.catalog import run_strategy, specs
 from opfbench.study.config import NIGHT_MODES
 from opfbench.study.periods import resolve_period
-from opfbench.study.scenarios import SharedSnapshots, chunk_scenario
+from opfbench.study.task_scenarios import SharedSnapshots, chunk_scenario
 
 EVENING = "2016-06-28T19:00..2016-06-28T21:30"  # day and night rows, PV still producing after 20:00
 WALKED = ("q_mvar", "losses_kw", "vm", "status", "power_flows", "excursion_mvar", "lower_bound_kw")
@@ -43,5 +43,11 @@ def test_a_snapshot_wise_strategy_gives_each_mode_its_own_results_from_the_union
             np.testing.assert_array_equal(getattr(taken, field), getattr(own, field), err_msg=f"{name}: {field}")
         assert taken.extra.keys() == own.extra.keys()
         for key, value in own.extra.items():
-            if key not in ("solve_ms", "solves"):  # times, and the screening guesses a solve took
+            if key not in ("solves",):  # the screening guesses a solve took
                 np.testing.assert_array_equal(taken.extra[key], value, err_msg=f"{name}: {key}")
+        assert (taken.solver is None) == (own.solver is None)
+        if own.solver is not None:
+            for field in ("objective_kw", "solver_status", "fallback", "certified_by", "iterations"):
+                np.testing.assert_array_equal(
+                    getattr(taken.solver, field), getattr(own.solver, field), err_msg=f"{name}: {field}"
+                )

@@ -14,8 +14,8 @@ from opfbench.errors import InputError
 from opfbench.io import load_case
 from opfbench.scenario import Scenario
 from opfbench.study import StudyConfig
-from opfbench.study.runner import prepare, run_study
-from opfbench.study.scenarios import chunk_scenario
+from opfbench.study.run_family import prepare, run_study
+from opfbench.study.task_scenarios import chunk_scenario
 
 SPEC = "simbench:1-LV-rural1--0-sw"
 DAWN = "2016-06-21T03:00..2016-06-21T07:00"  # night until 05:00, PV rising after
@@ -30,7 +30,7 @@ def dawn_run(tmp_path_factory):
         period=DAWN,
         chunk="day",
     )
-    return run_study(config, tmp_path_factory.mktemp("dawn"), quiet=True)
+    return run_study(config, tmp_path_factory.mktemp("dawn"))
 
 
 def test_period_runs_at_the_profiles_step(dawn_run):
@@ -57,7 +57,7 @@ def test_the_tasks_use_the_case_series(dawn_run):
 
 
 def run_strategy_energy(scenario, name: str) -> float:
-    from opfbench.registry import run_strategy
+    from opfbench.registry.catalog import run_strategy
 
     return float(np.nansum(run_strategy(name, scenario, 0.0).losses_kw))
 
@@ -104,8 +104,8 @@ def test_a_case_without_der_gets_a_note_in_the_run_and_the_report(tmp_path, caps
     config = StudyConfig(
         cases=("case33bw",), strategies=("no-action", "llma"), ks=(0.0,), period="2016-03-01T10:00..2016-03-01T11:00"
     )
-    run = run_study(config, tmp_path / "run", quiet=False)
-    assert f"note: case33bw: {NO_DER_NOTE}" in capsys.readouterr().err
+    run = run_study(config, tmp_path / "run")
+    assert f"note: case33bw: {NO_DER_NOTE}" in run.notes and capsys.readouterr().err == ""  # the library prints nothing
     manifest = json.loads((run.out / "manifest.json").read_text())
     assert manifest["cases"]["case33bw"]["notes"] == [NO_DER_NOTE]
     page = write_report(run.out).read_text()

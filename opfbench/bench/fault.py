@@ -13,13 +13,13 @@ from __future__ import annotations
 
 import os
 
-from opfbench.dynamics.model import build_model
 from opfbench.dynamics.params import FaultParams, ModelParams
 from opfbench.dynamics.point import operating_point
+from opfbench.dynamics.rms_model import build_model
 from opfbench.dynamics.simulate import simulate
 from opfbench.dynamics.study import FaultConfig, run_fault_study
 from opfbench.io import load_case
-from opfbench.registry import run_strategy
+from opfbench.registry.catalog import run_strategy
 from opfbench.timing import best_ms
 
 
@@ -33,7 +33,7 @@ def run() -> dict:
     sim_ms, sim = best_ms(lambda: simulate(model, fault), 5)
     workers = min(2, os.cpu_count() or 1)
     config = FaultConfig("paper33", tuple(int(b) for b in net.bus_ids), forecasts=("off", "oracle"))
-    timings = run_fault_study(config, case, workers=workers, quiet=True).timings
+    timings = run_fault_study(config, case, workers=workers).timings
     from opfbench.dynamics.andes_ref import MILD_FAULT, andes_available, mild_fault_comparison
 
     andes_ms = mild_fault_comparison()["andes_sim_ms"] if andes_available() else None

@@ -20,9 +20,9 @@ import argparse
 import numpy as np
 from threadpoolctl import threadpool_limits
 
-from opfbench.registry import run_strategy
-from opfbench.strategies.learned import FAMILIES, TRAIN_K, fit_rule, install
-from opfbench.study.learning import training_scenario, training_set
+from opfbench.learned.rules import FAMILIES, TRAIN_K, fit_rule, install
+from opfbench.registry.catalog import run_strategy
+from opfbench.study.training_checks import training_scenario, training_set
 from opfbench.timing import elapsed_ms, now
 
 CASE = "simbench:1-MV-rural--0-sw"

@@ -16,9 +16,9 @@ from functools import partial
 
 import numpy as np
 
-from opfbench.bench.profiles import paper_day_scenario
+from opfbench.bench.paper_day import paper_day_scenario
 from opfbench.powerflow.memo import cold
-from opfbench.registry import run_strategy, specs
+from opfbench.registry.catalog import run_strategy, specs
 from opfbench.scenario import Scenario
 from opfbench.timing import best_ms
 

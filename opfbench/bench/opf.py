@@ -6,7 +6,7 @@ snapshots of a smooth day (`daily_scenario`) it times, per snapshot and in one r
 - the AC OPF, IPOPT warm-started from the previous snapshot (wall time of the
   `AcOpf.solve` call, CasADi overhead included; IPOPT's own time alongside), and the
   same snapshots solved cold, for the iteration counts;
-- the SOCP relaxation (`SocpRelaxation.solve` call);
+- the SOCP relaxation (`ConicModel.solve` call);
 - pandapower `runopp` on the same snapshots (`PandapowerOpf`), with its losses checked
   against ours (our AC power flow at IPOPT's setpoints) where both converged.
 
@@ -45,15 +45,16 @@ import numpy as np
 import pandas as pd
 
 from opfbench.bench.pandapower_opf import PandapowerOpf
-from opfbench.bench.profiles import paper_day_scenario
-from opfbench.formulations.models.polar_ac import build_acopf
+from opfbench.bench.paper_day import paper_day_scenario
+from opfbench.formulations.model import build_problem_model
 from opfbench.formulations.problem import snapshot_data
-from opfbench.formulations.relaxation import build_socp, forget_solves
+from opfbench.formulations.solves import forget_solves
 from opfbench.io import load_case, load_network
 from opfbench.network import Network
 from opfbench.powerflow import solve_pf_batch
 from opfbench.powerflow.memo import forget_flows
-from opfbench.registry import run_strategy
+from opfbench.registry.catalog import run_strategy
+from opfbench.result import CERTIFIED_BY_SOCP
 from opfbench.scenario import Scenario
 from opfbench.timing import elapsed_ms, now
 
@@ -93,7 +94,7 @@ def bench_opf(n: int = 200, case: str = "paper33", k: float = 0.0) -> dict:
     net = load_network(case)
     scenario = daily_scenario(net, n)
     data = snapshot_data(scenario, k)
-    opf, relax = build_acopf(net), build_socp(net)
+    opf, relax = build_problem_model("exact", net), build_problem_model("relaxation", net)
     try:
         peer = PandapowerOpf.of_network(net)
     except ImportError:  # the peer is optional (pip install -e '.[bench]')
@@ -126,7 +127,7 @@ def bench_opf(n: int = 200, case: str = "paper33", k: float = 0.0) -> dict:
     pp_ok = np.array([p.converged for p in peers], dtype=bool)
     diff = np.abs(np.array([p.losses_kw for p in peers]) - our_losses)[ipopt_ok & pp_ok] if peers else np.zeros(0)
     socp_ok = np.array([s.optimal for s in socp])
-    lower = np.array([s.lower_bound_kw for s in socp])
+    lower = np.array([s.objective_kw for s in socp])
 
     ipopt_ms = float(np.median(ipopt_wall))
     socp_ms = float(np.median(socp_wall))
@@ -198,7 +199,7 @@ def bench_paper_day(case: str = "paper33", k: float = 0.0, repeats: int = 3) -> 
         "acopf_paper_shared_step_ms": float(np.median(paper_ms)),
         "acopf_ipopt_step_ms": ipopt_ms,
         "acopf_build_s": build_s,
-        "certified_share": float(np.mean(fast.extra["certified_by"] == "socp")),
+        "certified_share": float(np.mean(fast.solver.certified_by == CERTIFIED_BY_SOCP)),
         "acopf_not_ok_steps": int((fast.status != "ok").sum()),
         "fast_path_max_rel_diff": float(rel.max(initial=0.0)),
     }
@@ -254,7 +255,7 @@ def bench_mv(code: str = MV_CASE, k: float = 0.0, repeats: int = 3, peer_every: 
         "mv_socp_step_ms_runs": socp_ms,
         "mv_acopf_step_ms_runs": acopf_ms,
         "mv_build_s": build_s,
-        "mv_certified_share": float(np.mean(acopf.extra["certified_by"] == "socp")),
+        "mv_certified_share": float(np.mean(acopf.solver.certified_by == CERTIFIED_BY_SOCP)),
         "mv_acopf_not_ok_steps": int((acopf.status != "ok").sum()),
         "mv_target_step_ms": TARGET_MV_STEP_MS,
         "mv_pandapower_runopp_ms": None,

@@ -19,7 +19,7 @@ import warnings
 
 import numpy as np
 
-from opfbench.bench.profiles import paper_day_scenario
+from opfbench.bench.paper_day import paper_day_scenario
 from opfbench.errors import NetworkError
 from opfbench.io.matpower import to_ppc
 from opfbench.network import Network

@@ -46,7 +46,7 @@ TIME_LIMIT_S = {"pf": 300, "batch96": 300, "acopf": 900, "lfma96": 600}
 
 def day96(case: str):
     """The paper day on `case` at 15-minute steps (96 snapshots)."""
-    from opfbench.bench.profiles import paper_day_scenario
+    from opfbench.bench.paper_day import paper_day_scenario
 
     return paper_day_scenario(case).take(slice(0, 1440, 1440 // SNAPSHOTS))
 
@@ -61,7 +61,7 @@ def _job(task: str, case: str):
     """(timed callable, repeats) of one measurement, its inputs built outside the timing."""
     from opfbench.powerflow import bus_injections, solve_pf, solve_pf_batch
     from opfbench.powerflow.memo import cold
-    from opfbench.registry import run_strategy
+    from opfbench.registry.catalog import run_strategy
 
     day = day96(case)
     net = day.net
@@ -153,7 +153,7 @@ def _scaling_row(case: str) -> dict:
     """Best-of seconds of single PF, batch of 96 and LFMA on 96 on `case`, set-up excluded."""
     from opfbench.powerflow import bus_injections, solve_pf, solve_pf_batch
     from opfbench.powerflow.memo import cold
-    from opfbench.registry import run_strategy
+    from opfbench.registry.catalog import run_strategy
 
     day = day96(case)
     net = day.net

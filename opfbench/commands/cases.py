@@ -6,7 +6,8 @@ from __future__ import annotations
 
 import argparse
 
-from opfbench.commands.common import print_json
+from opfbench.commands.arguments import print_json
+from opfbench.io.sources import formats
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -37,7 +38,5 @@ def run(args: argparse.Namespace) -> int:
             f"{'yes' if r['meshed'] else 'no':<6}  {'yes' if r['series'] else 'no':<6}  {r['load_mw']:.3f} / {r['load_mvar']:.3f}"
         )
     if not args.simbench and not args.specs:
-        print(
-            "\nalso: any MATPOWER .m or pandapower .json file, and simbench:CODE (SimBench LV/MV grids; --simbench lists the suite)"
-        )
+        print(f"\nalso: {formats(without='shipped')} (--simbench lists SimBench's suite)")
     return 0

@@ -10,7 +10,7 @@ from dataclasses import replace
 from typing import TYPE_CHECKING
 
 from opfbench.capability import PAPER_KS
-from opfbench.commands.common import (
+from opfbench.commands.arguments import (
     CASE_HELP,
     STRATEGY_HELP,
     add_case_options,
@@ -26,7 +26,7 @@ from opfbench.commands.common import (
 from opfbench.dynamics.params import FORECASTS, SENSITIVITY_VARIANTS, FaultParams, ModelParams
 from opfbench.errors import InputError
 from opfbench.jsonio import print_json
-from opfbench.registry import DEFAULT_FAULT
+from opfbench.registry.references import DEFAULT_FAULT
 
 if TYPE_CHECKING:
     from opfbench.io.case import Case
@@ -133,9 +133,10 @@ def _variants(args: argparse.Namespace) -> tuple[str, ...]:
 
 
 def run(args: argparse.Namespace) -> int:
+    from opfbench.commands.progress import console
     from opfbench.dynamics.study import FaultConfig, run_fault_study  # numba: only when a study runs
     from opfbench.io import load_case
-    from opfbench.study.learning import check_params
+    from opfbench.study.training_checks import check_params
 
     case = load_case(case_spec(args.case, args))
     net = case.network
@@ -173,8 +174,8 @@ def run(args: argparse.Namespace) -> int:
             workers=args.workers,
             scheduler=args.scheduler,
             fresh=args.fresh,
-            quiet=args.quiet or args.json,
             command=["opfbench", "fault", *sys.argv[2:]],
+            reporter=console(args.quiet or args.json),
         )
     except MemoryError:
         raise InputError(

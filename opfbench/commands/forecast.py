@@ -12,7 +12,7 @@ import sys
 from dataclasses import replace
 from typing import TYPE_CHECKING
 
-from opfbench.commands.common import path
+from opfbench.commands.arguments import path
 from opfbench.errors import InputError
 from opfbench.forecasting.names import FORECAST_DATASETS, MODEL_NAMES
 from opfbench.jsonio import print_json
@@ -94,7 +94,7 @@ def run(args: argparse.Namespace) -> int:
 
 def format_table(result: "ComparisonResult") -> str:
     """Plain-text metrics table with the paper's Table I values."""
-    from opfbench.report.paper import FORECAST_TABLE as PAPER_TABLE
+    from opfbench.report.paper_figures import FORECAST_TABLE as PAPER_TABLE
 
     header = (
         f"{'model':<18}"

@@ -10,7 +10,7 @@ import argparse
 
 import numpy as np
 
-from opfbench.commands.common import CASE_HELP, add_case_options, case_spec, fraction, print_json, share
+from opfbench.commands.arguments import CASE_HELP, add_case_options, case_spec, fraction, print_json, share
 from opfbench.errors import InputError
 
 DEFAULT_LOAD_SCALE, DEFAULT_DER_SCALE = 1.0, 0.8

@@ -9,7 +9,7 @@ import sys
 import tempfile
 from pathlib import Path
 
-from opfbench.commands.common import fraction, path
+from opfbench.commands.arguments import fraction, path
 from opfbench.errors import InputError
 
 

@@ -10,7 +10,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from opfbench.capability import PAPER_KS
-from opfbench.commands.common import (
+from opfbench.commands.arguments import (
     STRATEGY_HELP,
     add_case_options,
     add_execution_options,
@@ -20,14 +20,15 @@ from opfbench.commands.common import (
     path,
     strategy_labels,
 )
-from opfbench.formulations.options import ACOPF_SOLVERS
+from opfbench.formulations.acopf_options import ACOPF_SOLVERS
+from opfbench.io.sources import formats
 from opfbench.jsonio import print_json
-from opfbench.registry import DEFAULT_FORECAST, DEFAULT_RUN
+from opfbench.registry.references import DEFAULT_FORECAST, DEFAULT_RUN
 from opfbench.study.config import CHUNKS, DEFAULT_NIGHT, NIGHT_MODES, StudyConfig
 from opfbench.study.price import DEFAULT_CURRENCY, DEFAULT_PRICE_PER_KWH, DEFAULT_PRICE_SOURCE
 
 if TYPE_CHECKING:
-    from opfbench.study.runner import StudyRun
+    from opfbench.study.run_family import StudyRun
 
 SUITES = ("simbench",)
 
@@ -55,8 +56,7 @@ def register(sub: argparse._SubParsersAction) -> None:
         "--case",
         nargs="+",
         default=None,
-        help="case specs (default paper33): shipped names, MATPOWER .m or pandapower .json paths, simbench:CODE, "
-        "e.g. paper33 case69-der simbench:1-MV-rural--0-sw",
+        help=f"case specs (default paper33), each {formats()}; e.g. paper33 case69-der simbench:1-MV-rural--0-sw",
     )
     cases.add_argument(
         "--suite",
@@ -165,9 +165,10 @@ def _forecast_strategies(args: argparse.Namespace) -> list[str] | None:
 
 def run(args: argparse.Namespace) -> int:
     source = DEFAULT_PRICE_SOURCE if args.price == DEFAULT_PRICE_PER_KWH else "--price"
+    from opfbench.commands.progress import console
     from opfbench.report.inputs import checked_sources
     from opfbench.report.sources import holds_forecasts
-    from opfbench.study.runner import run_study
+    from opfbench.study.run_family import run_study
 
     forecast_dir = Path(args.forecast_dir)  # the report's forecast section only when it holds a forecast run
     checked_sources(forecast_dir if holds_forecasts(forecast_dir) else None, args.fault_dir, args.year_dir)  # before any work
@@ -195,8 +196,8 @@ def run(args: argparse.Namespace) -> int:
         workers=args.workers,
         scheduler=args.scheduler,
         fresh=args.fresh,
-        quiet=args.quiet,
         command=["opfbench", *sys.argv[1:]],
+        reporter=console(args.quiet),
     )
     return finish_run(result, args)
 

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import argparse
 
-from opfbench.commands.common import (
+from opfbench.commands.arguments import (
     CASE_HELP,
     add_case_options,
     add_operating_point,
@@ -16,7 +16,7 @@ from opfbench.commands.common import (
     strategy_labels,
 )
 from opfbench.errors import InputError
-from opfbench.formulations.options import ACOPF_SOLVERS, FALLBACKS
+from opfbench.formulations.acopf_options import ACOPF_SOLVERS, FALLBACKS
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -64,7 +64,7 @@ def register(sub: argparse._SubParsersAction) -> None:
 def _options(args: argparse.Namespace, label: str) -> dict:
     """The strategy options the flags set; a flag the strategy does not take is an error
     (which strategies take it is the registry's word)."""
-    from opfbench.registry import configuration, specs
+    from opfbench.registry.catalog import configuration, specs
 
     spec = configuration(label).spec
     given = {
@@ -89,9 +89,9 @@ def _options(args: argparse.Namespace, label: str) -> dict:
 
 def run(args: argparse.Namespace) -> int:
     from opfbench.io import load_network
-    from opfbench.registry import run_strategy
+    from opfbench.registry.catalog import run_strategy
     from opfbench.scenario import Scenario
-    from opfbench.study.learning import check_params
+    from opfbench.study.training_checks import check_params
 
     (label,) = strategy_labels([args.strategy], args)
     options = _options(args, label)

@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import argparse
 
-from opfbench.commands.common import add_plugin_option, load_plugins, print_json
+from opfbench.commands.arguments import add_plugin_option, load_plugins, print_json
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -17,7 +17,7 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from opfbench.registry import specs
+    from opfbench.registry.catalog import specs
 
     load_plugins(args)
     entries = [s.describe() for s in specs()]

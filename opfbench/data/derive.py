@@ -23,7 +23,7 @@ from opfbench.data.cleaning import check_bounds, check_finite, check_time_index,
 from opfbench.data.dwd_try import TRY_COLUMNS, TRY_YEAR, parse_try
 from opfbench.data.files_io import FILES_DIR, sha256, write_manifest, write_series_csv_gz
 from opfbench.data.pv_plant import PV_PLANT, pv_ac_power_kw
-from opfbench.data.simbench import GENERATION_PROFILES, LOAD_PROFILES, parse_simbench_profiles
+from opfbench.data.simbench_profiles import GENERATION_PROFILES, LOAD_PROFILES, parse_simbench_profiles
 from opfbench.data.sites import PAYERNE, POTSDAM
 from opfbench.data.wind_plant import TURBINE, turbine_rating_kw, wind_power_kw
 from opfbench.errors import OpfbenchError

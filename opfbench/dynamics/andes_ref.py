@@ -22,8 +22,8 @@ from dataclasses import replace
 
 import numpy as np
 
-from opfbench.dynamics.model import DynamicModel, build_model
 from opfbench.dynamics.params import FaultParams, InverterParams, ModelParams
+from opfbench.dynamics.rms_model import DynamicModel, build_model
 from opfbench.dynamics.simulate import recovery_ms, simulate
 from opfbench.timing import elapsed_ms, now
 
@@ -258,7 +258,7 @@ def mild_fault_comparison(fault: FaultParams = MILD_FAULT) -> dict:
     """Ours vs ANDES on the paper feeder at the reference operating point with LFMA (k = 0)
     setpoints: recovery times per bus, max |ΔV|, wall times."""
     from opfbench.io import load_network
-    from opfbench.registry import run_strategy
+    from opfbench.registry.catalog import run_strategy
     from opfbench.scenario import Scenario
 
     net = load_network("paper33")

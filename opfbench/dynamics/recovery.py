@@ -8,7 +8,8 @@ import numpy as np
 import pandas as pd
 
 from opfbench.dynamics.params import DIVERGED, NOT_RECOVERED, RECOVERED
-from opfbench.registry import BASELINE, get_strategy
+from opfbench.registry.catalog import get_strategy
+from opfbench.registry.references import BASELINE
 
 WORST_FIRST = (DIVERGED, NOT_RECOVERED, RECOVERED)
 """A simulation's status is its worst bus's, in this order."""

@@ -11,8 +11,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from opfbench.dynamics import kernel
-from opfbench.dynamics.model import DynamicModel
 from opfbench.dynamics.params import RECOVERY_PU, FaultParams, ModelParams
+from opfbench.dynamics.rms_model import DynamicModel
 from opfbench.errors import InputError
 from opfbench.network import Network
 from opfbench.timing import elapsed_ms, now

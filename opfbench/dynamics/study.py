@@ -23,48 +23,26 @@ from threadpoolctl import threadpool_limits
 
 from opfbench.capability import PAPER_KS, check_reserve
 from opfbench.digests import digest
-from opfbench.dynamics.model import build_model, check_modelled, prefault_flow
 from opfbench.dynamics.params import DIVERGED, FORECASTS, NOT_RECOVERED, RECOVERED, RECOVERY_PU, FaultParams, ModelParams
 from opfbench.dynamics.point import OperatingPoint, operating_point
 from opfbench.dynamics.recovery import recovery_table
+from opfbench.dynamics.rms_model import build_model, check_modelled, prefault_flow
 from opfbench.dynamics.simulate import MARGIN_WINDOW_S, TRACE_EVERY_S, Simulation, check_fault, simulate
 from opfbench.errors import InputError
 from opfbench.io import Case
 from opfbench.network import Network
 from opfbench.parquetio import ParquetStream, arrow_table, write_parquet
-from opfbench.registry import DEFAULT_FAULT, get_strategy, run_strategy
+from opfbench.registry.catalog import get_strategy, run_strategy
+from opfbench.registry.references import DEFAULT_FAULT
 from opfbench.scenario import Scenario
+from opfbench.schema import FAULT, FAULT_TASK, FAULT_TASK_TRACES, TRACES
 from opfbench.study.config import check_something_to_run, strategies_for, unique_grid
-from opfbench.study.engine import EngineRun, Task, TaskOutput, run_family
+from opfbench.study.engine import SILENT, EngineRun, Reporter, Task, TaskOutput, run_family
 from opfbench.timing import elapsed_ms, now
 
 FAULT_OUTPUTS = ("fault.parquet", "traces.parquet")
-FAULT_COLUMNS = [
-    "case",
-    "fault_bus",
-    "strategy",
-    "k",
-    "forecast",
-    "variant",
-    "source_impedance_pu",
-    "emf",
-    "motor_share",
-    "bus",
-    "recovery_ms",
-    "status",
-    "vmin_pu",
-    "margin_pu",
-    "motors_stalled",
-    "sim_ms",
-    "der_bus",
-    "faulted",
-]
-TRACE_COLUMNS = ["case", "fault_bus", "strategy", "k", "forecast", "variant", "bus", "t_s", "v_pu", "q_mvar"]
-#: A task's tables: per bus of each fault, and the traces.
-TASK_COLUMNS = {
-    "measures": ["fault_bus", *FAULT_COLUMNS[FAULT_COLUMNS.index("bus") :]],
-    "traces": ["bus", "t_s", "v_pu", "q_mvar", "fault_bus"],
-}
+#: A task's tables: per bus of each fault, and the traces (`opfbench.schema`).
+TASK_COLUMNS = {"measures": FAULT_TASK.names, "traces": FAULT_TASK_TRACES.names}
 
 
 @dataclass(frozen=True)
@@ -389,8 +367,8 @@ class FaultAssembler:
         label |= {"forecast": c.forecast, "variant": c.variant}
         model: dict[str, str | float] = {"source_impedance_pu": src.impedance_pu, "emf": str(src.emf)}
         model["motor_share"] = c.params.motors.share
-        self.rows.append(_labelled(tables["measures"], label | model, FAULT_COLUMNS))
-        self.batch.append(_labelled(tables["traces"], label, TRACE_COLUMNS))
+        self.rows.append(_labelled(tables["measures"], label | model, FAULT.names))
+        self.batch.append(_labelled(tables["traces"], label, TRACES.names))
         if sum(t.num_rows for t in self.batch) >= TRACE_BATCH:
             self._flush()
         self.left[c.task] -= 1
@@ -452,13 +430,13 @@ def run_fault_study(
     workers: int | None = 1,
     scheduler: str | None = None,
     fresh: bool = False,
-    quiet: bool = False,
     command: list[str] | None = None,
+    reporter: Reporter = SILENT,
 ) -> FaultStudy:
     """Run the study on the engine into `out` (None: a temporary folder), resuming its
     finished tasks; see `study.engine.run_family` for the rest."""
     run = run_family(
-        lambda: plan(config, case), out, workers=workers, scheduler=scheduler, fresh=fresh, quiet=quiet, command=command
+        lambda: plan(config, case), out, workers=workers, scheduler=scheduler, fresh=fresh, command=command, reporter=reporter
     )
     return FaultStudy(out and run.out, run.family, run.result, run)
 

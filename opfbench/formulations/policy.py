@@ -27,18 +27,31 @@ otherwise.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
 
-from opfbench.formulations.models.polar_ac import AcOpf, ac_opf
-from opfbench.formulations.models.soc import SocpSolve
-from opfbench.formulations.options import Fallback
+from opfbench.formulations.acopf_options import Fallback
+from opfbench.formulations.model import ExactModel
+from opfbench.formulations.models.conic import SnapshotSolve
 from opfbench.formulations.problem import OpfProblem, SnapshotData
-from opfbench.formulations.results import CERTIFIED_BY_IPOPT, CERTIFIED_BY_SOCP, FROM_COLD, FROM_NO_ACTION, FROM_SOCP, FROM_SOLVER
 from opfbench.formulations.solvers.ipopt_adapter import IpoptSolve
 from opfbench.powerflow import PowerFlowResult, solve_pf, solve_pf_batch
-from opfbench.result import FALLBACK_COLD, FALLBACK_NO_ACTION, FALLBACK_SOCP, INFEASIBLE, OK, SOLVER_FAILED
+from opfbench.result import (
+    CERTIFIED_BY_IPOPT,
+    CERTIFIED_BY_SOCP,
+    FALLBACK_COLD,
+    FALLBACK_NO_ACTION,
+    FALLBACK_SOCP,
+    FROM_COLD,
+    FROM_NO_ACTION,
+    FROM_SOCP,
+    FROM_SOLVER,
+    INFEASIBLE,
+    OK,
+    SOLVER_FAILED,
+)
 from opfbench.scenario import Scenario
 
 CERTIFY_RTOL = 1e-6  # fast path: AC losses of the SOCP point ≤ bound·(1 + this) (relative)
@@ -47,7 +60,7 @@ CERTIFY_RTOL = 1e-6  # fast path: AC losses of the SOCP point ≤ bound·(1 + th
 @dataclass
 class Settled:
     """How one snapshot was settled: its setpoints (p.u.), status, where the point comes
-    from (`results.FROM_*`), the IPOPT attempts, the relaxation's solve, the power flows
+    from (`result.FROM_*`), the IPOPT attempts, the relaxation's solve, the power flows
     the policy used to check points, who certified it, its losses where certified by
     the SOCP (kW), and the bounds' proof of its infeasibility (`infeasibility`; "" if none)."""
 
@@ -55,7 +68,7 @@ class Settled:
     status: str
     fallback: str
     attempts: list[IpoptSolve]
-    socp: SocpSolve
+    socp: SnapshotSolve
     power_flows: int
     certified_by: str
     objective_kw: float = np.nan
@@ -84,7 +97,7 @@ class Settled:
             "objective_kw": self.objective_kw if by_socp else acc.objective_kw if acc else np.nan,
             "fallback": self.fallback,
             "certified_by": self.certified_by,
-            "relaxation_gap": socp["relaxation_gap"],
+            "relaxation_gap": self.socp.relaxation_gap,
             "socp_status": socp["solver_status"],
             "socp_ms": socp["solve_ms"],
         }
@@ -100,7 +113,7 @@ class FastPath:
     certified: np.ndarray  # (S,) bool
     proofs: np.ndarray  # (S,) str: `infeasibility.proven_infeasible`
 
-    def settled(self, i: int, socp: SocpSolve) -> Settled | None:
+    def settled(self, i: int, socp: SnapshotSolve) -> Settled | None:
         """Snapshot i settled without IPOPT — certified, or proven infeasible by the
         relaxation or the bounds (then no action) — else None."""
         if self.certified[i]:
@@ -112,7 +125,7 @@ class FastPath:
 
 
 def fast_path(
-    scenario: Scenario, problem: OpfProblem, data: SnapshotData, solves: tuple[SocpSolve, ...], proofs: np.ndarray
+    scenario: Scenario, problem: OpfProblem, data: SnapshotData, solves: tuple[SnapshotSolve, ...], proofs: np.ndarray
 ) -> FastPath:
     """The fast path's evaluation of every snapshot (module docstring); `proofs`: the
     snapshots' `infeasibility.proven_infeasible` (their relaxation need not be solved)."""
@@ -121,7 +134,7 @@ def fast_path(
     optimal = np.array([s.optimal for s in solves], dtype=bool)
     q_pu = np.array([s.q_pu if s.q_pu is not None else np.zeros(n_der) for s in solves]).reshape(len(solves), n_der)
     pf = solve_pf_batch(net, scenario.injections(q_pu * net.base_mva))
-    bound = np.array([s.lower_bound_kw for s in solves])
+    bound = np.array([s.objective_kw for s in solves])
     with np.errstate(invalid="ignore"):
         close = np.abs(pf.losses_kw - bound) <= CERTIFY_RTOL * np.abs(bound)
     return FastPath(q_pu, pf, optimal & problem.feasible(pf, data.s_fixed) & close, proofs)
@@ -137,15 +150,23 @@ def merge_flows(fast: PowerFlowResult, rest: PowerFlowResult, rows: np.ndarray) 
 class IpoptPolicy:
     """Settles snapshots with IPOPT one by one under a failure policy, carrying the warm start."""
 
-    def __init__(self, data: SnapshotData, problem: OpfProblem, fallback: Fallback, socp: tuple[SocpSolve, ...]):
+    def __init__(
+        self,
+        data: SnapshotData,
+        problem: OpfProblem,
+        fallback: Fallback,
+        socp: tuple[SnapshotSolve, ...],
+        exact: Callable[[], ExactModel],
+    ):
         self.data, self.problem = data, problem
         self.fallback, self.socp = fallback, socp
         self.net = problem.net
         self.start: IpoptSolve | None = None
+        self._exact = exact
 
     @property
-    def opf(self) -> AcOpf:
-        return ac_opf(self.net, self.problem.slack_export)  # built on first use only
+    def opf(self) -> ExactModel:
+        return self._exact()  # built on first use only
 
     def _feasible(self, i: int, q_pu: np.ndarray) -> bool:
         s_fixed = self.data.s_fixed[i]

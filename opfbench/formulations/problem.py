@@ -25,7 +25,7 @@ power-flow solution against the same limits. A formulation supplies only its net
 model (how branch flows depend on its variables) and its objective expression.
 
 Also here: the per-snapshot inputs (`snapshot_data`) and the π-model branch coefficients.
-The status vocabulary is `opfbench.result`'s; the result assembly `formulations.results`.
+The status vocabulary is `opfbench.result`'s; the result assembly `formulations.evaluation`.
 """
 
 from __future__ import annotations

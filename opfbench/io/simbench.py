@@ -15,7 +15,7 @@ What SimBench's data need, each handled here (and tested):
   `simbench.get_absolute_profiles_from_relative_profiles`).
 - **Local time**: the profiles' time column is German local time with daylight saving (a
   missing hour on 27 March, a repeated one on 30 October): read by
-  `opfbench.data.simbench.simbench_time_index` into a strictly increasing tz-aware index.
+  `opfbench.data.simbench_profiles.simbench_time_index` into a strictly increasing tz-aware index.
 - **Signs**: negative profile values are real (wind turbines' own consumption −1e-5 p.u.,
   capacitive load Q) and are never clipped.
 - **Structure**: several loads (and sgens) share a bus, bus indices are not contiguous,

@@ -3,9 +3,9 @@ worker, tables).
 
     SOURCE[?der=DER&der-pf=PF&line-z=F]
 
-SOURCE is a shipped case name (`opfbench cases`), the path of a MATPOWER `.m` file or of a
-pandapower net saved with `pandapower.to_json` (`.json`), or `simbench:CODE` (a SimBench LV
-or MV grid code, e.g. `simbench:1-MV-rural--0-sw`). Options:
+SOURCE is one of the case sources `opfbench.io.sources` declares (its `formats()` names
+them: the shipped names, MATPOWER `.m` and pandapower `.json` files, `simbench:CODE`).
+Options:
 
 - `der=gens` (MATPOWER files): the case's non-slack generators become DER
   (`opfbench.io.matpower`); `der=BUS:KIND:MW[:ENERGY],…`: DER placed at those buses
@@ -28,9 +28,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from opfbench.errors import InputError
+from opfbench.io.sources import formats, source_of
 from opfbench.network import DER_ENERGIES, DER_KINDS
-
-SIMBENCH = "simbench:"
 
 
 @dataclass(frozen=True)
@@ -57,22 +56,14 @@ class CaseSpec:
 
     @property
     def kind(self) -> str:
-        """ "simbench", "matpower", "pandapower" or "shipped"."""
-        if self.source.startswith(SIMBENCH):
-            return "simbench"
-        if self.source.endswith(".m"):
-            return "matpower"
-        if self.source.endswith(".json"):
-            return "pandapower"
-        return "shipped"
+        """The kind of its source (`sources.SOURCES`: "shipped", "matpower", …)."""
+        return source_of(self.source).kind
 
 
 def parse_spec(text: str) -> CaseSpec:
     """The CaseSpec of `text`; InputError naming the option for a malformed one."""
     if not isinstance(text, str) or not text.strip():
-        raise InputError(
-            f"a case is a shipped case's name, a MATPOWER .m or pandapower .json file's path or simbench:CODE, got {text!r}"
-        )
+        raise InputError(f"a case is {formats()}, got {text!r}")
     source, sep, query = text.strip().partition("?")
     der, der_pf, line_z = None, None, None
     for part in query.split("&") if sep else ():

@@ -46,6 +46,7 @@ from opfbench.powerflow.dense import DenseNewton, DenseZbus
 from opfbench.powerflow.fixed_point import fixed_point, max_mismatch
 from opfbench.powerflow.memo import flow_memo
 from opfbench.powerflow.sparse import SparseNewton, SparseZbus
+from opfbench.state import PROCESS
 
 __all__ = [
     "MAX_NR_ITER",
@@ -134,6 +135,14 @@ def _zbus(net: Network, sparse: bool) -> _ZbusFactor:
     full = np.full(net.n_bus, net.v_slack, dtype=complex)
     full[keep] = v_noload[:, 0]
     return _ZbusFactor(keep, z, v_noload[:, 0], full, net.ybus_sparse[keep])
+
+
+def _forget_factors() -> None:
+    _newton.cache_clear()
+    _zbus.cache_clear()
+
+
+PROCESS.on_reset("power-flow factorizations", _forget_factors)
 
 
 def solve_pf_batch(

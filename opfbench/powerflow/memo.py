@@ -23,6 +23,7 @@ import numpy as np
 
 from opfbench.network import Network
 from opfbench.powerflow.common import PowerFlowResult
+from opfbench.state import PROCESS
 
 T = TypeVar("T")
 MEMO_BYTES = 64 * 2**20  # per thread: inputs and answers kept (estimated from their arrays)
@@ -83,6 +84,9 @@ def flow_memo() -> FlowMemo:
 def forget_flows() -> None:
     """Empty this thread's memo (benchmarks timing the flows themselves)."""
     _local.memo = FlowMemo()
+
+
+PROCESS.on_reset("power-flow answers (the calling thread's)", forget_flows)
 
 
 def cold(fn: Callable[..., T], *args, **kwargs) -> T:

@@ -17,8 +17,9 @@ from typing import Callable
 import numpy as np
 import pandas as pd
 
-from opfbench.registry import BASELINE, PAPER_OPF, PAPER_RULES, REFERENCE_OPTIMUM
-from opfbench.report import paper, tables
+from opfbench.registry.references import BASELINE, PAPER_OPF, PAPER_RULES, REFERENCE_OPTIMUM
+from opfbench.report import paper_figures as paper
+from opfbench.report import tables
 from opfbench.report.inputs import Inputs
 
 HOLDS, FAILS, NA = "holds", "does not hold", "not comparable"

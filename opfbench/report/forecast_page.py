@@ -19,7 +19,7 @@ import pandas as pd  # noqa: E402
 
 from opfbench.forecasting.experiment import ComparisonResult  # noqa: E402
 from opfbench.report.page import environment, render, table  # noqa: E402
-from opfbench.report.paper import FORECAST_TABLE as PAPER_TABLE  # noqa: E402
+from opfbench.report.paper_figures import FORECAST_TABLE as PAPER_TABLE  # noqa: E402
 
 __all__ = ["PAPER_TABLE", "forecast_page", "forecast_section", "html_page", "plot_day"]
 

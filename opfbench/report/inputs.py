@@ -23,9 +23,9 @@ import pyarrow.parquet as pq
 import opfbench
 from opfbench.errors import InputError
 from opfbench.io.spec import parse_spec
-from opfbench.registry import is_formulation
 from opfbench.report.sources import check_given, report_sources
-from opfbench.report.tables import REFERENCE_NIGHT
+from opfbench.report.tables import REFERENCE_NIGHT, Kinds
+from opfbench.schema import DER_Q, FAULT, KEYS, STEPS, SUMMARY, TRACES, Table
 from opfbench.study.store import SCHEMA
 
 RUN_COMMAND = "opfbench run --out {dir}"
@@ -73,6 +73,12 @@ class Inputs:
     studies: list[Inputs] = field(default_factory=list)  # committed learned-rule studies (docs/learned), if the run trained none
     missing: dict[str, str] = field(default_factory=dict)  # input name -> how to produce it
 
+    def kinds(self) -> Kinds:
+        """How the run's configurations are classified: as its manifest records them
+        (`report.tables.Kinds`)."""
+        labels = self.summary["strategy"] if self.summary is not None else ()
+        return Kinds.of(labels, (self.manifest or {}).get("strategies"))
+
     def models(self) -> dict[str, str]:
         """Each case of the run → the case it is modelled by (its spec without `line-z`),
         whose rows the training summary holds."""
@@ -87,32 +93,37 @@ class Inputs:
 
 TEXT, NUMBER, TIME, FLAG, NULL = "text", "number", "time", "true/false", "null"
 """Kinds of column a report input must have (`_kind`)."""
-_KEYS = {"case": TEXT, "strategy": TEXT, "k": NUMBER, "night_mode": TEXT, "forecast": TEXT}
-STEP_KINDS = _KEYS | {
-    "time": TIME,
-    "status": TEXT,
-    "losses_kw": NUMBER,
-    "vmin_pu": NUMBER,
-    "vmax_pu": NUMBER,
-    "solver_ms": NUMBER,
-    "iterations": NUMBER,
-    "certified_by": TEXT,
-    "fallback": TEXT,
-    "solver_status": TEXT,
-}
+_KIND = {"text": TEXT, "number": NUMBER, "integer": NUMBER, "time": TIME, "true/false": FLAG}
+
+
+def _kinds(table: Table, names: tuple[str, ...]) -> dict[str, str]:
+    """The kinds the report checks of the columns `names` of a declared table (`opfbench.schema`)."""
+    return {name: _KIND[table[name].dtype] for name in names}
+
+
+_KEYS = _kinds(STEPS, tuple(KEYS))
+STEP_KINDS = _kinds(
+    STEPS,
+    (
+        *KEYS,
+        "time",
+        "status",
+        "losses_kw",
+        "vmin_pu",
+        "vmax_pu",
+        "solver_ms",
+        "iterations",
+        "certified_by",
+        "fallback",
+        "solver_status",
+    ),
+)
 """The columns of steps.parquet the report uses, and their kinds."""
 STEP_COLUMNS = tuple(STEP_KINDS)
-DER_Q_KINDS = _KEYS | {"time": TIME, "bus": NUMBER, "kind": TEXT, "q_mvar": NUMBER}
-_FAULT_KEYS = {"case": TEXT, "fault_bus": NUMBER, "strategy": TEXT, "k": NUMBER, "forecast": TEXT, "variant": TEXT}
-FAULT_KINDS = _FAULT_KEYS | {
-    "bus": NUMBER,
-    "recovery_ms": NUMBER,
-    "status": TEXT,
-    "vmin_pu": NUMBER,
-    "margin_pu": NUMBER,
-    "faulted": FLAG,
-}
-TRACE_KINDS = _FAULT_KEYS | {"bus": NUMBER, "t_s": NUMBER, "v_pu": NUMBER, "q_mvar": NUMBER}
+DER_Q_KINDS = _kinds(DER_Q, (*KEYS, "time", "bus", "kind", "q_mvar"))
+_FAULT_KEYS = _kinds(FAULT, ("case", "fault_bus", "strategy", "k", "forecast", "variant"))
+FAULT_KINDS = _FAULT_KEYS | _kinds(FAULT, ("bus", "recovery_ms", "status", "vmin_pu", "margin_pu", "faulted"))
+TRACE_KINDS = _FAULT_KEYS | _kinds(TRACES, ("bus", "t_s", "v_pu", "q_mvar"))
 SUMMARY_NUMBERS = (
     "steps",
     "hours",
@@ -137,15 +148,7 @@ SUMMARY_NUMBERS = (
 pf_converged_steps, pf_diverged_steps and rule_non_finite_steps when present."""
 FORECAST_METRICS = ("mse_scaled", "mape_pct", "mae_kw", "rmse_kw", "skill", "fit_s")
 """The metrics of a forecast JSON the report shows."""
-SUMMARY_COUNTS = (
-    "steps",
-    "not_ok_steps",
-    "voltage_violation_steps",
-    "excursion_steps",
-    "pf_converged_steps",
-    "pf_diverged_steps",
-    "rule_non_finite_steps",
-)
+SUMMARY_COUNTS = tuple(c.name for c in SUMMARY if c.dtype == "integer")
 """Columns of summary.csv that count steps: whole numbers ≥ 0."""
 SUMMARY_OPTIONAL_NUMBERS = ("pf_converged_steps", "pf_diverged_steps", "rule_non_finite_steps")
 
@@ -170,6 +173,9 @@ _JSON_KINDS = {
     "a number > 0": lambda v: _number(v) and v > 0,
     "a finite number ≥ 0": lambda v: _number(v) and v >= 0,
     "a whole number ≥ 0": lambda v: _number(v) and isinstance(v, int) and v >= 0,
+    "true or false": lambda v: isinstance(v, bool),
+    "a strategy kind": lambda v: v in ("local", "formulation"),
+    "a model role": lambda v: v in ("exact", "relaxation", "approximation"),
 }
 """JSON kinds (with their domain) of the manifest fields the report reads."""
 MANIFEST_FIELDS = {
@@ -182,6 +188,7 @@ MANIFEST_FIELDS = {
     "cases": "an object",
     "tasks": "a list",
     "timings": "an object",
+    "strategies": "an object",
     "config.cases": "a list of text",
     "config.strategies": "a list of text",
     "config.ks": "a list of numbers in [0, 1]",
@@ -207,6 +214,8 @@ MANIFEST_REQUIRED = ("config", "config.period")
 
 CASE_FIELDS = {"buses": "a whole number ≥ 0", "ders": "a list", "vmin_pu": "a number", "vmax_pu": "a number"}
 """The fields of a manifest's cases.<name> the report reads, and their JSON types."""
+STRATEGY_FIELDS = {"kind": "a strategy kind", "uses_forecast": "true or false", "role": "a model role"}
+"""The fields of a manifest's strategies.<label> the report reads (a kind required), and their JSON types."""
 
 
 def _is_kind(value: object, expected: str) -> bool:
@@ -286,6 +295,12 @@ def _manifest(path: Path, command: str) -> dict | None:
         for key, value, expected in fields:
             if value is not None and not _is_kind(value, expected):
                 raise _damaged(path, f"{key} is {value!r}, expected {expected}", command)
+    for label, record in (m.get("strategies") or {}).items():
+        if not isinstance(record, dict) or "kind" not in record:
+            raise _damaged(path, f"strategies.{label} is {record!r}, expected an object with a kind", command)
+        for name, expected in STRATEGY_FIELDS.items():
+            if record.get(name) is not None and not _is_kind(record[name], expected):
+                raise _damaged(path, f"strategies.{label}.{name} is {record[name]!r}, expected {expected}", command)
     return m
 
 
@@ -384,14 +399,14 @@ def _reference_filter(summary: pd.DataFrame | None) -> list | None:
     return [("night_mode", "==", reference[0]), ("forecast", "==", "off"), ("k", "==", reference[1])]
 
 
-def _steps(path: Path, summary: pd.DataFrame | None, command: str) -> pd.DataFrame | None:
+def _steps(path: Path, summary: pd.DataFrame | None, kinds: Kinds, command: str) -> pd.DataFrame | None:
     """The per-step rows the report uses — every formulation's (convergence tables) and the
     reference setting's (plots) — with only the columns it uses."""
     reference = _reference_filter(summary)
     keys = (*_KEYS, "time", "status")
     if reference is None or summary is None:
         return _filtered(path, STEP_KINDS, None, command, keys=keys)
-    formulations = [s for s in dict.fromkeys(summary["strategy"].astype(str)) if is_formulation(s)]
+    formulations = sorted(kinds.formulations)
     filters = [[("strategy", "in", formulations)], reference] if formulations else [reference]
     return _filtered(path, STEP_KINDS, filters, command, keys=keys)
 
@@ -475,7 +490,7 @@ def load_inputs(
     command = RUN_COMMAND.format(dir=run)
     inp.manifest = _manifest(run / "manifest.json", command)
     inp.summary = _summary(run / "summary.csv", command)
-    inp.steps = _steps(run / "steps.parquet", inp.summary, command)
+    inp.steps = _steps(run / "steps.parquet", inp.summary, inp.kinds(), command)
     # plotted: the reference rows
     inp.der_q = _filtered(
         run / "der_q.parquet", DER_Q_KINDS, _reference_filter(inp.summary), command, True, (*_KEYS, "time", "bus")
@@ -511,7 +526,7 @@ def load_study(folder: Path) -> Inputs:
 
 
 def _learned_row(path: Path, command: str) -> dict:
-    """A fitted rule's parameters file (`strategies.learned.LearnedParams`) as a table row."""
+    """A fitted rule's parameters file (`learned.rules.LearnedParams`) as a table row."""
     data = _json(path, command) or {}
     try:
         train, fit = data["train"], data.get("fit") or {}

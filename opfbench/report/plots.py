@@ -19,7 +19,7 @@ import plotly.graph_objects as go
 import plotly.io as pio
 from plotly.subplots import make_subplots
 
-from opfbench.registry import BASELINE
+from opfbench.registry.references import BASELINE
 from opfbench.report.inputs import TRACE_BUS
 from opfbench.report.tables import REFERENCE_NIGHT, order
 

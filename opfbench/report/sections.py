@@ -83,7 +83,7 @@ TRAINING_TIME = (
 def _how_close_blocks(inputs: Inputs, name: str) -> list[Block]:
     """A run's shares of the AC OPF's loss reduction per local rule (train beside test),
     its fitted rules and its figure; `name` tells the run apart."""
-    board = tables.how_close(inputs.summary, inputs.train_summary, inputs.models())
+    board = tables.how_close(inputs.summary, inputs.kinds(), inputs.train_summary, inputs.models())
     out = []
     if inputs.learned:
         fits = pd.DataFrame([{"file": ref} | row for ref, row in sorted(inputs.learned.items())])
@@ -260,7 +260,7 @@ def convergence(inputs: Inputs) -> Section:
     )
     if inputs.steps is None:
         return sec.add(*_missing(inputs, "steps.parquet"))
-    conv = tables.convergence(inputs.steps)
+    conv = tables.convergence(inputs.steps, inputs.kinds())
     if conv.empty:
         return sec.add(Block("note", text="The run has no formulation (acopf, acopf-paper, socp)."))
     solver = (inputs.manifest or {}).get("config", {}).get("acopf_solver", "auto")
@@ -278,10 +278,14 @@ def convergence(inputs: Inputs) -> Section:
         )
     )
     sec.add(table(conv, "Steps per status"))
-    sec.add(table(tables.failure_reasons(inputs.steps), "Steps not ok: status, solver return status and fallback used"))
     sec.add(
         table(
-            tables.solver_stats(inputs.steps),
+            tables.failure_reasons(inputs.steps, inputs.kinds()), "Steps not ok: status, solver return status and fallback used"
+        )
+    )
+    sec.add(
+        table(
+            tables.solver_stats(inputs.steps, inputs.kinds()),
             "Solver iterations and solve times (ms): IPOPT for acopf/acopf-paper (0 iterations where the SOCP certified the step), Clarabel for socp",
         )
     )
@@ -350,7 +354,8 @@ def year(inputs: Inputs, price: tuple[float, str, str]) -> Section:
     s = inputs.year_summary
     sec.add(_run_meta(inputs.year_dir, inputs.year_manifest))
     sec.blocks += _energy_tables(s, price, " over the year")
-    sec.add(table(tables.convergence_summary(s), "Steps not ok over the year per formulation and k (all night modes)"))
+    kinds = tables.Kinds.of(s["strategy"], inputs.year_manifest.get("strategies"))
+    sec.add(table(tables.convergence_summary(s, kinds), "Steps not ok over the year per formulation and k (all night modes)"))
     sec.blocks += _plots(plots.energy_vs_k(s, "year-energy-k", " over the year"))
     return sec
 
@@ -376,7 +381,8 @@ def field_year(inputs: Inputs, price: tuple[float, str, str]) -> Section:
         if board.empty:
             continue
         sec.add(table(_shown(board), f"Leaderboard over the year, PV {mode} at night (rank 1 = lowest energy)"))
-    sec.add(table(tables.convergence_summary(s), "Steps not ok and certified optima over the year per formulation and k"))
+    kinds = tables.Kinds.of(s["strategy"], inputs.field_manifest.get("strategies"))
+    sec.add(table(tables.convergence_summary(s, kinds), "Steps not ok and certified optima over the year per formulation and k"))
     sec.blocks += _energy_tables(s, price, " over the year")
     sec.blocks += _plots(plots.share_vs_costs(tables.leaderboard(s)))
     return sec
@@ -451,7 +457,7 @@ def voltage(inputs: Inputs) -> Section:
         sec.add(Block("note", text="Limits: " + "; ".join(f"{n} [{lo}, {hi}] p.u." for n, (lo, hi) in limits.items())))
     sec.blocks += _no_figure_note(inputs.summary)
     sec.add(table(tables.voltage(inputs.summary)))
-    exc = tables.excursions(inputs.summary)
+    exc = tables.excursions(inputs.summary, inputs.kinds())
     if exc.empty:
         sec.add(Block("note", text="No forecast-aware configuration in the run (forecast off only)."))
     else:

@@ -7,14 +7,18 @@ E/E_no-action) with E_no-action the same case/k/night mode, forecast off (summar
 
 from __future__ import annotations
 
+from collections.abc import Iterable
+from dataclasses import dataclass
+
 import numpy as np
 import pandas as pd
 
 from opfbench.dynamics.recovery import KEYS as RECOVERY_KEYS
 from opfbench.dynamics.recovery import recovery_table
-from opfbench.registry import BASELINE, PAPER_OPF, PAPER_RULES, REFERENCE_OPTIMUM, describe, is_formulation, is_relaxation, rank
-from opfbench.report import paper
-from opfbench.result import PF_DIVERGED, RULE_NON_FINITE, STATUSES
+from opfbench.registry.catalog import describe, rank
+from opfbench.registry.references import BASELINE, PAPER_OPF, PAPER_RULES, REFERENCE_OPTIMUM
+from opfbench.report import paper_figures as paper
+from opfbench.result import CERTIFIED_BY_IPOPT, CERTIFIED_BY_SOCP, PF_DIVERGED, RULE_NON_FINITE, STATUSES
 
 CONFIG = ["case", "strategy", "k", "night_mode", "forecast"]
 REFERENCE_NIGHT = "connected"
@@ -76,16 +80,45 @@ def energy_pivot(summary: pd.DataFrame, night_mode: str = REFERENCE_NIGHT, value
     return order(table.reset_index())
 
 
-def formulation_steps(steps: pd.DataFrame) -> pd.DataFrame:
-    """Rows of strategies that call a solver (registered formulations, or any with an IPOPT/solver status)."""
-    labels = steps["strategy"].astype(str)
-    solver = labels.map(is_formulation).astype(bool) | (steps["solver_status"].fillna("") != "")
-    return steps[solver]
+@dataclass(frozen=True)
+class Kinds:
+    """How a run folder's configurations are classified: the formulations, those of them
+    whose point is not a certified AC optimum (a relaxation's or an approximation's), and
+    the configurations that read a forecast — as the folder's manifest records them
+    (`StrategySpec.record`), so a report built without a plugin classifies its rows right;
+    a folder older than the record is classified by the registry, a name neither knows as
+    a local rule that reads a forecast."""
+
+    formulations: frozenset[str] = frozenset()
+    inexact: frozenset[str] = frozenset()
+    forecast_readers: frozenset[str] = frozenset()
+
+    @classmethod
+    def of(cls, labels: Iterable[str], recorded: dict | None = None) -> "Kinds":
+        formulations, inexact, readers = set(), set(), set()
+        for label in dict.fromkeys(map(str, labels)):
+            record = (recorded or {}).get(label)
+            if record is None:
+                spec = describe(label)
+                record = spec.record() if spec is not None else {"kind": "local", "uses_forecast": True}
+            if record["kind"] == "formulation":
+                formulations.add(label)
+                if record.get("role") != "exact":
+                    inexact.add(label)
+            if record.get("uses_forecast"):
+                readers.add(label)
+        return cls(frozenset(formulations), frozenset(inexact), frozenset(readers))
 
 
-def convergence(steps: pd.DataFrame) -> pd.DataFrame:
-    """Per case × formulation × k: steps with each status (count and share %)."""
-    sub = formulation_steps(steps)
+def formulation_steps(steps: pd.DataFrame, kinds: Kinds) -> pd.DataFrame:
+    """Rows of the formulations (`kinds`)."""
+    return steps[steps["strategy"].astype(str).isin(kinds.formulations)]
+
+
+def convergence(steps: pd.DataFrame, kinds: Kinds) -> pd.DataFrame:
+    """Per case × formulation × k: steps with each status (count and share %); for an
+    exact model's, the ok steps certified by the relaxation or by IPOPT."""
+    sub = formulation_steps(steps, kinds)
     if sub.empty:
         return pd.DataFrame()
     counts = pd.crosstab([sub["case"], sub["strategy"], sub["k"]], sub["status"])
@@ -99,19 +132,19 @@ def convergence(steps: pd.DataFrame) -> pd.DataFrame:
     out = counts.copy()
     out.insert(0, "steps", total)
     out["not ok %"] = 100.0 * (total - counts["ok"]) / total
-    ac = ~sub["strategy"].astype(str).map(is_relaxation).astype(bool)  # who certified the AC OPF's ok steps
-    relaxation = out.index.get_level_values("strategy").map(is_relaxation).astype(bool)
-    for solver in ("socp", "ipopt"):  # `certified_by` values
+    ac = ~sub["strategy"].astype(str).isin(kinds.inexact)  # who certified the AC OPF's ok steps
+    inexact = out.index.get_level_values("strategy").isin(kinds.inexact)
+    for solver in (CERTIFIED_BY_SOCP, CERTIFIED_BY_IPOPT):
         picked = sub[ac & (sub["status"] == "ok") & (sub["certified_by"] == solver)]
         out[f"ok, certified by {solver}"] = (
-            picked.groupby(["case", "strategy", "k"]).size().reindex(out.index, fill_value=0).where(~relaxation).astype("Int64")
+            picked.groupby(["case", "strategy", "k"]).size().reindex(out.index, fill_value=0).where(~inexact).astype("Int64")
         )
     return order(out.reset_index())
 
 
-def failure_reasons(steps: pd.DataFrame) -> pd.DataFrame:
+def failure_reasons(steps: pd.DataFrame, kinds: Kinds) -> pd.DataFrame:
     """Steps not "ok" per case × formulation × status × solver return status."""
-    sub = formulation_steps(steps)
+    sub = formulation_steps(steps, kinds)
     sub = sub[sub["status"] != "ok"]
     if sub.empty:
         return pd.DataFrame(columns=["case", "strategy", "status", "solver_status", "fallback", "steps"])
@@ -119,9 +152,9 @@ def failure_reasons(steps: pd.DataFrame) -> pd.DataFrame:
     return order(out)
 
 
-def solver_stats(steps: pd.DataFrame) -> pd.DataFrame:
+def solver_stats(steps: pd.DataFrame, kinds: Kinds) -> pd.DataFrame:
     """Solver iterations and solve times (ms) per case × formulation: median, 90th percentile, max."""
-    sub = formulation_steps(steps)
+    sub = formulation_steps(steps, kinds)
     if sub.empty:
         return pd.DataFrame()
     g = sub.groupby(["case", "strategy"])
@@ -217,10 +250,9 @@ def voltage(summary: pd.DataFrame) -> pd.DataFrame:
     return order(out.reset_index())
 
 
-def excursions(summary: pd.DataFrame) -> pd.DataFrame:
+def excursions(summary: pd.DataFrame, kinds: Kinds) -> pd.DataFrame:
     """Algorithm 3 (forecast on): steps whose setpoint exceeds the capability at P^C, and the largest excess."""
-    reads = summary["strategy"].astype(str).map(lambda s: describe(s) is None or describe(s).uses_forecast)  # type: ignore[union-attr]
-    sub = summary[(summary["forecast"] != "off") & reads.astype(bool)]
+    sub = summary[(summary["forecast"] != "off") & summary["strategy"].astype(str).isin(kinds.forecast_readers)]
     return order(sub[CONFIG + ["steps", "excursion_steps", "max_excursion_mvar"]])
 
 
@@ -280,16 +312,16 @@ def sensitivity(rec: pd.DataFrame) -> pd.DataFrame:
     return order(out.reset_index())
 
 
-def convergence_summary(summary: pd.DataFrame) -> pd.DataFrame:
+def convergence_summary(summary: pd.DataFrame, kinds: Kinds) -> pd.DataFrame:
     """Per case × formulation × k, over every night mode (forecast off): steps, steps not ok
     and the share of steps whose point is a certified AC optimum (by the SOCP or by IPOPT;
-    NaN for socp, whose point is the bound's, not certified) — from the summary, without
-    the per-step table."""
-    sub = summary[(summary["forecast"] == "off") & summary["strategy"].astype(str).map(is_formulation).astype(bool)]
+    NaN for a relaxation or an approximation, whose point is not certified) — from the
+    summary, without the per-step table."""
+    sub = summary[(summary["forecast"] == "off") & summary["strategy"].astype(str).isin(kinds.formulations)]
     g = sub.assign(certified=sub["certified_share"] * sub["steps"]).groupby(["case", "strategy", "k"], sort=False)
     out = g.agg(steps=("steps", "sum"), not_ok_steps=("not_ok_steps", "sum"), certified=("certified", "sum")).reset_index()
-    relaxation = out["strategy"].astype(str).map(is_relaxation).astype(bool)
-    out["certified optimal %"] = np.where(relaxation, np.nan, 100.0 * out.pop("certified") / out["steps"])
+    inexact = out["strategy"].astype(str).isin(kinds.inexact)
+    out["certified optimal %"] = np.where(inexact, np.nan, 100.0 * out.pop("certified") / out["steps"])
     return order(out)
 
 
@@ -394,7 +426,9 @@ LOCAL_COLUMNS = [
 ]
 
 
-def how_close(summary: pd.DataFrame, train: pd.DataFrame | None = None, model_of: dict[str, str] | None = None) -> pd.DataFrame:
+def how_close(
+    summary: pd.DataFrame, kinds: Kinds, train: pd.DataFrame | None = None, model_of: dict[str, str] | None = None
+) -> pd.DataFrame:
     """Per case × k (forecast off, PV connected at night): every local rule — no action,
     the paper's, the rules in force, the learned ones — by its share of the AC OPF's loss
     reduction on the test period (the run, `summary`) and on the training period (`train`,
@@ -403,7 +437,7 @@ def how_close(summary: pd.DataFrame, train: pd.DataFrame | None = None, model_of
     voltage limits, worst excursion and not-settled steps (the `leaderboard`'s figures).
     NaN where a side lacks the rule or the OPF."""
     test = leaderboard(summary, baseline=True)
-    test = test[~test["strategy"].astype(str).map(is_formulation).astype(bool)]
+    test = test[~test["strategy"].astype(str).isin(kinds.formulations)]
     out = pd.DataFrame(
         {
             "case": test["case"],

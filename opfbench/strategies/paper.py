@@ -1,4 +1,4 @@
-"""The paper's rules on the local-rule engine (`opfbench.strategies.engine`): no action,
+"""The paper's rules on the local-rule engine (`opfbench.strategies.rule_engine`): no action,
 LLMA (Algorithm 1) and LFMA (Algorithm 2), with Algorithm 3 (forecast-aware limits)
 whenever the scenario carries a forecast P^F.
 
@@ -25,11 +25,13 @@ import numpy as np
 
 from opfbench.capability import check_reserve
 from opfbench.powerflow import PowerFlowResult
+from opfbench.registry.specs import strategy
 from opfbench.result import StrategyResult
 from opfbench.scenario import Scenario
-from opfbench.strategies.engine import Grid, run_rule
 from opfbench.strategies.limits import clip, reactive_limit
-from opfbench.strategies.rules import Measurements, Rule
+from opfbench.strategies.registration import SAFE, local_rule
+from opfbench.strategies.rule_engine import Grid
+from opfbench.strategies.rules import Measurements
 from opfbench.timing import elapsed_ms, now
 
 # What LFMA step 4 did at each DER (LfmaTrace.rule).
@@ -40,35 +42,27 @@ BACK_TO_LLMA = 3  # Q_up and Q_do both changed sign (or Q_do hit zero): Q^F = Q^
 STOPPED = 4  # a power flow of this snapshot diverged earlier: setpoint frozen
 
 
+@local_rule("no-action", reads=(), uses_forecast=False, summary="every DER at Q = 0", snapshot_wise=True)
 def no_action_target(m: Measurements) -> np.ndarray:
     """No action: every DER at Q = 0 MVAr."""
     return np.zeros(m.shape)
 
 
+@local_rule(
+    "llma",
+    reads=("load",),
+    summary="Algorithm 1: Q = the load's Q at the DER's own bus, within (1 − k)·Qmax",
+    snapshot_wise=True,
+)
 def llma_target(m: Measurements) -> np.ndarray:
     """Algorithm 1, (S, n_der) MVAr: the DER's share of the reactive load at its own bus
     (the engine clips it to ±L: Q^H = min(Q_load, L) for the usual positive load)."""
     return m.load_q_mvar
 
 
-NO_ACTION = Rule("no-action", no_action_target, frozenset())
-LLMA = Rule("llma", llma_target, frozenset({"load"}))
-
-
-def no_action(scenario: Scenario, k: float = 0.0) -> StrategyResult:
-    """Every DER at Q = 0 MVAr (k is validated and recorded; the limits of a zero target
-    change nothing)."""
-    return run_rule("no-action", NO_ACTION, scenario, k, {})
-
-
 def llma_setpoints(scenario: Scenario, limit_mvar: np.ndarray) -> np.ndarray:
     """Algorithm 1, (S, n_der) MVAr: Q^H = min(Q_load at the DER's own bus, L), clipped to ±L."""
     return clip(scenario.load_q_at_der_mvar(), limit_mvar)
-
-
-def llma(scenario: Scenario, k: float = 0.0, safe: bool = False) -> StrategyResult:
-    """LLMA (Algorithm 1) with the bound L of `reactive_limit` (reserve k, forecast, safe)."""
-    return run_rule("llma", LLMA, scenario, k, {}, safe=safe)
 
 
 @dataclass(frozen=True, eq=False)
@@ -178,6 +172,15 @@ def upstream_disagreements(scenario: Scenario, trace: LfmaTrace) -> np.ndarray:
     return out
 
 
+@strategy(
+    "lfma",
+    kind="local",
+    summary="Algorithm 2: LLMA plus the measured upstream Q inflow, sign-change rules",
+    reads=("load", "flows"),
+    options=(SAFE,),
+    uses_forecast=True,
+    snapshot_wise=True,
+)
 def lfma(scenario: Scenario, k: float = 0.0, safe: bool = False) -> StrategyResult:
     """LFMA (Algorithm 2) with the bound L of `reactive_limit`. Snapshots whose power flow
     diverged at any step get status "pf-diverged" and NaN losses. extra: `diverged_step`

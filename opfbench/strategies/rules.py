@@ -1,6 +1,6 @@
 """What a local rule is: a function of the DER's own measurements (`Measurements`) giving
 its Q target, and what it reads (`Rule.reads`); the engine that runs rules is
-`opfbench.strategies.engine`. Light to import (numpy only): the registry and the CLI use it.
+`opfbench.strategies.rule_engine`. Light to import (numpy only): the registry and the CLI use it.
 
 Units: |V| p.u.; P in MW, Q in MVAr, positive = injected by the DER (loads: positive =
 consumed; lines: positive = leaving the DER's bus into the line).

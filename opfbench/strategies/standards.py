@@ -1,5 +1,5 @@
 """The reactive-power rules grid codes mandate, as targets of the local-rule engine
-(`opfbench.strategies.engine`: every target then passes through the (1 − k)·Qmax limits,
+(`opfbench.strategies.rule_engine`: every target then passes through the (1 − k)·Qmax limits,
 Algorithm 3 and the night modes, and rules of |V| are solved for their closed-loop steady
 state).
 
@@ -32,6 +32,8 @@ from collections.abc import Sequence
 import numpy as np
 
 from opfbench.errors import InputError
+from opfbench.registry.options import Option
+from opfbench.strategies.registration import local_rule
 from opfbench.strategies.rules import Measurements
 
 Points = tuple[tuple[float, ...], tuple[float, ...]]
@@ -50,6 +52,17 @@ Q_U_MAX = 0.33  # p.u. of P̄
 COSPHI_P_START = 0.5  # P/P̄ where cos φ(P) leaves 1
 COSPHI_P_MIN = 0.90  # cos φ at P̄ (units above 4.6 kVA); 0.95 for smaller ones
 PF = 0.95
+
+
+CURVE = Option("curve", "b", "IEEE 1547-2018 category: a or b", choices=("a", "b"))
+
+
+def curve_points(x: str, help_x: str) -> tuple[Option, Option]:
+    """The options of a curve's explicit points: `x` (the abscissae, described by `help_x`) and q."""
+    return (
+        Option(x, (), f"explicit curve points instead of a preset: {help_x}, increasing, written 0.9/1.0/1.1 (with q=)"),
+        Option("q", (), "explicit curve points: Q per unit, one per point, written 0.44/0/-0.44"),
+    )
 
 
 def piecewise(points: Points, x: np.ndarray) -> np.ndarray:
@@ -88,11 +101,6 @@ def check_pf(rule: str, pf: float) -> None:
 
 
 # ----- IEEE 1547-2018 ---------------------------------------------------------------------
-def volt_var(m: Measurements, curve: str = "b", v: Sequence[float] = (), q: Sequence[float] = ()) -> np.ndarray:
-    """Volt-VAR: Q(|V|) in p.u. of S̄ (Category `curve`, or the points v/q), MVAr."""
-    return piecewise(_points(v, q, VOLT_VAR[curve]), m.v_pu) * m.s_rated_mva
-
-
 def check_preset_or_points(rule: str, options: dict, x_name: str) -> None:
     """A category other than the default and explicit points are two curves: refused."""
     if options["curve"] != "b" and options[x_name]:
@@ -104,9 +112,18 @@ def check_volt_var(options: dict) -> None:
     check_points("volt-var", "v", options["v"], options["q"], (0.5, 1.5))
 
 
-def watt_var(m: Measurements, curve: str = "b", p: Sequence[float] = (), q: Sequence[float] = ()) -> np.ndarray:
-    """Watt-VAR: Q(P/P̄) in p.u. of S̄ (Category `curve`, or the points p/q), MVAr."""
-    return piecewise(_points(p, q, WATT_VAR[curve]), m.p_mw / m.p_rated_mw) * m.s_rated_mva
+@local_rule(
+    "volt-var",
+    reads=("v",),
+    options=(CURVE, *curve_points("v", "|V| p.u.")),
+    summary="IEEE 1547-2018 Volt-VAR Q(V) in p.u. of S̄ (B: 0.92/+0.44 0.98/0 1.02/0 1.08/−0.44; "
+    "A: 0.90/+0.25 1.00/0 1.10/−0.25), closed loop",
+    check=check_volt_var,
+    snapshot_wise=True,
+)
+def volt_var(m: Measurements, curve: str = "b", v: Sequence[float] = (), q: Sequence[float] = ()) -> np.ndarray:
+    """Volt-VAR: Q(|V|) in p.u. of S̄ (Category `curve`, or the points v/q), MVAr."""
+    return piecewise(_points(v, q, VOLT_VAR[curve]), m.v_pu) * m.s_rated_mva
 
 
 def check_watt_var(options: dict) -> None:
@@ -114,23 +131,39 @@ def check_watt_var(options: dict) -> None:
     check_points("watt-var", "p", options["p"], options["q"], (0.0, 1.0))
 
 
+@local_rule(
+    "watt-var",
+    reads=("p",),
+    options=(CURVE, *curve_points("p", "P/P̄")),
+    summary="IEEE 1547-2018 Watt-VAR Q(P/P̄) in p.u. of S̄ (0.2/0 0.5/0 1.0/−0.44 for B, −0.25 for A)",
+    check=check_watt_var,
+    snapshot_wise=True,
+)
+def watt_var(m: Measurements, curve: str = "b", p: Sequence[float] = (), q: Sequence[float] = ()) -> np.ndarray:
+    """Watt-VAR: Q(P/P̄) in p.u. of S̄ (Category `curve`, or the points p/q), MVAr."""
+    return piecewise(_points(p, q, WATT_VAR[curve]), m.p_mw / m.p_rated_mw) * m.s_rated_mva
+
+
 # ----- power factor -----------------------------------------------------------------------
-def const_pf(m: Measurements, pf: float = PF, mode: str = "absorb") -> np.ndarray:
-    """Constant power factor: Q = −|P|·tan(acos pf) absorbing, +|P|·tan(acos pf) injecting, MVAr."""
-    sign = -1.0 if mode == "absorb" else 1.0
-    return sign * np.abs(m.p_mw) * np.tan(np.arccos(pf))
-
-
 def check_const_pf(options: dict) -> None:
     check_pf("const-pf", options["pf"])
 
 
-def cosphi_p(m: Measurements, pf_min: float = COSPHI_P_MIN, p_start: float = COSPHI_P_START) -> np.ndarray:
-    """VDE-AR-N 4105 cos φ(P): cos φ = 1 up to P/P̄ = p_start, then linear to pf_min
-    under-excited at P̄; Q = −|P|·tan(acos cos φ) MVAr (absorbing; the VDE's consumer sign
-    would have it positive)."""
-    cos_phi = piecewise(((p_start, 1.0), (1.0, pf_min)), m.p_mw / m.p_rated_mw)
-    return -np.abs(m.p_mw) * np.tan(np.arccos(cos_phi))
+@local_rule(
+    "const-pf",
+    reads=("p",),
+    options=(
+        Option("pf", PF, "power factor in (0, 1]"),
+        Option("mode", "absorb", "absorb (under-excited) or inject (over-excited)", choices=("absorb", "inject")),
+    ),
+    summary="constant power factor: Q = ∓|P|·tan(acos pf)",
+    check=check_const_pf,
+    snapshot_wise=True,
+)
+def const_pf(m: Measurements, pf: float = PF, mode: str = "absorb") -> np.ndarray:
+    """Constant power factor: Q = −|P|·tan(acos pf) absorbing, +|P|·tan(acos pf) injecting, MVAr."""
+    sign = -1.0 if mode == "absorb" else 1.0
+    return sign * np.abs(m.p_mw) * np.tan(np.arccos(pf))
 
 
 def check_cosphi_p(options: dict) -> None:
@@ -139,7 +172,44 @@ def check_cosphi_p(options: dict) -> None:
         raise InputError(f"cosphi-p: p_start is a share of P̄ in [0, 1), got {options['p_start']:g}")
 
 
+@local_rule(
+    "cosphi-p",
+    reads=("p",),
+    options=(
+        Option("pf_min", COSPHI_P_MIN, "cos φ at P̄, under-excited (0.95 for units ≤ 4.6 kVA)"),
+        Option("p_start", COSPHI_P_START, "P/P̄ where cos φ leaves 1"),
+    ),
+    summary="VDE-AR-N 4105 cos φ(P): 1 up to P/P̄ = 0.5, then linear to 0.90 under-excited at P̄",
+    check=check_cosphi_p,
+    snapshot_wise=True,
+)
+def cosphi_p(m: Measurements, pf_min: float = COSPHI_P_MIN, p_start: float = COSPHI_P_START) -> np.ndarray:
+    """VDE-AR-N 4105 cos φ(P): cos φ = 1 up to P/P̄ = p_start, then linear to pf_min
+    under-excited at P̄; Q = −|P|·tan(acos cos φ) MVAr (absorbing; the VDE's consumer sign
+    would have it positive)."""
+    cos_phi = piecewise(((p_start, 1.0), (1.0, pf_min)), m.p_mw / m.p_rated_mw)
+    return -np.abs(m.p_mw) * np.tan(np.arccos(cos_phi))
+
+
 # ----- VDE-AR-N 4110 ------------------------------------------------------------------------
+def check_q_u(options: dict) -> None:
+    if not 0 <= options["q_max"] <= 1:
+        raise InputError(f"q-u: q_max is per unit of P̄ and must lie in [0, 1], got {options['q_max']:g}")
+    check_points("q-u", "v", options["v"], options["q"], (0.5, 1.5))
+
+
+@local_rule(
+    "q-u",
+    reads=("v",),
+    options=(
+        Option("deadband", False, "the characteristic with its dead band 0.96–1.04 p.u."),
+        Option("q_max", Q_U_MAX, "Q at the characteristic's ends, p.u. of P̄"),
+        *curve_points("v", "|V| p.u."),
+    ),
+    summary="VDE-AR-N 4110 Q(U): 0.96/+0.33 to 1.04/−0.33 p.u. of P̄ (dead band: 0.94/0.96/1.04/1.06), closed loop",
+    check=check_q_u,
+    snapshot_wise=True,
+)
 def q_u(
     m: Measurements, deadband: bool = False, q_max: float = Q_U_MAX, v: Sequence[float] = (), q: Sequence[float] = ()
 ) -> np.ndarray:
@@ -147,9 +217,3 @@ def q_u(
     band), or the explicit points v/q (p.u. of P̄), MVAr; positive (injecting) below 1 p.u."""
     preset = (Q_U_DEADBAND_V, (q_max, 0.0, 0.0, -q_max)) if deadband else (Q_U_V, (q_max, -q_max))
     return piecewise(_points(v, q, preset), m.v_pu) * m.p_rated_mw
-
-
-def check_q_u(options: dict) -> None:
-    if not 0 <= options["q_max"] <= 1:
-        raise InputError(f"q-u: q_max is per unit of P̄ and must lie in [0, 1], got {options['q_max']:g}")
-    check_points("q-u", "v", options["v"], options["q"], (0.5, 1.5))

@@ -10,9 +10,9 @@ __all__ = ["NIGHT_MODES", "Period", "StudyConfig", "StudyRun", "prepare", "resol
 _LAZY = {
     "Period": "periods",
     "resolve_period": "periods",
-    "StudyRun": "runner",
-    "prepare": "runner",
-    "run_study": "runner",
+    "StudyRun": "run_family",
+    "prepare": "run_family",
+    "run_study": "run_family",
 }  # pandas and the solvers load on first use, not with the CLI
 
 

@@ -18,16 +18,18 @@ from dataclasses import asdict, dataclass, field, replace
 from opfbench.capability import PAPER_KS, check_reserve
 from opfbench.errors import InputError
 from opfbench.forecasting.names import MODEL_NAMES
-from opfbench.formulations.options import ACOPF_SOLVERS, check_option
-from opfbench.registry import DEFAULT_RUN, StrategySpec, configuration, specs
-from opfbench.study.fitted import Fitted
+from opfbench.formulations.acopf_options import ACOPF_SOLVERS, check_option
+from opfbench.learned.fitted import Fitted
+from opfbench.registry.catalog import configuration, specs
+from opfbench.registry.references import DEFAULT_RUN
+from opfbench.registry.specs import StrategySpec
 from opfbench.study.price import DEFAULT_CURRENCY, DEFAULT_PRICE_PER_KWH, DEFAULT_PRICE_SOURCE
 
 NIGHT_MODES = ("connected", "disconnected", "connected-q")
 DEFAULT_NIGHT = "20:00-05:00"
 CHUNKS = ("auto", "6h", "day", "week", "month")
 FORECAST_SOURCES = ("off", "oracle")  # besides a forecasting model's name (`opfbench.forecasting.names`)
-#: The optional long tables (`study.tables.detail_rows`), in the order they are written.
+#: The optional long tables (`study.run_tables.detail_rows`), in the order they are written.
 DETAIL_TABLES = ("der_q", "bus_v")
 SHORT_PERIOD_H = 48.0  # periods up to two days: 6-hour chunks ("auto") and the per-DER Q table by default
 _WINDOW = re.compile(r"^([01]\d|2[0-3]):([0-5]\d)-([01]\d|2[0-3]):([0-5]\d)$")

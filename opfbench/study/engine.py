@@ -1,5 +1,5 @@
 """The one study engine: a task family's tasks → checkpoint store → in this process or on
-Dask → tables, the same for every family (`opfbench run`'s study, `study.runner`;
+Dask → tables, the same for every family (`opfbench run`'s study, `study.run_family`;
 `opfbench fault`'s, `dynamics.study`).
 
 A family (`TaskFamily`) says what to run:
@@ -19,21 +19,23 @@ The engine (`run_family`) checks the scheduler and the folder, plans (the family
 by a function it calls), locks the folder, keeps every checkpoint that matches its task's
 definition (others are recomputed, with a note), runs the rest in process or on Dask
 (local workers or `scheduler`), saves each finished task at once, streams the tables as
-tasks finish and commits them. Ctrl-C stops it with exit code 130 and one line: the
-finished tasks stay on disk, and the same command resumes.
+tasks finish and commits them. It never prints and never ends the process: it tells its
+caller what happens through a `Reporter` (notes, progress; the CLI's writes them to stderr)
+and stops on Ctrl-C with `Stopped`, the finished tasks on disk — the same call resumes. A
+reporter may stop the process at once instead (`Reporter.hard_stop`: the CLI's, exit code
+130 while IPOPT, which swallows the signal, is still solving).
 """
 
 from __future__ import annotations
 
-import os
 import re
 import shutil
-import sys
 import tempfile
+from contextlib import nullcontext
 from dataclasses import dataclass, field
 from functools import cached_property
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, Callable, Protocol
+from typing import TYPE_CHECKING, Any, Callable, NoReturn, Protocol
 
 import pandas as pd
 import pyarrow as pa
@@ -144,6 +146,44 @@ class TaskFamily(Protocol):
     def timings(self, wall_s: float) -> dict: ...
 
 
+class ProgressSink(Protocol):
+    """Progress over a study's tasks, as a `Reporter` shows it."""
+
+    def update(self, result: TaskOutput) -> None: ...
+
+    def close(self) -> None: ...
+
+
+class _NoProgress:
+    def update(self, result: TaskOutput) -> None:
+        pass
+
+    def close(self) -> None:
+        pass
+
+
+def _drop(text: str) -> None:
+    """A note nobody is shown (it is kept in the run's `notes` all the same)."""
+
+
+@dataclass(frozen=True)
+class Reporter:
+    """How a study talks to whoever runs it. `note(text)`: what the user should know
+    (planning notes, checkpoints kept or recomputed, workers); `progress(total, done)`: a
+    `ProgressSink` for the tasks (None: none); `hard_stop(message)`: on Ctrl-C while
+    the work runs in this process, after the cleanup, say `message` and end the process
+    at once (None: the running task finishes and the study raises `Stopped`). The default
+    shows nothing and stops gracefully: a program or a notebook using the library."""
+
+    note: Callable[[str], None] = _drop
+    progress: Callable[[int, int], ProgressSink] | None = None
+    hard_stop: Callable[[str], NoReturn] | None = None
+
+
+SILENT = Reporter()
+"""The library's reporter: shows nothing, stops gracefully."""
+
+
 @dataclass
 class EngineRun:
     """A finished run of a family: its folder, tasks, how many were kept from before and
@@ -157,6 +197,7 @@ class EngineRun:
     result: Any = None
     task_wall: dict = field(default_factory=dict)
     workers: int = 1
+    notes: list[str] = field(default_factory=list)
 
 
 class _Assembly:
@@ -183,10 +224,6 @@ class _Assembly:
         return self.assembler.commit()
 
 
-def _note(msg: str) -> None:
-    print(msg, file=sys.stderr, flush=True)
-
-
 def run_family(
     prepare: Callable[[], TaskFamily],
     out: Path | None,
@@ -194,18 +231,24 @@ def run_family(
     workers: int | None = 1,
     scheduler: str | None = None,
     fresh: bool = False,
-    quiet: bool = False,
     command: list[str] | None = None,
     notes: bool = True,
+    reporter: Reporter = SILENT,
 ) -> EngineRun:
     """Plan with `prepare()` and run the family into the folder `out` (None: a temporary
     folder, removed afterwards), resuming its finished tasks. `workers`: local worker
     processes (None: one per core), never more than tasks to run (a note says so when
-    more were asked); ignored with a `scheduler` address. Notes go to stderr; `quiet`
-    silences the progress only; `notes=False` keeps the family's planning notes unsaid (a
-    nested run's, which its parent says). Ctrl-C: `Stopped` (or, in process, exit 130 at once)."""
-    from opfbench.study.progress import Progress
+    more were asked); ignored with a `scheduler` address. Notes and progress go to the
+    `reporter` (the run's `notes` keep the notes too); `notes=False` keeps the family's
+    planning notes unsaid (a nested run's, which its parent says). Ctrl-C: `Stopped`, or
+    the reporter's `hard_stop` (module docstring)."""
     from opfbench.study.store import RunStore
+
+    said: list[str] = []
+
+    def note(text: str) -> None:
+        said.append(text)
+        reporter.note(text)
 
     start = now()
     if scheduler is not None:
@@ -213,26 +256,30 @@ def run_family(
     temporary = out is None
     folder = Path(tempfile.mkdtemp(prefix="opfbench-")) if out is None else Path(out)
     try:
-        store = RunStore(folder, _note)
+        store = RunStore(folder, note)
+        stopped_planning = "stopped while planning; nothing was run"
 
         def planning_stopped() -> None:
-            _note(f"\n{' '.join((command or ['opfbench'])[:2])}: stopped while planning; nothing was run")
             _remove(folder, temporary)
-            os._exit(execution.STOPPED)
+            assert reporter.hard_stop is not None
+            reporter.hard_stop(f"\n{' '.join((command or ['opfbench'])[:2])}: {stopped_planning}")
 
-        with execution.stop_on_ctrl_c(planning_stopped):
-            family = prepare()
-        for note in family.notes if notes else ():
-            _note(note)
-        run = EngineRun(store.out, family)
+        try:
+            with execution.stop_on_ctrl_c(planning_stopped) if reporter.hard_stop else nullcontext():
+                family = prepare()
+        except KeyboardInterrupt:
+            raise Stopped(stopped_planning) from None
+        for text in family.notes if notes else ():
+            note(text)
+        run = EngineRun(store.out, family, notes=said)
         if scheduler is not None and not all((store.out / t.file).exists() for t in family.tasks):
             execution.check_scheduler(scheduler)  # before any work: there is some to do
         with store:
             done = store.open(family, command or [], fresh)
             pending = [t for t in family.tasks if t.id not in done]
             run.kept = len(done)
-            run.workers = execution.worker_count(workers, len(pending), scheduler, _note)
-            progress = Progress(len(family.tasks), len(done), quiet)
+            run.workers = execution.worker_count(workers, len(pending), scheduler, note)
+            progress = reporter.progress(len(family.tasks), len(done)) if reporter.progress else _NoProgress()
             assembly = _Assembly(store, family, done, family.assembler(store.out))
 
             def save(result: TaskOutput) -> None:
@@ -249,19 +296,21 @@ def run_family(
                     return f"{run.ran} of {len(family.tasks)} tasks had finished (no --out: nothing kept)"
                 return f"{run.kept} tasks kept in {store.out}; rerun the same command to resume"
 
-            def stop() -> None:  # Ctrl-C in the in-process path: every finished task is on disk
+            def stop() -> None:  # Ctrl-C in the in-process path, with a hard stop: every finished task is on disk
                 progress.close()
                 assembly.assembler.abort()
                 store.release()
-                _note(f"\nopfbench {family.kind}: stopped; {kept_note()}")
                 _remove(folder, temporary)
-                os._exit(execution.STOPPED)
+                assert reporter.hard_stop is not None
+                reporter.hard_stop(f"\nopfbench {family.kind}: stopped; {kept_note()}")
 
             try:
                 assembly.advance()  # the tasks kept from before
                 try:
                     jobs = [(t, family.job(t)) for t in pending]
-                    workers_exited = execution.execute(jobs, family.runner(), save, run.workers, scheduler, stop)
+                    workers_exited = execution.execute(
+                        jobs, family.runner(), save, run.workers, scheduler, stop if reporter.hard_stop else None
+                    )
                 except KeyboardInterrupt:
                     raise Stopped(kept_note()) from None
                 finally:  # also after an interrupt: the manifest marks the finished tasks

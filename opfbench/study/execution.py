@@ -5,8 +5,10 @@ writes each finished task to the folder as it arrives — workers need no access
 
 Ctrl-C: CasADi/IPOPT installs its own SIGINT handler while it solves and swallows the
 signal, so in-process work blocks SIGINT in the main thread and waits for it in a watcher
-thread (`signal.sigwait`), which stops the process at once (exit code 130) — every
-finished task is already on disk (each written atomically), the running one is dropped.
+thread (`signal.sigwait`), which either stops the process at once (the caller's `on_stop`,
+the CLI's: exit code 130 — every finished task is already on disk, each written
+atomically, the running one is dropped) or, without one, lets the running task finish
+and save and then stops the work with KeyboardInterrupt (a library's caller).
 With Dask the tasks run in other processes, which never see the signal (the local
 cluster's worker processes start with SIGINT blocked, so a terminal's Ctrl-C reaches this
 process alone); here Ctrl-C only raises a flag the wait for results looks at every 50 ms,
@@ -29,7 +31,6 @@ from opfbench.errors import InputError
 
 Save = Callable[[Any], None]
 
-STOPPED = 130  # exit code after Ctrl-C (128 + SIGINT)
 CONNECT_S = 10  # seconds to reach a scheduler
 POLL_S = 0.05  # seconds between looks for finished tasks and Ctrl-C while a cluster works
 #: SILENT_LOGS: the local cluster logs only what is critical. A task's error reaches this
@@ -129,9 +130,8 @@ class _SigintWatcher:
 
 
 def stop_on_ctrl_c(on_stop: Callable[[], None]) -> contextlib.AbstractContextManager:
-    """Inside the block Ctrl-C calls `on_stop` (which must end the process) from a watcher
-    thread, whatever the main thread is running (IPOPT swallows the signal); outside the
-    main thread, nothing."""
+    """Inside the block Ctrl-C calls `on_stop` (once) from a watcher thread, whatever the
+    main thread is running (IPOPT swallows the signal); outside the main thread, nothing."""
     main = threading.current_thread() is threading.main_thread()
     return _SigintWatcher(on_stop) if main else contextlib.nullcontext()
 
@@ -152,20 +152,25 @@ def _sigint_blocked() -> Iterator[None]:
         signal.pthread_sigmask(signal.SIG_SETMASK, previous)
 
 
-def run_in_process(jobs: list[tuple[Any, Any]], runner: Callable, save: Save, on_stop: Callable[[], None]) -> None:
-    """Run the jobs here, one after another; Ctrl-C calls `on_stop` from a watcher thread
-    (`on_stop` must end the process, e.g. with os._exit) once no task is being written."""
-    saving = threading.Lock()
+def run_in_process(jobs: list[tuple[Any, Any]], runner: Callable, save: Save, on_stop: Callable[[], None] | None) -> None:
+    """Run the jobs here, one after another. Ctrl-C calls `on_stop` from a watcher thread
+    once no task is being written (`on_stop` must end the process, e.g. with os._exit); with
+    no `on_stop`, the running task finishes and is saved, then KeyboardInterrupt."""
+    saving, pressed = threading.Lock(), threading.Event()
 
     def stop() -> None:
         with saving:
-            on_stop()
+            if on_stop is not None:
+                on_stop()
+            pressed.set()
 
     with stop_on_ctrl_c(stop):
         for _, job in jobs:
             result = runner(job)
             with saving:
                 save(result)
+            if pressed.is_set():
+                raise KeyboardInterrupt
 
 
 @contextlib.contextmanager
@@ -245,10 +250,16 @@ def run_dask(
 
 
 def execute(
-    jobs: list[tuple[Any, Any]], runner: Callable, save: Save, workers: int, scheduler: str | None, on_stop: Callable[[], None]
+    jobs: list[tuple[Any, Any]],
+    runner: Callable,
+    save: Save,
+    workers: int,
+    scheduler: str | None,
+    on_stop: Callable[[], None] | None,
 ) -> Callable[[], None]:
     """Run `runner` on each (task, input) of `jobs`, calling `save` with each result (in
-    completion order); `on_stop` ends the process on Ctrl-C in the in-process path.
+    completion order); Ctrl-C in the in-process path: `on_stop` ends the process, or
+    KeyboardInterrupt after the running task (`run_in_process`).
     Returns a function that waits until every local worker process has exited
     (`run_dask`)."""
     if not jobs:  # every task kept from before: no cluster to start or reach

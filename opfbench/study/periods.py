@@ -15,7 +15,7 @@ Cases with their own time series (SimBench grids: per-load and per-DER profiles 
 at 15 min) run at their native step (`native_minutes`): `paper-day` is that date at
 15 min, `year` and `START..END` the same instants at 15 min, unless `step_minutes` is
 given (then their profiles are interpolated linearly in time too). Their scenarios take
-the case's own series at the period's instants (`opfbench.study.scenarios`); the period's
+the case's own series at the period's instants (`opfbench.study.task_scenarios`); the period's
 load/pv/wind profiles are only for cases without a series.
 
 Profiles follow the mapping rule of `opfbench.data.assemble_profiles` on the whole period

@@ -4,13 +4,13 @@ A task is (case, forecast, k, chunk of steps) and runs every requested strategy 
 night mode of that group. `acopf`, `acopf-paper` and `socp` share SOCP solves, and the
 night modes — which differ only in the night hours, so their daytime snapshots are the
 same problems — solve each once: the formulations' solve cache is keyed on the data
-(`formulations.relaxation`), whatever Scenario objects carry it; a snapshot-wise strategy
+(`formulations.solves`), whatever Scenario objects carry it; a snapshot-wise strategy
 (`StrategySpec.snapshot_wise`: every local rule, the SOCP) runs once on the distinct
-snapshots of the night modes (`scenarios.SharedSnapshots`: by day, and at night where the
-PV units produce nothing, the modes' snapshots are the same) and each mode takes its rows,
-charged the wall time of the snapshots it brought; and where two night modes give the very
-same scenario (no PV output in the night hours of the chunk), the second takes the first's
-results (`Scenario.same_data`) with its wall time 0. Its input
+snapshots of the night modes (`task_scenarios.SharedSnapshots`: by day, and at night where
+the PV units produce nothing, the modes' snapshots are the same) and each mode takes its
+rows, charged the wall time of the snapshots it brought; and where two night modes give
+the very same scenario (no PV output in the night hours of the chunk), the second takes the
+first's results (`Scenario.same_data`) with its wall time 0. Its input
 carries its slice of the period's profiles, so it runs the same in this process, in a
 local worker process or on a remote Dask worker; the AC OPF starts cold at each chunk and
 warm-starts inside it — the same whatever the number of workers.
@@ -25,17 +25,17 @@ import pandas as pd
 from threadpoolctl import threadpool_limits
 
 from opfbench.errors import InputError
+from opfbench.learned.fitted import Fitted
+from opfbench.learned.rules import install
 from opfbench.plugins import PluginSource, ensure, loaded
-from opfbench.registry import OptionValue, configuration, run_strategy
+from opfbench.registry.catalog import configuration, run_strategy
+from opfbench.registry.options import OptionValue
 from opfbench.result import StrategyResult
 from opfbench.scenario import Scenario
-from opfbench.strategies.learned import install
 from opfbench.study.config import StudyConfig
 from opfbench.study.engine import Task, TaskOutput
-from opfbench.study.fitted import Fitted
 from opfbench.study.periods import Period
-from opfbench.study.scenarios import SharedSnapshots, chunk_scenario
-from opfbench.study.tables import (
+from opfbench.study.run_tables import (
     DETAIL_COLUMNS,
     Columns,
     detail_rows,
@@ -45,6 +45,7 @@ from opfbench.study.tables import (
     step_columns,
     step_rows,
 )
+from opfbench.study.task_scenarios import SharedSnapshots, chunk_scenario
 
 
 @dataclass(frozen=True)

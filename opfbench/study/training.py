@@ -36,10 +36,11 @@ import pandas as pd
 from opfbench.errors import InputError
 from opfbench.io import load_network
 from opfbench.jsonio import write_atomic
-from opfbench.registry import BASELINE, REFERENCE_OPTIMUM, configuration, is_formulation
-from opfbench.strategies.learned import TRAIN_K, TRAIN_NIGHT, LearnedParams
-from opfbench.study.fitted import LEARNED_DIR, TRAIN_DIR, Fitted
-from opfbench.study.learning import LearnedConfig, learned_configs, model_case, training_set
+from opfbench.learned.fitted import LEARNED_DIR, TRAIN_DIR, Fitted
+from opfbench.learned.rules import TRAIN_K, TRAIN_NIGHT, LearnedParams
+from opfbench.registry.catalog import configuration, is_formulation
+from opfbench.registry.references import BASELINE, REFERENCE_OPTIMUM
+from opfbench.study.training_checks import LearnedConfig, learned_configs, model_case, training_set
 
 TRAIN_SUMMARY = f"{TRAIN_DIR}/summary.csv"
 
@@ -51,7 +52,7 @@ run (its `summary`): the runner's `run_study`, with the run's workers and schedu
 
 def given(labels: tuple[str, ...], cases: tuple[str, ...]) -> list[Fitted]:
     """The `params=FILE` configurations' rules for every case (checked by `check_learned`)."""
-    from opfbench.strategies.learned import load_params
+    from opfbench.learned.rules import load_params
 
     return [
         Fitted.of(case, lc.label, lc.params, load_params(lc.params))

@@ -7,6 +7,7 @@ from __future__ import annotations
 import multiprocessing
 import os
 import random
+import signal
 import socket
 import subprocess
 import sys
@@ -28,6 +29,33 @@ def free_port() -> int:
 def child_env() -> dict[str, str]:
     """The environment of a child process: this checkout importable, one BLAS thread."""
     return os.environ | {"PYTHONPATH": str(ROOT), "OMP_NUM_THREADS": "1"}
+
+
+def ctrl_c_when(
+    command: list[str], ready: Callable[[], bool], timeout_s: float = 240
+) -> tuple[subprocess.Popen, str, str, float]:
+    """Run `command` (Python's default SIGINT handling restored), send it Ctrl-C (SIGINT) once
+    `ready()`, and return the process, its stdout and stderr, and how long after the signal
+    it ended (s)."""
+    proc = subprocess.Popen(
+        command,
+        cwd=ROOT,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL),
+    )
+    try:
+        deadline = time.monotonic() + timeout_s
+        while not ready():
+            assert proc.poll() is None and time.monotonic() < deadline, proc.stderr.read() if proc.stderr else ""
+            time.sleep(0.05)
+        proc.send_signal(signal.SIGINT)
+        sent = time.monotonic()
+        out, err = proc.communicate(timeout=120)
+    finally:
+        proc.kill()
+    return proc, out, err, time.monotonic() - sent
 
 
 def _wait_for_port(port: int, proc: subprocess.Popen, log: Path, timeout_s: float) -> None:

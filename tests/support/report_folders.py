@@ -9,7 +9,7 @@ import numpy as np
 import pandas as pd
 
 from opfbench.jsonio import write_json
-from opfbench.registry import get_strategy
+from opfbench.registry.catalog import get_strategy
 
 STRATEGIES = ("no-action", "llma", "lfma", "acopf", "acopf-paper", "socp")
 FORMULATIONS = ("acopf", "acopf-paper", "socp")

@@ -11,8 +11,8 @@ feeder, which DistFlow does not model, so it changes nothing. The cone is writte
 ‖(2P/√α, 2Q/√α, v_i − ℓ/α)‖ ≤ v_i + ℓ/α, the same set for any α > 0, with α = (what the
 branch may carry)² (`branch_scale`): ℓ/α is then of order one like v_i. Unscaled, a
 branch carrying 1e-5 of a feeder's power has ℓ ~ 1e-10 next to v ~ 1 and Clarabel
-stalls (feeder10k at noon, k = 0: 200 iterations, "AlmostSolved", bound −4 to −360 kW
-against a 25.56 kW optimum; scaled: "Solved" in 12 iterations).
+stalls on large feeders, far from the optimum (`tests/test_formulations_scaling.py` shows
+it on feeder10k, scaled and not).
 
 Cone residual (`relaxation_gap`): v_i·ℓ − P² − Q², squared apparent power on base_mva.
 """
@@ -25,7 +25,8 @@ import cvxpy as cp
 import numpy as np
 
 from opfbench.errors import NetworkError
-from opfbench.formulations.models.soc import Reader, SocpRelaxation
+from opfbench.formulations.model import formulation
+from opfbench.formulations.models.conic import ConicModel, Reader
 from opfbench.formulations.problem import incidence
 from opfbench.network import Network
 
@@ -77,10 +78,15 @@ class RadialBranches:
         return cls(child, parent, branch, net.r[branch], net.x[branch], tapped, parent_scale, child_scale, charging, conductance)
 
 
-class DistFlowSocp(SocpRelaxation):
+@formulation(
+    "distflow",
+    role="relaxation",
+    networks=("radial",),
+    serves_problem=True,
+    summary="DistFlow branch-flow SOC relaxation (radial feeders)",
+)
+class DistFlowSocp(ConicModel):
     """Branch-flow (DistFlow) relaxation for radial feeders; see the module docstring."""
-
-    model = "distflow"
 
     def _network_model(self) -> tuple[cp.Expression, cp.Expression, cp.Expression, list[cp.Constraint]]:
         net = self.net
@@ -132,8 +138,8 @@ def branch_scale(net: Network) -> np.ndarray:
     branch may carry — the larger of the nominal load |S| and the DER rating below it —
     floored at 1e-3 of the largest (1 where nothing is below any branch). The slack's
     entry is unused. The floor matters where (almost) nothing is below a branch: its
-    ℓ ≈ 0, and a tiny α would magnify solver noise (case141-der, paper day: 18.4
-    iterations per solve with a 1e-6 floor, 13.5 with 1e-3, 10.4 unscaled)."""
+    ℓ ≈ 0, and a tiny α would magnify solver noise (more iterations per solve with a
+    smaller floor; `python -m opfbench.bench opf` times the solves)."""
     load = np.abs(net.load_p_mw + 1j * net.load_q_mvar)  # each bus's own, then summed below
     der = np.zeros(net.n_bus)
     np.add.at(der, net.der_bus, net.der_rating_mw)

@@ -14,13 +14,20 @@ from __future__ import annotations
 import cvxpy as cp
 import numpy as np
 
-from opfbench.formulations.models.soc import Reader, SocpRelaxation
+from opfbench.formulations.model import formulation
+from opfbench.formulations.models.conic import ConicModel, Reader
 
 
-class JabrSocp(SocpRelaxation):
+@formulation(
+    "jabr",
+    role="relaxation",
+    networks=("radial", "meshed"),
+    serves_problem=True,
+    preference=1,  # on a radial feeder DistFlow serves: its cones are the branches' own
+    summary="Jabr's bus-injection SOC relaxation (any feeder)",
+)
+class JabrSocp(ConicModel):
     """Bus-injection (Jabr) SOC relaxation for any feeder; see the module docstring."""
-
-    model = "jabr"
 
     def _network_model(self) -> tuple[cp.Expression, cp.Expression, cp.Expression, list[cp.Constraint]]:
         br = self.problem.branches

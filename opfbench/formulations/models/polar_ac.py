@@ -20,7 +20,7 @@ import casadi as ca
 import numpy as np
 import scipy.sparse as sp
 
-from opfbench.formulations.cache import per_thread
+from opfbench.formulations.model import formulation
 from opfbench.formulations.problem import OpfProblem, incidence
 from opfbench.formulations.solvers.ipopt_adapter import IpoptNlp, IpoptSolve
 from opfbench.network import Network
@@ -79,6 +79,12 @@ def _nlp(problem: OpfProblem, sym: type[Sym]) -> tuple[dict[str, Sym], list]:
     return nlp, rows
 
 
+@formulation(
+    "polar-ac",
+    role="exact",
+    serves_problem=True,
+    summary="the exact AC OPF in polar form (CasADi NLP, IPOPT)",
+)
 class AcOpf:
     """The polar AC OPF of one network, built once; `solve` per snapshot.
 
@@ -112,13 +118,3 @@ class AcOpf:
             self.flat_start,
             start,
         )
-
-
-def build_acopf(net: Network, slack_export: bool = True) -> AcOpf:
-    """A new AC OPF of `net` (the caller's own: its IPOPT instances keep per-solve state)."""
-    return AcOpf(net, slack_export)
-
-
-def ac_opf(net: Network, slack_export: bool = True) -> AcOpf:
-    """The AC OPF of `net`, built once per network and option in this thread."""
-    return per_thread(net, ("acopf", bool(slack_export)), lambda: build_acopf(net, slack_export))

@@ -23,8 +23,8 @@ buses; the parameter-free compile is linear in the problem size.
 Bound screening. Most nonnegative rows are variable bounds a·x_j ≤ b_r (a single nonzero:
 v within its limits, DER Q within ±its limit), and at an optimum only a few are active. A
 screened program keeps the zero, other nonnegative and SOC rows, writes a set S of bound
-rows as equalities and drops the other bounds: fewer rows and barrier terms (paper33,
-paper day, k = 0: 9.4 instead of 12.3 Clarabel iterations, each cheaper). Its solution
+rows as equalities and drops the other bounds: fewer rows and barrier terms (fewer Clarabel
+iterations, each cheaper; `python -m opfbench.bench opf` times it). Its solution
 (x, z) answers the full program when every dropped bound holds with slack ≥ MARGIN and every bound in S
 has multiplier z_r ≥ MARGIN: then x is feasible, and z with zeros on the dropped rows is
 dual feasible, for the full program, so x is its optimum and the screened dual objective
@@ -66,16 +66,14 @@ def relaxation_settings() -> clarabel.DefaultSettings:
     settings.verbose = False
     settings.max_iter = MAX_ITER
     settings.tol_gap_abs = settings.tol_gap_rel = settings.tol_feas = TOLERANCE
-    # Iterative refinement roughly doubles the solve time on the paper day (paper33) for
-    # objectives within 2e-6 kW; one thread and QDLDL (deterministic, no thread pool on tiny
-    # KKT systems) are faster again (`python -m opfbench.bench opf` times the result).
+    # Iterative refinement costs solve time for objectives within the tolerance; one thread
+    # and QDLDL (deterministic, no thread pool on tiny KKT systems) are faster again
+    # (`python -m opfbench.bench opf` times the result).
     settings.iterative_refinement_enable = False
     settings.max_threads = 1
     settings.direct_solve_method = "qdldl"
-    # Mean Clarabel iterations per answer on the paper day at k = 0 / 0.4 (screened, as
-    # solved), step fraction 0.99 (Clarabel's default) → 0.98: paper33 10.5 → 9.4 / 11.1 →
-    # 8.9, case69-der 9.9 → 9.5 / 10.1 → 9.7, case141-der 9.5 → 9.9 / 9.4 → 9.5, feeder1k
-    # (every 20th step) 11.1 → 9.9 / 10.7 → 10.1; 0.97: more again.
+    # A step fraction of 0.98 instead of Clarabel's 0.99 takes fewer iterations per answer on
+    # the shipped feeders' paper day (0.97: more again); `bench opf` counts them.
     settings.max_step_fraction = 0.98
     return settings
 
@@ -142,20 +140,36 @@ class ConeSolve:
         return self.final_status in SOLVED
 
 
+@dataclass(frozen=True, eq=False)
+class Objective:
+    """A program's objective ½·xᵀ·P·x + cᵀ·x + offset: P upper triangular (Clarabel's form;
+    zero for a linear objective), c, and the constant `offset` (added to the reported
+    objectives)."""
+
+    p: sp.csc_matrix
+    c: np.ndarray
+    offset: float
+
+
 class _Clarabel:
     """One persistent Clarabel solver on rows `rows` of A·x + s = b (cones in row order)."""
 
     def __init__(
-        self, a: sp.csc_matrix, c: np.ndarray, rows: np.ndarray, cones: list, b: np.ndarray, settings: clarabel.DefaultSettings
+        self,
+        objective: Objective,
+        a: sp.csc_matrix,
+        rows: np.ndarray,
+        cones: list,
+        b: np.ndarray,
+        settings: clarabel.DefaultSettings,
     ):
-        self.rows, self._a, self._c, self._cones, self._settings = rows, a[rows], c, cones, settings
+        self.rows, self._objective, self._a, self._cones, self._settings = rows, objective, a[rows], cones, settings
         self.solver = self._fresh(b[rows])
         if not self.solver.is_data_update_allowed():
             raise ValueError("Clarabel does not allow data updates for this problem (presolve or chordal decomposition)")
 
     def _fresh(self, b: np.ndarray) -> clarabel.DefaultSolver:
-        n_x = self._c.size
-        return clarabel.DefaultSolver(sp.csc_matrix((n_x, n_x)), self._c, self._a, b, self._cones, self._settings)
+        return clarabel.DefaultSolver(self._objective.p, self._objective.c, self._a, b, self._cones, self._settings)
 
     def solve(self, b: np.ndarray) -> tuple[clarabel.DefaultSolution, list[str], int]:
         """(final solution, statuses, iterations) at the full offset `b`: the solver is
@@ -180,7 +194,7 @@ class _Screened(_Clarabel):
     slack is the box's width)."""
 
     def __init__(self, program: "ParametricConeProgram", rows: np.ndarray, cones: list, kept: np.ndarray, checked: np.ndarray):
-        super().__init__(program._a, program._c, rows, cones, program._b0, program._settings)
+        super().__init__(program.objective, program._a, rows, cones, program._b0, program._settings)
         self.kept, self.checked = kept, checked
 
 
@@ -189,8 +203,13 @@ def _vector(values: list[float]) -> np.ndarray:
     return np.fromiter(values, np.float64, len(values))
 
 
-def _answer(solution, x: np.ndarray, statuses: list[str], iterations: int, solves: int, screened: bool) -> ConeSolve:
-    return ConeSolve(" → ".join(statuses), x, solution.obj_val, solution.obj_val_dual, iterations, solves, screened)
+def _answer(
+    solution, x: np.ndarray, statuses: list[str], iterations: int, solves: int, screened: bool, offset: float
+) -> ConeSolve:
+    primal, dual = solution.obj_val, solution.obj_val_dual
+    if offset:
+        primal, dual = primal + offset, dual + offset
+    return ConeSolve(" → ".join(statuses), x, primal, dual, iterations, solves, screened)
 
 
 class _BoundState:
@@ -239,10 +258,37 @@ class _BoundState:
         return tuple(np.flatnonzero(active).tolist())
 
 
+def _objective(problem: cp.Problem, data: dict, is_data: np.ndarray) -> Objective:
+    """The compiled objective without the data columns: ValueError where a data variable
+    enters it, linearly or in the quadratic term (a solve would then depend on θ in a way
+    the offsets do not carry)."""
+    c = np.asarray(data["c"], dtype=float)
+    raw = data.get("P")
+    p = sp.csc_matrix(raw) if raw is not None else sp.csc_matrix((c.size, c.size))
+    p.eliminate_zeros()
+    rows, cols = p.nonzero()
+    if np.any(c[is_data] != 0) or np.any(is_data[rows]) or np.any(is_data[cols]):
+        raise ValueError("the data variables must not enter the objective")
+    keep = ~is_data
+    # The objective's constant term: its value at x = 0 (cvxpy keeps it out of P and c).
+    held = {v: v.value for v in problem.variables()}
+    try:
+        for v in held:
+            v.value = np.zeros(v.shape)
+        offset = float(problem.objective.value)
+    finally:
+        for v, value in held.items():
+            v.value = value
+    return Objective(sp.triu(p[keep][:, keep]).tocsc(), c[keep], offset)
+
+
 class ParametricConeProgram:
-    """A cvxpy problem (linear objective; zero, nonnegative and SOC constraints) whose
-    vector variables `data_vars` are data θ, fixed per solve (they must not enter the
-    objective), solved by persistent Clarabel instances with bound screening."""
+    """A cvxpy problem (a linear or convex quadratic objective — cvxpy's P matrix is handed
+    to Clarabel, and a constant term added to the reported objectives; zero, nonnegative
+    and SOC constraints) whose vector variables `data_vars` are data θ, fixed per solve
+    (they must not enter the objective), solved by persistent Clarabel instances with bound
+    screening (the screening check is the KKT conditions, which hold for a quadratic
+    objective as for a linear one)."""
 
     def __init__(
         self, problem: cp.Problem, data_vars: Sequence[cp.Variable], settings: clarabel.DefaultSettings, screening: bool = True
@@ -262,20 +308,19 @@ class ParametricConeProgram:
         is_data = np.zeros(c.size, dtype=bool)
         theta_cols = np.concatenate(data_cols) if data_cols else np.zeros(0, dtype=int)
         is_data[theta_cols[theta_cols >= 0]] = True
-        if np.any(c[is_data] != 0):
-            raise ValueError("the data variables must not enter the objective")
+        objective = _objective(problem, data, is_data)
         # B = −A_θ = −A·S with S selecting the data columns (a data entry that appears
         # nowhere has a zero column).
         present = np.flatnonzero(theta_cols >= 0)
         select = sp.csc_matrix((np.ones(present.size), (theta_cols[present], present)), shape=(c.size, theta_cols.size))
         self._b_theta = (-(a @ select)).tocsc()
         self._b0 = np.asarray(data["b"], dtype=float)
-        self._a, self._c = a[:, ~is_data], c[~is_data]
+        self._a, self.objective = a[:, ~is_data], objective
         new_col = np.cumsum(~is_data) - 1
         self._var_col = {vid: int(new_col[col]) for vid, col in var_col.items() if not is_data[col]}
         self._settings, self._dims = settings, data["dims"]
         self._screening(self._dims)
-        self.full = _Clarabel(self._a, self._c, np.arange(self._b0.size), _cones(data["dims"]), self._b0, settings)
+        self.full = _Clarabel(objective, self._a, np.arange(self._b0.size), _cones(data["dims"]), self._b0, settings)
         self._screens: OrderedDict[tuple, _Screened] = OrderedDict()
         self._guess: tuple | None = None
 
@@ -291,7 +336,7 @@ class ParametricConeProgram:
         self._bound_col = rows.indices[rows.indptr[:-1][single]]
         self._bound_coef = rows.data[rows.indptr[:-1][single]]
         upper = self._bound_coef > 0
-        row_of = np.full((2, self._c.size), -1)  # [upper, lower] bound row of each variable
+        row_of = np.full((2, self.n_x), -1)  # [upper, lower] bound row of each variable
         row_of[0, self._bound_col[upper]] = np.flatnonzero(upper)
         row_of[1, self._bound_col[~upper]] = np.flatnonzero(~upper)
         self._opposite = np.where(upper, row_of[1, self._bound_col], row_of[0, self._bound_col])
@@ -305,7 +350,7 @@ class ParametricConeProgram:
     @property
     def n_x(self) -> int:
         """Length of the solution vector x."""
-        return self._c.size
+        return self.objective.c.size
 
     def offsets(self, thetas: np.ndarray) -> np.ndarray:
         """The constraint offsets b(θ) = b₀ + B·θ, one row per row of `thetas` (S, n_θ): the
@@ -338,7 +383,7 @@ class ParametricConeProgram:
         allows (module docstring)."""
         if not (self.screening and self._bounds.size):
             solution, statuses, iterations = self.full.solve(b)
-            return _answer(solution, _vector(solution.x), statuses, iterations, 1, False)
+            return _answer(solution, _vector(solution.x), statuses, iterations, 1, False, self.objective.offset)
         bounds = _BoundState(self, b)
         solves = 0
         tried = set()
@@ -356,13 +401,13 @@ class ParametricConeProgram:
             ok, corrected = bounds.check(program, x, solution.z)
             if ok:
                 self._guess = guess
-                return _answer(solution, x, statuses, iterations, solves, True)
+                return _answer(solution, x, statuses, iterations, solves, True, self.objective.offset)
             guess = corrected
         solution, statuses, iterations = self.full.solve(b)
         solves += 1
         x = _vector(solution.x)
         if statuses[-1] not in SOLVED:
-            return _answer(solution, x, statuses, iterations, solves, False)
+            return _answer(solution, x, statuses, iterations, solves, False, self.objective.offset)
         self._guess = active = bounds.active(x)
         if active not in tried:
             program = self._screen(active)
@@ -371,8 +416,10 @@ class ParametricConeProgram:
             if screened_statuses[-1] in SOLVED:
                 screened_x = _vector(screened.x)
                 if bounds.check(program, screened_x, screened.z)[0]:
-                    return _answer(screened, screened_x, screened_statuses, screened_iterations, solves, True)
-        return _answer(solution, x, statuses, iterations, solves, False)
+                    return _answer(
+                        screened, screened_x, screened_statuses, screened_iterations, solves, True, self.objective.offset
+                    )
+        return _answer(solution, x, statuses, iterations, solves, False, self.objective.offset)
 
     def reader(self, x: np.ndarray) -> Callable[[cp.Variable], np.ndarray]:
         """A function reading a (vector, non-data) variable's value from solution vectors

@@ -17,8 +17,8 @@ import numpy as np
 
 TOLERANCE = 1e-10  # IPOPT tol (scaled NLP error; objective in kW)
 # IPOPT's gradient-based scaling shrinks the kW objective; without this extra factor the
-# barrier left active Q bounds ~3e-6 MVAr short, ~1e-5 relative above the optimum on
-# case69-der (seen against the exact SOCP bound). With it: ≤ 1e-6, and fewer iterations.
+# barrier leaves active Q bounds short of their limits and the objective above the exact
+# SOCP bound by more than the certification's tolerance (`policy.CERTIFY_RTOL`).
 OBJECTIVE_SCALING = 100.0
 MAX_ITER = 300
 IPOPT_OPTIONS: dict[str, Any] = {

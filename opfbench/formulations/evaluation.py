@@ -1,9 +1,7 @@
-"""From a formulation's per-snapshot answers to the one result record (`StrategyResult`).
-
-The vocabulary of `extra["fallback"]` (which point a snapshot's setpoints come from) and
-`extra["certified_by"]` (which solver proved the point optimal), the per-snapshot
-diagnostics → arrays conversion, and the AC evaluation every formulation's setpoints get.
-Statuses are `opfbench.result`'s.
+"""From a formulation's per-snapshot answers to the one result record (`StrategyResult`):
+the per-snapshot diagnostics → the typed solver record (`result.SolverRecord`) and the
+model's other diagnostics (`extra`), and the AC evaluation every formulation's setpoints
+get. Statuses and the vocabularies of `fallback` and `certified_by` are `opfbench.result`'s.
 """
 
 from __future__ import annotations
@@ -14,18 +12,9 @@ import numpy as np
 
 from opfbench.formulations.problem import OpfProblem, SnapshotData
 from opfbench.powerflow import PowerFlowResult, solve_pf_batch
-from opfbench.result import StrategyResult
+from opfbench.registry.specs import ModelSpec
+from opfbench.result import SolverRecord, StrategyResult
 from opfbench.scenario import Scenario
-
-# ----- which point a snapshot's setpoints come from (extra["fallback"]) ------------------
-FROM_SOLVER = "none"  # the formulation's own solution
-FROM_COLD = "cold"  # IPOPT started cold after the warm start failed
-FROM_SOCP = "socp"  # the SOCP relaxation's setpoints
-FROM_NO_ACTION = "no-action"  # Q = 0
-
-# ----- which solver proved the point optimal (extra["certified_by"]; "" = none) ---------
-CERTIFIED_BY_SOCP = "socp"  # AC-feasible and within the relaxation's bound (the fast path)
-CERTIFIED_BY_IPOPT = "ipopt"  # IPOPT converged to it
 
 
 def diagnostics(rows: Iterable[dict]) -> dict[str, np.ndarray]:
@@ -46,6 +35,16 @@ def diagnostics(rows: Iterable[dict]) -> dict[str, np.ndarray]:
     return out
 
 
+def solver_record(model: ModelSpec, rows: Iterable[dict]) -> tuple[SolverRecord, dict[str, np.ndarray]]:
+    """Per-snapshot diagnostic dicts (same keys, with at least the record's: objective_kw,
+    solver_status, fallback, certified_by, solve_ms, iterations) → the typed record of
+    `model`'s answers, and the other keys as `extra` arrays (`diagnostics`)."""
+    columns = diagnostics(rows)
+    typed = ("objective_kw", "solver_status", "fallback", "certified_by", "solve_ms", "iterations")
+    record = SolverRecord(model.name, model.meaning, *(columns.pop(key, np.zeros(0)) for key in typed))
+    return record, columns
+
+
 def evaluated_result(
     strategy: str,
     k: float,
@@ -55,7 +54,8 @@ def evaluated_result(
     q_pu: np.ndarray,
     wall_ms: float,
     status: np.ndarray,
-    lower_bound_kw: np.ndarray,
+    lower_bound_kw: np.ndarray | None,
+    solver: SolverRecord,
     extra: dict[str, np.ndarray],
     power_flows: np.ndarray | int = 0,
     pf: PowerFlowResult | None = None,
@@ -64,18 +64,20 @@ def evaluated_result(
     flow (or `pf`, that evaluation already done), with extra["ac_feasible"] (the point
     meets every limit, `OpfProblem.feasible`) and the scalar extra["slack_export"].
 
-    `lower_bound_kw` (the relaxation's, per snapshot) bounds the losses of the points that
-    meet the limits, so the result carries it only where its own point does; elsewhere
-    (no feasible point found: infeasible, solver-failed, a point applied anyway under the
-    paper's policy) the bound is NaN there and kept as extra["relaxation_bound_kw"]."""
+    `lower_bound_kw` (the relaxation's, per snapshot; None for a model that gives none)
+    bounds the losses of the points that meet the limits, so the result carries it only
+    where its own point does; elsewhere (no feasible point found: infeasible,
+    solver-failed, a point applied anyway under the paper's policy) the bound is NaN there
+    and kept as extra["relaxation_bound_kw"]."""
     net = scenario.net
     q_mvar = np.asarray(q_pu, dtype=float).reshape(scenario.n_snapshots, len(net.ders)) * net.base_mva
     if pf is None:
         pf = solve_pf_batch(net, scenario.injections(q_mvar))
     feasible = problem.feasible(pf, data.s_fixed)
     full: dict[str, object] = {**extra, "ac_feasible": feasible, "slack_export": problem.slack_export}
-    full["relaxation_bound_kw"] = lower_bound_kw
-    lower_bound_kw = np.where(feasible, lower_bound_kw, np.nan)
+    if lower_bound_kw is not None:
+        full["relaxation_bound_kw"] = lower_bound_kw
+        lower_bound_kw = np.where(feasible, lower_bound_kw, np.nan)
     flows = np.asarray(power_flows, dtype=np.int64) + 1
     return StrategyResult.from_setpoints(
         strategy,
@@ -87,5 +89,6 @@ def evaluated_result(
         pf=pf,
         status=status,
         lower_bound_kw=lower_bound_kw,
+        solver=solver,
         extra=full,
     )

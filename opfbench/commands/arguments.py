@@ -7,6 +7,7 @@ import math
 import re
 from pathlib import Path
 
+from opfbench.io.sources import formats
 from opfbench.jsonio import print_json
 
 __all__ = [
@@ -27,11 +28,7 @@ __all__ = [
     "workers",
 ]
 
-CASE_HELP = (
-    "a shipped case (see `opfbench cases`), a MATPOWER .m or pandapower .json file, or simbench:CODE "
-    "(a SimBench LV/MV grid with its own profiles, e.g. simbench:1-MV-rural--0-sw); options ?der=…&der-pf=… "
-    "as --der/--der-pf"
-)
+CASE_HELP = f"{formats()}; options ?der=…&der-pf=… as --der/--der-pf"
 
 STRATEGY_HELP = (
     "strategy configurations NAME or NAME:key=value,… (e.g. lfma volt-var volt-var:curve=a cosphi-p:pf_min=0.95); "
@@ -172,7 +169,7 @@ def load_plugins(args: argparse.Namespace) -> None:
 def strategy_labels(labels: list[str], args: argparse.Namespace) -> list[str]:
     """The --plugin modules loaded, then every label of `labels` checked and canonical
     (`registry.configuration`; InputError naming a bad one), before any work."""
-    from opfbench.registry import canonical
+    from opfbench.registry.catalog import canonical
 
     load_plugins(args)
     return [canonical(label) for label in labels]

@@ -23,9 +23,9 @@ import pandas as pd
 
 from opfbench.errors import InputError
 from opfbench.io import load_network, parse_spec
-from opfbench.registry import configuration
+from opfbench.learned.rules import TRAIN_NIGHT, TrainingSet, check_samples, family_rule, load_params, usable
+from opfbench.registry.catalog import configuration
 from opfbench.scenario import Scenario
-from opfbench.strategies.learned import TRAIN_NIGHT, TrainingSet, check_samples, family_rule, load_params, usable
 from opfbench.study.periods import Period, local_time
 
 Window = tuple[pd.Timestamp, pd.Timestamp]  # [start, end), local time
@@ -136,7 +136,7 @@ def training_scenario(case: str, train: str, night: str, step_minutes: float | N
     """The training period and snapshots of the case `case` (its own spec; `model_case`
     gives a perturbed case's model) over `train` (at `step_minutes`, default the case's
     own step): PV connected at night, no forecast."""
-    from opfbench.study.scenarios import chunk_scenario, study_period
+    from opfbench.study.task_scenarios import chunk_scenario, study_period
 
     period, _ = study_period((case,), ("off",), train, night, step_minutes)
     step = pd.Timedelta(hours=period.step_h)

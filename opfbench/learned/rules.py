@@ -2,7 +2,7 @@
 get? Each family is fitted per DER to the AC OPF's optimal Q over a training period, from
 what that DER measures in closed loop — its own-bus |V| (p.u.), its own P (MW), its
 own-bus load P (MW) and Q (MVAr); no time stamp, no other DER's data — and runs as a local
-rule on the engine (`opfbench.strategies.engine`): the target is clipped to ±(1 − k)·Qmax
+rule on the engine (`opfbench.strategies.rule_engine`): the target is clipped to ±(1 − k)·Qmax
 like every rule's, and a rule of |V| is solved for its closed-loop steady state.
 
 Families (Q positive = injected; q = Q/S̄ in p.u. of the DER's nameplate S̄):
@@ -51,7 +51,7 @@ A fitted rule is written as JSON (`LearnedParams.write`, format FORMAT): the fam
 case and its DERs (bus, S̄, P̄), the training period, the hash of the training data, the
 sensitivity's row sums, the slope limits and the per-DER parameters. `params=FILE` makes
 it a rule anywhere; the run's training (`train=START..END`) is fitted by `opfbench run`
-(`opfbench.study.learning`), which ships the fitted parameters to its workers
+(`opfbench.study.training_checks`), which ships the fitted parameters to its workers
 (`install`).
 """
 
@@ -68,6 +68,9 @@ import numpy as np
 
 from opfbench.errors import InputError
 from opfbench.jsonio import dumps, write_atomic
+from opfbench.registry.options import Option, OptionValue
+from opfbench.state import PROCESS
+from opfbench.strategies.registration import local_rule
 
 if TYPE_CHECKING:
     from opfbench.scenario import Scenario
@@ -492,7 +495,7 @@ def features(scenario: Scenario, v_pu: np.ndarray) -> Features:
 def _closed_loop(rule: LearnedRule, scenario: Scenario) -> tuple[np.ndarray, float, int]:
     """(|V| at the DER buses (S, n_der), mean losses kW, not-settled steps) of `rule` in
     closed loop on `scenario` at TRAIN_K."""
-    from opfbench.strategies.engine import run_rule
+    from opfbench.strategies.rule_engine import run_rule
     from opfbench.strategies.rules import Rule
 
     res = run_rule(rule.name, Rule(rule.name, lambda m: rule.predict(m), frozenset(rule.reads)), scenario, TRAIN_K, {})
@@ -741,9 +744,19 @@ class LearnedParams:
 
 
 # ----- parameters at run time ---------------------------------------------------------------
-_installed: dict[str, LearnedParams] = {}
-_files: dict[tuple, LearnedParams] = {}
+_installed: dict[str, LearnedParams] = PROCESS.table("installed learned rules")
+_files: dict[tuple, LearnedParams] = PROCESS.table("learned-rule files read")
 _lock = threading.Lock()
+
+
+def forget() -> None:
+    """Forget every installed fitted rule and every file read."""
+    with _lock:
+        _installed.clear()
+        _files.clear()
+
+
+PROCESS.on_reset("learned rules", forget)
 
 
 def install(params: dict[str, LearnedParams]) -> None:
@@ -833,11 +846,66 @@ def _target(family: str, m: Measured, train: str, params: str) -> np.ndarray:
     return got.rule.predict(m)
 
 
+def fit_configuration(family: str, training: TrainingSet, options: dict) -> LearnedParams:
+    """The registry's `fit` of the learned strategies: `fit_rule` with the label's fit options."""
+    return fit_rule(family, training, rho=options["rho"], rounds=options["rounds"], knots=options.get("knots", KNOTS))
+
+
+def _rho(value: OptionValue) -> str | None:
+    return None if isinstance(value, float) and 0 < value < 1 else f"a contraction factor lies in (0, 1), got {value}"
+
+
+def _rounds(value: OptionValue) -> str | None:
+    return None if isinstance(value, int) and 0 <= value <= 20 else f"rounds lie in 0..20, got {value}"
+
+
+#: A learned strategy's options: where its parameters come from, and the fit's.
+TRAIN = Option("train", "", "training period START..END (END excluded): opfbench run fits the rule to the AC OPF over it")
+PARAMS = Option("params", "", "a fitted rule's parameters (JSON: a run folder's learned/*.json)")
+LEARNED_OPTIONS = (
+    TRAIN,
+    PARAMS,
+    Option("rho", RHO, "the slope bound's contraction factor ρ: |∂Q_i/∂|V_i|| ≤ ρ / Σ_j |∂|V_i|/∂Q_j|", check=_rho),
+    Option(
+        "rounds",
+        0,
+        "end-to-end rounds: refit on the voltages the rule produces in closed loop on the training period",
+        check=_rounds,
+    ),
+)
+
+
+def _learned(name: str, summary: str, reads: tuple[str, ...], check: Callable[[dict], None], *extra: Option):
+    """A learned family's registration: slope-bounded, closed loop, fitted by `fit_configuration`."""
+    return local_rule(
+        name,
+        reads=reads,
+        options=(*LEARNED_OPTIONS, *extra),
+        summary=summary + " (slope-bounded), closed loop",
+        check=check,
+        fit=fit_configuration,
+        snapshot_wise=True,
+    )
+
+
+@_learned(
+    "learned-affine",
+    "learned linear decision rule Q/S̄ = a + b·P/S̄ + c·|V| + d·Q_load/S̄ per DER (c ≤ 0), fitted to the AC OPF",
+    ("v", "p", "load"),
+    check_affine,
+)
 def affine_target(m: Measured, train: str = "", params: str = "", rho: float = RHO, rounds: int = 0) -> np.ndarray:
     """learned-affine's Q target (S, n_der) MVAr (module docstring)."""
     return _target(AffineRule.name, m, train, params)
 
 
+@_learned(
+    "learned-vv",
+    "learned Volt-VAR: monotone piecewise-linear Q(|V|) per DER, knots at training-voltage quantiles, fitted to the AC OPF",
+    ("v",),
+    check_vv,
+    Option("knots", KNOTS, "knots of the curve, at quantiles of the DER's training voltages"),
+)
 def vv_target(
     m: Measured, train: str = "", params: str = "", rho: float = RHO, rounds: int = 0, knots: int = KNOTS
 ) -> np.ndarray:
@@ -845,11 +913,12 @@ def vv_target(
     return _target(VoltVarRule.name, m, train, params)
 
 
+@_learned(
+    "learned-1547",
+    "learned IEEE 1547 Volt-VAR: the four-point shape with per-DER points fitted to the AC OPF",
+    ("v",),
+    check_ieee1547,
+)
 def ieee1547_target(m: Measured, train: str = "", params: str = "", rho: float = RHO, rounds: int = 0) -> np.ndarray:
     """learned-1547's Q target (S, n_der) MVAr (module docstring)."""
     return _target(Ieee1547Rule.name, m, train, params)
-
-
-def fit_configuration(family: str, training: TrainingSet, options: dict) -> LearnedParams:
-    """The registry's `fit` of the learned strategies: `fit_rule` with the label's fit options."""
-    return fit_rule(family, training, rho=options["rho"], rounds=options["rounds"], knots=options.get("knots", KNOTS))

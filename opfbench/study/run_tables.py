@@ -1,4 +1,4 @@
-"""The run's tables (columns: docs/CONTRACTS.md, run folder): per-step rows of one
+"""The run's tables (columns: `opfbench.schema`, docs/CONTRACTS.md): per-step rows of one
 strategy result, the optional detail tables (per-DER Q, per-bus V), and the summary,
 built from per-task partial sums so that a year never has to sit in memory at once.
 """
@@ -8,33 +8,13 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 
-from opfbench.registry import BASELINE, configuration, describe
+from opfbench.registry.catalog import configuration, describe
+from opfbench.registry.references import BASELINE
 from opfbench.result import NOT_SETTLED, OK, PF_DIVERGED, RULE_NON_FINITE, StrategyResult
+from opfbench.schema import BUS_V, DER_Q, KEYS, STEPS, SUMMARY, TASK_SUMMARY, StepContext
 from opfbench.study.config import DETAIL_TABLES
 
-KEYS = ["case", "strategy", "k", "night_mode", "forecast"]
-STEP_COLUMNS = [
-    *KEYS,
-    "time",
-    "step_h",
-    "night",
-    "status",
-    "losses_kw",
-    "vmin_pu",
-    "vmax_pu",
-    "voltage_violation_pu",
-    "q_total_mvar",
-    "excursion_mvar",
-    "lower_bound_kw",
-    "power_flows",
-    "wall_ms",
-    "solver_ms",
-    "iterations",
-    "certified_by",
-    "fallback",
-    "solver_status",
-]
-DETAIL_COLUMNS = {"der_q": [*KEYS, "time", "der", "bus", "kind", "q_mvar"], "bus_v": [*KEYS, "time", "bus", "v_pu"]}
+DETAIL_COLUMNS = {"der_q": DER_Q.names, "bus_v": BUS_V.names}
 VIOLATION_PU = 1e-6  # a step violates the voltage limits beyond this
 EXCURSION_MVAR = 1e-9  # a step's setpoint exceeds the physical capability beyond this
 
@@ -46,15 +26,8 @@ def extra_columns(labels: tuple[str, ...]) -> tuple[str, ...]:
 
 
 def step_columns(extra: tuple[str, ...] = ()) -> list[str]:
-    """The per-step table's columns: STEP_COLUMNS, then the strategies' extra ones."""
-    return [*STEP_COLUMNS, *extra]
-
-
-def _certified_by(res: StrategyResult) -> np.ndarray:
-    """Per step: the formulations' own record ("socp" | "ipopt" | ""); "" for the local rules."""
-    if "certified_by" in res.extra:
-        return np.asarray(res.extra["certified_by"], dtype=object)
-    return np.full(res.n_snapshots, "", dtype=object)
+    """The per-step table's columns: `schema.STEPS`'s, then the strategies' extra ones."""
+    return [*STEPS.names, *extra]
 
 
 Columns = dict[str, np.ndarray | str | float | int | bool]  # name → the part's rows, or one value for all
@@ -70,38 +43,12 @@ def step_rows(
     res: StrategyResult,
     extra_columns: tuple[str, ...] = (),
 ) -> Columns:
-    """The columns of one row per step of `res` (see the contract), for `stack`; the
-    `extra_columns` from `res.extra` (NaN where this strategy has none)."""
-    n = res.n_snapshots
-    nan = np.full(n, np.nan)
-    extra = res.extra
-    local = "fallback" not in extra
-    lb = res.lower_bound_kw if res.lower_bound_kw is not None else nan
-    return {
-        "case": case,
-        "strategy": res.strategy,
-        "k": float(res.k),
-        "night_mode": night_mode,
-        "forecast": forecast,
-        "time": time.asi8,
-        "step_h": float(step_h),
-        "night": np.asarray(night, dtype=bool),
-        "status": res.status.astype(str),
-        "losses_kw": res.losses_kw,
-        "vmin_pu": res.vmin,
-        "vmax_pu": res.vmax,
-        "voltage_violation_pu": res.voltage_violation(),
-        "q_total_mvar": res.q_mvar.sum(axis=1),
-        "excursion_mvar": res.excursion_mvar,
-        "lower_bound_kw": np.asarray(lb, dtype=float),
-        "power_flows": np.asarray(res.power_flows, dtype=np.int64),
-        "wall_ms": res.wall_ms / n,
-        "solver_ms": np.asarray(extra.get("solve_ms", nan), dtype=float),
-        "iterations": np.asarray(extra.get("iterations", nan), dtype=float),
-        "certified_by": _certified_by(res).astype(str),
-        "fallback": "" if local else np.asarray(extra["fallback"], dtype=str),
-        "solver_status": "" if local else np.asarray(extra["solver_status"], dtype=str),
-    } | {name: np.asarray(extra.get(name, nan), dtype=float) for name in extra_columns}
+    """The columns of one row per step of `res` (`schema.STEPS`, each computed by its
+    declaration), for `stack`; the `extra_columns` from `res.extra` (NaN where this
+    strategy has none)."""
+    context = StepContext(case, night_mode, forecast, time.asi8, step_h, night, res)
+    nan = np.full(res.n_snapshots, np.nan)
+    return STEPS.compute(context) | {name: np.asarray(res.extra.get(name, nan), dtype=float) for name in extra_columns}
 
 
 def detail_rows(
@@ -214,30 +161,7 @@ def partial_summary(steps: pd.DataFrame) -> pd.DataFrame:
     return sums[list(PARTIAL_COLUMNS)].reset_index()
 
 
-PARTIAL_COLUMNS = (
-    "steps",
-    "hours",
-    "pf_converged_steps",
-    "measured_hours",
-    "energy_kwh",
-    "not_ok_steps",
-    "not_settled_steps",
-    "pf_diverged_steps",
-    "rule_non_finite_steps",
-    "voltage_violation_steps",
-    "voltage_violation_h",
-    "max_violation_pu",
-    "vmin_pu",
-    "vmax_pu",
-    "max_excursion_mvar",
-    "excursion_steps",
-    "lower_bound_kwh",
-    "lb_missing",
-    "wall_s",
-    "solver_s",
-    "solver_known",
-    "certified",
-)
+PARTIAL_COLUMNS = tuple(TASK_SUMMARY.names[len(KEYS) :])
 """The columns of a task's partial sums (`partial_summary`) besides KEYS."""
 EXTREMES = {"vmin_pu": "min", "vmax_pu": "max", "max_excursion_mvar": "max", "max_violation_pu": "max"}
 """The partial sums' extremes (combined by `summarize` with these; the others are summed)."""
@@ -284,43 +208,8 @@ def summarize(partials: list[pd.DataFrame], order: list[tuple]) -> pd.DataFrame:
     )
     out["gap_kwh"] = out.energy_kwh - out.lower_bound_kwh
     out["gap_pct"] = 100 * out.gap_kwh / out.lower_bound_kwh
-    cols = [
-        "steps",
-        "hours",
-        "avg_loss_kw",
-        "energy_kwh",
-        "no_action_kwh",
-        "savings_pct",
-        "not_ok_steps",
-        "not_settled_steps",
-        "voltage_violation_steps",
-        "voltage_violation_min",
-        "max_violation_pu",
-        "vmin_pu",
-        "vmax_pu",
-        "max_excursion_mvar",
-        "excursion_steps",
-        "lower_bound_kwh",
-        "gap_kwh",
-        "gap_pct",
-        "wall_s",
-        "solver_s",
-        "certified_share",
-        "pf_converged_steps",
-        "pf_diverged_steps",
-        "rule_non_finite_steps",
-    ]
-    ints = [
-        "steps",
-        "not_ok_steps",
-        "not_settled_steps",
-        "voltage_violation_steps",
-        "excursion_steps",
-        "pf_converged_steps",
-        "pf_diverged_steps",
-        "rule_non_finite_steps",
-    ]
-    return out[KEYS + cols].astype({c: np.int64 for c in ints})
+    integers = {c.name: np.int64 for c in SUMMARY if c.dtype == "integer"}
+    return out[SUMMARY.names].astype(integers)
 
 
 def _bound_rank(label: str) -> float:

@@ -24,6 +24,7 @@ from typing import Callable, Generic, Hashable, Sequence, TypeVar
 import numpy as np
 
 from opfbench.network import Network
+from opfbench.state import PROCESS
 
 T = TypeVar("T")
 PER_THREAD = 16  # solver objects kept per thread (least recently used dropped first)
@@ -46,6 +47,13 @@ def per_thread(net: Network, key: Hashable, build: Callable[[], T]) -> T:
         cache.popitem(last=False)
     return value
 
+
+def forget_solvers() -> None:
+    """Drop the calling thread's solver objects."""
+    _local.cache = OrderedDict()
+
+
+PROCESS.on_reset("formulation solver objects (the calling thread's)", forget_solvers)
 
 Key = tuple[Network, Hashable, bytes]
 

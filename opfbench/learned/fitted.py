@@ -4,8 +4,10 @@ study's config holds them)."""
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
-from opfbench.strategies.learned import LearnedParams
+if TYPE_CHECKING:
+    from opfbench.learned.rules import LearnedParams
 
 LEARNED_DIR = "learned"  # the run folder's fitted rules: learned/<case>--<label>.json
 TRAIN_DIR = "train"  # the run folder's training runs (train/reference, train/learned) and train/summary.csv
@@ -32,4 +34,6 @@ class Fitted:
         return {"case": self.case, "label": self.label, "ref": self.ref, "sha256": self.sha256}
 
     def parsed(self) -> LearnedParams:
+        from opfbench.learned.rules import LearnedParams
+
         return LearnedParams.parse(self.text, self.ref)

@@ -1,22 +1,24 @@
-"""What every second-order-cone relaxation of the OPF problem shares (cvxpy + Clarabel).
+"""What every conic model of the OPF problem shares (cvxpy + Clarabel): the relaxations
+(`distflow`, `jabr`) and the approximations (`lindistflow`).
 
 The OPF problem of `problem.OpfProblem` (as the AC OPF solves it), in v = |V|²: DER Q
 within ±(1 − k)·Qmax(P), v_slack², vmin² ≤ v ≤ vmax², the power balance and slack rule
-of `OpfProblem.balance`; objective = branch losses. A model (`distflow`, `jabr`) writes
-how the voltages couple the branch flows: its own variables, the bus mismatches and its
-cones (`SocpRelaxation._network_model`). Any AC-feasible point maps to a feasible point of
-such a relaxation with the same losses, so its optimum is a lower bound on the AC OPF's.
+of `OpfProblem.balance`; objective = the model's branch losses (linear, or convex
+quadratic). A model writes how the voltages couple the branch flows: its own variables,
+the bus mismatches, its objective and its constraints (`ConicModel._network_model`). For
+a relaxation, any AC-feasible point maps to a feasible point with the same losses, so its
+optimum is a lower bound on the AC OPF's; an approximation's optimum is an estimate.
 
-The bound reported is min(primal, dual) objective of Clarabel's solution (kW). Clarabel's
+The objective reported is min(primal, dual) objective of Clarabel's solution (kW). Clarabel's
 "AlmostSolved" (reduced tolerances met) counts as solved and is recorded as such in
 solver_status; a solve that stalls after an in-place data update is retried once on a
 fresh solver (`clarabel_adapter.ParametricConeProgram.solve`), recorded as e.g.
 "InsufficientProgress → Solved".
 
-`relaxation_gap` = max over branches of the model's cone residual at the optimum, in p.u.²
-(`_cone_residual`): 0 (in practice ≲ 1e-7, the solver's tolerance) means the relaxation is
-exact on every branch; the AC losses of the setpoints against the bound is the end-to-end
-measure.
+A relaxation's `relaxation_gap` = max over branches of its cone residual at the optimum,
+in p.u.² (`_cone_residual`): 0 (in practice ≲ 1e-7, the solver's tolerance) means the
+relaxation is exact on every branch; the AC losses of the setpoints against the bound is
+the end-to-end measure. A model without cones has none (NaN).
 """
 
 from __future__ import annotations
@@ -33,23 +35,25 @@ from opfbench.formulations.solvers.clarabel_adapter import ParametricConeProgram
 from opfbench.network import Network
 from opfbench.timing import elapsed_ms, now
 
-NOT_SOLVED = "not solved"  # a SocpSolve's outcome where the caller skipped the snapshot
+NOT_SOLVED = "not solved"  # a SnapshotSolve's outcome where the caller skipped the snapshot
 Reader = Callable[[cp.Variable], np.ndarray]  # a variable's values in stacked solutions, (S, size)
 
 
 @dataclass(frozen=True)
-class SocpSolve:
-    """One snapshot's relaxation solve. outcome: "optimal" | "infeasible" (certified by
-    Clarabel) | "failed" | "not solved" (`not_solved`: a caller had no use for it); solver_status: Clarabel's own status; solve_ms: wall time of
-    Clarabel's data updates and solves; iterations: the answering Clarabel solve's; solves:
-    every Clarabel solve the answer took (`clarabel_adapter.ConeSolve`); slack_p_pu: the
-    slack bus's active injection at the optimum (p.u., positive = import from the upstream
-    grid). Where not optimal, lower_bound_kw, relaxation_gap and slack_p_pu are NaN and
-    q_pu is None."""
+class SnapshotSolve:
+    """One snapshot's solve of a model that solves snapshots independently. outcome:
+    "optimal" | "infeasible" (certified by the solver) | "failed" | "not solved"
+    (`not_solved`: a caller had no use for it); solver_status: the solver's own status;
+    objective_kw: the model's optimum (kW; a relaxation's is a lower bound on the AC
+    OPF's); solve_ms: wall time of the data updates and solves; iterations: the answering
+    solve's; solves: every solve the answer took (`clarabel_adapter.ConeSolve`);
+    slack_p_pu: the slack bus's active injection at the optimum (p.u., positive = import
+    from the upstream grid). Where not optimal, objective_kw, relaxation_gap and slack_p_pu
+    are NaN and q_pu is None."""
 
     outcome: str
     solver_status: str
-    lower_bound_kw: float
+    objective_kw: float
     q_pu: np.ndarray | None
     relaxation_gap: float
     solve_ms: float
@@ -58,7 +62,7 @@ class SocpSolve:
     slack_p_pu: float = np.nan
 
     @classmethod
-    def not_solved(cls) -> "SocpSolve":
+    def not_solved(cls) -> "SnapshotSolve":
         """The record of a snapshot left unsolved (no status, no time, NaN figures)."""
         return cls(NOT_SOLVED, "", np.nan, None, np.nan, 0.0, 0, 0)
 
@@ -77,7 +81,6 @@ class SocpSolve:
             "iterations": int(self.iterations),
             "solves": int(self.solves),
             "solver_status": self.solver_status,
-            "relaxation_gap": self.relaxation_gap,
         }
 
 
@@ -99,22 +102,20 @@ def _rows(row: Row) -> list[cp.Constraint]:
 def screens(net: Network) -> bool:
     """Whether the relaxation of `net` uses bound screening (`solvers.clarabel_adapter`):
     not on feeders with a DER at every other bus or more (SimBench's MV grids). There the
-    active set moves with almost every 15-min step and is often degenerate — measured on
-    1-MV-rural's paper day (102 DER, 101 buses): the last step's guess failed on 73 % of
-    the steps and the screened program at a step's own active set passed its check on
-    43 %, ~3 Clarabel solves per step (8.0 ms) against one full solve (2.2 ms)."""
+    active set moves with almost every 15-min step and is often degenerate: the last
+    step's guess mostly fails its check and a step costs several Clarabel solves where one
+    full solve answers (`python -m opfbench.bench opf`'s `mv_*` keys time them)."""
     return len(net.ders) < net.n_bus / 2
 
 
-class SocpRelaxation:
-    """The relaxation of one `OpfProblem`, built once; `solve` per snapshot.
+class ConicModel:
+    """A conic model of one `OpfProblem`, built once; `solve` per snapshot.
 
     Data (cvxpy variables that `ParametricConeProgram` holds fixed per solve): p_fixed,
     q_fixed (n_bus,) fixed injections and q_limit (n_der,) usable Q limit, all p.u.
-    A model subclasses it with its `model` name, `_network_model` and `_cone_residual`.
+    A model subclasses it with its `_network_model`; a relaxation with its `_cone_residual`;
+    a model whose objective is not the losses its balance carries with `_slack_p_pu`.
     """
-
-    model: str = ""
 
     def __init__(self, net: Network, slack_export: bool = True):
         self.problem = problem = OpfProblem.of(net, slack_export)
@@ -144,20 +145,28 @@ class SocpRelaxation:
         """(mismatch_p, mismatch_q, branch losses, model constraints), p.u., per `problem`."""
         raise NotImplementedError
 
-    def _cone_residual(self, value: Reader) -> np.ndarray:
+    def _cone_residual(self, value: Reader) -> np.ndarray | None:
         """Largest cone residual (p.u.²) of each of stacked solutions; `value(var)` reads a
-        variable as (S, size)."""
-        raise NotImplementedError
+        variable as (S, size). None: the model has no cones."""
+        return None
+
+    def _slack_p_pu(self, value: Reader, thetas: np.ndarray, objective_kw: np.ndarray) -> np.ndarray:
+        """The slack's active injection (p.u.) at each of stacked optima: summed over all
+        buses the mismatches are the branch losses plus the shunts' P minus the fixed
+        injections; every non-slack mismatch is 0, so where the objective is the branch
+        losses the balance carries, this is the slack's P."""
+        n = self.net.n_bus
+        return objective_kw / self.problem.kw_per_pu + value(self.v) @ self.problem.gsh - thetas[:, :n].sum(axis=1)
 
     def _der_q_at_buses(self) -> cp.Expression:
         return self.problem.der_at_bus @ self.q
 
-    def solve(self, s_fixed: np.ndarray, q_limit: np.ndarray) -> SocpSolve:
+    def solve(self, s_fixed: np.ndarray, q_limit: np.ndarray) -> SnapshotSolve:
         """Solve one snapshot: fixed injections `s_fixed` (n_bus,) complex p.u., usable
         Q limits `q_limit` (n_der,) p.u."""
         return self.solve_data(data_vector(s_fixed, q_limit)[None])[0]
 
-    def solve_data(self, thetas: np.ndarray) -> list[SocpSolve]:
+    def solve_data(self, thetas: np.ndarray) -> list[SnapshotSolve]:
         """Solve snapshots given as rows of data vectors (`data_vector`), one by one; the
         offsets before and the solutions' read-out after are done for all at once."""
         thetas = np.atleast_2d(thetas)
@@ -173,20 +182,19 @@ class SocpRelaxation:
         primal = np.array([a.primal for a in final])
         dual = np.array([a.dual for a in final])
         value = self.program.reader(x)
-        n, q_limit = self.net.n_bus, thetas[solved, 2 * self.net.n_bus :]
+        q_limit = thetas[solved, 2 * self.net.n_bus :]
         q_pu = np.clip(value(self.q), -q_limit, q_limit)  # within solver tolerance of the limits anyway
-        # Summed over all buses the mismatches are the branch losses plus the shunts' P minus
-        # the fixed injections; every non-slack mismatch is 0, so this is the slack's P.
-        slack_p = primal / self.problem.kw_per_pu + value(self.v) @ self.problem.gsh - thetas[solved, :n].sum(axis=1)
-        gap = self._cone_residual(value)
+        slack_p = self._slack_p_pu(value, thetas[solved], primal)
+        residual = self._cone_residual(value)
+        gap = np.full(primal.size, np.nan) if residual is None else residual
         out, j = [], 0
         for (a, solve_ms), ok in zip(raw, solved, strict=True):
             if not ok:
                 outcome = "infeasible" if a.final_status in CONIC_INFEASIBLE else "failed"
-                out.append(SocpSolve(outcome, a.status, np.nan, None, np.nan, solve_ms, a.iterations, a.solves))
+                out.append(SnapshotSolve(outcome, a.status, np.nan, None, np.nan, solve_ms, a.iterations, a.solves))
                 continue
             out.append(
-                SocpSolve(
+                SnapshotSolve(
                     "optimal",
                     a.status,
                     float(min(primal[j], dual[j])),

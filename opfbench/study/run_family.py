@@ -14,14 +14,15 @@ import pyarrow as pa
 
 from opfbench.io import load_case
 from opfbench.jsonio import write_atomic
+from opfbench.learned.fitted import LEARNED_DIR, TRAIN_DIR, Fitted
 from opfbench.parquetio import ParquetStream
-from opfbench.registry import configuration
+from opfbench.registry.catalog import configuration
+from opfbench.schema import KEYS, TASK_SUMMARY
 from opfbench.study.config import LABEL_FIELDS, StudyConfig
-from opfbench.study.engine import EngineRun, TaskOutput, run_family
-from opfbench.study.fitted import LEARNED_DIR, TRAIN_DIR, Fitted
+from opfbench.study.engine import SILENT, EngineRun, Reporter, TaskOutput, run_family
 from opfbench.study.periods import Period
-from opfbench.study.scenarios import check_model_forecasts, study_period
-from opfbench.study.tables import DETAIL_COLUMNS, KEYS, PARTIAL_COLUMNS, extra_columns, step_columns, summarize
+from opfbench.study.run_tables import DETAIL_COLUMNS, extra_columns, step_columns, summarize
+from opfbench.study.task_scenarios import check_model_forecasts, study_period
 from opfbench.study.tasks import RunTask, TaskInput, plan_tasks, task_input
 
 RUN_OUTPUTS = ("steps.parquet", "summary.csv", "der_q.parquet", "bus_v.parquet", "report.html")
@@ -30,7 +31,7 @@ RUN_OUTPUTS = ("steps.parquet", "summary.csv", "der_q.parquet", "bus_v.parquet",
 @dataclass
 class StudyRun:
     """A finished run: its folder, summary, tasks run now and kept from before, wall time
-    (s), each task's wall time."""
+    (s), each task's wall time, and the notes it made (`study.engine.Reporter`)."""
 
     out: Path
     config: StudyConfig
@@ -41,6 +42,7 @@ class StudyRun:
     wall_s: float = 0.0
     summary: pd.DataFrame | None = None
     task_wall: dict = field(default_factory=dict)
+    notes: list[str] = field(default_factory=list)
 
 
 def _case_info(case: str) -> dict:
@@ -81,7 +83,7 @@ class RunFamily:
     def columns(self, table: str) -> list[str]:
         if table == "steps":
             return step_columns(extra_columns(self.config.strategies))
-        return [*KEYS, *PARTIAL_COLUMNS] if table == "summary" else DETAIL_COLUMNS[table]
+        return TASK_SUMMARY.names if table == "summary" else DETAIL_COLUMNS[table]
 
     @property
     def notes(self) -> tuple[str, ...]:
@@ -96,6 +98,7 @@ class RunFamily:
             "period": self.period.as_dict(),
             "data_sources": list(self.period.sources),
             "cases": cases,
+            "strategies": {label: configuration(label).spec.record() for label in self.config.strategies},
         }
 
     def job(self, task: RunTask) -> TaskInput:
@@ -175,22 +178,30 @@ def run_study(
     workers: int | None = 1,
     scheduler: str | None = None,
     fresh: bool = False,
-    quiet: bool = False,
     command: list[str] | None = None,
     fitted: tuple[Fitted, ...] | None = None,
+    reporter: Reporter = SILENT,
 ) -> StudyRun:
     """Run `config` into the folder `out` (resuming finished tasks; `run_family` for the
     rest). Ctrl-C: `Stopped` after the finished tasks are saved. Its learned
     configurations are fitted first (`fit_learned`), unless `fitted` gives their rules
     (a nested training run's, whose case notes are its parent's to say)."""
-    options: dict[str, Any] = {"workers": workers, "scheduler": scheduler, "fresh": fresh, "quiet": quiet, "command": command}
+    options: dict[str, Any] = {
+        "workers": workers,
+        "scheduler": scheduler,
+        "fresh": fresh,
+        "command": command,
+        "reporter": reporter,
+    }
     nested = fitted is not None
     if fitted is None:
         fitted = fit_learned(config, out, options)
     config = replace(config, fitted=fitted)
     run: EngineRun = run_family(lambda: prepare(config), out, **options, notes=not nested)
     family: RunFamily = run.family
-    return StudyRun(run.out, family.config, family.period, family.tasks, run.kept, run.ran, run.wall_s, run.result, run.task_wall)
+    return StudyRun(
+        run.out, family.config, family.period, family.tasks, run.kept, run.ran, run.wall_s, run.result, run.task_wall, run.notes
+    )
 
 
 def fit_learned(config: StudyConfig, out: Path, options: dict[str, Any]) -> tuple[Fitted, ...]:
@@ -198,9 +209,9 @@ def fit_learned(config: StudyConfig, out: Path, options: dict[str, Any]) -> tupl
     itself (its input, the training periods apart from the test period, a params file's
     case, the folder's earlier run) — before any work: the `train=` ones fitted in nested
     runs of the folder `out` (`study.training`)."""
-    from opfbench.study.learning import check_learned, learned_configs
     from opfbench.study.store import RunStore
     from opfbench.study.training import recorded_fits, train
+    from opfbench.study.training_checks import check_learned, learned_configs
 
     if not learned_configs(config.strategies):
         return ()

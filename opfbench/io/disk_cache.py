@@ -1,8 +1,8 @@
-"""An on-disk cache of converted cases whose source is slow to read: a SimBench grid takes
-simbench 5–12 s to extract from its complete data set, its conversion 20 ms. The first
+"""An on-disk cache of converted cases whose source is slow to read: simbench extracts a
+grid from its complete data set slowly, the conversion is quick. The first
 read of a spec writes the converted case (network, stored point, series, notes) to
 `$OPFBENCH_CACHE` (default `$XDG_CACHE_HOME/opfbench`, else `~/.cache/opfbench`); later
-processes — every Dask worker, every `opfbench pf` — read it back in milliseconds.
+processes — every Dask worker, every `opfbench pf` — read it back at once.
 
 An entry is keyed by the spec and everything that could change the result: the
 simbench, pandapower and numpy versions and a hash of the converter's own source files.
@@ -27,7 +27,7 @@ from opfbench.io.case import Case, CaseSeries
 from opfbench.network import Network
 
 #: Source files whose change invalidates every entry (the conversion and the records).
-_SOURCES = ("io/pandapower.py", "io/simbench.py", "io/case.py", "io/cache.py", "network.py", "data/simbench.py")
+_SOURCES = ("io/pandapower.py", "io/simbench.py", "io/case.py", "io/disk_cache.py", "network.py", "data/simbench_profiles.py")
 _FORMAT = 1
 
 
