@@ -5,9 +5,10 @@ workload, and print its figures and the workload's time as one JSON object:
 
 `calibration_ms` is the median of the two timings (each the best of CALIBRATION_REPEATS):
 a peer measured in the same process as the benchmark, for the keys that have no peer of
-their own (`opfbench.bench.record`). Run as a script by path, it imports nothing of
-opfbench but `opfbench.bench.NAME` — so an older checkout's benchmarks run under it too
-(`python -m opfbench.bench all --tree DIR` puts DIR first on PYTHONPATH).
+their own (`opfbench.bench.record`). Run as a script by path, it imports of opfbench only
+`opfbench.bench.NAME` and `opfbench.jsonio` — modules every checkout since the first
+benchmarks has — so an older checkout's benchmarks run under it too (`python -m
+opfbench.bench all --tree DIR` puts DIR first on PYTHONPATH).
 """
 
 from __future__ import annotations
@@ -23,6 +24,8 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.sparse.linalg import splu
 from threadpoolctl import threadpool_limits
+
+from opfbench.jsonio import json_safe
 
 CALIBRATION_REPEATS = 5
 
@@ -59,21 +62,6 @@ def calibration_ms() -> float:
     return best
 
 
-def _plain(value: object) -> object:
-    """JSON-ready: numpy → Python, NaN/inf → None, tuples → lists."""
-    if isinstance(value, np.ndarray):
-        return _plain(value.tolist())
-    if isinstance(value, np.generic):
-        return _plain(value.item())
-    if isinstance(value, float):
-        return value if math.isfinite(value) else None
-    if isinstance(value, dict):
-        return {str(k): _plain(v) for k, v in value.items()}
-    if isinstance(value, (list, tuple)):
-        return [_plain(v) for v in value]
-    return value if value is None or isinstance(value, (bool, int, str)) else str(value)
-
-
 def main(argv: list[str]) -> int:
     name, options = argv[0], argv[1:]
     module = importlib.import_module(f"opfbench.bench.{name}")
@@ -87,7 +75,7 @@ def main(argv: list[str]) -> int:
     after = calibration_ms()
     figures["calibration_ms"] = float(np.median([before, after]))
     figures["calibration_ms_runs"] = [before, after]
-    print(json.dumps(_plain(figures)))
+    print(json.dumps(json_safe(figures), allow_nan=False))
     return 0
 
 

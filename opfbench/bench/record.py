@@ -165,7 +165,9 @@ def run_bench(bench: Bench, tree: Path | None) -> tuple[dict | None, str | None,
     if tree is not None:
         env["PYTHONPATH"] = os.pathsep.join([str(tree), *filter(None, [env.get("PYTHONPATH")])])
     start = now()
-    done = subprocess.run([sys.executable, str(HARNESS), bench.module, *bench.options], capture_output=True, text=True, env=env)
+    done = subprocess.run(
+        [sys.executable, "-P", str(HARNESS), bench.module, *bench.options], capture_output=True, text=True, env=env
+    )
     wall = elapsed_ms(start) / 1e3
     if done.returncode:
         lines = [line for line in done.stderr.strip().splitlines() if line.strip()]
