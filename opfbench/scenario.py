@@ -279,11 +279,14 @@ class Scenario:
             return self._bus_load
         return self.load_scale[:, None] * (self.net.load_p_mw + 1j * self.net.load_q_mvar)[None, :]
 
-    def injections(self, der_q_mvar: np.ndarray) -> np.ndarray:
-        """Bus injections (S, n_bus) complex MW for DER reactive setpoints (S, n_der) MVAr."""
+    def injections(self, der_q_mvar: np.ndarray, der_p_mw: np.ndarray | None = None) -> np.ndarray:
+        """Bus injections (S, n_bus) complex MW for DER reactive setpoints (S, n_der) MVAr,
+        with the DER at their available power P^C, or at `der_p_mw` (S, n_der) MW where a
+        rule curtails."""
+        p = self.der_p_mw if der_p_mw is None else der_p_mw
         if self.load_scale is None:
-            return bus_injections(self.net, self.der_p_mw, der_q_mvar, bus_load_mva=self._bus_load)
-        return bus_injections(self.net, self.der_p_mw, der_q_mvar, self.load_scale)
+            return bus_injections(self.net, p, der_q_mvar, bus_load_mva=self._bus_load)
+        return bus_injections(self.net, p, der_q_mvar, self.load_scale)
 
     def load_q_at_der_mvar(self) -> np.ndarray:
         """Each DER's share of the reactive load at its own bus (S, n_der) MVAr — what LLMA
@@ -370,15 +373,22 @@ class Scenario:
         the snapshots where `mask` (S,) is True."""
         return Scenario(self.net, self.load_scale, self.der_p_mw, self.der_p_forecast_mw, mask, self.load_p_mw, self.load_q_mvar)
 
+    def night_q(self) -> np.ndarray | bool:
+        """(S, n_der) where the solar units have the "Q at night" capability, or False
+        (nowhere)."""
+        if self.pv_night_q is None or not self.pv_night_q.any():
+            return False
+        return self.pv_night_q[:, None] & self.net.der_solar[None, :]
+
     def qmax_mvar(self, p_mw: np.ndarray | None = None) -> np.ndarray:
         """(S, n_der) physical Qmax at active power `p_mw` (default P^C), MVAr, with the
         "Q at night" capability for the solar units at the `pv_night_q` snapshots."""
         p = self.der_p_mw if p_mw is None else p_mw
         net = self.net
-        kinds, rating, s_rated = net.der_kinds, net.der_rating_mw, net.der_s_mva
-        if self.pv_night_q is None or not self.pv_night_q.any():
-            return qmax(kinds, p, rating, s_rated)
-        return qmax(kinds, p, rating, s_rated, night_q=self.pv_night_q[:, None] & net.der_solar[None, :])
+        night = self.night_q()
+        if night is False:
+            return qmax(net.der_kinds, p, net.der_rating_mw, net.der_s_mva)
+        return qmax(net.der_kinds, p, net.der_rating_mw, net.der_s_mva, night_q=night)
 
 
 def _check_net(net: object) -> None:

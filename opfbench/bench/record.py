@@ -80,6 +80,12 @@ ALL: tuple[Bench, ...] = (
     Bench("run", "run", ("--repeats", "1"), {"day_s": CALIBRATION}),
     Bench("suite", "run", ("--suite", "--repeats", "1"), {"suite_year_est_min": CALIBRATION, "suite_week_s": CALIBRATION}),
     Bench("learned", "learned", (), {"learned_fit_s": CALIBRATION}),
+    Bench(  # cases.0: paper33's day (the band never binds), cases.1: a week of 1-MV-rural (it binds)
+        "frontier",
+        "frontier",
+        (),
+        {"cases.0.frontier_ms": "cases.0.acopf_ms", "cases.1.frontier_extra_ms": "cases.1.acopf_ms"},
+    ),
 )
 
 
@@ -94,11 +100,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def flatten(figures: dict, prefix: str = "") -> dict[str, float]:
-    """The numeric scalars of `figures` as {"a.b": value}: nested dicts joined by dots;
-    lists, text, booleans and None left out."""
+    """The numeric scalars of `figures` as {"a.b": value}: nested dicts joined by dots, a
+    list of dicts by position ("cases.0.x"); other lists, text, booleans and None left out."""
     out: dict[str, float] = {}
     for key, value in figures.items():
         name = f"{prefix}{key}"
+        if isinstance(value, list) and value and all(isinstance(v, dict) for v in value):
+            value = {str(i): v for i, v in enumerate(value)}
         if isinstance(value, dict):
             out |= flatten(value, f"{name}.")
         elif isinstance(value, (int, float)) and not isinstance(value, bool):

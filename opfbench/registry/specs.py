@@ -38,7 +38,7 @@ MEANING: dict[str, str] = {"exact": "optimum", "relaxation": "bound", "approxima
 #: Network classes a strategy or a model runs on (`network_class`).
 SUPPORTS = ("radial", "meshed")
 OPFBENCH = "opfbench"  # the source of the built-in entries
-_NAME = re.compile(r"^[a-z0-9][a-z0-9._-]*$")
+_NAME = re.compile(r"^[a-z0-9][a-z0-9._+-]*$")  # "+" joins rules run together: volt-var+volt-watt
 Runner = Callable[..., "StrategyResult"]
 
 
@@ -64,13 +64,14 @@ class StrategySpec:
     alone, bit for bit, whatever other snapshots the scenario holds (the study runs such a
     strategy once on the distinct snapshots of several night modes; a solver warm-started
     along the scenario is not); `source`: "opfbench" or the plugin that registered it,
-    `module` the module that declared it."""
+    `module` the module that declared it; `curtails`: a local rule that caps its DER's
+    active power (its target returns `rules.Targets`)."""
 
     name: str
     kind: Kind
     summary: str
     runner: Runner
-    target: Callable[..., np.ndarray] | None = None
+    target: Callable[..., Any] | None = None  # (S, n_der) MVAr, or `strategies.rules.Targets`
     reads: tuple[str, ...] = ()
     closed_loop: bool = False
     options: tuple[Option, ...] = ()
@@ -87,6 +88,7 @@ class StrategySpec:
     snapshot_wise: bool = False
     source: str = OPFBENCH
     module: str = ""
+    curtails: bool = False
 
     @property
     def option(self) -> dict[str, Option]:
@@ -154,6 +156,7 @@ class StrategySpec:
             "summary": self.summary,
             "reads": list(self.reads) if self.kind == "local" else ["the whole network (centralized)"],
             "closed_loop": self.closed_loop,
+            "curtails": self.curtails,
             "learned": self.learned,
             "uses_forecast": self.uses_forecast,
             "lower_bound": self.bound_rank is not None,
@@ -231,14 +234,16 @@ MODELS: dict[str, ModelSpec] = PROCESS.table("formulation models")
 
 def _check_name(what: str, name: str, source: str, held: StrategySpec | ModelSpec | None) -> None:
     if not _NAME.match(name):
-        raise InputError(f"{source}: {what} name {name!r} must be lower-case letters, digits, '.', '_' or '-'")
+        raise InputError(f"{source}: {what} name {name!r} must be lower-case letters, digits, '.', '_', '+' or '-'")
     if held is not None and held.source != source:
         raise InputError(f"{source}: {what} name {name!r} is taken (by {held.source})")
+    if held is not None:  # one source, one entry a name: the second would silently replace the first
+        raise InputError(f"{what} {name!r} is registered twice by {source}: give each its own name")
 
 
 def register(spec: StrategySpec) -> None:
-    """Add a strategy; InputError for a name that is taken by another source or not a valid
-    name (lower-case letters, digits, '.', '_', '-')."""
+    """Add a strategy; InputError for a name that is taken (by another source, or already
+    by this one) or not a valid name (lower-case letters, digits, '.', '_', '+', '-')."""
     _check_name("strategy", spec.name, spec.source, STRATEGIES.get(spec.name))
     STRATEGIES[spec.name] = spec
 
