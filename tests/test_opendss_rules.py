@@ -129,3 +129,22 @@ def test_bad_der_on_a_feeder_exits_2(capsys, argv, expected):
     assert main(argv) == 2
     err = capsys.readouterr().err
     assert expected in err and "Traceback" not in err
+
+
+def test_lfma_reads_per_phase_flows_and_finds_the_upstream_line():
+    """LFMA on ieee13 with single- and three-phase units: the line each branch-node DER
+    takes as upstream (largest |Q| on its phases in the no-action state) is the one towards
+    the source, and its step 3 adds that inflow to LLMA's setpoint (within the limit)."""
+    from opfbench.strategies.paper import lfma_trace
+
+    net = load_case(f"ieee13{IEEE13_DER},632.2:inverter:0.05").network
+    assert isinstance(net, PhaseNetwork)
+    scenario = Scenario.snapshot(net, 1.0, 0.5)
+    res = run_strategy("lfma", scenario, 0.0)
+    assert res.status[0] == "ok" and res.extra["upstream_disagreements"][0] == []
+    trace = lfma_trace(scenario, 0.0)
+    upstream = [net.bus_names[b] if b >= 0 else None for b in trace.upstream_branch[0]]
+    assert upstream == [None, "670", None, None, "rg60"]  # 675, 611, 652 are leaves; 671 and 632 are fed from 670 and rg60
+    limit = reactive_limit(scenario, 0.0)[0]
+    expected = np.clip(trace.q_llma[0] + net.der_share * trace.q_up_h[0], -limit, limit)
+    np.testing.assert_allclose(trace.q_step3[0, [1, 4]], expected[[1, 4]], rtol=1e-12)
