@@ -294,7 +294,7 @@ class Scenario(Generic[NetT]):
     @classmethod
     def from_profiles(
         cls,
-        net: Network,
+        net: Network | PhaseNetwork,
         load_pu: np.ndarray,
         pv_pu: np.ndarray,
         wind_pu: np.ndarray,

@@ -148,3 +148,56 @@ def test_lfma_reads_per_phase_flows_and_finds_the_upstream_line():
     limit = reactive_limit(scenario, 0.0)[0]
     expected = np.clip(trace.q_llma[0] + net.der_share * trace.q_up_h[0], -limit, limit)
     np.testing.assert_allclose(trace.q_step3[0, [1, 4]], expected[[1, 4]], rtol=1e-12)
+
+
+def test_run_eulv_on_its_own_load_shapes_with_vuf_columns(tmp_path):
+    """`opfbench run --case eulv`: every house on its own 1-min shape on the paper day (the
+    loads OpenDSS's LoadShape gives, read here independently), the PV on the period's
+    profile; the steps and summary carry the declared VUF columns; no frontier (the optimum
+    on three-phase feeders is issue 30's) and the report is written."""
+    import opendssdirect as dss
+    import pandas as pd
+
+    from opfbench.powerflow.multiphase import solve_phase_flow
+
+    out = tmp_path / "run"
+    argv = ["run", "--case", "eulv", "--strategies", "no-action", "volt-var", "--k", "0", "--night-modes", "connected"]
+    argv += [
+        "--forecast",
+        "off",
+        "--period",
+        "2016-06-28T12:00..2016-06-28T12:09",
+        "--workers",
+        "1",
+        "--quiet",
+        "--out",
+        str(out),
+    ]
+    assert main(argv) == 0
+    steps = pd.read_parquet(out / "steps.parquet")
+    summary = pd.read_csv(out / "summary.csv")
+    assert (
+        len(steps) == 18 and (steps.status == "ok").all()
+    )  # 9 one-minute steps (the end is exclusive) × 2 and (out / "report.html").is_file()
+    assert steps.max_vuf_pct.between(0.01, 5).all() and {"max_vuf_pct", "vuf_min"} <= set(summary.columns)
+    worst = steps[steps.strategy == "no-action"].max_vuf_pct.max()
+    assert summary.set_index("strategy").max_vuf_pct["no-action"] == pytest.approx(worst, rel=1e-5)  # CSV: 6 digits
+    net = load_case("eulv").network
+    with opendss_copy("eulv") as master:
+        dss.Text.Command(f'compile "{master}"')
+        mult = []
+        i = dss.Loads.First()
+        while i:
+            dss.LoadShape.Name(dss.Loads.Yearly())
+            mult.append(dss.LoadShape.PMult()[12 * 60 + 5])  # 12:05
+            i = dss.Loads.Next()
+    load_p = net.load_p_mw * np.array(mult)
+    row = steps[(steps.strategy == "no-action") & (steps.time.dt.strftime("%H:%M") == "12:05")].iloc[0]
+    from opfbench.study.task_scenarios import study_period
+
+    period, _ = study_period(("eulv",), ("off",), "2016-06-28T12:00..2016-06-28T12:09", "20:00-05:00", None)
+    pv_pu = period.profiles["pv"][row.time]  # the paper day's BSRN PV
+    flow = solve_phase_flow(
+        net, load_p[None], (load_p * net.load_q_mvar / net.load_p_mw)[None], (pv_pu * net.der_rating_mw)[None]
+    )
+    assert row.losses_kw == pytest.approx(flow.losses_kw[0], rel=1e-9)

@@ -6,8 +6,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-import opfbench.strategies.paper as paper
 import opfbench.strategies.grids as grids
+import opfbench.strategies.paper as paper
 from opfbench.bench.local import bench_local
 from opfbench.bench.paper_day import paper_day_scenario
 from opfbench.commands.table import format_table

@@ -37,14 +37,15 @@ from __future__ import annotations
 
 import os
 import threading
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import TYPE_CHECKING
 
 import numpy as np
+import pandas as pd
 
 from opfbench.errors import CaseFormatError, InputError, NetworkError
-from opfbench.io.case import Case
+from opfbench.io.case import Case, CaseSeries
 from opfbench.multiphase import GROUND, Branches, Element, Line, LoadModels, PhaseNetwork, Source, Transformer, Winding
 from opfbench.multiphase.branches import LOAD_MODELS
 from opfbench.network import DER
@@ -75,6 +76,16 @@ _lock = threading.Lock()
 
 
 @dataclass(frozen=True, eq=False)
+class LoadShape:
+    """An OpenDSS load shape: P and Q multipliers of the loads' nominal powers (Q: P's
+    where the shape gives none), one every `interval_h` hours."""
+
+    p: np.ndarray
+    q: np.ndarray
+    interval_h: float
+
+
+@dataclass(frozen=True, eq=False)
 class OpenDssCircuit:
     """What `read_opendss` returns: the network and the snapshot the file defines —
     per load P and Q (MW, MVAr), per DER P and Q (MW, MVAr, generated) — and notes."""
@@ -85,6 +96,8 @@ class OpenDssCircuit:
     der_p_mw: np.ndarray
     der_q_mvar: np.ndarray
     notes: tuple[str, ...]
+    load_shapes: tuple[str, ...] = ()
+    shapes: dict[str, LoadShape] = field(default_factory=dict)
 
 
 def _dss():
@@ -144,6 +157,7 @@ class _Reader:
         self.path = path
         self.name = name
         self.notes: list[str] = []
+        self.load_shape: list[str] = []
 
     def refuse(self, element: str, problem: str) -> None:
         raise CaseFormatError(f"{self.path}: {element}: {problem}")
@@ -192,7 +206,19 @@ class _Reader:
             band,
             band_name,
         )
-        return OpenDssCircuit(net, load_p, load_q, der_p, der_q, tuple(self.notes))
+        shapes = self._shapes()
+        return OpenDssCircuit(net, load_p, load_q, der_p, der_q, tuple(self.notes), tuple(self.load_shape), shapes)
+
+    def _shapes(self) -> dict[str, LoadShape]:
+        """The load shapes the loads follow (their yearly shape, else their daily one)."""
+        ls = self.dss.LoadShape
+        out = {}
+        for name in sorted(set(self.load_shape) - {""}):
+            ls.Name(name)
+            p = np.asarray(ls.PMult(), dtype=float)
+            q = np.asarray(ls.QMult(), dtype=float)
+            out[name] = LoadShape(p, q if q.shape == p.shape else p, float(ls.HrInterval()))
+        return out
 
     # ----- the compiled circuit ------------------------------------------------------
     def _check_classes(self) -> None:
@@ -396,6 +422,7 @@ class _Reader:
                 vlow.append(float(dss.Text.Result()))
                 cvr_p.append(loads.CVRwatts())
                 cvr_q.append(loads.CVRvars())
+                self.load_shape.append((loads.Yearly() or loads.Daily()).lower())
                 for br in branches:
                     owner.append(index)
                     a.append(br[0])
@@ -460,6 +487,43 @@ class _Reader:
         return ders, names, Branches(owner, a, b, base, share, len(ders)), p, np.array(q_out, dtype=float)
 
 
+SHIPPED_SERIES = {
+    "eulv": ("2016-06-28", "Europe/Berlin", "eulv's own 1-min load shapes (Daily_1min_100profiles) on the paper day")
+}
+"""The shipped feeders whose loads follow the file's own shapes in a study: the shapes'
+first point at local midnight of the date, in the zone (eulv: the paper day,
+`opfbench.data.PAPER_DAY` and `PAPER_DAY_TZ`), and the series' source."""
+
+
+def shape_series(circuit: OpenDssCircuit, start: str, tz: str, source: str) -> CaseSeries:
+    """Every load on its own shape (its nominal P and Q × the shape's multipliers) from
+    `start` in zone `tz`; the DER have no series of their own (a study runs them on the
+    period's PV and wind profiles). CaseFormatError for a load without a shape or shapes
+    of different lengths or steps."""
+    names = sorted(circuit.shapes)
+    if "" in circuit.load_shapes or not names:
+        raise CaseFormatError(f"{source}: every load needs a yearly or daily load shape")
+    shapes = [circuit.shapes[n] for n in names]
+    if len({(len(sh.p), sh.interval_h) for sh in shapes}) != 1:
+        raise CaseFormatError(f"{source}: the loads' shapes differ in length or step")
+    n, step = len(shapes[0].p), shapes[0].interval_h
+    index = pd.date_range(pd.Timestamp(start).tz_localize(tz), periods=n, freq=pd.Timedelta(hours=step))
+    col = np.array([names.index(name) for name in circuit.load_shapes], dtype=int)
+    return CaseSeries(
+        index,
+        np.column_stack([sh.p for sh in shapes]),
+        col,
+        circuit.load_p_mw,
+        np.column_stack([sh.q for sh in shapes]),
+        col,
+        circuit.load_q_mvar,
+        np.zeros((n, 1)),
+        np.zeros(0, dtype=int),
+        np.zeros(0),
+        source,
+    )
+
+
 NO_DER_NOTE = "the feeder has no DER (PVSystem or Generator elements): every strategy gives the no-action result"
 
 
@@ -482,7 +546,10 @@ def opendss_case(spec: CaseSpec, path: Path | None, name: str | None) -> Case:
             circuit = read_opendss(path, name)
         stored = (circuit.load_p_mw, circuit.load_q_mvar, circuit.der_p_mw, circuit.der_q_mvar)
         notes = circuit.notes if circuit.network.ders else circuit.notes + (NO_DER_NOTE,)
-        return Case(spec.text, circuit.network, stored, notes=notes)
+        series = None
+        if path is None and name in SHIPPED_SERIES:
+            series = shape_series(circuit, *SHIPPED_SERIES[name])
+        return Case(spec.text, circuit.network, stored, series, notes=notes)
 
     record = path
     if record is None:
