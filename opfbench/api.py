@@ -65,9 +65,8 @@ def snapshot(
     for ref in plugins:
         load(ref)
     config = configuration(strategy)
-    net = (load_case(case) if isinstance(case, str) else case).balanced(
-        "a snapshot (for now only `pf` and `cases` read three-phase feeders)"
-    )
+    net = (load_case(case) if isinstance(case, str) else case).network
+    config.spec.check_network(net)
     return config.run(Scenario.snapshot(net, load_scale, der_scale), k)
 
 

@@ -12,8 +12,10 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from opfbench.jsonio import json_safe
+from opfbench.multiphase import PhaseNetwork
 from opfbench.network import Network
-from opfbench.powerflow import PowerFlowResult, solve_pf_batch
+from opfbench.powerflow import PowerFlowResult
+from opfbench.powerflow.multiphase import PhaseFlowResult
 
 if TYPE_CHECKING:
     from opfbench.scenario import Scenario
@@ -40,6 +42,8 @@ STATUSES = (
     RULE_NON_FINITE,
 )
 
+
+MAX_VUF = "max_vuf_pct"  # a three-phase feeder's worst voltage unbalance factor |V₂|/|V₁| per snapshot, %
 
 # ----- where a formulation's setpoints come from (SolverRecord.fallback) --------------------
 FROM_SOLVER = "none"  # the model's own solution
@@ -133,7 +137,7 @@ class StrategyResult:
 
     strategy: str
     k: float
-    net: Network
+    net: Network | PhaseNetwork
     q_mvar: np.ndarray
     losses_kw: np.ndarray
     vm: np.ndarray
@@ -155,7 +159,7 @@ class StrategyResult:
         q_mvar: np.ndarray,
         wall_ms: float,
         power_flows: np.ndarray | int = 0,
-        pf: PowerFlowResult | None = None,
+        pf: PowerFlowResult | PhaseFlowResult | None = None,
         status: np.ndarray | None = None,
         p_mw: np.ndarray | None = None,
         **kw,
@@ -169,7 +173,7 @@ class StrategyResult:
         q = np.atleast_2d(np.asarray(q_mvar, dtype=float))
         flows = np.broadcast_to(np.asarray(power_flows, dtype=np.int64), (q.shape[0],)).copy()
         if pf is None:
-            pf = solve_pf_batch(scenario.net, scenario.injections(q, p_mw))
+            pf = scenario.flow(q, p_mw)
             flows += 1
         conv = np.asarray(pf.converged, dtype=bool).reshape(-1)
         st = np.full(q.shape[0], OK, dtype=object) if status is None else np.asarray(status, dtype=object).copy()
@@ -179,6 +183,9 @@ class StrategyResult:
         physical = scenario.qmax_mvar(p_mw)
         excursion = np.maximum(np.abs(q) - physical, 0.0).max(axis=1, initial=0.0)
         curtailed = None if p_mw is None else np.maximum(scenario.der_p_mw - p_mw, 0.0)
+        if isinstance(pf, PhaseFlowResult):  # what unbalance adds: the worst VUF of the snapshot, %
+            vuf = 100.0 * np.max(pf.vuf, axis=1, initial=0.0)
+            kw["extra"] = {MAX_VUF: np.where(conv, vuf, np.nan)} | kw.get("extra", {})
         return cls(
             strategy, float(k), scenario.net, q, losses, vm, st, flows, float(wall_ms), excursion, curtailed_mw=curtailed, **kw
         )
@@ -248,7 +255,7 @@ class StrategyResult:
             "status": str(self.status[i]),
             "losses_kw": self.losses_kw[i],
             "q_mvar": dict(zip(names, self.q_mvar[i], strict=True)),
-            "der_bus": {name: int(b) for name, b in zip(names, bus_ids, strict=True)},
+            "der_bus": {name: b if isinstance(b, str) else int(b) for name, b in zip(names, bus_ids, strict=True)},
             "vmin": self.vmin[i],
             "vmax": self.vmax[i],
             "power_flows": int(self.power_flows[i]),

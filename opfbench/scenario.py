@@ -14,14 +14,16 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from functools import cached_property
-from typing import TYPE_CHECKING, Callable
+from typing import TYPE_CHECKING, Generic, TypeVar
 
 import numpy as np
 
 from opfbench.capability import qmax
 from opfbench.errors import InputError
+from opfbench.multiphase import PhaseNetwork
 from opfbench.network import Network
-from opfbench.powerflow import bus_injections
+from opfbench.powerflow import PowerFlowResult, bus_injections, solve_pf_batch
+from opfbench.powerflow.multiphase import PhaseFlowResult, solve_phase_flow
 
 if TYPE_CHECKING:
     import pandas as pd
@@ -29,8 +31,12 @@ if TYPE_CHECKING:
     from opfbench.io.case import Case
 
 
+NetT = TypeVar("NetT", bound=Network | PhaseNetwork)
+"""A scenario's network: balanced (bus level) or three-phase (node level)."""
+
+
 @dataclass(frozen=True, eq=False)
-class Scenario:
+class Scenario(Generic[NetT]):
     """S snapshots on one network. Arrays: load_scale (S,) — or None when the per-load
     load_p_mw and load_q_mvar (S, n_load) MW/MVAr are given instead —, der_p_mw (S, n_der)
     MW, der_p_forecast_mw (S, n_der) MW or None. A single snapshot may give der_p_mw as
@@ -44,7 +50,7 @@ class Scenario:
     snapshots where the solar units have the S-limited "Q at night" capability (night mode
     "connected-q")."""
 
-    net: Network
+    net: NetT
     load_scale: np.ndarray | None
     der_p_mw: np.ndarray
     der_p_forecast_mw: np.ndarray | None = None
@@ -223,7 +229,7 @@ class Scenario:
 
     @classmethod
     def snapshot(
-        cls, net: Network, load_scale: float = 1.0, der_scale: float = 0.8, forecast_der_scale: float | None = None
+        cls, net: Network | PhaseNetwork, load_scale: float = 1.0, der_scale: float = 0.8, forecast_der_scale: float | None = None
     ) -> "Scenario":
         """One snapshot: every DER at `der_scale` × rating (and optionally a forecast)."""
         _check_net(net)
@@ -232,19 +238,19 @@ class Scenario:
                 raise InputError(f"{label} is a fraction of rating and must lie in [0, 1], got {value}")
         rating = net.der_rating_mw
         forecast = None if forecast_der_scale is None else np.array([forecast_der_scale * rating])
-        return cls(net, np.array([load_scale]), np.array([der_scale * rating]), forecast)
+        return Scenario(net, np.array([load_scale]), np.array([der_scale * rating]), forecast)
 
     @classmethod
     def from_series(
         cls,
-        net: Network,
+        net: Network | PhaseNetwork,
         load_p_mw: np.ndarray,
         load_q_mvar: np.ndarray,
         der_p_mw: np.ndarray,
         der_p_forecast_mw: np.ndarray | None = None,
     ) -> "Scenario":
         """Snapshots of every load's own P and Q (S, n_load) and every DER's P (S, n_der)."""
-        return cls(net, None, der_p_mw, der_p_forecast_mw, load_p_mw=load_p_mw, load_q_mvar=load_q_mvar)
+        return Scenario(net, None, der_p_mw, der_p_forecast_mw, load_p_mw=load_p_mw, load_q_mvar=load_q_mvar)
 
     @classmethod
     def of_case(cls, case: Case, times: pd.DatetimeIndex | None = None) -> "Scenario":
@@ -254,11 +260,11 @@ class Scenario:
             if case.stored is None:
                 raise InputError(f"{case.spec}: the case stores no per-element operating point")
             p, q, der_p, _ = case.stored
-            return cls.from_series(case.balanced("a scenario"), p[None, :], q[None, :], der_p[None, :])
+            return cls.from_series(case.network, p[None, :], q[None, :], der_p[None, :])
         if case.series is None:
             raise InputError(f"{case.spec}: the case has no time series of its own")
         load_p, load_q, der_p = case.series.rows(times)
-        return cls.from_series(case.balanced("a scenario"), load_p, load_q, der_p)
+        return cls.from_series(case.network, load_p, load_q, der_p)
 
     @property
     def n_snapshots(self) -> int:
@@ -267,7 +273,7 @@ class Scenario:
     @cached_property
     def _bus_load(self) -> np.ndarray:
         """(S, n_bus) complex MVA: the per-load P + jQ summed onto the buses."""
-        assert self.load_p_mw is not None and self.load_q_mvar is not None
+        assert self.load_p_mw is not None and self.load_q_mvar is not None and isinstance(self.net, Network)
         out = (self.net.load_incidence @ (self.load_p_mw + 1j * self.load_q_mvar).T).T
         out = np.ascontiguousarray(out)
         out.setflags(write=False)
@@ -279,38 +285,68 @@ class Scenario:
             return self._bus_load
         return self.load_scale[:, None] * (self.net.load_p_mw + 1j * self.net.load_q_mvar)[None, :]
 
+    @property
+    def three_phase(self) -> bool:
+        """True on a three-phase feeder (`PhaseNetwork`: node-level loads and DER)."""
+        return isinstance(self.net, PhaseNetwork)
+
+    def element_loads(self) -> tuple[np.ndarray, np.ndarray]:
+        """(load P (S, n_load) MW, load Q (S, n_load) MVAr) of every load element."""
+        if self.load_scale is None:
+            assert self.load_p_mw is not None and self.load_q_mvar is not None
+            return self.load_p_mw, self.load_q_mvar
+        return self.load_scale[:, None] * self.net.load_p_mw[None, :], self.load_scale[:, None] * self.net.load_q_mvar[None, :]
+
+    def flow(self, der_q_mvar: np.ndarray, der_p_mw: np.ndarray | None = None) -> PowerFlowResult | PhaseFlowResult:
+        """The batched AC power flow of every snapshot with the DER at reactive setpoints
+        (S, n_der) MVAr and at P^C (or `der_p_mw`): bus-level on a balanced network, node
+        level on a three-phase feeder."""
+        if isinstance(self.net, PhaseNetwork):
+            p = self.der_p_mw if der_p_mw is None else der_p_mw
+            return solve_phase_flow(self.net, *self.element_loads(), p, der_q_mvar)
+        return solve_pf_batch(self.net, self.injections(der_q_mvar, der_p_mw))
+
     def injections(self, der_q_mvar: np.ndarray, der_p_mw: np.ndarray | None = None) -> np.ndarray:
         """Bus injections (S, n_bus) complex MW for DER reactive setpoints (S, n_der) MVAr,
         with the DER at their available power P^C, or at `der_p_mw` (S, n_der) MW where a
         rule curtails."""
         p = self.der_p_mw if der_p_mw is None else der_p_mw
+        net = self.net
+        if not isinstance(net, Network):
+            raise InputError(f"{net.name}: bus injections are a balanced network's (a three-phase feeder: `flow`)")
         if self.load_scale is None:
-            return bus_injections(self.net, p, der_q_mvar, bus_load_mva=self._bus_load)
-        return bus_injections(self.net, p, der_q_mvar, self.load_scale)
+            return bus_injections(net, p, der_q_mvar, bus_load_mva=self._bus_load)
+        return bus_injections(net, p, der_q_mvar, self.load_scale)
 
     def load_q_at_der_mvar(self) -> np.ndarray:
         """Each DER's share of the reactive load at its own bus (S, n_der) MVAr — what LLMA
         measures: the bus's load × `Network.der_share` (S̄ / Σ S̄ of the DER at that bus,
         1 for a DER alone), so the units at one bus compensate its load once."""
-        return self._at_der(self.net.load_q_mvar, lambda load: load.imag)
+        return self._at_der(reactive=True)
 
     def load_p_at_der_mw(self) -> np.ndarray:
         """Each DER's share of the active load at its own bus (S, n_der) MW (shared as
         `load_q_at_der_mvar`)."""
-        return self._at_der(self.net.load_p_mw, lambda load: load.real)
+        return self._at_der(reactive=False)
 
-    def _at_der(self, nominal: np.ndarray, part: Callable[[np.ndarray], np.ndarray]) -> np.ndarray:
-        """(S, n_der): the bus load's `part` (per-load form) or load_scale × `nominal`, at
-        each DER's bus, × its share of the bus."""
+    def _at_der(self, reactive: bool) -> np.ndarray:
+        """(S, n_der): the bus load's Q (`reactive`) or P (per-load form, or load_scale × the
+        nominal) at each DER's bus, × its share of the bus; on a three-phase feeder the load
+        on the DER's phases (`PhaseNetwork.der_load_weights`)."""
         net = self.net
+        if isinstance(net, PhaseNetwork):
+            loads = self.element_loads()[1 if reactive else 0]
+            return np.ascontiguousarray((net.der_load_weights @ loads.T).T)
         if self.load_scale is None:
-            return np.ascontiguousarray(part(self._bus_load)[:, net.der_bus] * net.der_share)
+            part = self._bus_load.imag if reactive else self._bus_load.real
+            return np.ascontiguousarray(part[:, net.der_bus] * net.der_share)
+        nominal = net.load_q_mvar if reactive else net.load_p_mw
         return self.load_scale[:, None] * nominal[net.der_bus][None, :] * net.der_share
 
     @classmethod
     def from_profiles(
         cls,
-        net: Network,
+        net: Network | PhaseNetwork,
         load_pu: np.ndarray,
         pv_pu: np.ndarray,
         wind_pu: np.ndarray,
@@ -345,7 +381,7 @@ class Scenario:
                 wind_pu if forecast_wind_pu is None else forecast_wind_pu,
                 "forecast_",
             )
-        return cls(net, load, der_mw(pv_pu, wind_pu), forecast)
+        return Scenario(net, load, der_mw(pv_pu, wind_pu), forecast)
 
     def take(self, rows: np.ndarray | slice) -> "Scenario":
         """The sub-scenario of some snapshots."""
@@ -392,8 +428,10 @@ class Scenario:
 
 
 def _check_net(net: object) -> None:
-    if not isinstance(net, Network):
-        raise InputError(f"scenario: net must be a Network (e.g. opfbench.io.load_network('paper33')), got {type(net).__name__}")
+    if not isinstance(net, (Network, PhaseNetwork)):
+        raise InputError(
+            f"scenario: net must be a Network or a PhaseNetwork (e.g. opfbench.io.load_network('paper33')), got {type(net).__name__}"
+        )
 
 
 def _real_array(label: str, value: object) -> np.ndarray:

@@ -19,7 +19,7 @@ from typing import TYPE_CHECKING, Any, Literal
 
 import numpy as np
 
-from opfbench.result import STATUSES, Reference
+from opfbench.result import MAX_VUF, STATUSES, Reference
 
 if TYPE_CHECKING:
     from opfbench.result import StrategyResult
@@ -169,6 +169,14 @@ STEPS = Table(
         ),
         Column("vmin_pu", "number", "p.u.", "lowest bus |V| (NaN where the flow did not converge)", lambda c: c.res.vmin),
         Column("vmax_pu", "number", "p.u.", "highest bus |V| (NaN likewise)", lambda c: c.res.vmax),
+        Column(
+            "max_vuf_pct",
+            "number",
+            "%",
+            "worst voltage unbalance factor |V₂|/|V₁| at a three-phase bus (three-phase feeders; NaN on balanced cases "
+            "and where the flow did not converge)",
+            lambda c: np.asarray(c.res.extra.get(MAX_VUF, _nan(c)), dtype=float),
+        ),
         Column(
             "voltage_violation_pu",
             "number",
@@ -346,6 +354,8 @@ TASK_SUMMARY = Table(
         Column("max_violation_pu", "number", "p.u.", "the worst excursion beyond the limits"),
         Column("vmin_pu", "number", "p.u.", "lowest |V|"),
         Column("vmax_pu", "number", "p.u.", "highest |V|"),
+        Column("max_vuf_pct", "number", "%", "worst voltage unbalance factor"),
+        Column("vuf_h", "number", "h", "length of the steps whose worst VUF exceeds EN 50160's 2 %"),
         Column("max_excursion_mvar", "number", "MVAr", "largest capability excursion"),
         Column("excursion_steps", "integer", NO_UNIT, "steps with an excursion beyond 1e-9 MVAr"),
         Column("lower_bound_kwh", "number", "kWh", "sum of the bound × step length"),
@@ -423,6 +433,8 @@ SUMMARY = Table(
         Column("max_violation_pu", "number", "p.u.", "the worst excursion beyond them"),
         Column("vmin_pu", "number", "p.u.", "lowest |V| over the converged steps"),
         Column("vmax_pu", "number", "p.u.", "highest |V| over the converged steps"),
+        Column("max_vuf_pct", "number", "%", "worst voltage unbalance factor |V₂|/|V₁| (three-phase feeders)"),
+        Column("vuf_min", "number", "min", "minutes of steps whose worst VUF exceeds EN 50160's 2 %"),
         Column("max_excursion_mvar", "number", "MVAr", "largest capability excursion"),
         Column("excursion_steps", "integer", NO_UNIT, "steps with an excursion"),
         Column(

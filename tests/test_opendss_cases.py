@@ -86,7 +86,8 @@ def test_bad_opendss_files_exit_2_naming_them(tmp_path, capsys, body, expected):
     [
         (["pf", "opendss:/nonexistent/Master.dss"], "not found"),
         (["pf", "opendss:"], "opendss: needs the path"),
-        (["pf", "ieee13?der=675:inverter:0.1"], "three-phase"),
+        (["pf", "ieee13?line-z=1.2"], "three-phase"),
+        (["pf", "ieee13?der=675.4:inverter:0.1"], "phases 1, 2, 3"),
         (["fault", "ieee13", "--fault-bus", "671"], "the fault study (a balanced three-phase RMS model) needs a balanced case"),
     ],
 )

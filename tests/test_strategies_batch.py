@@ -6,8 +6,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+import opfbench.strategies.grids as grids
 import opfbench.strategies.paper as paper
-import opfbench.strategies.rule_engine as engine
 from opfbench.bench.local import bench_local
 from opfbench.bench.paper_day import paper_day_scenario
 from opfbench.commands.table import format_table
@@ -53,7 +53,7 @@ def test_lfma_uses_one_batched_flow_per_step_and_shows_intermediate_divergence(m
             return PowerFlowResult(pf.net, pf.v, converged, pf.iterations)
         return pf
 
-    monkeypatch.setattr(engine, "solve_pf_batch", flaky)  # every answer of the grid
+    monkeypatch.setattr(grids, "solve_pf_batch", flaky)  # every answer of the grid
     trace = paper.lfma_trace(scenario, 0.0)
     assert calls == [3, 3, 3, 3]
     assert trace.diverged_step.tolist() == [0, 3, 0]

@@ -95,9 +95,13 @@ def _read(spec: CaseSpec) -> Case:
     der_pf = DEFAULT_DER_PF if spec.der_pf is None else spec.der_pf
     case = source_of(spec.source).read(spec, der_pf)
     if isinstance(case.network, PhaseNetwork):
-        if spec.der is not None or spec.line_z is not None:
-            raise InputError(f"case {spec.text!r}: der= and line-z= apply to balanced cases; this is a three-phase feeder")
-        return case
+        from opfbench.io.opendss import with_ders
+
+        if spec.line_z is not None:
+            raise InputError(f"case {spec.text!r}: line-z= applies to balanced cases; this is a three-phase feeder")
+        if spec.der == "gens":
+            raise InputError(f"case {spec.text!r}: der=gens reads a MATPOWER file's generators; this is a three-phase feeder")
+        return with_ders(case, spec, der_pf)
     if spec.der is not None and spec.der != "gens":
         case = _with_listed_ders(case, spec, der_pf)
     if spec.line_z is not None:

@@ -37,14 +37,15 @@ from __future__ import annotations
 
 import os
 import threading
-from dataclasses import dataclass
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import TYPE_CHECKING
 
 import numpy as np
+import pandas as pd
 
-from opfbench.errors import CaseFormatError, NetworkError
-from opfbench.io.case import Case
+from opfbench.errors import CaseFormatError, InputError, NetworkError
+from opfbench.io.case import Case, CaseSeries
 from opfbench.multiphase import GROUND, Branches, Element, Line, LoadModels, PhaseNetwork, Source, Transformer, Winding
 from opfbench.multiphase.branches import LOAD_MODELS
 from opfbench.network import DER
@@ -75,6 +76,16 @@ _lock = threading.Lock()
 
 
 @dataclass(frozen=True, eq=False)
+class LoadShape:
+    """An OpenDSS load shape: P and Q multipliers of the loads' nominal powers (Q: P's
+    where the shape gives none), one every `interval_h` hours."""
+
+    p: np.ndarray
+    q: np.ndarray
+    interval_h: float
+
+
+@dataclass(frozen=True, eq=False)
 class OpenDssCircuit:
     """What `read_opendss` returns: the network and the snapshot the file defines —
     per load P and Q (MW, MVAr), per DER P and Q (MW, MVAr, generated) — and notes."""
@@ -85,6 +96,8 @@ class OpenDssCircuit:
     der_p_mw: np.ndarray
     der_q_mvar: np.ndarray
     notes: tuple[str, ...]
+    load_shapes: tuple[str, ...] = ()
+    shapes: dict[str, LoadShape] = field(default_factory=dict)
 
 
 def _dss():
@@ -144,6 +157,7 @@ class _Reader:
         self.path = path
         self.name = name
         self.notes: list[str] = []
+        self.load_shape: list[str] = []
 
     def refuse(self, element: str, problem: str) -> None:
         raise CaseFormatError(f"{self.path}: {element}: {problem}")
@@ -192,7 +206,19 @@ class _Reader:
             band,
             band_name,
         )
-        return OpenDssCircuit(net, load_p, load_q, der_p, der_q, tuple(self.notes))
+        shapes = self._shapes()
+        return OpenDssCircuit(net, load_p, load_q, der_p, der_q, tuple(self.notes), tuple(self.load_shape), shapes)
+
+    def _shapes(self) -> dict[str, LoadShape]:
+        """The load shapes the loads follow (their yearly shape, else their daily one)."""
+        ls = self.dss.LoadShape
+        out = {}
+        for name in sorted(set(self.load_shape) - {""}):
+            ls.Name(name)
+            p = np.asarray(ls.PMult(), dtype=float)
+            q = np.asarray(ls.QMult(), dtype=float)
+            out[name] = LoadShape(p, q if q.shape == p.shape else p, float(ls.HrInterval()))
+        return out
 
     # ----- the compiled circuit ------------------------------------------------------
     def _check_classes(self) -> None:
@@ -396,6 +422,7 @@ class _Reader:
                 vlow.append(float(dss.Text.Result()))
                 cvr_p.append(loads.CVRwatts())
                 cvr_q.append(loads.CVRvars())
+                self.load_shape.append((loads.Yearly() or loads.Daily()).lower())
                 for br in branches:
                     owner.append(index)
                     a.append(br[0])
@@ -460,6 +487,43 @@ class _Reader:
         return ders, names, Branches(owner, a, b, base, share, len(ders)), p, np.array(q_out, dtype=float)
 
 
+SHIPPED_SERIES = {
+    "eulv": ("2016-06-28", "Europe/Berlin", "eulv's own 1-min load shapes (Daily_1min_100profiles) on the paper day")
+}
+"""The shipped feeders whose loads follow the file's own shapes in a study: the shapes'
+first point at local midnight of the date, in the zone (eulv: the paper day,
+`opfbench.data.PAPER_DAY` and `PAPER_DAY_TZ`), and the series' source."""
+
+
+def shape_series(circuit: OpenDssCircuit, start: str, tz: str, source: str) -> CaseSeries:
+    """Every load on its own shape (its nominal P and Q × the shape's multipliers) from
+    `start` in zone `tz`; the DER have no series of their own (a study runs them on the
+    period's PV and wind profiles). CaseFormatError for a load without a shape or shapes
+    of different lengths or steps."""
+    names = sorted(circuit.shapes)
+    if "" in circuit.load_shapes or not names:
+        raise CaseFormatError(f"{source}: every load needs a yearly or daily load shape")
+    shapes = [circuit.shapes[n] for n in names]
+    if len({(len(sh.p), sh.interval_h) for sh in shapes}) != 1:
+        raise CaseFormatError(f"{source}: the loads' shapes differ in length or step")
+    n, step = len(shapes[0].p), shapes[0].interval_h
+    index = pd.date_range(pd.Timestamp(start).tz_localize(tz), periods=n, freq=pd.Timedelta(hours=step))
+    col = np.array([names.index(name) for name in circuit.load_shapes], dtype=int)
+    return CaseSeries(
+        index,
+        np.column_stack([sh.p for sh in shapes]),
+        col,
+        circuit.load_p_mw,
+        np.column_stack([sh.q for sh in shapes]),
+        col,
+        circuit.load_q_mvar,
+        np.zeros((n, 1)),
+        np.zeros(0, dtype=int),
+        np.zeros(0),
+        source,
+    )
+
+
 NO_DER_NOTE = "the feeder has no DER (PVSystem or Generator elements): every strategy gives the no-action result"
 
 
@@ -482,10 +546,121 @@ def opendss_case(spec: CaseSpec, path: Path | None, name: str | None) -> Case:
             circuit = read_opendss(path, name)
         stored = (circuit.load_p_mw, circuit.load_q_mvar, circuit.der_p_mw, circuit.der_q_mvar)
         notes = circuit.notes if circuit.network.ders else circuit.notes + (NO_DER_NOTE,)
-        return Case(spec.text, circuit.network, stored, notes=notes)
+        series = None
+        if path is None and name in SHIPPED_SERIES:
+            series = shape_series(circuit, *SHIPPED_SERIES[name])
+        return Case(spec.text, circuit.network, stored, series, notes=notes)
 
     record = path
     if record is None:
         assert name is not None
         record = opendss_master(name)
     return cached_case(spec.text, build, file_stamp(record, folder=True))
+
+
+@dataclass(frozen=True)
+class Placement:
+    """A DER placed on a three-phase feeder: the bus (OpenDSS name), its phases (() = every
+    phase of the bus), rated P̄ (MW), S̄ (MVA), kind and primary energy."""
+
+    bus: str
+    phases: tuple[int, ...]
+    rating_mw: float
+    s_mva: float
+    kind: str = "inverter"
+    energy: str = "solar"
+
+
+def place_ders(net: PhaseNetwork, placements: tuple[Placement, ...], what: str) -> PhaseNetwork:
+    """`net` with the DER `placements` (a feeder without DER of its own): each a wye unit
+    from its phases to the bus's neutral (its lowest neutral node; ground where the bus has
+    none), single-phase on one phase, its P and Q split equally over several; named
+    `BUS.PHASES` (e.g. `675.1.2.3`; `-2`, `-3`, … for further units on the same phases). InputError naming `what` for a bus or phase that does
+    not exist."""
+    if net.ders:
+        raise InputError(f"{what}: the feeder already has {len(net.ders)} DER of its own; der= places DER on a feeder without")
+    bus_index = {b: i for i, b in enumerate(net.bus_names)}
+    nodes_of: dict[int, dict[int, int]] = {}
+    for i, (b, p) in enumerate(zip(net.node_bus.tolist(), net.node_phase.tolist(), strict=True)):
+        nodes_of.setdefault(b, {})[p] = i
+    ders: list[DER] = []
+    names: list[str] = []
+    owner, a, b_end, base, share = [], [], [], [], []
+    for place in placements:
+        bus = bus_index.get(place.bus)
+        if bus is None:
+            raise InputError(f"{what}: DER at bus {place.bus!r}: the feeder has no such bus")
+        nodes = nodes_of.get(bus, {})
+        present = tuple(p for p in (1, 2, 3) if p in nodes)
+        phases = place.phases or present
+        missing = [p for p in phases if p not in nodes]
+        if missing or not phases:
+            raise InputError(
+                f"{what}: DER at bus {place.bus!r} phase {missing[0] if missing else '?'}: the bus has phases "
+                f"{'.'.join(map(str, present)) or 'none'}"
+            )
+        neutral = min((p for p in nodes if p > 3), default=None)
+        index = len(ders)
+        name = stem = ".".join([place.bus, *map(str, phases)])
+        for n in range(2, len(placements) + 2):
+            if name not in names:
+                break
+            name = f"{stem}-{n}"  # a further unit on the same bus and phases
+        ders.append(DER(bus, place.kind, place.rating_mw, place.s_mva, place.energy, name))  # type: ignore[arg-type]
+        names.append(name)
+        for p in phases:
+            owner.append(index)
+            a.append(nodes[p])
+            b_end.append(GROUND if neutral is None else nodes[neutral])
+            base.append(net.bus_kv_ln[bus] * 1e3)
+            share.append(1.0 / len(phases))
+    branches = Branches(np.array(owner), np.array(a), np.array(b_end), np.array(base), np.array(share), len(ders))
+    return replace(net, ders=tuple(ders), der_names=tuple(names), der_branches=branches)
+
+
+EULV_PV_MW = 0.004
+EULV_PV_PF = 0.90
+
+
+def eulv_placement(net: PhaseNetwork) -> tuple[Placement, ...]:
+    """The shipped `eulv` feeder's PV: a single-phase unit at every second house in the
+    file's load order (LOAD1, LOAD3, …) on the house's own phase, P̄ = 4 kW, S̄ = P̄/0.90."""
+    lb = net.load_branches
+    out = []
+    for index in range(0, net.n_load, 2):
+        node = int(lb.a[np.flatnonzero(lb.owner == index)[0]])
+        bus = net.bus_names[net.node_bus[node]]
+        out.append(Placement(bus, (int(net.node_phase[node]),), EULV_PV_MW, EULV_PV_MW / EULV_PV_PF))
+    return tuple(out)
+
+
+SHIPPED_PLACEMENTS = {"eulv": eulv_placement}
+"""The placement rule of each shipped feeder that has one (applied when no der= is given)."""
+
+
+def with_ders(case: Case, spec: CaseSpec, der_pf: float) -> Case:
+    """A three-phase `case` with the DER of the spec's `der=` list (DerEntry with phases;
+    generic inverters S̄ = P̄/`der_pf`, PV and DFIG S̄ = P̄), or — without one — its shipped
+    placement rule (`SHIPPED_PLACEMENTS`); the stored point has the placed DER at P = Q = 0."""
+    from opfbench.io.spec import parse_der_list
+
+    net = case.network
+    assert isinstance(net, PhaseNetwork)
+    if spec.der is not None:
+        placements = tuple(
+            Placement(
+                str(e.bus), e.phases, e.rating_mw, e.rating_mw / der_pf if e.kind == "inverter" else e.rating_mw, e.kind, e.energy
+            )
+            for e in parse_der_list(spec.der, spec.text, phased=True)
+        )
+    elif spec.source in SHIPPED_PLACEMENTS and not net.ders:
+        placements = SHIPPED_PLACEMENTS[spec.source](net)
+    else:
+        return case
+    placed = place_ders(net, placements, f"case {spec.text!r}")
+    stored = case.stored
+    if stored is not None:
+        zeros = np.zeros(len(placed.ders))
+        stored = (stored[0], stored[1], zeros, zeros)
+    note = f"{len(placed.ders)} DER placed ({'der=' if spec.der is not None else 'the shipped placement rule'})"
+    return replace(case, network=placed, stored=stored, notes=tuple(n for n in case.notes if n != NO_DER_NOTE) + (note,))

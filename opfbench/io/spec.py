@@ -57,6 +57,13 @@ class CaseSpec:
         return CaseSpec(self.source, self.der, self.der_pf)
 
     @property
+    def three_phase(self) -> bool:
+        """The spec names a three-phase feeder (an `opendss:` file or a shipped OpenDSS feeder)."""
+        from opfbench.cases.opendss_cases import OPENDSS_NAMES
+
+        return self.kind == "opendss" or self.source in OPENDSS_NAMES
+
+    @property
     def kind(self) -> str:
         """The kind of its source (`sources.SOURCES`: "shipped", "matpower", …)."""
         return source_of(self.source).kind
@@ -95,7 +102,7 @@ def parse_spec(text: str) -> CaseSpec:
             raise InputError(f"case {text!r}: unknown option {key!r} (der, der-pf, line-z)")
     spec = CaseSpec(source, der, der_pf, line_z)
     if der is not None and der != "gens":
-        parse_der_list(der, text)
+        parse_der_list(der, text, phased=spec.three_phase)
     if spec.kind == "opendss" and not spec.source.removeprefix("opendss:").strip():
         raise InputError(f"case {text!r}: opendss: needs the path of an OpenDSS master file, e.g. opendss:my/Master.dss")
     if der == "gens" and spec.kind != "matpower":
@@ -116,16 +123,21 @@ def _factor(text: str, value: str) -> float:
 
 @dataclass(frozen=True)
 class DerEntry:
-    """One `der=` item: external bus number, kind, rated P̄ (MW), primary energy."""
+    """One `der=` item: external bus number (a three-phase feeder's: the OpenDSS bus name,
+    lower case), kind, rated P̄ (MW), primary energy, and on a three-phase feeder the
+    phases it connects to (`BUS.1.2`; () = every phase of the bus)."""
 
-    bus: int
+    bus: int | str
     kind: str
     rating_mw: float
     energy: str
+    phases: tuple[int, ...] = ()
 
 
-def parse_der_list(value: str, spec: str) -> tuple[DerEntry, ...]:
-    """`BUS:KIND:MW[:ENERGY],…` → entries; InputError naming the item otherwise."""
+def parse_der_list(value: str, spec: str, phased: bool = False) -> tuple[DerEntry, ...]:
+    """`BUS:KIND:MW[:ENERGY],…` → entries; on a three-phase feeder (`phased`) BUS is an
+    OpenDSS bus name with optional phases, `BUS[.PHASE…]` (e.g. `675.1`, `611.3`,
+    `sourcebus`); InputError naming the item otherwise."""
     kinds = {k.lower(): k for k in DER_KINDS}
     out = []
     for item in value.split(","):
@@ -133,11 +145,20 @@ def parse_der_list(value: str, spec: str) -> tuple[DerEntry, ...]:
         if len(parts) not in (3, 4):
             raise InputError(f"case {spec!r}: DER {item!r} must be BUS:KIND:MW[:ENERGY], e.g. 10:PV:0.5")
         bus_text, kind_text, mw_text = parts[:3]
+        bus: int | str
+        phases: tuple[int, ...] = ()
         try:
-            bus = int(bus_text)
             mw = float(mw_text)
+            if phased:
+                bus, *phase_texts = bus_text.strip().lower().split(".")
+                phases = tuple(int(p) for p in phase_texts)
+                if not bus or any(p not in (1, 2, 3) for p in phases) or len(set(phases)) != len(phases):
+                    raise ValueError
+            else:
+                bus = int(bus_text)
         except ValueError:
-            raise InputError(f"case {spec!r}: DER {item!r}: BUS must be a bus number and MW a number") from None
+            what = "an OpenDSS bus name BUS[.PHASE…] (phases 1, 2, 3, each once)" if phased else "a bus number"
+            raise InputError(f"case {spec!r}: DER {item!r}: BUS must be {what} and MW a number") from None
         kind = kinds.get(kind_text.lower())
         if kind is None:
             raise InputError(f"case {spec!r}: DER {item!r}: KIND must be one of {', '.join(DER_KINDS)}")
@@ -147,5 +168,5 @@ def parse_der_list(value: str, spec: str) -> tuple[DerEntry, ...]:
         energy = parts[3].lower() if len(parts) == 4 else default
         if energy not in DER_ENERGIES:
             raise InputError(f"case {spec!r}: DER {item!r}: ENERGY must be one of {', '.join(DER_ENERGIES)}")
-        out.append(DerEntry(bus, kind, mw, energy))
+        out.append(DerEntry(bus, kind, mw, energy, phases))
     return tuple(out)

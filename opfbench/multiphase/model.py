@@ -274,6 +274,93 @@ class PhaseNetwork:
     def der_bus(self) -> np.ndarray:
         return np.array([d.bus for d in self.ders], dtype=int)
 
+    # ----- DER as every rule and limit reads them (the names `Network` gives them) -------
+    @property
+    def bus_ids(self) -> np.ndarray:
+        """(n_bus,) the buses' OpenDSS names (what a result names a DER's bus by)."""
+        return np.array(self.bus_names, dtype=object)
+
+    @property
+    def der_rating_mw(self) -> np.ndarray:
+        return np.array([d.rating_mw for d in self.ders], dtype=float)
+
+    @property
+    def der_s_mva(self) -> np.ndarray:
+        """Nameplate apparent power S̄ of each DER (MVA)."""
+        return np.array([d.s_rated_mva for d in self.ders], dtype=float)
+
+    @property
+    def der_kinds(self) -> tuple:
+        return tuple(d.kind for d in self.ders)
+
+    @property
+    def der_solar(self) -> np.ndarray:
+        """Bool per DER: a solar unit (what the night modes switch off or give "Q at night")."""
+        return np.array([d.primary_energy == "solar" for d in self.ders], dtype=bool)
+
+    @cached_property
+    def der_phase_nodes(self) -> tuple[frozenset[int], ...]:
+        """Each DER's phase nodes (the nodes its branches start from: one for a
+        single-phase unit, three for a three-phase one)."""
+        nodes: list[set[int]] = [set() for _ in self.ders]
+        for owner, a in zip(self.der_branches.owner.tolist(), self.der_branches.a.tolist(), strict=True):
+            nodes[owner].add(a)
+        return tuple(frozenset(n) for n in nodes)
+
+    @cached_property
+    def der_share(self) -> np.ndarray:
+        """(n_der,) each DER's share of what it measures on its phases (the flows on its
+        phases' conductors): S̄ / Σ S̄ of the DER on the same phase nodes — 1 for a DER
+        alone there (`Network.der_share`, per phase)."""
+        s = self.der_s_mva
+        groups: dict[frozenset[int], float] = {}
+        for key, rated in zip(self.der_phase_nodes, s.tolist(), strict=True):
+            groups[key] = groups.get(key, 0.0) + rated
+        return _frozen(np.array([rated / groups[key] for key, rated in zip(self.der_phase_nodes, s.tolist(), strict=True)]))
+
+    @cached_property
+    def der_load_weights(self) -> sp.csr_matrix:
+        """(n_der, n_load): the load each DER measures (LLMA's own-bus load) as weights of
+        the load elements' powers — the load on the DER's phases: each load branch whose
+        phase node is one of a DER's phase nodes, shared among the DER on that node in
+        proportion to their S̄ per phase (S̄ / phases). Several DER on one phase together
+        compensate its load once; a three-phase unit takes the load of all three."""
+        db, lb = self.der_branches, self.load_branches
+        per_branch = self.der_s_mva[db.owner] * db.share  # S̄ per phase of each DER branch
+        on_node: dict[int, list[tuple[int, float]]] = {}
+        for owner, a, rated in zip(db.owner.tolist(), db.a.tolist(), per_branch.tolist(), strict=True):
+            on_node.setdefault(a, []).append((owner, rated))
+        rows, cols, vals = [], [], []
+        for owner, a, share in zip(lb.owner.tolist(), lb.a.tolist(), lb.share.tolist(), strict=True):
+            units = on_node.get(a, ())
+            total = sum(r for _, r in units)
+            for der, rated in units:
+                rows.append(der)
+                cols.append(owner)
+                vals.append(share * rated / total)
+        w = sp.csr_matrix((vals, (rows, cols)), shape=(len(self.ders), self.n_load))
+        w.sum_duplicates()
+        return w
+
+    @cached_property
+    def der_measure(self) -> sp.csr_matrix:
+        """(n_der, n_der_branch): each DER's measured voltage as the average of its
+        branches' voltages in p.u. of their bases (a single-phase unit: its own; a
+        three-phase unit: the average of its phases, OpenDSS InvControl's default AVG)."""
+        db = self.der_branches
+        count = np.bincount(db.owner, minlength=len(self.ders)).astype(float)
+        return sp.csr_matrix((1.0 / count[db.owner], (db.owner, np.arange(db.n))), shape=(len(self.ders), db.n))
+
+    @property
+    def vmin(self) -> np.ndarray:
+        """(n_monitored,) the band's lower limit at every monitored voltage, p.u."""
+        return np.full(len(self.monitored[0]), self.band[0])
+
+    @property
+    def vmax(self) -> np.ndarray:
+        """(n_monitored,) the band's upper limit at every monitored voltage, p.u."""
+        return np.full(len(self.monitored[0]), self.band[1])
+
     # ----- admittances ---------------------------------------------------------------
     @cached_property
     def y_elements(self) -> sp.csc_matrix:

@@ -8,8 +8,9 @@ into the grid). Results carry complex bus voltages (p.u.), branch flows at both 
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from functools import cached_property, lru_cache
+from typing import Self
 
 import numpy as np
 
@@ -46,6 +47,11 @@ class PowerFlowResult:
     @property
     def vm(self) -> np.ndarray:
         return np.abs(self.v)
+
+    def with_converged(self, converged: np.ndarray) -> Self:
+        """The same voltages with the verdict `converged` (S,) (e.g. a strategy's own: a
+        snapshot one of whose earlier flows diverged)."""
+        return replace(self, converged=np.asarray(converged, dtype=bool))
 
     @cached_property
     def _flows(self) -> tuple[np.ndarray, np.ndarray]:

@@ -28,9 +28,9 @@ converged (its voltages are no operating point and carry no figure).
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from functools import cached_property, lru_cache
-from typing import Any
+from typing import Any, Self
 
 import numpy as np
 import scipy.sparse as sp
@@ -73,6 +73,11 @@ class PhaseFlowResult:
     def n_snapshots(self) -> int:
         return self.v.shape[0]
 
+    def with_converged(self, converged: np.ndarray) -> Self:
+        """The same voltages with the verdict `converged` (S,) (e.g. a strategy's own: a
+        snapshot one of whose earlier flows diverged)."""
+        return replace(self, converged=np.asarray(converged, dtype=bool))
+
     @cached_property
     def node_vm_pu(self) -> np.ndarray:
         """(S, n_node) |V| in p.u. of each node's phase-to-neutral base (OpenDSS's node p.u.)."""
@@ -84,6 +89,16 @@ class PhaseFlowResult:
         a, b, base, _ = self.net.monitored
         vx = np.concatenate([self.v, np.zeros((self.n_snapshots, 1), dtype=complex)], axis=1)
         return np.abs(vx[:, a] - vx[:, b]) / base
+
+    @cached_property
+    def der_vm(self) -> np.ndarray:
+        """(S, n_der) the voltage each DER measures, p.u.: its branches' voltages (phase to
+        neutral, or phase to phase for a delta unit) in p.u. of their bases, averaged over
+        its phases (`PhaseNetwork.der_measure`)."""
+        db = self.net.der_branches
+        vx = np.concatenate([self.v, np.zeros((self.n_snapshots, 1), dtype=complex)], axis=1)
+        u = np.abs(vx[:, db.a] - vx[:, db.b]) / db.vbase_v
+        return np.asarray((self.net.der_measure @ u.T).T)
 
     @cached_property
     def source_kva(self) -> np.ndarray:

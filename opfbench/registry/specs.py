@@ -27,6 +27,7 @@ from opfbench.registry.options import Option, OptionValue
 from opfbench.state import PROCESS
 
 if TYPE_CHECKING:
+    from opfbench.multiphase import PhaseNetwork
     from opfbench.network import Network
     from opfbench.result import StrategyResult
     from opfbench.scenario import Scenario
@@ -140,8 +141,21 @@ class StrategySpec:
         if self.check is not None:
             self.check(options)
 
-    def check_network(self, net: Network) -> None:
-        """InputError / NetworkError for a network this strategy cannot run on."""
+    def check_network(self, net: Network | PhaseNetwork) -> None:
+        """InputError / NetworkError for a network this strategy cannot run on (on a
+        three-phase feeder: only the local rules, and a rule that measures needs DER)."""
+        from opfbench.multiphase import PhaseNetwork
+
+        if isinstance(net, PhaseNetwork):
+            if self.kind != "local":
+                raise InputError(
+                    f"strategy {self.name!r} is a formulation; on a three-phase feeder ({net.name}) only the local rules run"
+                )
+            if not net.ders and self.reads:
+                raise InputError(
+                    f"strategy {self.name!r}: {net.name} has no DER; place them with ?der=BUS[.PHASE…]:KIND:MW (or --der)"
+                )
+            return
         kind = network_class(net)
         if kind not in self.supports:
             raise InputError(f"strategy {self.name!r} runs on {', '.join(self.supports)} networks; {net.name} is {kind}")

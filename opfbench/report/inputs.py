@@ -486,6 +486,8 @@ def _frontier(path: Path, command: str) -> pd.DataFrame | None:
     missing = [c for c in FRONTIER_KINDS if c not in frame.columns]
     if missing:
         raise _damaged(path, f"no column {', '.join(missing)}", command)
+    if frame.empty:  # no optimum ran (a three-phase feeder's run)
+        return None
     for name, kind in FRONTIER_KINDS.items():
         if kind == NUMBER and (not pd.api.types.is_numeric_dtype(frame[name]) or pd.api.types.is_bool_dtype(frame[name])):
             raise _damaged(path, f"column {name!r} holds a value that is not a number", command)

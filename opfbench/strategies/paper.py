@@ -24,10 +24,10 @@ from dataclasses import dataclass
 import numpy as np
 
 from opfbench.capability import check_reserve
-from opfbench.powerflow import PowerFlowResult
 from opfbench.registry.specs import strategy
 from opfbench.result import StrategyResult
 from opfbench.scenario import Scenario
+from opfbench.strategies.grids import Flow, grid_of
 from opfbench.strategies.limits import clip, reactive_limit
 from opfbench.strategies.registration import SAFE, local_rule
 from opfbench.strategies.rule_engine import Grid
@@ -89,7 +89,7 @@ class LfmaTrace:
     q_do_i: np.ndarray
     upstream_branch: np.ndarray
     rule: np.ndarray
-    flows: tuple[PowerFlowResult, ...]
+    flows: tuple[Flow, ...]
     diverged_step: np.ndarray
 
 
@@ -132,7 +132,7 @@ def lfma_trace(scenario: Scenario, k: float = 0.0, safe: bool = False) -> LfmaTr
     limit = reactive_limit(scenario, k, safe)
     q_load = scenario.load_q_at_der_mvar()  # each DER's share of its bus's load
     share = net.der_share  # … and of the inflow its bus's meters read
-    branch_node = ~net.is_leaf[net.der_bus]  # (n_der,): more than one incident line
+    branch_node = meters.branch_node  # (n_der,): more than one incident line
 
     def answer(q: np.ndarray) -> np.ndarray:
         """Apply setpoints q, let the grid answer, return the reactive meter readings."""
@@ -163,12 +163,12 @@ def upstream_disagreements(scenario: Scenario, trace: LfmaTrace) -> np.ndarray:
     no-action flow diverged. On a radial feeder with a positive reactive load at every DER bus
     the lists are empty (the upstream line carries that load plus all the other lines carry)."""
     net = scenario.net
-    true_up = net.parent_branch[net.der_bus]
+    true_up = grid_of(scenario).meters.true_upstream
     wrong = (trace.upstream_branch >= 0) & (trace.upstream_branch != true_up)
     der_ids = net.bus_ids[net.der_bus]
     out = np.empty(scenario.n_snapshots, dtype=object)
     for s in range(scenario.n_snapshots):
-        out[s] = None if trace.diverged_step[s] == 1 else [int(b) for b in der_ids[wrong[s]]]
+        out[s] = None if trace.diverged_step[s] == 1 else [b if isinstance(b, str) else int(b) for b in der_ids[wrong[s]]]
     return out
 
 
@@ -188,8 +188,7 @@ def lfma(scenario: Scenario, k: float = 0.0, safe: bool = False) -> StrategyResu
     t0 = now()
     k = check_reserve(k)
     trace = lfma_trace(scenario, k, safe)
-    final = trace.flows[-1]
-    completed = PowerFlowResult(final.net, final.v, trace.diverged_step == 0, final.iterations)
+    completed = trace.flows[-1].with_converged(trace.diverged_step == 0)
     extra = {"diverged_step": trace.diverged_step, "upstream_disagreements": upstream_disagreements(scenario, trace)}
     return StrategyResult.from_setpoints(
         "lfma", k, scenario, trace.q_final, elapsed_ms(t0), power_flows=len(trace.flows), pf=completed, extra=extra

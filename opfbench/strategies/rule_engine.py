@@ -50,11 +50,10 @@ from dataclasses import dataclass
 import numpy as np
 
 from opfbench.capability import check_reserve
-from opfbench.powerflow import PowerFlowResult, solve_pf_batch
 from opfbench.result import NOT_SETTLED, OK, RULE_NON_FINITE, StrategyResult
 from opfbench.scenario import Scenario
+from opfbench.strategies.grids import Flow, RuleGrid, grid_of
 from opfbench.strategies.limits import Capability
-from opfbench.strategies.meters import LocalMeters
 from opfbench.strategies.rules import DEFAULT_SETTLING, RESIDUAL, Measurements, Rule, Settling, Targets, targets
 from opfbench.timing import elapsed_ms, now
 
@@ -64,7 +63,7 @@ class _Plant:
     """What the rows of one scenario give every rule without a power flow."""
 
     scenario: Scenario
-    meters: LocalMeters
+    grid: RuleGrid
     s_rated: np.ndarray
     p_rated: np.ndarray
     kinds: np.ndarray
@@ -82,18 +81,20 @@ class _Plant:
         if "load" in reads:
             fixed["load_p_mw"] = scenario.load_p_at_der_mw()
             fixed["load_q_mvar"] = scenario.load_q_at_der_mvar()
-        return cls(scenario, LocalMeters.of(net), net.der_s_mva, net.der_rating_mw, np.asarray(net.der_kinds, dtype=str), fixed)
+        return cls(scenario, grid_of(scenario), net.der_s_mva, net.der_rating_mw, np.asarray(net.der_kinds, dtype=str), fixed)
 
-    def measure(self, reads: frozenset[str], rows: np.ndarray, pf: PowerFlowResult | None) -> Measurements:
+    def measure(self, reads: frozenset[str], rows: np.ndarray, pf: Flow | None) -> Measurements:
         """The measurements of `rows`; `pf` the flow of exactly those rows (closed loop)."""
         every = rows.size == self.scenario.n_snapshots  # all rows in order: no copies
         values = {key: arr if every else arr[rows] for key, arr in self.fixed.items()}
         if pf is not None and "v" in reads:
-            values["v_pu"] = np.abs(pf.v[:, self.scenario.net.der_bus])
+            values["v_pu"] = self.grid.der_vm(pf)
         if pf is not None and "flows" in reads:
-            values["line_mva"] = self.meters.outflow(pf)
+            values["line_mva"] = self.grid.outflow(pf)
         net = self.scenario.net
-        return Measurements(reads, values, rows.size, self.s_rated, self.p_rated, self.kinds, self.meters.valid, net.der_share)
+        return Measurements(
+            reads, values, rows.size, self.s_rated, self.p_rated, self.kinds, self.grid.meters.valid, net.der_share
+        )
 
 
 class Grid:
@@ -104,13 +105,15 @@ class Grid:
 
     def __init__(self, scenario: Scenario) -> None:
         self.scenario = scenario
-        self.meters = LocalMeters.of(scenario.net)
-        self.flows: list[PowerFlowResult] = []
+        self.grid = grid_of(scenario)
+        self.meters = self.grid.meters
+        self.flows: list[Flow] = []
         self.diverged = np.zeros(scenario.n_snapshots, dtype=np.int64)
 
-    def answer(self, q_mvar: np.ndarray) -> PowerFlowResult:
+    def answer(self, q_mvar: np.ndarray) -> Flow:
         """The grid's answer to setpoints q_mvar (S, n_der)."""
-        pf = solve_pf_batch(self.scenario.net, self.scenario.injections(q_mvar), v0=self.flows[-1].v if self.flows else None)
+        rows = np.arange(self.scenario.n_snapshots)
+        pf = self.grid.answer(rows, q_mvar, None, self.flows[-1].v if self.flows else None)
         self.flows.append(pf)
         self.diverged[(self.diverged == 0) & ~np.asarray(pf.converged)] = len(self.flows)
         return pf
@@ -141,7 +144,7 @@ def run_rule(
     wanted = targets(rule, plant.measure(rule.reads, rows, None), options, n)
     finite = wanted.finite
     q, p = capability.setpoints(rows, *_finite(wanted, finite))
-    pf = solve_pf_batch(scenario.net, scenario.injections(q, p))
+    pf = scenario.flow(q, p)
     res = StrategyResult.from_setpoints(label, k, scenario, q, elapsed_ms(t0), power_flows=1, pf=pf, p_mw=p)
     return _no_setpoint(res, ~finite)
 
@@ -190,13 +193,10 @@ def _settle(
     label: str, rule: Rule, options: dict, plant: _Plant, capability: Capability, s: Settling, t0: float
 ) -> StrategyResult:
     """The closed-loop steady state of every snapshot (module docstring)."""
-    scenario = plant.scenario
-    net = scenario.net
-    n_snap, n_der = scenario.n_snapshots, len(net.ders)
-    place = np.zeros((n_der, net.n_bus))
-    place[np.arange(n_der), net.der_bus] = 1.0  # DER → bus
-    base = scenario.injections(np.zeros((n_snap, n_der)))
-    first = solve_pf_batch(net, base)  # the no-action state Q_0 = 0
+    scenario, grid = plant.scenario, plant.grid
+    n_snap, n_der = scenario.n_snapshots, len(scenario.net.ders)
+    every = np.arange(n_snap)
+    first = grid.answer(every, np.zeros((n_snap, n_der)), None, None)  # the no-action state Q_0 = 0
     v = np.array(first.v)
     converged = np.array(first.converged, dtype=bool)
     q = np.zeros((n_snap, n_der))
@@ -208,12 +208,14 @@ def _settle(
     status = np.full(n_snap, OK, dtype=object)
     alpha = np.full((n_snap, n_der), float(s.step_factor))
     dv_old = np.full((n_snap, n_der), -1.0)
-    vm_prev = np.full((n_snap, net.n_bus), np.nan)
+    vm_prev = np.full(v.shape, np.nan)
+    der_prev = np.full((n_snap, n_der), np.nan)
     rows = np.flatnonzero(converged)  # a diverged no-action flow: nothing measured (pf-diverged)
     step = 0
     while rows.size:
-        pf = PowerFlowResult(net, v[rows], np.ones(rows.size, dtype=bool), flows[rows])
-        vm = np.abs(pf.v)
+        pf = grid.view(v[rows])
+        vm = grid.node_vm(pf.v)
+        der_vm = grid.der_vm(pf)
         asked = targets(rule, plant.measure(rule.reads, rows, pf), options, rows.size)
         finite = asked.finite
         wanted, wanted_p = capability.setpoints(rows, *_finite(asked, finite))
@@ -230,27 +232,26 @@ def _settle(
             status[rows[going]] = NOT_SETTLED
             break
         if s.adaptive and step:
-            dv_der = dv_bus[:, net.der_bus]
+            dv_der = np.abs(der_vm - der_prev[rows])
             alpha[rows] = adapt_step_factor(alpha[rows], dv_der, dv_old[rows])
             dv_old[rows] = dv_der
         rows, wanted = rows[going], wanted[going]
         if not rows.size:
             break
         q[rows] = q[rows] + alpha[rows] * (wanted - q[rows])
-        injections = base[rows] + 1j * (q[rows] @ place)
         if moves_p:
             assert wanted_p is not None
             p[rows] = p[rows] + alpha[rows] * (wanted_p[going] - p[rows])
-            injections = injections + (p[rows] - available[rows]) @ place
-        answer = solve_pf_batch(net, injections, v0=v[rows])
-        vm_prev[rows] = np.abs(v[rows])
+        answer = grid.answer(rows, q[rows], p[rows] if moves_p else None, v[rows])
+        vm_prev[rows] = vm[going]
+        der_prev[rows] = der_vm[going]
         v[rows] = answer.v
         flows[rows] += 1
         ok = np.asarray(answer.converged, dtype=bool)
         converged[rows] = ok
         rows = rows[ok]  # a diverged flow stops the snapshot: pf-diverged, no figures
         step += 1
-    final = PowerFlowResult(net, v, converged, flows)
+    final = grid.final(v, converged, flows)
     res = StrategyResult.from_setpoints(
         label,
         capability.k,

@@ -53,13 +53,18 @@ class StudyRun:
     notes: list[str] = field(default_factory=list)
 
 
+def _bus_id(bus: object) -> int | str:
+    """A bus's id as the manifest records it: a number, or a three-phase feeder's bus name."""
+    return bus if isinstance(bus, str) else int(bus)  # type: ignore[call-overload]
+
+
 def _case_info(case: str) -> dict:
     loaded = load_case(case)
-    net = loaded.balanced("a study (for now only `opfbench pf` and `opfbench cases` read three-phase feeders)")
+    net = loaded.network
     return {
         "buses": int(net.n_bus),
         "ders": [
-            {"name": name, "bus": int(net.bus_ids[d.bus]), "kind": d.kind, "rating_mw": float(d.rating_mw)}
+            {"name": name, "bus": _bus_id(net.bus_ids[d.bus]), "kind": d.kind, "rating_mw": float(d.rating_mw)}
             for name, d in zip(net.der_names, net.ders, strict=True)
         ],
         "vmin_pu": float(net.vmin.min()),
@@ -185,7 +190,7 @@ def prepare(config: StudyConfig) -> RunFamily:
     for case in config.cases:
         loaded = load_case(case)
         data[case] = loaded.data_sha256
-        net = loaded.balanced("a study (for now only `opfbench pf` and `opfbench cases` read three-phase feeders)")
+        net = loaded.network
         for label in config.strategies:
             if label in running:
                 configuration(label).spec.check_network(net)

@@ -41,6 +41,7 @@ DETAIL_COLUMNS = {"der_q": DER_Q.names, "bus_v": BUS_V.names}
 FRONTIER_KEYS = ["case", "k", "night_mode", "curtail"]
 FRONTIER_COLUMNS = FRONTIER.names
 VIOLATION_PU = 1e-6  # a step violates the voltage limits beyond this
+VUF_LIMIT_PCT = 2.0  # EN 50160's limit of the voltage unbalance factor, %
 EXCURSION_MVAR = 1e-9  # a step's setpoint exceeds the physical capability beyond this
 BELOW_KW = 1e-4  # a cost this far below its frontier point counts as below it (solver tolerances)
 SHARE_MIN_KWH = 1e-6  # a reduction below this defines no share
@@ -156,12 +157,12 @@ def stack(parts: list[Columns], columns: list[str], tz) -> pd.DataFrame:
     data = {}
     for name in columns:
         values = [part[name] for part in parts]
-        if all(isinstance(v, str) for v in values):
+        if values and all(isinstance(v, str) for v in values):
             categories = list(dict.fromkeys(values))
             codes = np.repeat(np.array([categories.index(v) for v in values], dtype=np.int32), rows)
             data[name] = pd.Categorical.from_codes(codes, categories)
         elif name == "time":
-            times = np.concatenate([np.asarray(v) for v in values])
+            times = np.concatenate([np.asarray(v) for v in values]) if values else np.zeros(0, dtype=np.int64)
             data[name] = pd.DatetimeIndex(times.view("datetime64[ns]")).tz_localize("UTC").tz_convert(tz)
         else:
             arrays = [np.full(r, v) if np.ndim(v) == 0 else np.asarray(v) for v, r in zip(values, rows, strict=True)]
@@ -193,6 +194,7 @@ def partial_summary(steps: pd.DataFrame) -> pd.DataFrame:
         non_finite=(steps.status == RULE_NON_FINITE).astype(np.int64),
         vv=(steps.voltage_violation_pu > VIOLATION_PU).astype(np.int64),
         vv_h=steps.step_h.where(steps.voltage_violation_pu > VIOLATION_PU, 0.0),
+        vuf_h=steps.step_h.where(steps.max_vuf_pct > VUF_LIMIT_PCT, 0.0),
         exc=(steps.excursion_mvar > EXCURSION_MVAR).astype(np.int64),
         solver_known=steps.solver_ms.notna().astype(np.int64),
         certified=(steps.certified_by != "").astype(np.int64),
@@ -221,6 +223,8 @@ def partial_summary(steps: pd.DataFrame) -> pd.DataFrame:
             "max_violation_pu": g.voltage_violation_pu.max(),
             "vmin_pu": g.vmin_pu.min(),
             "vmax_pu": g.vmax_pu.max(),
+            "max_vuf_pct": g.max_vuf_pct.max(),
+            "vuf_h": g.vuf_h.sum(),
             "max_excursion_mvar": g.excursion_mvar.max(),
             "excursion_steps": g.exc.sum(),
             "lower_bound_kwh": g.lb_energy.sum(),
@@ -239,6 +243,7 @@ PARTIAL_COLUMNS = tuple(TASK_SUMMARY.names[len(KEYS) :])
 EXTREMES = {
     "vmin_pu": "min",
     "vmax_pu": "max",
+    "max_vuf_pct": "max",
     "max_excursion_mvar": "max",
     "max_violation_pu": "max",
     "frontier_curtails": "max",
@@ -261,7 +266,8 @@ def summarize(partials: list[pd.DataFrame], order: list[tuple]) -> pd.DataFrame:
     unless every step has one. curtailed_kwh: the active energy the DER had and did not
     deliver (a rule's Volt-Watt or reactive priority); cost_kwh = energy_kwh + curtailed_kwh.
     voltage_violation_min: minutes of steps outside the case's voltage limits,
-    max_violation_pu the worst excursion beyond them; not_settled_steps: steps where a
+    max_violation_pu the worst excursion beyond them; max_vuf_pct the worst voltage
+    unbalance factor (three-phase feeders), vuf_min the minutes above VUF_LIMIT_PCT; not_settled_steps: steps where a
     closed-loop rule did not settle. At equal compliance (module docstring): frontier_kwh
     the frontier's optimum at each step's compliance (NaN unless every step has one;
     frontier_missing_steps count those without), frontier_bound_kwh its certified bound,
@@ -283,6 +289,7 @@ def summarize(partials: list[pd.DataFrame], order: list[tuple]) -> pd.DataFrame:
     out["solver_s"] = out.solver_s.where(out.solver_known > 0)
     out["certified_share"] = out.certified / out.steps
     out["voltage_violation_min"] = 60.0 * out.pop("voltage_violation_h")
+    out["vuf_min"] = 60.0 * out.pop("vuf_h")
     base = out[(out.strategy == BASELINE) & (out.forecast == "off")].set_index(["case", "k", "night_mode"]).energy_kwh
     out["no_action_kwh"] = pd.MultiIndex.from_frame(out[["case", "k", "night_mode"]]).map(base.to_dict().get).astype(float)
     out["savings_pct"] = 100 * (1 - out.energy_kwh / out.no_action_kwh)

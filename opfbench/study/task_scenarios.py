@@ -83,8 +83,8 @@ def chunk_scenario(
     S-limited capability there."""
     own = load_case(case)
     if own.series is not None:
-        return _series_scenario(own, night_mode, forecast, profiles.index, night, n_steps)
-    net = own.balanced("a study")
+        return _series_scenario(own, night_mode, forecast, profiles, night, n_steps)
+    net = own.network
     load, pv_all, wind_all = (profiles[c].to_numpy() for c in ("load", "pv", "wind"))
     pv_all = pv_all * ~night if night_mode == "disconnected" else pv_all
     pv, wind = pv_all[:n_steps], wind_all[:n_steps]
@@ -103,13 +103,18 @@ def chunk_scenario(
 
 
 def _series_scenario(
-    case: Case, night_mode: str, forecast: str, times: pd.DatetimeIndex, night: np.ndarray, n_steps: int
+    case: Case, night_mode: str, forecast: str, profiles: pd.DataFrame, night: np.ndarray, n_steps: int
 ) -> Scenario:
-    """The scenario of a case's own series at the first `n_steps` of `times` (a further
-    instant, if present, is the next step, for the oracle); night modes on its solar units."""
-    load_p, load_q, der_p = case.series.rows(times) if case.series is not None else (None, None, None)
+    """The scenario of a case's own series at the first `n_steps` instants of `profiles`
+    (a further instant, if present, is the next step, for the oracle); night modes on its
+    solar units. A series of the loads alone (a feeder's load shapes, e.g. eulv) runs its
+    DER on the period's profiles: solar units on `pv`, the others on `wind`."""
+    load_p, load_q, der_p = case.series.rows(profiles.index) if case.series is not None else (None, None, None)
     assert load_p is not None and load_q is not None and der_p is not None
-    net = case.balanced("a study")
+    net = case.network
+    if der_p.shape[1] != len(net.ders):  # the series gives no DER columns
+        pv, wind = (profiles[c].to_numpy()[:, None] for c in ("pv", "wind"))
+        der_p = np.where(net.der_solar[None, :], pv, wind) * net.der_rating_mw
     if night_mode == "disconnected":
         der_p = np.where(night[:, None] & net.der_solar[None, :], 0.0, der_p)
     ahead = None

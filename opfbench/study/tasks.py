@@ -250,18 +250,23 @@ def run_task(inp: TaskInput) -> TaskOutput:
                     ran.append((scenario, results))
             plain = scenario_of(mode, "off")
             front = next((f for earlier, f in drawn if earlier.same_data(plain)), None)
-            if front is None:
+            if front is None and not plain.three_phase:  # the optimum on three-phase feeders: not yet (issue 30)
                 front = frontier(plain, t.k, at_zero=by_source.get("off", {}).get(REFERENCE_OPTIMUM))
                 drawn.append((plain, front))
-            fronts.append(frontier_rows(t.case, t.k, mode, time, inp.step_h, front))
+            if front is not None:
+                fronts.append(frontier_rows(t.case, t.k, mode, time, inp.step_h, front))
             cut = {(s, n): _curtailed(r) for s, results in by_source.items() for n, r in results.items() if curtails(n)}
             rows = np.flatnonzero(np.logical_or.reduce([*cut.values(), np.zeros(inp.n_steps, dtype=bool)]))
-            cutting = frontier(plain.take(rows), t.k, curtail=True) if rows.size else None
+            cutting = frontier(plain.take(rows), t.k, curtail=True) if rows.size and front is not None else None
             if cutting is not None:
                 fronts.append(frontier_rows(t.case, t.k, mode, time[rows], inp.step_h, cutting))
             for source, results in by_source.items():
                 for name, res in results.items():
-                    ref = reference(front, res.voltage_violation(), cutting, rows, cut.get((source, name)))
+                    ref = (
+                        None
+                        if front is None
+                        else reference(front, res.voltage_violation(), cutting, rows, cut.get((source, name)))
+                    )
                     steps.append(step_rows(t.case, mode, source, time, inp.step_h, night, res, inp.columns, ref))
                     for table, columns in detail_rows(t.case, mode, source, time, res, inp.detail).items():
                         detail[table].append(columns)

@@ -73,3 +73,74 @@ def line_impedance_ohm(name: str) -> np.ndarray:
 def set_tap(transformer: str, winding: int, tap: float) -> str:
     """The OpenDSS command that puts a transformer's winding at `tap` p.u."""
     return f"transformer.{transformer}.wdg={winding} tap={tap!r}"
+
+
+@dataclass(frozen=True)
+class InverterAnswer:
+    """OpenDSS's closed-loop steady state with InvControls: each PVSystem's P and Q (MW,
+    MVAr, generated, in the order given), node names and |V| p.u., whether the solution
+    and its control loop converged."""
+
+    p_mw: np.ndarray
+    q_mvar: np.ndarray
+    node_names: list[str]
+    vm_pu: np.ndarray
+    converged: bool
+
+
+TIGHT = "varchangetolerance=1e-10 voltagechangetolerance=1e-10 activepchangetolerance=1e-10 eventlog=no"
+
+
+def volt_var(
+    master: Path,
+    load_mult: float,
+    units: list[tuple[str, float, float, float, float]],
+    curve_v: tuple[float, ...],
+    curve_q: list[np.ndarray],
+) -> InverterAnswer:
+    """OpenDSS's Volt-VAR steady state on a shipped feeder: compiled and solved at its own
+    loads (regulator taps settle), taps then held (RegControls and CapControls disabled),
+    loads × `load_mult`, and one PVSystem per unit (bus1 with nodes, e.g. `34.1.0`; kV; kVA;
+    Pmpp kW; P kW) — constant power (vminpu 0.05) — each with an InvControl VOLTVAR
+    (adaptive step, tight tolerances, measured voltage the phases' average, the rated
+    voltage as the curve's reference), curve `curve_v` → `curve_q[i]` in p.u. of its
+    kvarMax (= |Q| limit: kvarmax is its last entry), flat beyond the ends."""
+    far = (0.5, 1.5)
+    dss.Basic.AllowChangeDir(False)
+    run = dss.Text.Command
+    run("clear")
+    run(f'compile "{master}"')
+    run(f"set mode=snapshot tolerance={TOLERANCE!r} maxiterations=200")
+    dss.Solution.Solve()
+    run("batchedit regcontrol..* enabled=no")
+    run("batchedit capcontrol..* enabled=no")
+    run(f"set loadmult={load_mult!r}")
+    for i, ((bus1, kv, kva, pmpp, p_kw), (q_pu, kvar_max)) in enumerate(zip(units, curve_q, strict=True)):
+        phases = len(bus1.split(".")) - 2
+        xs, ys = (far[0], *curve_v, far[1]), (q_pu[0], *q_pu, q_pu[-1])
+        run(
+            f"new xycurve.vv{i} npts={len(xs)} xarray=[{' '.join(map(repr, map(float, xs)))}] yarray=[{' '.join(map(repr, map(float, ys)))}]"
+        )
+        run(
+            f"new pvsystem.pv{i} phases={phases} bus1={bus1} kv={kv!r} kva={kva!r} pmpp={pmpp!r} irradiance={p_kw / pmpp!r} "
+            f"%cutin=0 %cutout=0 kvarmax={kvar_max!r} kvarmaxabs={kvar_max!r} wattpriority=no pfpriority=no "
+            "varfollowinverter=no vminpu=0.05 vmaxpu=2"
+        )
+        run(
+            f"new invcontrol.ic{i} derlist=[pvsystem.pv{i}] mode=voltvar vvc_curve1=vv{i} voltage_curvex_ref=rated "
+            f"refreactivepower=varmax deltaq_factor=-1 {TIGHT}"
+        )
+    run("set controlmode=static maxcontroliter=5000")
+    dss.Solution.Solve()
+    p, q = np.zeros(len(units)), np.zeros(len(units))
+    for i in range(len(units)):
+        dss.Circuit.SetActiveElement(f"pvsystem.pv{i}")
+        powers = np.asarray(dss.CktElement.Powers())
+        p[i], q[i] = -powers[0::2].sum() / 1e3, -powers[1::2].sum() / 1e3  # kW, kvar into the element
+    return InverterAnswer(
+        p,
+        q,
+        [n.lower() for n in dss.Circuit.AllNodeNames()],
+        np.asarray(dss.Circuit.AllBusMagPu()),
+        bool(dss.Solution.Converged()),
+    )
