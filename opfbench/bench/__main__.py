@@ -1,4 +1,4 @@
-"""`python -m opfbench.bench {pf,local,opf,fault,run,learned,frontier} [--json] [options of the benchmark]`."""
+"""`python -m opfbench.bench {pf,local,opf,fault,run,learned,frontier,unbalanced} [--json] [options of the benchmark]`."""
 
 from __future__ import annotations
 
@@ -7,7 +7,7 @@ import importlib
 
 from opfbench.jsonio import print_json
 
-BENCHES = ("pf", "local", "opf", "fault", "run", "learned", "frontier")
+BENCHES = ("pf", "local", "opf", "fault", "run", "learned", "frontier", "unbalanced")
 
 
 def main(argv: list[str] | None = None) -> int:
