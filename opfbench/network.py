@@ -86,8 +86,37 @@ class DER:
         return _KIND_ENERGY.get(self.kind, "other") if self.energy is None else self.energy
 
 
+class DerFleet:
+    """The per-DER arrays every network derives from its `ders` (balanced and three-phase
+    alike: `Network`, `multiphase.PhaseNetwork`)."""
+
+    ders: tuple[DER, ...]
+
+    @property
+    def der_bus(self) -> np.ndarray:
+        return np.array([d.bus for d in self.ders], dtype=int)
+
+    @property
+    def der_rating_mw(self) -> np.ndarray:
+        return np.array([d.rating_mw for d in self.ders], dtype=float)
+
+    @property
+    def der_s_mva(self) -> np.ndarray:
+        """Nameplate apparent power S̄ of each DER (MVA)."""
+        return np.array([d.s_rated_mva for d in self.ders], dtype=float)
+
+    @property
+    def der_kinds(self) -> tuple[DerKind, ...]:
+        return tuple(d.kind for d in self.ders)
+
+    @property
+    def der_solar(self) -> np.ndarray:
+        """Bool per DER: a solar unit (what the night modes switch off or give "Q at night")."""
+        return np.array([d.primary_energy == "solar" for d in self.ders], dtype=bool)
+
+
 @dataclass(frozen=True, eq=False)
-class Network:
+class Network(DerFleet):
     """Buses, branches (π model), loads, fixed generators, DER units and one slack bus.
 
     Arrays (length n_bus): bus_ids, base_kv, load_p_mw, load_q_mvar, gs_mw, bs_mvar,
@@ -301,19 +330,6 @@ class Network:
             raise NetworkError(f"{self.name}: no bus numbered {bus_id}")
         return int(hits[0])
 
-    @property
-    def der_bus(self) -> np.ndarray:
-        return np.array([d.bus for d in self.ders], dtype=int)
-
-    @property
-    def der_rating_mw(self) -> np.ndarray:
-        return np.array([d.rating_mw for d in self.ders], dtype=float)
-
-    @property
-    def der_s_mva(self) -> np.ndarray:
-        """Nameplate apparent power S̄ of each DER (MVA)."""
-        return np.array([d.s_rated_mva for d in self.ders], dtype=float)
-
     @cached_property
     def der_names(self) -> tuple[str, ...]:
         """Each DER's unique name: `DER.name` where the source gives one, else
@@ -343,15 +359,6 @@ class Network:
         total = np.zeros(self.n_bus)
         np.add.at(total, self.der_bus, s)
         return _frozen(s / total[self.der_bus])
-
-    @property
-    def der_kinds(self) -> tuple[DerKind, ...]:
-        return tuple(d.kind for d in self.ders)
-
-    @property
-    def der_solar(self) -> np.ndarray:
-        """Bool per DER: a solar unit (what the night modes switch off or give "Q at night")."""
-        return np.array([d.primary_energy == "solar" for d in self.ders], dtype=bool)
 
     @property
     def n_load(self) -> int:

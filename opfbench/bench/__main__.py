@@ -1,4 +1,4 @@
-"""`python -m opfbench.bench {pf,local,opf,fault,run,learned,frontier} [--json] [options of the benchmark]`;
+"""`python -m opfbench.bench {pf,local,opf,fault,run,learned,frontier,unbalanced} [--json] [options of the benchmark]`;
 `python -m opfbench.bench all [--json] [--markdown] …` (every benchmark, one record, `record`)
 and `python -m opfbench.bench check NEW` (the regression guard, `check`)."""
 
@@ -11,7 +11,7 @@ import sys
 from opfbench.errors import InputError
 from opfbench.jsonio import print_json
 
-BENCHES = ("pf", "local", "opf", "fault", "run", "learned", "frontier")
+BENCHES = ("pf", "local", "opf", "fault", "run", "learned", "frontier", "unbalanced")
 COMMANDS = {"all": "record", "check": "check"}  # the record of every benchmark, and the guard
 
 

@@ -86,6 +86,17 @@ ALL: tuple[Bench, ...] = (
         (),
         {"cases.0.frontier_ms": "cases.0.acopf_ms", "cases.1.frontier_extra_ms": "cases.1.acopf_ms"},
     ),
+    Bench(  # the three-phase flow and rules against OpenDSS in the same process (issue 29)
+        "unbalanced",
+        "unbalanced",
+        (),
+        {
+            "eulv_day_ms": "eulv_dss_daily_ms",
+            "eulv_volt_var_day_ms": "eulv_no_action_day_ms",
+            "ieee8500_pf_ms": CALIBRATION,
+            "ieee8500_batch96_ms": CALIBRATION,
+        },
+    ),
 )
 
 

@@ -44,7 +44,7 @@ from scipy.sparse.csgraph import connected_components
 
 from opfbench.errors import NetworkError
 from opfbench.multiphase.branches import GROUND, Branches, LoadModels
-from opfbench.network import DER
+from opfbench.network import DER, DerFleet
 
 ELEMENT_KINDS = ("line", "transformer", "capacitor", "reactor")
 PHASES = (1, 2, 3)
@@ -141,7 +141,7 @@ class Source:
 
 
 @dataclass(frozen=True, eq=False)
-class PhaseNetwork:
+class PhaseNetwork(DerFleet):
     """An unbalanced feeder at node level (see the module docstring). Buses: `bus_names`
     (lower case, OpenDSS's), `bus_kv_ln` (n_bus,) phase-to-neutral base kV. Nodes:
     `node_bus`, `node_phase` (n_node,). Loads: `load_names` (OpenDSS's `Load.x`), `load_bus`,
@@ -270,33 +270,11 @@ class PhaseNetwork:
         """(n_node,) each node's phase-to-neutral base voltage, V."""
         return _frozen(self.bus_kv_ln[self.node_bus] * 1e3)
 
-    @property
-    def der_bus(self) -> np.ndarray:
-        return np.array([d.bus for d in self.ders], dtype=int)
-
-    # ----- DER as every rule and limit reads them (the names `Network` gives them) -------
+    # ----- DER as every rule and limit reads them (`network.DerFleet`, and as below) ----
     @property
     def bus_ids(self) -> np.ndarray:
         """(n_bus,) the buses' OpenDSS names (what a result names a DER's bus by)."""
         return np.array(self.bus_names, dtype=object)
-
-    @property
-    def der_rating_mw(self) -> np.ndarray:
-        return np.array([d.rating_mw for d in self.ders], dtype=float)
-
-    @property
-    def der_s_mva(self) -> np.ndarray:
-        """Nameplate apparent power S̄ of each DER (MVA)."""
-        return np.array([d.s_rated_mva for d in self.ders], dtype=float)
-
-    @property
-    def der_kinds(self) -> tuple:
-        return tuple(d.kind for d in self.ders)
-
-    @property
-    def der_solar(self) -> np.ndarray:
-        """Bool per DER: a solar unit (what the night modes switch off or give "Q at night")."""
-        return np.array([d.primary_energy == "solar" for d in self.ders], dtype=bool)
 
     @cached_property
     def der_phase_nodes(self) -> tuple[frozenset[int], ...]:
