@@ -58,6 +58,7 @@ def snapshot(
     """One operating point of `case` — every load at `load_scale` of nominal, every DER at
     `der_scale` of its rating — under the configuration `strategy` (`NAME[:key=value,…]`) at
     reserve k, as `opfbench snapshot` runs it; `plugins`: files or modules to load first."""
+    from opfbench.multiphase import PhaseNetwork
     from opfbench.plugins import load
     from opfbench.registry.catalog import configuration
     from opfbench.scenario import Scenario
@@ -66,7 +67,8 @@ def snapshot(
         load(ref)
     config = configuration(strategy)
     net = (load_case(case) if isinstance(case, str) else case).network
-    config.spec.check_network(net)
+    if isinstance(net, PhaseNetwork):  # a formulation, or a rule without DER, on a three-phase feeder: refused here
+        config.spec.check_network(net)
     return config.run(Scenario.snapshot(net, load_scale, der_scale), k)
 
 

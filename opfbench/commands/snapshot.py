@@ -89,6 +89,7 @@ def _options(args: argparse.Namespace, label: str) -> dict:
 
 def run(args: argparse.Namespace) -> int:
     from opfbench.io import load_case
+    from opfbench.multiphase import PhaseNetwork
     from opfbench.registry.catalog import configuration, run_strategy
     from opfbench.scenario import Scenario
     from opfbench.study.training_checks import check_params
@@ -97,7 +98,8 @@ def run(args: argparse.Namespace) -> int:
     options = _options(args, label)
     spec = case_spec(args.case, args)
     net = load_case(spec).network
-    configuration(label).spec.check_network(net)  # a formulation, or a rule without DER, on a three-phase feeder
+    if isinstance(net, PhaseNetwork):  # a formulation, or a rule without DER, on a three-phase feeder: refused here
+        configuration(label).spec.check_network(net)
     check_params([label], [spec])  # a fitted rule runs on the grid it was fitted on (or a perturbed one)
     scenario = Scenario.snapshot(net, args.load_scale, args.der_scale, args.forecast_der_scale)
     result = run_strategy(label, scenario, args.k, **options)
