@@ -69,6 +69,7 @@ def test_summary_counts_diverged_steps_and_averages_over_the_rest():
             "losses_kw": [10.0, np.nan, 30.0, np.nan],
             "vmin_pu": [0.95, np.nan, 0.93, np.nan],
             "vmax_pu": [1.0, np.nan, 1.0, np.nan],
+            "max_vuf_pct": np.nan,  # a balanced case: no unbalance factor
             "voltage_violation_pu": [0.0, np.nan, 0.0, np.nan],
             "excursion_mvar": 0.0,
             "lower_bound_kw": np.nan,
