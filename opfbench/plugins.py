@@ -251,7 +251,7 @@ def _fingerprint(source: str, depends: tuple[tuple[str, str], ...]) -> str:
 def _quiet_import(ref: str) -> Iterator[None]:
     """Run a plugin's import with its printed output held back (passed on afterwards); a
     `sys.exit` in it is the plugin's failure, named with what it printed (a script given
-    as a plugin prints its own usage)."""
+    as a plugin prints its own usage), as is any other BaseException but Ctrl-C."""
     held = io.StringIO()
     try:
         with redirect_stdout(held), redirect_stderr(held):
@@ -263,6 +263,10 @@ def _quiet_import(ref: str) -> Iterator[None]:
             + (f", printing: {said[:300]}" if said else "")
             + " — a plugin registers rules, it is not a script to run"
         ) from None
+    except (Exception, KeyboardInterrupt):  # its errors are named by `load`; Ctrl-C is the user's
+        raise
+    except BaseException as exc:  # a BaseException of its own: the plugin's failure, never a traceback
+        raise InputError(f"plugin {ref}: its import raised {type(exc).__name__}: {exc}") from None
     sys.stderr.write(held.getvalue())  # what it printed (stderr: stdout may be a --json answer)
 
 
@@ -296,6 +300,11 @@ def load(ref: str) -> PluginSource:
         with _watching() as (modules, files):
             if _is_path(ref):
                 path = Path(ref)
+                if path.is_dir():
+                    raise InputError(
+                        f"plugin {given}: a folder; give a .py file, or a package by its module name "
+                        "(importable: its parent folder on PYTHONPATH)"
+                    )
                 if not path.is_file():
                     raise InputError(f"plugin {given}: no such file")
                 try:
