@@ -149,6 +149,16 @@ def test_an_option_check_that_raises_is_the_plugins_error(tmp_path):
         plugins.load(ref)
 
 
+@pytest.mark.parametrize("option", ["k", "scenario"])
+def test_an_option_named_like_the_runners_own_argument_is_refused_at_load(tmp_path, option):
+    ref = _plugin(
+        tmp_path,
+        f'@local_rule("clash", reads=("p",), options={{"{option}": 1.0}})\ndef clash(m, {option}):\n    return 0 * m.p_mw\n',
+    )
+    with pytest.raises(InputError, match=rf"strategy 'clash': option name '{option}' is the runner's own argument"):
+        plugins.load(ref)  # it would reach the runner twice: a TypeError on the first snapshot
+
+
 def test_an_extra_column_that_is_the_steps_tables_own_is_refused_before_any_work(tmp_path, capsys):
     ref = _plugin(
         tmp_path,
