@@ -52,6 +52,7 @@ from __future__ import annotations
 
 import hashlib
 import importlib
+import importlib.util
 import io
 import json
 import os
@@ -293,8 +294,9 @@ def load(ref: str) -> PluginSource:
     InputError naming it if it cannot be loaded or registers no (valid) strategy. A file
     plugin is known by its absolute path (`canonical_ref`): any spelling loads it once."""
     given, ref = ref, canonical_ref(ref)
-    if ref in _loaded:
-        return _loaded[ref]
+    held = _loaded.get(ref) or _held_under_another_spelling(ref)
+    if held is not None:
+        return held
     own = None
     try:
         with _watching() as (modules, files):
@@ -332,6 +334,31 @@ def load(ref: str) -> PluginSource:
         )
     _loaded[ref] = PluginSource(ref, module, _fingerprint(source, depends), text, names, depends)
     return _loaded[ref]
+
+
+def _file_of(ref: str) -> str | None:
+    """The file a plugin ref names: its path, or a top-level module's file (found, not run)."""
+    if _is_path(ref):
+        return ref
+    module = sys.modules.get(ref)
+    if module is not None:
+        file = getattr(module, "__file__", None)
+    elif "." not in ref:  # a dotted name's parent packages would run to be searched: left to load
+        try:
+            spec = importlib.util.find_spec(ref)
+        except (ImportError, ValueError):
+            return None
+        file = spec.origin if spec is not None else None
+    else:
+        return None
+    return str(Path(file).resolve()) if file and Path(file).is_file() else None
+
+
+def _held_under_another_spelling(ref: str) -> PluginSource | None:
+    """The plugin already loaded from the same file as `ref`, named the other way (a module
+    name for a path, a path for a module name): one file, one plugin."""
+    file = _file_of(ref)
+    return next((src for other, src in _loaded.items() if file is not None and _file_of(other) == file), None)
 
 
 def _file_digest(module: types.ModuleType) -> str:

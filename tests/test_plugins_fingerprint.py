@@ -106,6 +106,8 @@ def test_one_file_under_two_spellings_is_one_plugin(tmp_path, monkeypatch, capsy
     first, second = plugins.load("good.py"), plugins.load("./good.py")
     assert first is second and first.ref == str(tmp_path / "good.py") and first.strategies == ("good",)
     assert plugins.load(str(tmp_path / "good.py")) is first
+    monkeypatch.syspath_prepend(str(tmp_path))
+    assert plugins.load("good") is first  # its module name is the same file: the same plugin, not "taken"
     assert main(["strategies", "--plugin", "good.py", "--plugin", "./good.py", "--json"]) == 0
     capsys.readouterr()
     (tmp_path / "pkg").mkdir()  # a folder is no file plugin: said so, not "no such file"
