@@ -73,6 +73,19 @@ class SolverRecord:
     solve_ms: np.ndarray
     iterations: np.ndarray
 
+    def take(self, rows: np.ndarray) -> "SolverRecord":
+        """The record of the snapshots `rows`."""
+        return SolverRecord(
+            self.model,
+            self.meaning,
+            self.objective_kw[rows],
+            self.solver_status[rows],
+            self.fallback[rows],
+            self.certified_by[rows],
+            self.solve_ms[rows],
+            self.iterations[rows],
+        )
+
     def snapshot(self, i: int) -> dict:
         """Snapshot i as `StrategyResult.snapshot_json` lists it."""
         return {
@@ -173,6 +186,32 @@ class StrategyResult:
     @property
     def n_snapshots(self) -> int:
         return self.q_mvar.shape[0]
+
+    def take(self, rows: np.ndarray, wall_ms: float) -> "StrategyResult":
+        """The result of the snapshots `rows` (the solver record's and the extra arrays of
+        length S taken likewise, the other extra values kept), with wall time `wall_ms`."""
+        n = self.n_snapshots
+
+        def part(value: object) -> object:
+            return value[rows] if isinstance(value, np.ndarray) and value.ndim and value.shape[0] == n else value
+
+        lower = None if self.lower_bound_kw is None else self.lower_bound_kw[rows]
+        return StrategyResult(
+            self.strategy,
+            self.k,
+            self.net,
+            self.q_mvar[rows],
+            self.losses_kw[rows],
+            self.vm[rows],
+            self.status[rows],
+            self.power_flows[rows],
+            float(wall_ms),
+            self.excursion_mvar[rows],
+            lower,
+            None if self.solver is None else self.solver.take(rows),
+            {key: part(value) for key, value in self.extra.items()},
+            None if self.curtailed_mw is None else self.curtailed_mw[rows],
+        )
 
     @property
     def curtailed_kw(self) -> np.ndarray:

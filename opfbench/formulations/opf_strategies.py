@@ -92,6 +92,7 @@ def run_acopf(
     bound_rank=0,
     role="relaxation",
     network_check=check_relaxation,
+    snapshot_wise=True,  # a relaxation solves each snapshot from its data alone (`model.BatchModel`)
 )
 def run_socp(scenario: Scenario, k: float, *, slack_export: bool = True) -> StrategyResult:
     """The relaxation's setpoints on every snapshot, evaluated by the AC power flow

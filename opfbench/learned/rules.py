@@ -999,6 +999,7 @@ def _learned(name: str, summary: str, reads: tuple[str, ...], check: Callable[[d
         summary=summary + " (slope-bounded), closed loop",
         check=check,
         fit=fit_configuration,
+        snapshot_wise=True,
     )
 
 

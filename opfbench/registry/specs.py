@@ -60,9 +60,12 @@ class StrategySpec:
     cannot model, before any work; `check(options)` refuses option combinations;
     `columns`: extra per-step result columns (name → meaning, from `StrategyResult.extra`);
     `fit(name, training, options)`: a learned strategy's fit, `fit_options` the options it
-    takes; `source`: "opfbench" or the plugin that registered it, `module` the module that
-    declared it; `curtails`: a local rule that caps its DER's active power (its target
-    returns `rules.Targets`)."""
+    takes; `snapshot_wise`: each snapshot's result is a function of that snapshot's data
+    alone, bit for bit, whatever other snapshots the scenario holds (the study runs such a
+    strategy once on the distinct snapshots of several night modes; a solver warm-started
+    along the scenario is not); `source`: "opfbench" or the plugin that registered it,
+    `module` the module that declared it; `curtails`: a local rule that caps its DER's
+    active power (its target returns `rules.Targets`)."""
 
     name: str
     kind: Kind
@@ -82,6 +85,7 @@ class StrategySpec:
     columns: dict[str, str] = field(default_factory=dict)
     fit: Callable[..., Any] | None = None
     fit_options: tuple[str, ...] = ()
+    snapshot_wise: bool = False
     source: str = OPFBENCH
     module: str = ""
     curtails: bool = False
@@ -156,6 +160,7 @@ class StrategySpec:
             "learned": self.learned,
             "uses_forecast": self.uses_forecast,
             "lower_bound": self.bound_rank is not None,
+            "snapshot_wise": self.snapshot_wise,
             "supports": list(self.supports),
             "options": [o.describe() for o in self.options],
             "fixed": {k: v for k, v in self.fixed.items()},
@@ -304,6 +309,7 @@ def strategy(
     network_check: Callable[[Network], None] | None = None,
     check: Callable[[dict], None] | None = None,
     columns: Mapping[str, str] | None = None,
+    snapshot_wise: bool = False,
 ) -> Callable[[Runner], Runner]:
     """Register the decorated `runner(scenario, k, **options) -> StrategyResult` as the
     strategy `name` (fields: `StrategySpec`). Stacked, one runner serves several entries
@@ -326,6 +332,7 @@ def strategy(
                 network_check=network_check,
                 check=check,
                 columns=dict(columns or {}),
+                snapshot_wise=snapshot_wise,
                 source=source_of(runner.__module__),
                 module=runner.__module__,
             )

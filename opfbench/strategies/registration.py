@@ -124,6 +124,7 @@ def local_rule(
     uses_forecast: bool = True,
     check: Callable[[dict], None] | None = None,
     fit: Callable[..., Any] | None = None,
+    snapshot_wise: bool = False,
     curtails: bool = False,
 ) -> Callable[[T], T]:
     """Register the decorated `target(m, **options) -> (S, n_der)` MVAr as the local rule
@@ -133,8 +134,11 @@ def local_rule(
     `safe`). `check(options)` refuses option combinations; `fit(name, training, options)`
     makes it a learned rule whose declared options are the fit's. `curtails`: the function
     returns `rules.Targets` (Q targets and a cap on active power, MW) — a rule that may
-    deliver less active power than it has. InputError for a bad name, reads, option or
-    signature, or (a plugin) targets of the wrong shape or not finite on a probe."""
+    deliver less active power than it has. `snapshot_wise`: the target of a snapshot reads
+    only that snapshot's measurements (the engine treats snapshots independently, so the
+    study may run the rule once on the distinct snapshots of several night modes;
+    `StrategySpec.snapshot_wise`). InputError for a bad name, reads, option or signature,
+    or (a plugin) targets of the wrong shape or not finite on a probe."""
 
     def decorate(target: T) -> T:
         source = source_of(target.__module__)
@@ -161,6 +165,7 @@ def local_rule(
             columns=dict(CLOSED_LOOP_COLUMNS if closed else {}) | dict(columns or {}),
             fit=fit,
             fit_options=tuple(o.name for o in declared) if fit is not None else (),
+            snapshot_wise=snapshot_wise,
             source=source,
             module=target.__module__,
             curtails=curtails,

@@ -129,6 +129,7 @@ def check_volt_var(options: dict) -> None:
     summary="IEEE 1547-2018 Volt-VAR Q(V) in p.u. of S̄ (B: 0.92/+0.44 0.98/0 1.02/0 1.08/−0.44; "
     "A: 0.90/+0.25 1.00/0 1.10/−0.25), closed loop",
     check=check_volt_var,
+    snapshot_wise=True,
 )
 def volt_var(m: Measurements, curve: str = "b", v: Sequence[float] = (), q: Sequence[float] = ()) -> np.ndarray:
     """Volt-VAR: Q(|V|) in p.u. of S̄ (Category `curve`, or the points v/q), MVAr."""
@@ -146,6 +147,7 @@ def check_watt_var(options: dict) -> None:
     options=(CURVE, *curve_points("p", "P/P̄")),
     summary="IEEE 1547-2018 Watt-VAR Q(P/P̄) in p.u. of S̄ (0.2/0 0.5/0 1.0/−0.44 for B, −0.25 for A)",
     check=check_watt_var,
+    snapshot_wise=True,
 )
 def watt_var(m: Measurements, curve: str = "b", p: Sequence[float] = (), q: Sequence[float] = ()) -> np.ndarray:
     """Watt-VAR: Q(P/P̄) in p.u. of S̄ (Category `curve`, or the points p/q), MVAr."""
@@ -237,6 +239,7 @@ def check_const_pf(options: dict) -> None:
     ),
     summary="constant power factor: Q = ∓|P|·tan(acos pf)",
     check=check_const_pf,
+    snapshot_wise=True,
 )
 def const_pf(m: Measurements, pf: float = PF, mode: str = "absorb") -> np.ndarray:
     """Constant power factor: Q = −|P|·tan(acos pf) absorbing, +|P|·tan(acos pf) injecting, MVAr."""
@@ -259,6 +262,7 @@ def check_cosphi_p(options: dict) -> None:
     ),
     summary="VDE-AR-N 4105 cos φ(P): 1 up to P/P̄ = 0.5, then linear to 0.90 under-excited at P̄",
     check=check_cosphi_p,
+    snapshot_wise=True,
 )
 def cosphi_p(m: Measurements, pf_min: float = COSPHI_P_MIN, p_start: float = COSPHI_P_START) -> np.ndarray:
     """VDE-AR-N 4105 cos φ(P): cos φ = 1 up to P/P̄ = p_start, then linear to pf_min
@@ -290,6 +294,7 @@ def check_q_u(options: dict) -> None:
     ),
     summary="VDE-AR-N 4110 Q(U): 0.96/+0.33 to 1.04/−0.33 p.u. of P̄ (dead band: 0.94/0.96/1.04/1.06), closed loop",
     check=check_q_u,
+    snapshot_wise=True,
 )
 def q_u(
     m: Measurements, deadband: bool = False, q_max: float = Q_U_MAX, v: Sequence[float] = (), q: Sequence[float] = ()

@@ -9,9 +9,13 @@ curtail (Volt-Watt, reactive priority, `acopf:curtail=true`) did, also the front
 optimum that may curtail, which it is compared with there. `acopf`, `acopf-paper` and `socp` share SOCP solves, and the
 night modes — which differ only in the night hours, so their daytime snapshots are the
 same problems — solve each once: the formulations' solve cache is keyed on the data
-(`formulations.solves`), whatever Scenario objects carry it; and where two
-night modes give the very same scenario (no PV output in the night hours of the chunk), the
-second takes the first's results (`Scenario.same_data`) with its wall time 0. Its input
+(`formulations.solves`), whatever Scenario objects carry it; a snapshot-wise strategy
+(`StrategySpec.snapshot_wise`: every local rule, the SOCP) runs once on the distinct
+snapshots of the night modes (`task_scenarios.SharedSnapshots`: by day, and at night where
+the PV units produce nothing, the modes' snapshots are the same) and each mode takes its
+rows, charged the wall time of the snapshots it brought; and where two night modes give
+the very same scenario (no PV output in the night hours of the chunk), the second takes the
+first's results (`Scenario.same_data`) with its wall time 0. Its input
 carries its slice of the period's profiles, so it runs the same in this process, in a
 local worker process or on a remote Dask worker; the AC OPF starts cold at each chunk and
 warm-starts inside it — the same whatever the number of workers.
@@ -51,7 +55,7 @@ from opfbench.study.run_tables import (
     step_columns,
     step_rows,
 )
-from opfbench.study.task_scenarios import chunk_scenario
+from opfbench.study.task_scenarios import SharedSnapshots, chunk_scenario
 
 
 @dataclass(frozen=True)
@@ -191,7 +195,8 @@ def _curtailed(res: StrategyResult) -> np.ndarray:
 
 def run_task(inp: TaskInput) -> TaskOutput:
     """Run every night mode, forecast source and strategy of the task, the strategies of a
-    (night mode, source) on one scenario, and each night mode's frontier (module docstring;
+    (night mode, source) on one scenario — a snapshot-wise strategy once on the night modes'
+    distinct snapshots of the source —, and each night mode's frontier (module docstring;
     single-threaded BLAS, so results are bit-identical wherever it runs)."""
     from opfbench.io import load_case
     from opfbench.timing import elapsed_ms, now
@@ -215,18 +220,32 @@ def run_task(inp: TaskInput) -> TaskOutput:
         def scenario_of(mode: str, source: str) -> Scenario:
             return chunk_scenario(t.case, mode, source, inp.profiles, inp.night, inp.n_steps, step, inp.forecast_dir)
 
-        for mode in t.night_modes:
+        scenarios = {(mode, source): scenario_of(mode, source) for mode in t.night_modes for source, _ in t.runs}
+        shared = {
+            source: SharedSnapshots.of([scenarios[mode, source] for mode in t.night_modes])
+            for source, _ in t.runs
+            if len(t.night_modes) > 1
+        }
+        union: dict[tuple[str, str], StrategyResult] = {}  # snapshot-wise strategies, run once per source
+
+        def result(j: int, source: str, name: str) -> StrategyResult:
+            """`name` on night mode j under `source`: its rows of the night modes' union run, or its own run."""
+            share = shared.get(source)
+            if share is not None and configuration(name).spec.snapshot_wise:
+                if (source, name) not in union:
+                    union[source, name] = run_strategy(name, share.union, t.k, settings, **overrides.get(name, {}))
+                whole = union[source, name]
+                return whole.take(share.rows[j], whole.wall_ms * share.share(j))
+            return run_strategy(name, scenarios[t.night_modes[j], source], t.k, settings, **overrides.get(name, {}))
+
+        for j, mode in enumerate(t.night_modes):
             by_source: dict[str, dict[str, StrategyResult]] = {}
             for source, names in t.runs:
-                scenario = scenario_of(mode, source)
+                scenario = scenarios[mode, source]
                 same = next((results for earlier, results in ran if earlier.same_data(scenario)), None)
                 results = by_source[source] = {}
                 for name in names:
-                    results[name] = (
-                        replace(same[name], wall_ms=0.0)
-                        if same is not None
-                        else run_strategy(name, scenario, t.k, settings, **overrides.get(name, {}))
-                    )
+                    results[name] = replace(same[name], wall_ms=0.0) if same is not None else result(j, source, name)
                 if same is None:
                     ran.append((scenario, results))
             plain = scenario_of(mode, "off")
