@@ -65,7 +65,9 @@ def snapshot(
     for ref in plugins:
         load(ref)
     config = configuration(strategy)
-    net = (load_case(case) if isinstance(case, str) else case).network
+    net = (load_case(case) if isinstance(case, str) else case).balanced(
+        "a snapshot (for now only `pf` and `cases` read three-phase feeders)"
+    )
     return config.run(Scenario.snapshot(net, load_scale, der_scale), k)
 
 

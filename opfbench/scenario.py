@@ -254,11 +254,11 @@ class Scenario:
             if case.stored is None:
                 raise InputError(f"{case.spec}: the case stores no per-element operating point")
             p, q, der_p, _ = case.stored
-            return cls.from_series(case.network, p[None, :], q[None, :], der_p[None, :])
+            return cls.from_series(case.balanced("a scenario"), p[None, :], q[None, :], der_p[None, :])
         if case.series is None:
             raise InputError(f"{case.spec}: the case has no time series of its own")
         load_p, load_q, der_p = case.series.rows(times)
-        return cls.from_series(case.network, load_p, load_q, der_p)
+        return cls.from_series(case.balanced("a scenario"), load_p, load_q, der_p)
 
     @property
     def n_snapshots(self) -> int:

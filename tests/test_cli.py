@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from opfbench.cli import main
-from tests.support.shipped_cases import SHIPPED
+from tests.support.shipped_cases import SHIPPED, UNBALANCED
 
 PF_KEYS = {"case", "converged", "iterations", "losses_kw", "vmin", "vmin_bus", "vmax", "vmax_bus"}
 
@@ -70,8 +70,10 @@ def test_bad_arguments_exit_2(capsys, argv, message):
 
 def test_cases_lists_shipped_cases(capsys):
     code, rows = _json(capsys, ["cases", "--json"])
-    assert code == 0 and [r["case"] for r in rows] == list(SHIPPED)
-    for r in rows:
+    assert code == 0 and [r["case"] for r in rows] == list(SHIPPED) + list(UNBALANCED)
+    for r in rows[len(SHIPPED) :]:
+        assert (r["buses"], r["nodes"], r["loads"], r["ders"]) == UNBALANCED[r["case"]]
+    for r in rows[: len(SHIPPED)]:
         n_bus, n_branch, in_service, n_der, load_p, load_q, meshed = SHIPPED[r["case"]]
         assert (r["buses"], r["branches"] + r["branches_open"], r["branches"], r["ders"]) == (n_bus, n_branch, in_service, n_der)
         assert r["load_mw"] == pytest.approx(load_p, abs=1e-6) and r["load_mvar"] == pytest.approx(load_q, abs=1e-6)

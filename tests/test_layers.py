@@ -33,7 +33,7 @@ LAYERS: tuple[tuple[str, tuple[str, ...]], ...] = (
             "opfbench.state",
         ),
     ),
-    ("network", ("opfbench.network", "opfbench.capability")),
+    ("network", ("opfbench.network", "opfbench.capability", "opfbench.multiphase")),
     ("cases", ("opfbench.io", "opfbench.cases")),
     ("powerflow", ("opfbench.powerflow",)),
     ("records", ("opfbench.scenario", "opfbench.result", "opfbench.schema")),

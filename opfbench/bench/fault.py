@@ -25,7 +25,7 @@ from opfbench.timing import best_ms
 
 def run() -> dict:
     case = load_case("paper33")
-    net = case.network
+    net = case.balanced("the fault benchmark")
     point = operating_point(net)
     model = build_model(point.scenario, run_strategy("lfma", point.scenario, 0.0).q_mvar[0], ModelParams())
     fault = FaultParams(bus=27)

@@ -221,7 +221,7 @@ def bench_mv(code: str = MV_CASE, k: float = 0.0, repeats: int = 3, peer_every: 
     index = pd.date_range(PAPER_DAY, periods=96, freq="15min", tz=PAPER_DAY_TZ)
     assert case.series is not None and case.load_index is not None and case.der_index is not None
     load_p, load_q, der_p = case.series.rows(index)
-    day = Scenario.from_series(case.network, load_p, load_q, der_p)
+    day = Scenario.from_series(case.balanced("the OPF benchmark"), load_p, load_q, der_p)
     n = day.n_snapshots
 
     def fresh() -> Scenario:

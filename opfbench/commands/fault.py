@@ -139,7 +139,7 @@ def run(args: argparse.Namespace) -> int:
     from opfbench.study.training_checks import check_params
 
     case = load_case(case_spec(args.case, args))
-    net = case.network
+    net = case.balanced("the fault study (a balanced three-phase RMS model)")
     if args.duration_ms < 0:
         raise InputError(f"--duration-ms must be ≥ 0, got {args.duration_ms:g}")
     if args.fault_impedance < 0:

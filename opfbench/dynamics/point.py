@@ -81,6 +81,6 @@ def case_source(case: Case, params: ModelParams) -> ModelParams:
     if case.short_circuit is None:
         return params
     s_sc, rx = case.short_circuit
-    z = case.network.base_mva / s_sc
+    z = case.balanced("the fault study (a balanced three-phase RMS model)").base_mva / s_sc
     x = z / np.hypot(1.0, rx)
     return replace(params, source=replace(params.source, impedance_pu=float(x), resistance_pu=float(rx * x)))

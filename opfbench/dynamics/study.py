@@ -247,7 +247,7 @@ class FaultFamily:
 def plan(config: FaultConfig, case: Case) -> FaultFamily:
     """Check the config, choose the operating point, run the strategies for their
     setpoints and make one task per distinct model of each variant."""
-    net = case.network
+    net = case.balanced("the fault study (a balanced three-phase RMS model)")
     variants = config.check(net)
     point = operating_point(net, config.load_scale, config.der_scale, config.time, case)
     with threadpool_limits(1):

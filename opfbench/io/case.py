@@ -11,6 +11,7 @@ import numpy as np
 import pandas as pd
 
 from opfbench.errors import InputError
+from opfbench.multiphase import PhaseNetwork
 from opfbench.network import Network
 
 
@@ -72,7 +73,8 @@ class CaseSeries:
 
 @dataclass(frozen=True, eq=False)
 class Case:
-    """What `opfbench.io.load_case` returns. `stored`: (load P, load Q, DER P, DER Q) per
+    """What `opfbench.io.load_case` returns: `network` a balanced `Network` or, for OpenDSS
+    feeders, a three-phase `PhaseNetwork`. `stored`: (load P, load Q, DER P, DER Q) per
     element as the source stores them (None: the source has no per-element operating
     point, e.g. a MATPOWER file's DER); `series`: the case's own time series or None;
     `short_circuit`: (S″k MVA, R/X) of the upstream grid at the slack, None when the
@@ -81,7 +83,7 @@ class Case:
     pandapower `load` and `sgen` index; None for sources without such rows)."""
 
     spec: str
-    network: Network
+    network: Network | PhaseNetwork
     stored: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None = None
     series: CaseSeries | None = None
     short_circuit: tuple[float, float] | None = None
@@ -99,6 +101,13 @@ class Case:
     @property
     def name(self) -> str:
         return self.network.name
+
+    def balanced(self, what: str) -> Network:
+        """The balanced network; InputError naming the case and `what` (the work that needs
+        a balanced model) for a three-phase feeder."""
+        if isinstance(self.network, PhaseNetwork):
+            raise InputError(f"{what} needs a balanced case; {self.spec} is a three-phase (unbalanced) feeder")
+        return self.network
 
     @cached_property
     def data_sha256(self) -> str:

@@ -1,12 +1,14 @@
 """Case sources behind one interface: `load_case(spec)` → `Case` (network, stored
-operating point, its own time series when it has them, notes).
+operating point, its own time series when it has them, notes; the network a balanced
+`Network` or, for OpenDSS feeders, a three-phase `PhaseNetwork`).
 
 Specs (`opfbench.io.spec`): a SOURCE of one of the sources `opfbench.io.sources` declares
 (the shipped names, MATPOWER `.m` and pandapower `.json` files, SimBench grids; its
 `formats()` names them in every help and error text), with the options `der=`, `der-pf=`
 and `line-z=` (a perturbed model). Cases are cached per process by spec (files also by
-their modification time and size), so a worker that runs many tasks of one case reads it
-once; SimBench grids, slow to extract, also on disk across processes (`opfbench.io.disk_cache`).
+their modification time and size, an OpenDSS master also by the newest file in its
+folder), so a worker that runs many tasks of one case reads it once; SimBench grids and
+OpenDSS feeders, slow to read, also on disk across processes (`opfbench.io.disk_cache`).
 """
 
 from __future__ import annotations
@@ -22,6 +24,7 @@ from opfbench.errors import InputError
 from opfbench.io.case import Case, CaseSeries
 from opfbench.io.sources import formats, source_of
 from opfbench.io.spec import DEFAULT_DER_PF, CaseSpec, parse_der_list, parse_spec
+from opfbench.multiphase import PhaseNetwork
 from opfbench.network import DER, Network
 from opfbench.state import PROCESS
 
@@ -45,14 +48,21 @@ PROCESS.on_reset("cases read", _forget_cases)
 
 
 def _stamp(spec: CaseSpec) -> tuple:
-    if source_of(spec.source).file:
-        path = Path(spec.source)
-        try:
-            st = path.stat()
-        except OSError:
-            raise InputError(f"case file {spec.source!r} not found (a case is {formats()})") from None
-        return (str(path.resolve()), st.st_mtime_ns, st.st_size)
-    return ()
+    source = source_of(spec.source)
+    return file_stamp(source.path(spec.source), source.folder) if source.file else ()
+
+
+def file_stamp(path: Path, folder: bool = False) -> tuple:
+    """(path, modification time, size) of a case file; with `folder` also the newest
+    modification time in its folder (the files an OpenDSS master reads)."""
+    try:
+        st = path.stat()
+    except OSError:
+        raise InputError(f"case file {str(path)!r} not found (a case is {formats()})") from None
+    stamp: tuple = (str(path.resolve()), st.st_mtime_ns, st.st_size)
+    if folder:
+        stamp += (max((f.stat().st_mtime_ns for f in path.resolve().parent.rglob("*") if f.is_file()), default=0),)
+    return stamp
 
 
 def load_case(spec: str) -> Case:
@@ -74,13 +84,18 @@ def load_case(spec: str) -> Case:
 
 
 def load_network(spec: str) -> Network:
-    """The network of `load_case(spec)`."""
-    return load_case(spec).network
+    """The balanced network of `load_case(spec)`; InputError for a three-phase feeder
+    (`load_case` gives its `PhaseNetwork`)."""
+    return load_case(spec).balanced("this command (for now only `opfbench pf` and `opfbench cases` read three-phase feeders)")
 
 
 def _read(spec: CaseSpec) -> Case:
     der_pf = DEFAULT_DER_PF if spec.der_pf is None else spec.der_pf
     case = source_of(spec.source).read(spec, der_pf)
+    if isinstance(case.network, PhaseNetwork):
+        if spec.der is not None or spec.line_z is not None:
+            raise InputError(f"case {spec.text!r}: der= and line-z= apply to balanced cases; this is a three-phase feeder")
+        return case
     if spec.der is not None and spec.der != "gens":
         case = _with_listed_ders(case, spec, der_pf)
     if spec.line_z is not None:
@@ -101,7 +116,7 @@ def _read(spec: CaseSpec) -> Case:
 
 def _with_listed_ders(case: Case, spec: CaseSpec, der_pf: float) -> Case:
     """`case` with the DER of the spec's `der=` list (only on a case without DER)."""
-    net = case.network
+    net = case.balanced("der=")
     if net.ders:
         raise InputError(f"case {spec.text!r}: the case already has {len(net.ders)} DER; der= places DER on a case without")
     ders = []
@@ -117,7 +132,7 @@ def _with_listed_ders(case: Case, spec: CaseSpec, der_pf: float) -> Case:
 
 def _with_line_impedances(case: Case, factor: float) -> Case:
     """`case` with every line's r and x times `factor` (`opfbench.io.spec`: line-z)."""
-    net = case.network
+    net = case.balanced("line-z=")
     line = (net.base_kv[net.f] == net.base_kv[net.t]) & (net.tap == 1.0) & (net.shift == 0.0)
     scale = np.where(line, factor, 1.0)
     note = f"line-z={factor!r}: the series impedance of {int(line.sum())} lines × {factor:g} (a perturbed model)"

@@ -28,7 +28,8 @@ Reader = Callable[["CaseSpec", float], "Case"]  # (spec, the inverters' der-pf) 
 class CaseSource:
     """A source of cases: `kind` (what `CaseSpec.kind` says), `shown` (how help texts name
     it), `prefix` or `suffix` of the SOURCE it claims (neither: every other name), `file`
-    (SOURCE is a file's path: cached by its modification time and size), `read`."""
+    (SOURCE is a file's path: cached by its modification time and size; `folder`: and by
+    the newest file in its folder, which it reads too), `read`."""
 
     kind: str
     shown: str
@@ -36,6 +37,11 @@ class CaseSource:
     prefix: str = ""
     suffix: str = ""
     file: bool = False
+    folder: bool = False
+
+    def path(self, source: str) -> Path:
+        """The file a file source's SOURCE names (its prefix dropped)."""
+        return Path(source.removeprefix(self.prefix))
 
     def claims(self, source: str) -> bool:
         """`source` is this source's (a source without prefix or suffix claims none: it
@@ -83,12 +89,26 @@ def _pandapower(spec: CaseSpec, der_pf: float) -> Case:
     return Case(spec.text, conv.network, stored, None, conv.short_circuit, conv.notes, conv.load_index, conv.sgen_index)
 
 
+OPENDSS = "opendss:"
+
+
+def _opendss(spec: CaseSpec, der_pf: float) -> Case:
+    from opfbench.io.opendss import opendss_case
+
+    return opendss_case(spec, Path(spec.source.removeprefix(OPENDSS)), None)
+
+
 def _shipped(spec: CaseSpec, der_pf: float) -> Case:
     from opfbench.cases import CASE_NAMES, shipped_network
+    from opfbench.cases.opendss_cases import OPENDSS_NAMES
     from opfbench.io.case import Case
+    from opfbench.io.opendss import opendss_case
 
+    if spec.source in OPENDSS_NAMES:
+        return opendss_case(spec, None, spec.source)
     if spec.source not in CASE_NAMES:
-        raise InputError(f"unknown case {spec.source!r}: give one of {', '.join(CASE_NAMES)}, or {formats(without='shipped')}")
+        names = ", ".join(CASE_NAMES + OPENDSS_NAMES)
+        raise InputError(f"unknown case {spec.source!r}: give one of {names}, or {formats(without='shipped')}")
     return Case(spec.text, shipped_network(spec.source))
 
 
@@ -101,6 +121,14 @@ SOURCES: tuple[CaseSource, ...] = (
         "simbench:CODE (a SimBench LV/MV grid with its own profiles, e.g. simbench:1-MV-rural--0-sw)",
         _simbench,
         prefix="simbench:",
+    ),
+    CaseSource(
+        "opendss",
+        "opendss:PATH (an OpenDSS master file, read by OpenDSS itself: a three-phase feeder)",
+        _opendss,
+        prefix=OPENDSS,
+        file=True,
+        folder=True,
     ),
 )
 """Every source, in the order help texts name them."""

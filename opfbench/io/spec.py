@@ -4,8 +4,8 @@ worker, tables).
     SOURCE[?der=DER&der-pf=PF&line-z=F]
 
 SOURCE is one of the case sources `opfbench.io.sources` declares (its `formats()` names
-them: the shipped names, MATPOWER `.m` and pandapower `.json` files, `simbench:CODE`).
-Options:
+them: the shipped names, MATPOWER `.m` and pandapower `.json` files, `simbench:CODE`,
+`opendss:PATH`). Options:
 
 - `der=gens` (MATPOWER files): the case's non-slack generators become DER
   (`opfbench.io.matpower`); `der=BUS:KIND:MW[:ENERGY],…`: DER placed at those buses
@@ -102,6 +102,8 @@ def parse_spec(text: str) -> CaseSpec:
     spec = CaseSpec(source, der, None if der_pf == DEFAULT_DER_PF else der_pf, None if line_z == NOMINAL_LINE_Z else line_z)
     if der is not None and der != "gens":
         parse_der_list(der, text)
+    if spec.kind == "opendss" and not spec.source.removeprefix("opendss:").strip():
+        raise InputError(f"case {text!r}: opendss: needs the path of an OpenDSS master file, e.g. opendss:my/Master.dss")
     if der == "gens" and spec.kind != "matpower":
         raise InputError(f"case {text!r}: der=gens reads a MATPOWER file's generators; this case is {spec.kind}")
     return spec

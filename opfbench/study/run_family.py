@@ -55,7 +55,7 @@ class StudyRun:
 
 def _case_info(case: str) -> dict:
     loaded = load_case(case)
-    net = loaded.network
+    net = loaded.balanced("a study (for now only `opfbench pf` and `opfbench cases` read three-phase feeders)")
     return {
         "buses": int(net.n_bus),
         "ders": [
@@ -185,9 +185,10 @@ def prepare(config: StudyConfig) -> RunFamily:
     for case in config.cases:
         loaded = load_case(case)
         data[case] = loaded.data_sha256
+        net = loaded.balanced("a study (for now only `opfbench pf` and `opfbench cases` read three-phase feeders)")
         for label in config.strategies:
             if label in running:
-                configuration(label).spec.check_network(loaded.network)
+                configuration(label).spec.check_network(net)
     tasks = plan_tasks(config, period, data)
     _probe_plugins(tasks, config, period)
     return RunFamily(config, period, tasks)

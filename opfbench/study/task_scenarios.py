@@ -84,7 +84,7 @@ def chunk_scenario(
     own = load_case(case)
     if own.series is not None:
         return _series_scenario(own, night_mode, forecast, profiles.index, night, n_steps)
-    net = own.network
+    net = own.balanced("a study")
     load, pv_all, wind_all = (profiles[c].to_numpy() for c in ("load", "pv", "wind"))
     pv_all = pv_all * ~night if night_mode == "disconnected" else pv_all
     pv, wind = pv_all[:n_steps], wind_all[:n_steps]
@@ -109,12 +109,13 @@ def _series_scenario(
     instant, if present, is the next step, for the oracle); night modes on its solar units."""
     load_p, load_q, der_p = case.series.rows(times) if case.series is not None else (None, None, None)
     assert load_p is not None and load_q is not None and der_p is not None
+    net = case.balanced("a study")
     if night_mode == "disconnected":
-        der_p = np.where(night[:, None] & case.network.der_solar[None, :], 0.0, der_p)
+        der_p = np.where(night[:, None] & net.der_solar[None, :], 0.0, der_p)
     ahead = None
     if forecast == "oracle":
         ahead = np.vstack([der_p[1 : n_steps + 1], der_p[len(der_p) - 1 :]])[:n_steps]
-    scenario = Scenario.from_series(case.network, load_p[:n_steps], load_q[:n_steps], der_p[:n_steps], ahead)
+    scenario = Scenario.from_series(net, load_p[:n_steps], load_q[:n_steps], der_p[:n_steps], ahead)
     if night_mode == "connected-q":
         scenario = scenario.with_night_q(night[:n_steps])
     return scenario

@@ -1,0 +1,171 @@
+"""Loads and DER as branches between two nodes, and OpenDSS's load models as one current
+function.
+
+A load or DER element of p phases is p branches a → b, each carrying 1/p of the element's
+power (OpenDSS's rule: "the load is assumed balanced over the no. of phases defined"):
+
+- wye: phase node → the element's neutral (its last conductor: ground, or a neutral node);
+- delta: phase node i → phase node i+1 (the last wraps to the first); a one-phase delta
+  element is one branch between its two nodes.
+
+Each branch has a base voltage: for wye elements of two or three phases the element's
+kV/√3, for every other element (delta, one-phase wye) its kV — OpenDSS's
+`UpdateVoltageBases`. The voltage across a branch in p.u. of that base is what a load
+model, and a DER's own voltage measurement, reads.
+
+Signs: a load branch *draws* its current from node a into node b (power positive =
+consumed); a DER branch *injects* (power positive = generated). Units: V, A, W, var.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.sparse as sp
+
+GROUND = -1
+"""Node index of ground (OpenDSS's node 0): a branch to ground has b = GROUND."""
+
+CONSTANT_PQ, CONSTANT_Z, EXPONENTIAL, CONSTANT_I = 1, 2, 4, 5
+LOAD_MODELS = {
+    CONSTANT_PQ: "constant P and Q",
+    CONSTANT_Z: "constant impedance",
+    EXPONENTIAL: "exponential (CVR factors)",
+    CONSTANT_I: "constant current magnitude",
+}
+"""OpenDSS load models opfbench evaluates (`Load.model`); others are refused by the reader."""
+
+
+def _frozen(arr: object) -> np.ndarray:
+    arr = np.array(arr)
+    arr.setflags(write=False)
+    return arr
+
+
+@dataclass(frozen=True, eq=False)
+class Branches:
+    """Elements (loads or DER) as branches. Arrays (n_branch,): `owner` the element's index,
+    `a` the phase node, `b` the other node (GROUND, a neutral or another phase), `vbase_v`
+    the branch's base voltage (V), `share` the element's power fraction on it (1/phases).
+    `n_owner` elements in all (an element may have no branch only if it has no phase)."""
+
+    owner: np.ndarray
+    a: np.ndarray
+    b: np.ndarray
+    vbase_v: np.ndarray
+    share: np.ndarray
+    n_owner: int
+
+    def __post_init__(self) -> None:
+        for name, kind in (("owner", int), ("a", int), ("b", int), ("vbase_v", float), ("share", float)):
+            object.__setattr__(self, name, _frozen(np.asarray(getattr(self, name), dtype=kind)))
+
+    @classmethod
+    def empty(cls) -> "Branches":
+        return cls(np.zeros(0, int), np.zeros(0, int), np.zeros(0, int), np.zeros(0), np.zeros(0), 0)
+
+    @property
+    def n(self) -> int:
+        return len(self.a)
+
+    def incidence(self, n_node: int) -> sp.csr_matrix:
+        """(n_node, n_branch) +1 at node a, −1 at node b (none at ground): a current
+        injected *into a* by the branch is `incidence @ current`."""
+        cols = np.arange(self.n)
+        to = self.b != GROUND
+        rows = np.concatenate([self.a, self.b[to]])
+        vals = np.concatenate([np.ones(self.n), -np.ones(int(to.sum()))])
+        return sp.csr_matrix((vals, (rows, np.concatenate([cols, cols[to]]))), shape=(n_node, self.n))
+
+
+@dataclass(frozen=True, eq=False)
+class LoadModels:
+    """OpenDSS's voltage dependence of each load element (arrays (n_load,)): `model` 1
+    constant P and Q, 2 constant impedance, 4 exponential (P ∝ u^cvr_p, Q ∝ u^cvr_q,
+    OpenDSS's CVRwatts/CVRvars), 5 constant current magnitude; u = |V_branch|/V_base.
+
+    Models 1, 4 and 5 hold their law for vminpu < u ≤ vmaxpu and switch, as OpenDSS does,
+    to an impedance outside it: above vmaxpu the admittance that gives the nominal power
+    at vmaxpu (model 5: the nominal current); from vminpu down to vlowpu a current
+    magnitude falling linearly to that of the nominal impedance at vlowpu; below vlowpu
+    the nominal impedance. Model 2 is an impedance everywhere. The nominal impedance is
+    the one that draws the element's present power (its profile value) at u = 1.
+    """
+
+    model: np.ndarray
+    vminpu: np.ndarray
+    vmaxpu: np.ndarray
+    vlowpu: np.ndarray
+    cvr_p: np.ndarray
+    cvr_q: np.ndarray
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "model", _frozen(np.asarray(self.model, dtype=int)))
+        for name in ("vminpu", "vmaxpu", "vlowpu", "cvr_p", "cvr_q"):
+            object.__setattr__(self, name, _frozen(np.asarray(getattr(self, name), dtype=float)))
+
+    @classmethod
+    def empty(cls) -> "LoadModels":
+        z = np.zeros(0)
+        return cls(np.zeros(0, int), z, z, z, z, z)
+
+    def branch_law(self, owner: np.ndarray) -> "BranchLaw":
+        """The per-branch constants of the current function (`BranchLaw.current`)."""
+        model = self.model[owner]
+        exp_p = np.select([model == CONSTANT_PQ, model == CONSTANT_Z, model == CONSTANT_I], [0.0, 2.0, 1.0], self.cvr_p[owner])
+        exp_q = np.select([model == CONSTANT_PQ, model == CONSTANT_Z, model == CONSTANT_I], [0.0, 2.0, 1.0], self.cvr_q[owner])
+        vmin, vmax, vlow = self.vminpu[owner], self.vmaxpu[owner], self.vlowpu[owner]
+        constant_i = model == CONSTANT_I
+        return BranchLaw(
+            exp_p[:, None] - 1.0,
+            exp_q[:, None] - 1.0,
+            (model != CONSTANT_Z)[:, None],
+            vmin[:, None],
+            vmax[:, None],
+            vlow[:, None],
+            np.where(constant_i, 1.0, 1.0 / np.where(vmin > 0, vmin, 1.0))[:, None],
+            np.where(constant_i, vmax, vmax**2)[:, None],
+        )
+
+
+@dataclass(frozen=True, eq=False)
+class BranchLaw:
+    """Per-branch constants (columns of shape (n_branch, 1)) of `current`: in-band
+    exponents of u for the P and Q parts of the current (law exponent − 1), whether the
+    branch switches to impedances outside [vminpu, vmaxpu], the limits, the current factor
+    at vminpu and the divisor of u above vmaxpu."""
+
+    h_p: np.ndarray
+    h_q: np.ndarray
+    switches: np.ndarray
+    vmin: np.ndarray
+    vmax: np.ndarray
+    vlow: np.ndarray
+    at_vmin: np.ndarray
+    above_div: np.ndarray
+
+    def current(self, v_branch: np.ndarray, p_w: np.ndarray, q_var: np.ndarray, vbase_v: np.ndarray) -> np.ndarray:
+        """(n_branch, S) complex A drawn from node a into node b at branch voltages
+        `v_branch` (n_branch, S) complex V, for branch powers p_w, q_var (n_branch, S) at
+        their law's reference (u = 1) and base voltages `vbase_v` (n_branch, 1):
+
+            I = (P·h_P(u) − j·Q·h_Q(u))·e^{jθ}/V_base,   u = |V|/V_base, θ = arg V,
+
+        h = u^(exponent − 1) in band, and the impedance switches of `LoadModels` outside."""
+        with np.errstate(divide="ignore", invalid="ignore"):
+            mag = np.abs(v_branch)
+            u = mag / vbase_v
+            unit = np.where(mag > 0, v_branch / mag, 1.0)
+            h_p = np.power(u, self.h_p)
+            h_q = np.power(u, self.h_q)
+            if self.switches.any():
+                low = self.switches & (u <= self.vlow)
+                ramp = self.switches & ~low & (u <= self.vmin)
+                high = self.switches & (u > self.vmax)
+                slope = (self.at_vmin - self.vlow) / np.where(self.vmin > self.vlow, self.vmin - self.vlow, 1.0)
+                outside = np.select([low, ramp, high], [u, self.vlow + slope * (u - self.vlow), u / self.above_div], 0.0)
+                band = ~(low | ramp | high)
+                h_p = np.where(band, h_p, outside)
+                h_q = np.where(band, h_q, outside)
+        return (p_w * h_p - 1j * (q_var * h_q)) * unit / vbase_v

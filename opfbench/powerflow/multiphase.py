@@ -1,0 +1,287 @@
+"""The batched three-phase power flow on a `PhaseNetwork`: OpenDSS's own "normal"
+current-injection iteration, on S snapshots at once.
+
+The network equations at node level are
+
+    Y·V = I_source + I_branches(V),
+
+Y the elements' and the source's admittances, I_source the source's Norton current, and
+I_branches the currents the load branches draw (their OpenDSS models,
+`opfbench.multiphase.branches`) and the DER branches inject (constant power). As OpenDSS
+does, the loads' nominal admittances Y_L go into the factored matrix and the iteration is
+
+    V ← A⁻¹·(I_source + I_branches(V) + Y_L·V),    A = Y + Y_L,
+
+A factored once per network (SuperLU) and reused across snapshots and iterations (a
+constant-impedance load is exact in one step). Only the nodes the branches touch (K)
+enter the iteration; with few of them (`DENSE_MAX_NODES`, `DENSE_MAX_ENTRIES`) the
+impedances Z_NK = (A⁻¹)_{:,K} are formed once, an iteration is one small dense product
+Z_KK·J on all snapshots' columns, and every node follows from one product Z_NK·J at the
+end; with many the iteration solves with the sparse factor on every node.
+
+A snapshot has converged when its largest node-voltage update is below `tol` p.u. of the
+node's base voltage and the equations hold at the result: at every node the current
+mismatch |Y·V − I_source − I_branches(V)| is below `MISMATCH_REL` of the currents that
+meet there (`_residual`). One that has not after `max_iter` iterations is reported not
+converged (its voltages are no operating point and carry no figure).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from functools import cached_property, lru_cache
+from typing import Any
+
+import numpy as np
+import scipy.sparse as sp
+from threadpoolctl import ThreadpoolController
+
+from opfbench.errors import InputError
+from opfbench.multiphase import GROUND, PhaseNetwork
+from opfbench.powerflow.common import MAX_SWEEP_ITER, SWEEP_TOLERANCE
+from opfbench.powerflow.sparse import factorize
+
+DENSE_MAX_NODES = 800
+"""Iterate on the reduced dense impedance when at most this many nodes carry branches…"""
+DENSE_MAX_ENTRIES = 2**22
+"""… and the impedances from them to every node (n_node × that many, complex) take at most
+this many entries (64 MB)."""
+MISMATCH_REL = 1e-8
+"""The largest relative nodal current mismatch a converged snapshot may have (`_residual`)."""
+_CHUNK = 256  # columns per sparse solve when forming Z_KK (memory: n_node × _CHUNK)
+_BLAS = ThreadpoolController()
+
+
+@dataclass(frozen=True, eq=False)
+class PhaseFlowResult:
+    """Node voltages `v` (S, n_node) complex V of S snapshots, `converged` (S,) bool,
+    `iterations` (S,), `mismatch` (S,) the largest relative nodal current mismatch at the
+    result (`_residual`), `losses_kw` (S,)
+    active losses in the power-delivery elements (the source's Thevenin impedance
+    excluded, as OpenDSS's circuit losses): the power the source delivers minus what the
+    branches draw — free of the round-off that summing V·conj(Y·V) over near-zero-impedance
+    switches carries."""
+
+    net: PhaseNetwork
+    v: np.ndarray
+    converged: np.ndarray
+    iterations: np.ndarray
+    mismatch: np.ndarray
+    losses_kw: np.ndarray
+
+    @property
+    def n_snapshots(self) -> int:
+        return self.v.shape[0]
+
+    @cached_property
+    def node_vm_pu(self) -> np.ndarray:
+        """(S, n_node) |V| in p.u. of each node's phase-to-neutral base (OpenDSS's node p.u.)."""
+        return np.abs(self.v) / self.net.node_base_v
+
+    @cached_property
+    def vm(self) -> np.ndarray:
+        """(S, n_monitored) the voltages the band applies to, p.u. (`PhaseNetwork.monitored`)."""
+        a, b, base, _ = self.net.monitored
+        vx = np.concatenate([self.v, np.zeros((self.n_snapshots, 1), dtype=complex)], axis=1)
+        return np.abs(vx[:, a] - vx[:, b]) / base
+
+    @cached_property
+    def source_kva(self) -> np.ndarray:
+        """(S,) complex power the source delivers into its bus (kW + j kvar)."""
+        return _source_kva(self.net, self.v.T)
+
+    @cached_property
+    def vuf(self) -> np.ndarray:
+        """(S, n_three_phase_buses) voltage unbalance factor |V₂|/|V₁| at the buses with
+        phases 1, 2, 3 (`PhaseNetwork.three_phase_nodes`), from the phase voltages."""
+        nodes = self.net.three_phase_nodes
+        a = np.exp(2j * np.pi / 3)
+        va, vb, vc = (self.v[:, nodes[:, k]] for k in range(3))
+        v1 = (va + a * vb + a * a * vc) / 3
+        v2 = (va + a * a * vb + a * vc) / 3
+        with np.errstate(all="ignore"):
+            return np.abs(v2) / np.abs(v1)
+
+
+@dataclass(frozen=True, eq=False)
+class _System:
+    """Per-network data of the iteration (built once, `_system`)."""
+
+    k: np.ndarray  # nodes the branches touch
+    lu: Any  # scipy's SuperLU of A = Y + Y_L
+    v_source: np.ndarray  # (n_node,) A⁻¹·I_source
+    y_load_kk: sp.csr_matrix  # (m, m) Y_L on K
+    z_nk: np.ndarray | None  # (n_node, m) (A⁻¹)_{:,K} when dense
+    z_kk: np.ndarray | None  # (m, m) its rows K
+    load_a: np.ndarray  # load branch ends, positions in K (m = ground)
+    load_b: np.ndarray
+    der_a: np.ndarray
+    der_b: np.ndarray
+    load_inject: sp.csr_matrix  # (m, n_load_branch): branch current (a → b) → node injections
+    der_inject: sp.csr_matrix  # (m, n_der_branch)
+    base_k: np.ndarray  # (m, 1) node base voltages on K
+
+
+@lru_cache(maxsize=8)
+def _system(net: PhaseNetwork) -> _System:
+    lb, db = net.load_branches, net.der_branches
+    ends = [lb.a, lb.b[lb.b != GROUND], db.a, db.b[db.b != GROUND]]
+    k = np.unique(np.concatenate(ends)) if any(e.size for e in ends) else np.zeros(0, dtype=int)
+    m = len(k)
+    pos = np.full(net.n_node, m)
+    pos[k] = np.arange(m)
+    pos_g = np.append(pos, m)  # GROUND (−1) → the zero row m
+
+    y_branch = (net.load_p_mw[lb.owner] - 1j * net.load_q_mvar[lb.owner]) * 1e6 * lb.share / lb.vbase_v**2
+    c_load = lb.incidence(net.n_node)
+    y_load = (c_load @ sp.diags(y_branch) @ c_load.T).tocsc()
+    lu = factorize(net.ybus + y_load)
+    v_source = lu.solve(np.asarray(net.source_current, dtype=complex))
+    z_nk = None
+    if 0 < m <= DENSE_MAX_NODES and net.n_node * m <= DENSE_MAX_ENTRIES:
+        z_nk = np.empty((net.n_node, m), dtype=complex)
+        for start in range(0, m, _CHUNK):
+            cols = k[start : start + _CHUNK]
+            rhs = np.zeros((net.n_node, len(cols)), dtype=complex, order="F")
+            rhs[cols, np.arange(len(cols))] = 1.0
+            z_nk[:, start : start + len(cols)] = lu.solve(rhs)
+    return _System(
+        k,
+        lu,
+        v_source,
+        y_load[k][:, k].tocsr(),
+        z_nk,
+        None if z_nk is None else np.ascontiguousarray(z_nk[k]),
+        pos_g[lb.a],
+        pos_g[lb.b],
+        pos_g[db.a],
+        pos_g[db.b],
+        lb.incidence(net.n_node)[k].tocsr() * -1.0,
+        db.incidence(net.n_node)[k].tocsr(),
+        net.node_base_v[k][:, None],
+    )
+
+
+def _powers(label: str, values: np.ndarray | None, n_snap: int, n: int) -> np.ndarray:
+    if values is None:
+        return np.zeros((n_snap, n))
+    arr = np.asarray(values, dtype=float)
+    if arr.shape != (n_snap, n):
+        raise InputError(f"three-phase power flow: {label} must have shape ({n_snap}, {n}), got {arr.shape}")
+    if not np.all(np.isfinite(arr)):
+        raise InputError(f"three-phase power flow: {label} contains NaN or inf")
+    return arr
+
+
+def solve_phase_flow(
+    net: PhaseNetwork,
+    load_p_mw: np.ndarray,
+    load_q_mvar: np.ndarray,
+    der_p_mw: np.ndarray | None = None,
+    der_q_mvar: np.ndarray | None = None,
+    v0: np.ndarray | None = None,
+    tol: float = SWEEP_TOLERANCE,
+    max_iter: int = MAX_SWEEP_ITER,
+) -> PhaseFlowResult:
+    """The power flow of S snapshots (module docstring): each load element's P and Q
+    (S, n_load) MW/MVAr at its law's reference voltage (constant power: its power; constant
+    Z or I: its power at the base voltage), each DER's P and Q (S, n_der) MW/MVAr
+    generated (default 0); `v0` (S, n_node) complex V an optional warm start (rows that
+    are not finite and non-zero start from the no-load state)."""
+    load_p = np.atleast_2d(np.asarray(load_p_mw, dtype=float))
+    n_snap = load_p.shape[0]
+    load_p = _powers("load P", load_p, n_snap, net.n_load)
+    load_q = _powers("load Q", load_q_mvar, n_snap, net.n_load)
+    der_p = _powers("DER P", der_p_mw, n_snap, len(net.ders))
+    der_q = _powers("DER Q", der_q_mvar, n_snap, len(net.ders))
+    sys_ = _system(net)
+    lb, db = net.load_branches, net.der_branches
+    law = net.load_models.branch_law(lb.owner)
+    vbase_load = lb.vbase_v[:, None]
+    m = len(sys_.k)
+    powers = (
+        load_p.T[lb.owner] * lb.share[:, None] * 1e6,
+        load_q.T[lb.owner] * lb.share[:, None] * 1e6,
+        (der_p.T + 1j * der_q.T)[db.owner] * db.share[:, None] * 1e6,
+    )
+
+    def injections(v_k: np.ndarray, p_br: np.ndarray, q_br: np.ndarray, s_der: np.ndarray) -> np.ndarray:
+        """(m, S') branch currents injected into the nodes K at their voltages v_k (m, S'),
+        for the branch powers of those S' snapshots."""
+        vx = np.concatenate([v_k, np.zeros((1, v_k.shape[1]), dtype=complex)])
+        drawn = law.current(vx[sys_.load_a] - vx[sys_.load_b], p_br, q_br, vbase_load)
+        with np.errstate(all="ignore"):
+            given = np.conj(s_der / (vx[sys_.der_a] - vx[sys_.der_b]))
+        return sys_.load_inject @ drawn + sys_.der_inject @ given
+
+    dense = sys_.z_nk is not None
+    warm = None
+    if v0 is not None:
+        warm = np.asarray(v0, dtype=complex).reshape(n_snap, net.n_node).T
+        usable = np.isfinite(warm).all(axis=0) & (np.abs(warm) > 0).any(axis=0)
+    rows = sys_.k if dense else np.arange(net.n_node)  # the nodes the iteration carries
+    v = np.repeat(sys_.v_source[rows][:, None], n_snap, axis=1)
+    if warm is not None:
+        v[:, usable] = warm[rows][:, usable]
+    at_k = np.arange(m) if dense else sys_.k  # K's rows in v
+    iterations = np.zeros(n_snap, dtype=np.int64)
+    settled = np.full(n_snap, m == 0)  # nothing voltage-dependent: the no-load state is the answer
+    active = np.arange(n_snap)
+    v_act, p_act = v, powers
+    with _BLAS.limit(limits=1, user_api="blas"), np.errstate(all="ignore"):
+        for it in range(1, max_iter + 1 if m else 1):
+            v_k = v_act[at_k]
+            j = injections(v_k, *p_act) + sys_.y_load_kk @ v_k
+            if dense:
+                new = sys_.v_source[sys_.k][:, None] + sys_.z_kk @ j
+            else:
+                rhs = np.zeros((net.n_node, j.shape[1]), dtype=complex, order="F")
+                rhs[sys_.k] = j
+                new = sys_.v_source[:, None] + sys_.lu.solve(rhs)
+            step = (np.abs(new[at_k] - v_k) / sys_.base_k).max(axis=0)
+            iterations[active] = it
+            done = step < tol
+            settled[active[done]] = True
+            keep = ~done & np.isfinite(step)
+            if keep.all():
+                v_act = new
+                continue
+            v[:, active] = new
+            if not keep.any():
+                break
+            active, v_act = active[keep], new[:, keep]
+            p_act = tuple(x[:, keep] for x in p_act)
+        else:
+            v[:, active] = v_act
+        if dense:  # every node from the converged branch currents: V = A⁻¹·(I_source + P_K·J)
+            j = injections(v, *powers) + sys_.y_load_kk @ v
+            v = sys_.v_source[:, None] + sys_.z_nk @ j
+        given = injections(v[sys_.k], *powers)
+        mismatch = _residual(net, sys_, v, given)
+        losses = _source_kva(net, v).real + (v[sys_.k] * np.conj(given)).real.sum(axis=0) / 1e3
+    converged = settled & (mismatch < MISMATCH_REL)
+    return PhaseFlowResult(net, np.ascontiguousarray(v.T), converged, iterations, mismatch, losses)
+
+
+def _source_kva(net: PhaseNetwork, v: np.ndarray) -> np.ndarray:
+    """(S,) complex power the source delivers into its bus (kW + j kvar) at node voltages
+    v (n_node, S)."""
+    s = net.source
+    at = v[s.nodes]
+    current = s.y_s @ (s.emf_v[:, None] - at)
+    return (at * np.conj(current)).sum(axis=0) / 1e3
+
+
+def _residual(net: PhaseNetwork, sys_: _System, v: np.ndarray, given: np.ndarray) -> np.ndarray:
+    """(S,) the componentwise backward error of the network equations at V: the largest
+    nodal current mismatch |Y·V − I_source − I_branches| relative to the currents that meet
+    at the node (|Y|·|V| + |I_source| + |I_branches|). Scale-free, so a node joined by a
+    near-zero impedance switch — whose currents are large differences of large terms and
+    carry their round-off — is judged against what round-off leaves there."""
+    residual = net.ybus @ v - net.source_current[:, None]
+    residual[sys_.k] -= given
+    scale = abs(net.ybus) @ np.abs(v) + np.abs(net.source_current)[:, None]
+    scale[sys_.k] += np.abs(given)
+    with np.errstate(all="ignore"):
+        error = np.abs(residual) / np.where(scale > 0, scale, 1.0)
+    return np.where(np.isfinite(error).all(axis=0), error.max(axis=0, initial=0.0), np.inf)

@@ -1,0 +1,166 @@
+"""The three-phase power flow against OpenDSS (`tests/support/opendss_feeders.py`: the
+shipped master compiled and solved by OpenDSS alone at tolerance 1e-10): every node's |V|
+within 1e-6 p.u. and the losses within 1e-4 relative — at the file's own snapshot (the
+small feeders by default, every shipped feeder under `-m slow`), at other load levels with
+the regulator taps held, and with PVSystems and Generators of a file of its own."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from opfbench.cases.opendss_cases import opendss_copy
+from opfbench.io import load_case
+from opfbench.multiphase import PhaseNetwork
+from opfbench.powerflow.multiphase import solve_phase_flow
+from tests.support.opendss_feeders import UNBALANCED_ALL, UNBALANCED_SMALL, bus_vuf, line_impedance_ohm, set_tap, solve
+
+V_TOL_PU = 1e-6
+LOSS_REL = 1e-4
+
+
+def _network(name: str) -> tuple[PhaseNetwork, tuple]:
+    case = load_case(name)
+    assert isinstance(case.network, PhaseNetwork) and case.stored is not None
+    return case.network, case.stored
+
+
+def _agrees(net: PhaseNetwork, ours, theirs) -> None:
+    assert theirs.converged and bool(ours.converged[0])
+    assert theirs.node_names == list(net.node_names)
+    dv = np.abs(ours.v[0] - theirs.v) / net.node_base_v
+    worst = int(dv.argmax())
+    assert dv.max() < V_TOL_PU, f"{net.name}: |ΔV| {dv.max():.2e} p.u. at {net.node_names[worst]}"
+    assert ours.losses_kw[0] == pytest.approx(theirs.losses_kw, rel=LOSS_REL)
+
+
+def _own_snapshot(name: str) -> None:
+    net, (load_p, load_q, der_p, der_q) = _network(name)
+    ours = solve_phase_flow(net, load_p[None], load_q[None], der_p[None], der_q[None])
+    with opendss_copy(name) as master:
+        theirs = solve(master)
+    _agrees(net, ours, theirs)
+
+
+@pytest.mark.parametrize("name", UNBALANCED_SMALL)
+def test_the_files_own_snapshot_is_opendss(name):
+    _own_snapshot(name)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("name", [n for n in UNBALANCED_ALL if n not in UNBALANCED_SMALL])
+def test_the_large_feeders_own_snapshot_is_opendss(name):
+    _own_snapshot(name)
+
+
+def _taps(net: PhaseNetwork) -> list[str]:
+    """OpenDSS commands holding every regulator at the tap our model read."""
+    out = []
+    for t in net.transformers:
+        if t.regulated:
+            name = net.elements[t.element].name.split(".", 1)[1]
+            out += [set_tap(name, w + 1, wdg.tap) for w, wdg in enumerate(t.windings)]
+    return out
+
+
+@pytest.mark.parametrize(("name", "load_mult"), [("ieee13", 0.4), ("ieee13", 1.35), ("ieee123", 1.6), ("ieee37", 0.7)])
+def test_other_load_levels_with_the_taps_held(name, load_mult):
+    """Loads scaled (OpenDSS's loadmult): the models' switches to impedance below vminpu
+    and above vmaxpu, constant Z and I and the CVR exponents all take part."""
+    net, _ = _network(name)
+    ours = solve_phase_flow(net, net.load_p_mw[None] * load_mult, net.load_q_mvar[None] * load_mult)
+    with opendss_copy(name) as master:
+        theirs = solve(master, f"set loadmult={load_mult!r}", *_taps(net), controls=False)
+    _agrees(net, ours, theirs)
+    if load_mult > 1.3:  # the case the switch to impedance matters for
+        assert (ours.node_vm_pu[0][net.load_branches.a] < 0.95).any()
+
+
+DER_LINES = (
+    "new pvsystem.pv675a phases=1 bus1=675.1 kv=2.4 kva=300 pmpp=250 irradiance=1 pf=1 vminpu=0.5 vmaxpu=1.5",
+    "new pvsystem.pv680 phases=3 bus1=680 kv=4.16 kva=500 pmpp=400 irradiance=0.8 kvar=-60 vminpu=0.5 vmaxpu=1.5",
+    "new pvsystem.pv684 phases=1 bus1=684.1.3 conn=delta kv=4.16 kva=100 pmpp=80 irradiance=1 kvar=20 vminpu=0.5 vmaxpu=1.5",
+    "new generator.g671 phases=3 bus1=671 kv=4.16 kw=300 kvar=50 model=1 vminpu=0.5 vmaxpu=1.5",
+)
+
+
+def _with_der(tmp_path, master) -> object:
+    file = tmp_path / "with_der.dss"
+    file.write_text("\n".join([f'redirect "{master}"', *DER_LINES, "set voltagebases=[115, 4.16, .48]", "calcv"]) + "\n")
+    return file
+
+
+def test_pvsystems_and_generators_of_a_file_are_der_and_solve_as_opendss(tmp_path):
+    with opendss_copy("ieee13") as master:
+        file = _with_der(tmp_path, master)
+        case = load_case(f"opendss:{file}")
+        net = case.network
+        assert isinstance(net, PhaseNetwork) and case.stored is not None
+        assert net.der_names == ("PVSystem.pv675a", "PVSystem.pv680", "PVSystem.pv684", "Generator.g671")
+        assert [d.rating_mw for d in net.ders] == pytest.approx([0.25, 0.4, 0.08, 0.3])
+        assert [d.s_rated_mva for d in net.ders] == pytest.approx([0.3, 0.5, 0.1, 0.36])  # a Generator: kVA 1.2·kW by default
+        assert net.der_branches.n == 1 + 3 + 1 + 3
+        load_p, load_q, der_p, der_q = case.stored
+        assert der_p == pytest.approx([0.25, 0.32, 0.08, 0.3], rel=1e-9)
+        assert der_q == pytest.approx([0.0, -0.06, 0.02, 0.05], abs=1e-9)
+        ours = solve_phase_flow(net, load_p[None], load_q[None], der_p[None], der_q[None])
+        theirs = solve(file)
+    _agrees(net, ours, theirs)
+
+
+def test_vuf_is_opendss_sequence_voltages():
+    net, (load_p, load_q, der_p, der_q) = _network("ieee13")
+    ours = solve_phase_flow(net, load_p[None], load_q[None])
+    with opendss_copy("ieee13") as master:
+        solve(master)
+        buses = [net.bus_names[net.node_bus[row[0]]] for row in net.three_phase_nodes]
+        theirs = np.array([bus_vuf(b) for b in buses])
+    assert ours.vuf[0] == pytest.approx(theirs, abs=1e-8)
+    assert theirs.max() > 0.01  # an unbalanced feeder: the check has something to see
+
+
+def test_line_impedance_matrices_are_opendss_own():
+    """Z from the element's primitive admittance equals OpenDSS's R + jX × length."""
+    net, _ = _network("ieee13")
+    with opendss_copy("ieee13") as master:
+        solve(master)
+        for line in net.lines:
+            name = net.elements[line.element].name.split(".", 1)[1]
+            if not line.switch:
+                assert line.z_ohm == pytest.approx(line_impedance_ohm(name), rel=1e-9, abs=1e-12), name
+    lengths = {net.elements[line.element].name: line.length_km for line in net.lines}
+    assert lengths["Line.650632"] == pytest.approx(2000 * 0.3048e-3)
+
+
+def test_the_band_applies_phase_to_phase_on_three_wire_delta_sections():
+    delta, _ = _network("ieee37")
+    names = delta.monitored[3]
+    assert "701.1-2" in names and "701.1" not in names  # 4.8 kV three-wire delta
+    assert "sourcebus.1" in names  # the source's wye-grounded side
+    wye, _ = _network("ieee13")
+    assert all("-" not in n for n in wye.monitored[3]) and "671.1" in wye.monitored[3]
+    assert wye.band == (0.95, 1.05) and _network("eulv")[0].band == (0.90, 1.10)
+
+
+def test_a_diverging_snapshot_is_counted_and_gives_no_convergence():
+    """Loads far beyond what the feeder can carry: the iteration does not settle, and the
+    snapshot says so (the ones beside it still solve)."""
+    net, _ = _network("ieee13")
+    scale = np.array([1.0, 60.0])[:, None]
+    res = solve_phase_flow(net, net.load_p_mw[None] * scale, net.load_q_mvar[None] * scale)
+    assert res.converged.tolist() == [True, False]
+
+
+@pytest.mark.parametrize("name", ["ieee13", "ieee123"])
+def test_a_batch_is_its_snapshots_one_by_one_and_a_warm_start_changes_nothing(name):
+    """Snapshots are independent columns (the dense path on ieee13's few load nodes, the
+    same on ieee123): solved together or alone, cold or warm, they agree to the tolerance."""
+    net, _ = _network(name)
+    scale = np.array([0.3, 1.0, 1.4])[:, None] * np.linspace(0.8, 1.2, net.n_load)[None, :]
+    batch = solve_phase_flow(net, net.load_p_mw * scale, net.load_q_mvar * scale)
+    assert batch.converged.all()
+    for s in range(3):
+        alone = solve_phase_flow(net, net.load_p_mw[None] * scale[s], net.load_q_mvar[None] * scale[s])
+        assert np.abs(alone.v[0] - batch.v[s]).max() / net.node_base_v.min() < 1e-9
+    warm = solve_phase_flow(net, net.load_p_mw * scale, net.load_q_mvar * scale, v0=batch.v)
+    assert warm.iterations.max() <= 2 and np.abs(warm.v - batch.v).max() / net.node_base_v.min() < 1e-9
