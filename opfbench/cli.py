@@ -12,14 +12,46 @@ import argparse
 import importlib
 import os
 import sys
+from typing import Any
 
 from opfbench.errors import OpfbenchError
 
 COMMANDS = ("cases", "pf", "snapshot", "strategies", "table", "data", "run", "forecast", "report", "fault")
 
 
+class _Once(argparse.Action):
+    """argparse's plain store, except that a second occurrence of the option is refused
+    (argparse would keep the last value silently: `--der 7:PV:0.3 --der 8:PV:0.3`)."""
+
+    def __call__(
+        self, parser: argparse.ArgumentParser, namespace: argparse.Namespace, values: Any, option_string: str | None = None
+    ) -> None:
+        given = getattr(parser, "given", None)
+        if given is not None and self.dest in given:
+            parser.error(f"{'/'.join(self.option_strings) or self.dest} given twice; give it once")
+        if given is not None:
+            given.add(self.dest)
+        setattr(namespace, self.dest, values)
+
+
+class CommandParser(argparse.ArgumentParser):
+    """The command line's parser (its subcommands' too): an option that stores one value
+    (or one list, e.g. --strategies) is given at most once; repeatable options say so
+    (action="append", --plugin)."""
+
+    def __init__(self, *args: Any, **kwargs: Any) -> None:
+        super().__init__(*args, **kwargs)
+        self.given: set[str] | None = None
+        self.register("action", None, _Once)
+        self.register("action", "store", _Once)
+
+    def parse_known_args(self, args: Any = None, namespace: Any = None) -> Any:
+        self.given = set()
+        return super().parse_known_args(args, namespace)
+
+
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(prog="opfbench", description=__doc__.splitlines()[0])
+    parser = CommandParser(prog="opfbench", description=__doc__.splitlines()[0])
     sub = parser.add_subparsers(dest="command", required=True)
     for name in COMMANDS:
         importlib.import_module(f"opfbench.commands.{name}").register(sub)

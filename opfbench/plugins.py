@@ -52,6 +52,7 @@ from __future__ import annotations
 
 import hashlib
 import importlib
+import importlib.util
 import io
 import json
 import os
@@ -251,7 +252,7 @@ def _fingerprint(source: str, depends: tuple[tuple[str, str], ...]) -> str:
 def _quiet_import(ref: str) -> Iterator[None]:
     """Run a plugin's import with its printed output held back (passed on afterwards); a
     `sys.exit` in it is the plugin's failure, named with what it printed (a script given
-    as a plugin prints its own usage)."""
+    as a plugin prints its own usage), as is any other BaseException but Ctrl-C."""
     held = io.StringIO()
     try:
         with redirect_stdout(held), redirect_stderr(held):
@@ -263,6 +264,10 @@ def _quiet_import(ref: str) -> Iterator[None]:
             + (f", printing: {said[:300]}" if said else "")
             + " — a plugin registers rules, it is not a script to run"
         ) from None
+    except (Exception, KeyboardInterrupt):  # its errors are named by `load`; Ctrl-C is the user's
+        raise
+    except BaseException as exc:  # a BaseException of its own: the plugin's failure, never a traceback
+        raise InputError(f"plugin {ref}: its import raised {type(exc).__name__}: {exc}") from None
     sys.stderr.write(held.getvalue())  # what it printed (stderr: stdout may be a --json answer)
 
 
@@ -289,13 +294,19 @@ def load(ref: str) -> PluginSource:
     InputError naming it if it cannot be loaded or registers no (valid) strategy. A file
     plugin is known by its absolute path (`canonical_ref`): any spelling loads it once."""
     given, ref = ref, canonical_ref(ref)
-    if ref in _loaded:
-        return _loaded[ref]
+    held = _loaded.get(ref) or _held_under_another_spelling(ref)
+    if held is not None:
+        return held
     own = None
     try:
         with _watching() as (modules, files):
             if _is_path(ref):
                 path = Path(ref)
+                if path.is_dir():
+                    raise InputError(
+                        f"plugin {given}: a folder; give a .py file, or a package by its module name "
+                        "(importable: its parent folder on PYTHONPATH)"
+                    )
                 if not path.is_file():
                     raise InputError(f"plugin {given}: no such file")
                 try:
@@ -323,6 +334,31 @@ def load(ref: str) -> PluginSource:
         )
     _loaded[ref] = PluginSource(ref, module, _fingerprint(source, depends), text, names, depends)
     return _loaded[ref]
+
+
+def _file_of(ref: str) -> str | None:
+    """The file a plugin ref names: its path, or a top-level module's file (found, not run)."""
+    if _is_path(ref):
+        return ref
+    module = sys.modules.get(ref)
+    if module is not None:
+        file = getattr(module, "__file__", None)
+    elif "." not in ref:  # a dotted name's parent packages would run to be searched: left to load
+        try:
+            spec = importlib.util.find_spec(ref)
+        except (ImportError, ValueError):
+            return None
+        file = spec.origin if spec is not None else None
+    else:
+        return None
+    return str(Path(file).resolve()) if file and Path(file).is_file() else None
+
+
+def _held_under_another_spelling(ref: str) -> PluginSource | None:
+    """The plugin already loaded from the same file as `ref`, named the other way (a module
+    name for a path, a path for a module name): one file, one plugin."""
+    file = _file_of(ref)
+    return next((src for other, src in _loaded.items() if file is not None and _file_of(other) == file), None)
 
 
 def _file_digest(module: types.ModuleType) -> str:

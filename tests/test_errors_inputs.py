@@ -4,6 +4,7 @@ never a traceback, never a silently wrong result. One test per class of input.""
 from __future__ import annotations
 
 import json
+import os
 import re
 import subprocess
 import sys
@@ -506,6 +507,15 @@ def test_forecast_seed_out_of_range(capsys, no_computation, seed, message):
     assert code == 2 and err == f"opfbench forecast: error: {message}\n"
 
 
+@pytest.mark.parametrize("threads", ["0", "100000"])
+def test_forecast_threads_are_bounded_by_the_cores(capsys, no_computation, threads):
+    code, err = _cli(capsys, ["forecast", "--dataset", "pv", "--quick", "--threads", threads])
+    cores = os.cpu_count() or 1
+    assert (
+        code == 2 and err == f"opfbench forecast: error: --threads lies in 1..{cores} (this machine's CPU cores), got {threads}\n"
+    )
+
+
 def test_forecast_out_on_a_file_or_unwritable_folder(capsys, no_computation, tmp_path):
     target = tmp_path / "taken"
     target.write_text("")
@@ -572,3 +582,24 @@ def test_a_refused_command_leaves_no_out_folder_behind(capsys, tmp_path, command
     assert main([*command, "--out", str(out)]) == 2
     assert capsys.readouterr().err.count("\n") == 1
     assert not (tmp_path / "made").exists()  # nor the parent it would have made
+
+
+@pytest.mark.parametrize(
+    ("command", "option"),
+    [
+        (["snapshot", "case33bw", "--der", "7:PV:0.3", "--der", "8:PV:0.3", "--strategy", "llma"], "--der"),
+        (["snapshot", "paper33", "--strategy", "llma", "--k", "0", "--k", "0.4"], "--k"),
+        (["run", "--strategies", "llma", "--strat", "lfma"], "--strategies"),  # an abbreviation is the option too
+        (["fault", "paper33", "--fault-bus", "17", "--fault-bus", "18"], "--fault-bus"),
+    ],
+)
+def test_an_option_given_twice_on_the_command_line_is_refused_not_the_last_kept(capsys, tmp_path, command, option):
+    assert main([*command, "--out", str(tmp_path / "out")] if command[0] != "snapshot" else command) == 2
+    assert f"error: {option} given twice; give it once" in capsys.readouterr().err
+    assert not (tmp_path / "out").exists()
+
+
+def test_a_repeatable_option_may_be_repeated(capsys):
+    custom = str(Path(__file__).parents[1] / "docs" / "custom_rule.py")
+    assert main(["strategies", "--plugin", custom, "--plugin", custom, "--json"]) == 0
+    assert "droop" in capsys.readouterr().out

@@ -10,7 +10,8 @@ from opfbench.cli import main
 from tests.support.contracts import check_folder, parse
 from tests.support.matpower_texts import CASE4_PV
 
-SHORT = ["paper33", "--strategies", "no-action", "llma", "--k", "0", "0.8", "--t-end", "0.6"]
+CASE_SHORT = ["paper33", "--t-end", "0.6"]
+SHORT = [*CASE_SHORT, "--strategies", "no-action", "llma", "--k", "0", "0.8"]
 
 
 @pytest.mark.parametrize(
@@ -77,7 +78,7 @@ def test_a_bad_out_is_refused_before_the_simulations(tmp_path, capsys, no_simula
 
 
 def test_a_bus_given_twice_is_simulated_once(capsys):
-    assert main(["fault", *SHORT, "--fault-bus", "18", "18", "--strategies", "no-action", "--k", "0", "--json"]) == 0
+    assert main(["fault", *CASE_SHORT, "--fault-bus", "18", "18", "--strategies", "no-action", "--k", "0", "--json"]) == 0
     out, err = capsys.readouterr()
     assert len(json.loads(out)) == 1 and "note: duplicated fault buses dropped: 18" in err
 
@@ -109,7 +110,7 @@ def test_variants_are_labelled(capsys):
         main(
             [
                 "fault",
-                *SHORT,
+                *CASE_SHORT,
                 "--fault-bus",
                 "27",
                 "--strategies",

@@ -20,13 +20,17 @@ TRAIN = "2016-03-01..2016-03-02"
 TEST = "2016-03-02T00:00..2016-03-02T06:00"
 AFFINE, IEEE = f"learned-affine:train={TRAIN}", f"learned-1547:train={TRAIN},rounds=1"  # rounds: the end-to-end fit
 PERTURBED = "paper33?line-z=1.2"
-ARGS = ["--period", TEST, "--k", "0", "--night-modes", "connected", "--forecast", "off", "--quiet"]
+ARGS = ["--k", "0", "--night-modes", "connected", "--forecast", "off", "--quiet"]
 
 
 def _run(
-    out, cases=("paper33", PERTURBED), strategies=("no-action", "volt-var", AFFINE, IEEE, "acopf"), extra=("--workers", "1")
+    out,
+    cases=("paper33", PERTURBED),
+    strategies=("no-action", "volt-var", AFFINE, IEEE, "acopf"),
+    extra=("--workers", "1"),
+    period=TEST,
 ) -> int:
-    return main(["run", "--case", *cases, "--strategies", *strategies, *ARGS, *extra, "--out", str(out)])
+    return main(["run", "--case", *cases, "--strategies", *strategies, "--period", period, *ARGS, *extra, "--out", str(out)])
 
 
 def test_run_trains_on_the_model_and_tests_out_of_sample(tmp_path, capsys):
@@ -84,7 +88,7 @@ def test_run_trains_on_the_model_and_tests_out_of_sample(tmp_path, capsys):
 
 def test_a_run_refuses_leaks_before_any_work(tmp_path, capsys):
     out = tmp_path / "run"
-    assert _run(out, extra=("--period", "2016-03-01T12:00..2016-03-01T18:00", "--workers", "1")) == 2
+    assert _run(out, period="2016-03-01T12:00..2016-03-01T18:00") == 2
     assert "overlaps the test period" in capsys.readouterr().err and not (out / "train").exists()
     other = tmp_path / "other"  # a folder holding another configuration's run: refused before the training
     assert _run(other, cases=("paper33",), strategies=("no-action",)) == 0

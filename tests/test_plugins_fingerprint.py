@@ -106,8 +106,14 @@ def test_one_file_under_two_spellings_is_one_plugin(tmp_path, monkeypatch, capsy
     first, second = plugins.load("good.py"), plugins.load("./good.py")
     assert first is second and first.ref == str(tmp_path / "good.py") and first.strategies == ("good",)
     assert plugins.load(str(tmp_path / "good.py")) is first
+    monkeypatch.syspath_prepend(str(tmp_path))
+    assert plugins.load("good") is first  # its module name is the same file: the same plugin, not "taken"
     assert main(["strategies", "--plugin", "good.py", "--plugin", "./good.py", "--json"]) == 0
     capsys.readouterr()
+    (tmp_path / "pkg").mkdir()  # a folder is no file plugin: said so, not "no such file"
+    _write(tmp_path / "pkg" / "__init__.py", (tmp_path / "good.py").read_text().replace("good", "pkgd"))
+    with pytest.raises(InputError, match=r"plugin \./pkg/: a folder; give a \.py file, or a package by its module name"):
+        plugins.load("./pkg/")
 
 
 def test_a_resume_with_the_plugin_path_spelled_otherwise_resumes(tmp_path, monkeypatch):

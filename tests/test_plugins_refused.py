@@ -114,6 +114,24 @@ def test_sys_exit_in_a_plugin_is_the_plugins_failure_never_the_commands_exit(tmp
     )
     with pytest.raises(InputError, match=r"rule 'leaves' failed: SystemExit: 0"):
         run_strategy("leaves", Scenario.snapshot(load_network(CASE)), 0.0)
+    # a BaseException of the plugin's own (not Ctrl-C): at import, in a rule, in an option's check
+    boom = "class Boom(BaseException):\n    pass\n"
+    with pytest.raises(InputError, match=r"plugin .*booms\.py: its import raised Boom: at import"):
+        plugins.load(_plugin(tmp_path, boom + "raise Boom('at import')\n", "booms.py"))
+    plugins.load(
+        _plugin(
+            tmp_path,
+            boom
+            + "from opfbench.plugins import Option\n\ndef _check(v):\n    if v >= 2:\n        raise Boom('in a check')\n\n"
+            + '@local_rule("boom", reads=("p",), options={"g": Option("g", 1.0, "g", check=_check)})\n'
+            + "def boom(m, g):\n    if (m.kinds == 'inverter').any():\n        raise Boom('in the rule')\n    return 0 * m.p_mw\n",
+            "boom.py",
+        )
+    )
+    with pytest.raises(InputError, match=r"rule 'boom' failed: Boom: in the rule"):
+        run_strategy("boom", Scenario.snapshot(load_network(CASE)), 0.0)
+    with pytest.raises(InputError, match=r"option g: its check failed on 3 \(Boom: in a check\)"):
+        configuration("boom:g=3")
 
 
 def test_an_option_check_that_raises_is_the_plugins_error(tmp_path):
@@ -129,6 +147,16 @@ def test_an_option_check_that_raises_is_the_plugins_error(tmp_path):
     )
     with pytest.raises(InputError, match=r"option gain's default 1: its check failed on 1 \(KeyError: 'limits'\)"):
         plugins.load(ref)
+
+
+@pytest.mark.parametrize("option", ["k", "scenario"])
+def test_an_option_named_like_the_runners_own_argument_is_refused_at_load(tmp_path, option):
+    ref = _plugin(
+        tmp_path,
+        f'@local_rule("clash", reads=("p",), options={{"{option}": 1.0}})\ndef clash(m, {option}):\n    return 0 * m.p_mw\n',
+    )
+    with pytest.raises(InputError, match=rf"strategy 'clash': option name '{option}' is the runner's own argument"):
+        plugins.load(ref)  # it would reach the runner twice: a TypeError on the first snapshot
 
 
 def test_an_extra_column_that_is_the_steps_tables_own_is_refused_before_any_work(tmp_path, capsys):
@@ -164,6 +192,9 @@ def test_a_complex_or_textual_target_is_refused_not_cast(tmp_path):
     )
     with pytest.raises(InputError, match="rule 'words' returned <U32 values"):
         run_strategy("words:on=1", scenario, 0.0)
+    mask = _plugin(tmp_path, '@local_rule("mask", reads=("p",))\ndef mask(m):\n    return m.p_mw > 0\n', "mask.py")
+    with pytest.raises(InputError, match="rule 'mask' returned bool values; a Q target is real numbers"):
+        plugins.load(mask)  # a mask is no MVAr (True would be 1 MVAr): refused on the load-time probe
 
 
 def test_the_closed_loops_step_count_is_bounded(tmp_path):

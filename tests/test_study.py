@@ -236,6 +236,13 @@ SMALL = [
 ]
 
 
+def _with(argv: list[str], option: str, *values: str) -> list[str]:
+    """`argv` with `option`'s values replaced (the command line takes an option once)."""
+    start = argv.index(option) + 1
+    end = next((i for i in range(start, len(argv)) if argv[i].startswith("--")), len(argv))
+    return [*argv[:start], *values, *argv[end:]]
+
+
 def test_resume_refuse_fresh(tmp_path, capsys):
     out = str(tmp_path / "run")
     assert main([*SMALL, "--out", out]) == 0
@@ -248,9 +255,9 @@ def test_resume_refuse_fresh(tmp_path, capsys):
     assert main([*on_cluster, "--out", out, "--scheduler", "tcp://127.0.0.1:9"]) == 0
     assert "(0 run now, 1 kept)" in capsys.readouterr().out
     pd.testing.assert_frame_equal(first, pd.read_parquet(tmp_path / "run" / "steps.parquet"))
-    assert main([*SMALL, "--k", "0.2", "--out", out]) == 2
+    assert main([*_with(SMALL, "--k", "0.2"), "--out", out]) == 2
     assert "another configuration (differs in: ks)" in capsys.readouterr().err
-    assert main([*SMALL, "--k", "0.2", "--out", out, "--fresh"]) == 0
+    assert main([*_with(SMALL, "--k", "0.2"), "--out", out, "--fresh"]) == 0
     assert set(pd.read_parquet(tmp_path / "run" / "steps.parquet").k) == {0.2}
 
 

@@ -8,6 +8,7 @@ Full run (tens of minutes per dataset; the README gives today's figures):
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 from dataclasses import replace
 from typing import TYPE_CHECKING
@@ -69,8 +70,9 @@ def run(args: argparse.Namespace) -> int:
         raise InputError(f"--seed must lie in [0, {SEED_MAX}], got {args.seed}")
     settings = settings_for(args.dataset, args.quick)
     if args.threads is not None:
-        if args.threads < 1:
-            raise InputError(f"--threads must be >= 1, got {args.threads}")
+        cores = os.cpu_count() or 1
+        if not 1 <= args.threads <= cores:  # more threads than cores only contend (and thousands exhaust memory)
+            raise InputError(f"--threads lies in 1..{cores} (this machine's CPU cores), got {args.threads}")
         settings = replace(settings, threads=args.threads)
     if args.out is not None:  # before the computation, not after it
         check_out_dir(args.out)

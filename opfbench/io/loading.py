@@ -23,7 +23,7 @@ import numpy as np
 from opfbench.errors import InputError
 from opfbench.io.case import Case, CaseSeries
 from opfbench.io.sources import formats, source_of
-from opfbench.io.spec import CaseSpec, parse_der_list, parse_spec
+from opfbench.io.spec import DEFAULT_DER_PF, CaseSpec, parse_der_list, parse_spec
 from opfbench.multiphase import PhaseNetwork
 from opfbench.network import DER, Network
 from opfbench.state import PROCESS
@@ -90,8 +90,6 @@ def load_network(spec: str) -> Network:
 
 
 def _read(spec: CaseSpec) -> Case:
-    from opfbench.io.pandapower import DEFAULT_DER_PF
-
     der_pf = DEFAULT_DER_PF if spec.der_pf is None else spec.der_pf
     case = source_of(spec.source).read(spec, der_pf)
     if isinstance(case.network, PhaseNetwork):

@@ -56,9 +56,9 @@ import numpy as np
 import pandas as pd
 
 from opfbench.errors import CaseFormatError, NetworkError
+from opfbench.io.spec import DEFAULT_DER_PF
 from opfbench.network import DER, Network
 
-DEFAULT_DER_PF = 0.90  # S̄ = P̄ / 0.90: VDE-AR-N 4105's cos φ 0.90 at full output
 SWITCH_RX_RATIO = 2.0  # pandapower's default `switch_rx_ratio`
 DEFAULT_VMIN, DEFAULT_VMAX = 0.9, 1.1
 

@@ -38,7 +38,8 @@ import pandas as pd
 
 from opfbench.errors import DataError, InputError
 from opfbench.io.case import Case, CaseSeries
-from opfbench.io.pandapower import DEFAULT_DER_PF, from_pandapower
+from opfbench.io.pandapower import from_pandapower
+from opfbench.io.spec import DEFAULT_DER_PF
 
 PREFIX = "simbench:"
 SIMBENCH_TZ = "Europe/Berlin"

@@ -21,6 +21,8 @@ them: the shipped names, MATPOWER `.m` and pandapower `.json` files, `simbench:C
   the perturbed grid, and a learned rule trained in the same run is fitted on the case's
   model (`CaseSpec.model`: the spec without `line-z`), the operator's view of the grid:
   its result on the perturbed case is the price of model error.
+
+An option at its default (der-pf=0.9, line-z=1) is the case without it: one text per case.
 """
 
 from __future__ import annotations
@@ -32,6 +34,9 @@ from opfbench.errors import InputError
 from opfbench.exact import number_text
 from opfbench.io.sources import formats, source_of
 from opfbench.network import DER_ENERGIES, DER_KINDS
+
+DEFAULT_DER_PF = 0.90  # S̄ = P̄ / 0.90: VDE-AR-N 4105's cos φ 0.90 at full output
+NOMINAL_LINE_Z = 1.0  # line-z's identity: the source's impedances
 
 
 @dataclass(frozen=True)
@@ -100,7 +105,8 @@ def parse_spec(text: str) -> CaseSpec:
             line_z = _factor(text, value)
         else:
             raise InputError(f"case {text!r}: unknown option {key!r} (der, der-pf, line-z)")
-    spec = CaseSpec(source, der, der_pf, line_z)
+    # one text per case: an option at its default is the case without it (as in strategy labels)
+    spec = CaseSpec(source, der, None if der_pf == DEFAULT_DER_PF else der_pf, None if line_z == NOMINAL_LINE_Z else line_z)
     if der is not None and der != "gens":
         parse_der_list(der, text, phased=spec.three_phase)
     if spec.kind == "opendss" and not spec.source.removeprefix("opendss:").strip():

@@ -88,7 +88,9 @@ class Option:
             raise InputError(f"{value!r} is not one of {', '.join(self.choices)}")
         try:
             problem = self.check(value) if self.check is not None else None
-        except (Exception, SystemExit) as exc:  # a plugin's check with a bug of its own: named, never a traceback
+        except KeyboardInterrupt:
+            raise
+        except BaseException as exc:  # a plugin's check with a bug (or a sys.exit) of its own: named, never a traceback
             raise InputError(f"its check failed on {self.format(value)} ({type(exc).__name__}: {exc})") from None
         if problem:
             raise InputError(str(problem))

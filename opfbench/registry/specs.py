@@ -255,10 +255,21 @@ def _check_name(what: str, name: str, source: str, held: StrategySpec | ModelSpe
         raise InputError(f"{what} {name!r} is registered twice by {source}: give each its own name")
 
 
+RUNNER_ARGUMENTS = ("scenario", "k")
+"""What `StrategySpec.runner(scenario, k, **options)` takes itself: no option's name."""
+
+
 def register(spec: StrategySpec) -> None:
     """Add a strategy; InputError for a name that is taken (by another source, or already
-    by this one) or not a valid name (lower-case letters, digits, '.', '_', '+', '-')."""
+    by this one) or not a valid name (lower-case letters, digits, '.', '_', '+', '-'), or
+    an option named like the runner's own arguments (`RUNNER_ARGUMENTS`)."""
     _check_name("strategy", spec.name, spec.source, STRATEGIES.get(spec.name))
+    for option in spec.options:
+        if option.name in RUNNER_ARGUMENTS:
+            raise InputError(
+                f"{spec.source}: strategy {spec.name!r}: option name {option.name!r} is the runner's own argument "
+                f"({', '.join(RUNNER_ARGUMENTS)}: the snapshots and the reserve); give the option another name"
+            )
     STRATEGIES[spec.name] = spec
 
 

@@ -150,16 +150,18 @@ class Rule:
 
 def _real(rule: Rule, values: object, should: str) -> np.ndarray:
     """`values` as floats; InputError (`should`: what they must be) unless they are real
-    numbers (complex: its imaginary part would be dropped; text, objects)."""
+    numbers (complex: its imaginary part would be dropped; booleans: True is no 1 MVAr;
+    text, objects)."""
     arr = np.asarray(values)
-    if arr.dtype.kind not in "biuf":
+    if arr.dtype.kind not in "iuf":
         raise InputError(f"rule {rule.name!r} returned {arr.dtype} values; {should}")
     return arr.astype(float)
 
 
 def targets(rule: Rule, m: Measurements, options: dict, n_rows: int) -> Targets:
     """The rule's targets (rows, n_der): Q (MVAr) and, for a rule that curtails, a cap on
-    active power (MW); InputError naming the rule for an exception (a `sys.exit` too), an
+    active power (MW); InputError naming the rule for an exception (a `sys.exit` too, any
+    BaseException but Ctrl-C), an
     answer that is not real numbers (complex included), a wrong shape or a cap on active
     power from a rule that does not declare it curtails (non-finite values are the
     caller's to handle)."""
@@ -169,9 +171,9 @@ def targets(rule: Rule, m: Measurements, options: dict, n_rows: int) -> Targets:
         answer = raw if isinstance(raw, Targets) else Targets(raw)
         caps = None if answer.p_max_mw is None else _real(rule, answer.p_max_mw, "a cap on active power is real numbers (MW)")
         out = Targets(_real(rule, answer.q_mvar, "a Q target is real numbers (MVAr)"), caps)
-    except InputError:
+    except (InputError, KeyboardInterrupt):  # Ctrl-C is the user's
         raise
-    except (Exception, SystemExit) as exc:  # a rule's own bug, or its sys.exit: named, never a traceback or an exit
+    except BaseException as exc:  # a rule's own bug, its sys.exit or its own BaseException: named, never a traceback
         raise InputError(f"rule {rule.name!r} failed: {type(exc).__name__}: {exc}") from None
     for what, arr in (("", out.q_mvar), (" active-power caps of", out.p_max_mw)):
         if arr is not None and arr.shape != (n_rows, n_der):
