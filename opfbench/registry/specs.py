@@ -23,6 +23,7 @@ from typing import TYPE_CHECKING, Any, Literal
 import numpy as np
 
 from opfbench.errors import InputError
+from opfbench.multiphase import PhaseNetwork
 from opfbench.registry.options import Option, OptionValue
 from opfbench.state import PROCESS
 
@@ -37,14 +38,18 @@ Role = Literal["exact", "relaxation", "approximation"]
 MEANING: dict[str, str] = {"exact": "optimum", "relaxation": "bound", "approximation": "estimate"}
 #: Network classes a strategy or a model runs on (`network_class`).
 SUPPORTS = ("radial", "meshed")
+UNBALANCED = ("unbalanced-radial", "unbalanced-meshed")
+"""The classes of three-phase (`PhaseNetwork`) feeders; no balanced model claims them."""
 OPFBENCH = "opfbench"  # the source of the built-in entries
 _NAME = re.compile(r"^[a-z0-9][a-z0-9._-]*$")
 Runner = Callable[..., "StrategyResult"]
 
 
-def network_class(net: Network) -> str:
-    """The class of `net` that `supports` / `ModelSpec.networks` name: "meshed" or "radial"."""
-    return "meshed" if net.meshed else "radial"
+def network_class(net: Network | PhaseNetwork) -> str:
+    """The class of `net` that `supports` / `ModelSpec.networks` name: "meshed" or "radial",
+    "unbalanced-meshed" or "unbalanced-radial" for a three-phase feeder."""
+    kind = "meshed" if net.meshed else "radial"
+    return f"unbalanced-{kind}" if isinstance(net, PhaseNetwork) else kind
 
 
 @dataclass(frozen=True)
@@ -203,7 +208,7 @@ class ModelSpec:
 
     name: str
     role: Role
-    build: Callable[[Network, bool], Any]
+    build: Callable[[Network | PhaseNetwork, bool], Any]
     summary: str
     networks: tuple[str, ...] = SUPPORTS
     serves_problem: bool = False
@@ -214,7 +219,7 @@ class ModelSpec:
     def meaning(self) -> str:
         return MEANING[self.role]
 
-    def models(self, net: Network) -> bool:
+    def models(self, net: Network | PhaseNetwork) -> bool:
         return network_class(net) in self.networks
 
 

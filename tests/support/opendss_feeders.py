@@ -13,6 +13,8 @@ from pathlib import Path
 import numpy as np
 import opendssdirect as dss
 
+from opfbench.multiphase import PhaseNetwork
+
 UNBALANCED_SMALL = ("ieee13", "ieee34", "ieee37", "ieee123", "eulv")
 UNBALANCED_ALL = UNBALANCED_SMALL + ("ieee8500", "ckt5", "ckt7", "ckt24")
 TOLERANCE = 1e-10
@@ -73,3 +75,13 @@ def line_impedance_ohm(name: str) -> np.ndarray:
 def set_tap(transformer: str, winding: int, tap: float) -> str:
     """The OpenDSS command that puts a transformer's winding at `tap` p.u."""
     return f"transformer.{transformer}.wdg={winding} tap={tap!r}"
+
+
+def held_taps(net: PhaseNetwork) -> list[str]:
+    """OpenDSS commands holding every regulator at the tap our model read."""
+    out = []
+    for t in net.transformers:
+        if t.regulated:
+            name = net.elements[t.element].name.split(".", 1)[1]
+            out += [set_tap(name, w + 1, wdg.tap) for w, wdg in enumerate(t.windings)]
+    return out
