@@ -3,7 +3,7 @@
 fixed kvar on the same PVSystems, the regulator taps held), never above no action where
 no action meets the band, proven infeasible where nothing can reach the band, and its
 input checked before any work. The feeder: `ieee123` with single-phase PV on every second
-load (`tests/support/unbalanced_der.py`)."""
+load (`opfbench.cases.opendss_pv`)."""
 
 from __future__ import annotations
 
@@ -13,6 +13,7 @@ import numpy as np
 import pytest
 
 from opfbench.cases.opendss_cases import opendss_copy
+from opfbench.cases.opendss_pv import case_with_pv, with_pv
 from opfbench.errors import InputError
 from opfbench.formulations.model import model_for
 from opfbench.formulations.three_phase import BAND_TOL, optimum
@@ -20,7 +21,6 @@ from opfbench.multiphase import PhaseNetwork
 from opfbench.powerflow.multiphase import solve_phase_flow
 from opfbench.result import INFEASIBLE, OK
 from tests.support.opendss_feeders import held_taps, solve
-from tests.support.unbalanced_der import case_with_pv, with_pv
 
 # (load multiplier, PV irradiance): noon with the band binding, afternoon, evening peak
 SNAPSHOTS = ((0.9, 1.0), (1.0, 0.6), (1.1, 0.3))

@@ -16,7 +16,7 @@ Per unit: node voltages v = V / (the node's base, `PhaseNetwork.node_base_v`), p
     subject to Y·v = i_source + Σ branch currents(v, q)        (every node, p.u.)
                band_low ≤ |v_a − v_b| / base ≤ band_high        (`PhaseNetwork.monitored`)
                vminpu ≤ u_load                                   (loads that switch law)
-               u_load ≤ vmaxpu                                   (exponential loads)
+               u_load ≤ vmaxpu                                   (constant |I| and exponential)
                −q_limit ≤ q ≤ q_limit                            (the (1 − k) capability)
 
 - The source is its EMF behind its Thevenin admittance (the power flow's model): the EMF's
@@ -27,8 +27,9 @@ Per unit: node voltages v = V / (the node's base, `PhaseNetwork.node_base_v`), p
   OpenDSS model in band, and above vmaxpu the impedance switch of models 1 (constant PQ)
   and 5 (constant |I|) written exactly with min(u, vmaxpu). The ramp below vminpu is not
   modelled: a switching load stays at or above its vminpu (a constraint, the OpenDSS
-  default 0.95 p.u.), and an exponential load (model 4) also at or below its vmaxpu, where
-  the power flow's law jumps.
+  default 0.95 p.u.); a constant-|I| or exponential load (models 5, 4) also at or below
+  its vmaxpu (model 4's law jumps there; for model 5 it keeps the SDP relaxation's hull
+  of u = √w concave — `sdp_three_phase`).
 - DER: constant-power branches, P fixed (parameter), one Q per DER split equally over
   its phases (the power flow's and the rule engine's convention, OpenDSS's kvar).
 - Regulator and transformer taps fixed where the case settled them (they are in Y).
@@ -188,14 +189,14 @@ class ThreePhaseAc:
         mi = scale * (fz[a.tolist()] - ca.DM(np.where(b == GROUND, 0.0, 1.0)) * fz[np.where(b == GROUND, n, b).tolist()])
         band_sq = mr**2 + mi**2
         switching = np.flatnonzero(net.load_models.model[lb.owner] != CONSTANT_Z)
-        exponential = np.flatnonzero(net.load_models.model[lb.owner] == EXPONENTIAL)
+        bounded = np.flatnonzero(np.isin(net.load_models.model[lb.owner], (CONSTANT_I, EXPONENTIAL)))
         lo, hi = net.band
         rows = [
             (res_re, np.zeros(n), np.zeros(n)),
             (res_im, np.zeros(n), np.zeros(n)),
             (band_sq, np.full(len(a), lo**2), np.full(len(a), hi**2)),
             (u[switching.tolist()], net.load_models.vminpu[lb.owner][switching], np.full(switching.size, np.inf)),
-            (u[exponential.tolist()], np.full(exponential.size, -np.inf), net.load_models.vmaxpu[lb.owner][exponential]),
+            (u[bounded.tolist()], np.full(bounded.size, -np.inf), net.load_models.vmaxpu[lb.owner][bounded]),
         ]
         self.n_monitored = len(a)
         nlp = {
