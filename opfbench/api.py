@@ -92,6 +92,12 @@ class Study:
         """The per-DER setpoints (`schema.DER_Q`), when the study wrote them."""
         return self._table("der_q", columns, equal)
 
+    def frontier(self, columns: Sequence[str] | None = None, **equal: Any) -> pd.DataFrame:
+        """The frontier of losses against voltage compliance per step and ε
+        (`schema.FRONTIER`), which every configuration is compared with at its own
+        compliance (`summary`'s `gap_eq_kwh`, `share_eq_pct`)."""
+        return self._table("frontier", columns, equal)
+
     def _table(self, name: str, columns: Sequence[str] | None, equal: dict[str, Any]) -> pd.DataFrame:
         path = self.out / f"{name}.parquet"
         if not path.is_file():

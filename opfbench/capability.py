@@ -16,6 +16,16 @@ injected (over-excited). Limits are symmetric: Qmin = −Qmax.
   √(S̄² − P²) alone, no power-factor limit.
 - Reserve coefficient k ∈ [0, 1] (`check_reserve`): only (1 − k)·Qmax may be used for loss
   minimization; the paper sweeps `PAPER_KS`.
+
+Reactive-power priority (an inverter's `priority=q`, IEEE 1547-2018 and OpenDSS's PVSystem
+`WattPriority=no`): Q is given first and the active power yields. Every unit's capability
+Qmax(P) rises from P = 0 to a peak (PV at P = 0.8·S̄, the inverter at 0.9·S̄, where the
+power-factor line meets the S̄ circle) and falls beyond it (the S̄ circle; the DFIG curve
+falls from P = 0, "Q at night" from P = 0): `q_peak` is the largest Qmax a unit whose
+available power is P reaches by lowering it, `p_for_q` the largest active power at which
+(1 − k)·Qmax still covers a setpoint Q — the power it keeps, the rest curtailed, so the
+reserve k·Qmax stays free at the power it delivers. Only positive output is curtailed:
+a unit drawing its own consumption (P < 0) keeps it.
 """
 
 from __future__ import annotations
@@ -108,6 +118,15 @@ def inverter_qmax(p_mw: np.ndarray, rating_mw: np.ndarray, s_mva: np.ndarray, ni
     return s_limit if night else np.minimum(np.abs(p) * INVERTER_TAN_PHI_MAX, s_limit)
 
 
+def _columns(kinds: Sequence[str]) -> dict[str, np.ndarray]:
+    """Each kind's DER columns; InputError for an unknown kind."""
+    kinds_arr = np.asarray(kinds)
+    unknown = set(kinds_arr.tolist()) - set(KINDS)
+    if unknown:
+        raise InputError(f"unknown DER kind(s) {sorted(unknown)}; expected one of {', '.join(KINDS)}")
+    return {kind: kinds_arr == kind for kind in dict.fromkeys(kinds_arr.tolist())}
+
+
 def qmax(
     kinds: Sequence[str],
     p_mw: np.ndarray,
@@ -119,17 +138,13 @@ def qmax(
     nameplate S̄ per DER (default P̄). `night_q` (a bool, or a bool array broadcasting to
     `p_mw`) marks where a PV or inverter unit has the S-only "Q at night" limit; DFIG
     units keep their curve."""
-    kinds_arr = np.asarray(kinds)
-    unknown = set(kinds_arr.tolist()) - set(KINDS)
-    if unknown:
-        raise InputError(f"unknown DER kind(s) {sorted(unknown)}; expected one of {', '.join(KINDS)}")
+    columns = _columns(kinds)
     p = np.asarray(p_mw, float)
     rating = np.broadcast_to(np.asarray(rating_mw, float), p.shape)
     s = rating if s_mva is None else np.broadcast_to(np.asarray(s_mva, float), p.shape)
     night = np.broadcast_to(np.asarray(night_q, dtype=bool), p.shape)
     out = np.zeros(p.shape)
-    for kind in set(kinds_arr.tolist()):
-        cols = kinds_arr == kind
+    for kind, cols in columns.items():
         pc, rc, sc, nc = p[..., cols], rating[..., cols], s[..., cols], night[..., cols]
         if kind == "DFIG":
             out[..., cols] = dfig_qmax(pc, rc)
@@ -138,4 +153,63 @@ def qmax(
         else:
             day = inverter_qmax(pc, rc, sc)
             out[..., cols] = np.where(nc, inverter_qmax(pc, rc, sc, night=True), day) if nc.any() else day
+    return out
+
+
+def _peak_p(kinds: Sequence[str], s_mva: np.ndarray, night: np.ndarray) -> np.ndarray:
+    """The active power (MW) at which each unit's Qmax peaks: where the power-factor line
+    meets the S̄ circle (PV: cos φ 0.8, inverter: cos φ 0.90), 0 for a DFIG and for "Q at
+    night" (no power-factor limit)."""
+    out = np.zeros(np.shape(s_mva))
+    for kind, cols in _columns(kinds).items():
+        if kind != "DFIG":
+            pf = PF_MIN if kind == "PV" else INVERTER_PF_MIN
+            out[..., cols] = np.where(night[..., cols], 0.0, pf * s_mva[..., cols])
+    return out
+
+
+def q_peak(
+    kinds: Sequence[str],
+    p_mw: np.ndarray,
+    rating_mw: np.ndarray,
+    s_mva: np.ndarray | None = None,
+    night_q: bool | np.ndarray = False,
+) -> np.ndarray:
+    """Reactive priority's capability (MVAr): the largest Qmax(P′) over the powers P′ a unit
+    of available power P reaches by curtailing, P′ ∈ [min(P, 0), P] (module docstring);
+    arguments as `qmax`."""
+    p = np.asarray(p_mw, float)
+    rating = np.broadcast_to(np.asarray(rating_mw, float), p.shape)
+    s = rating if s_mva is None else np.broadcast_to(np.asarray(s_mva, float), p.shape)
+    night = np.broadcast_to(np.asarray(night_q, dtype=bool), p.shape)
+    at = np.clip(_peak_p(kinds, s, night), np.minimum(p, 0.0), p)
+    return qmax(kinds, at, rating, s, night)
+
+
+def p_for_q(
+    kinds: Sequence[str],
+    q_mvar: np.ndarray,
+    p_mw: np.ndarray,
+    rating_mw: np.ndarray,
+    s_mva: np.ndarray | None = None,
+    night_q: bool | np.ndarray = False,
+    share: float = 1.0,
+) -> np.ndarray:
+    """Reactive priority's active power (MW): the largest P′ ≤ P (available, `p_mw`) at which
+    share·Qmax(P′) ≥ |Q| (`share` = 1 − k), for setpoints Q within share·`q_peak`; P where
+    P ≤ 0 or Q = 0. The S̄ circle gives P′ = √(S̄² − (Q/share)²), the DFIG curve
+    P′/P̄ = 1.2·(4/3 − |Q|/(share·P̄)) where that is below 1 p.u. of P̄ (Qmax ≥ 0.5·P̄ everywhere)."""
+    p, q = np.asarray(p_mw, float), np.abs(np.asarray(q_mvar, float))
+    rating = np.broadcast_to(np.asarray(rating_mw, float), p.shape)
+    s = rating if s_mva is None else np.broadcast_to(np.asarray(s_mva, float), p.shape)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        needed = np.where(q > 0, q / share, 0.0)  # the Qmax the setpoint needs
+    out = p.copy()
+    for kind, cols in _columns(kinds).items():
+        need, sc, rc = needed[..., cols], s[..., cols], rating[..., cols]
+        if kind == "DFIG":
+            keep = np.where(need > 0.5 * rc, 1.2 * (4.0 / 3.0 * rc - need), np.inf)
+        else:
+            keep = np.sqrt(np.maximum(sc**2 - need**2, 0.0))
+        out[..., cols] = np.where(p[..., cols] > 0, np.minimum(p[..., cols], np.maximum(keep, 0.0)), p[..., cols])
     return out

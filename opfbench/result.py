@@ -73,6 +73,19 @@ class SolverRecord:
     solve_ms: np.ndarray
     iterations: np.ndarray
 
+    def take(self, rows: np.ndarray) -> "SolverRecord":
+        """The record of the snapshots `rows`."""
+        return SolverRecord(
+            self.model,
+            self.meaning,
+            self.objective_kw[rows],
+            self.solver_status[rows],
+            self.fallback[rows],
+            self.certified_by[rows],
+            self.solve_ms[rows],
+            self.iterations[rows],
+        )
+
     def snapshot(self, i: int) -> dict:
         """Snapshot i as `StrategyResult.snapshot_json` lists it."""
         return {
@@ -85,6 +98,19 @@ class SolverRecord:
             "solve_ms": self.solve_ms[i],
             "iterations": int(self.iterations[i]),
         }
+
+
+@dataclass(frozen=True)
+class Reference:
+    """Each step's frontier point at a configuration's own compliance (the optimum with the
+    voltage band widened just enough to cover the step's excursion,
+    `formulations.frontier.reference`), (S,) each: the optimum's cost (kW), its bound
+    (kW), that widening ε (p.u.), and whether it is the optimum's that may curtail."""
+
+    cost_kw: np.ndarray
+    bound_kw: np.ndarray
+    eps_pu: np.ndarray
+    curtails: np.ndarray
 
 
 @dataclass(eq=False)
@@ -118,6 +144,7 @@ class StrategyResult:
     lower_bound_kw: np.ndarray | None = None
     solver: SolverRecord | None = None
     extra: dict = field(default_factory=dict)
+    curtailed_mw: np.ndarray | None = None
 
     @classmethod
     def from_setpoints(
@@ -130,9 +157,11 @@ class StrategyResult:
         power_flows: np.ndarray | int = 0,
         pf: PowerFlowResult | None = None,
         status: np.ndarray | None = None,
+        p_mw: np.ndarray | None = None,
         **kw,
     ) -> "StrategyResult":
-        """Evaluate setpoints q_mvar (S, n_der) with the batched AC power flow (unless `pf`
+        """Evaluate setpoints q_mvar (S, n_der), with the DER delivering `p_mw` (S, n_der) MW
+        (None: their available power P^C), with the batched AC power flow (unless `pf`
         already holds that evaluation) and build the record. `power_flows` counts the
         flows the strategy itself used; the evaluation adds one per snapshot when run here.
         Snapshots whose flow did not converge get status "pf-diverged", NaN losses and NaN
@@ -140,20 +169,56 @@ class StrategyResult:
         q = np.atleast_2d(np.asarray(q_mvar, dtype=float))
         flows = np.broadcast_to(np.asarray(power_flows, dtype=np.int64), (q.shape[0],)).copy()
         if pf is None:
-            pf = solve_pf_batch(scenario.net, scenario.injections(q))
+            pf = solve_pf_batch(scenario.net, scenario.injections(q, p_mw))
             flows += 1
         conv = np.asarray(pf.converged, dtype=bool).reshape(-1)
         st = np.full(q.shape[0], OK, dtype=object) if status is None else np.asarray(status, dtype=object).copy()
         st[~conv] = PF_DIVERGED
         losses = np.where(conv, np.atleast_1d(pf.losses_kw), np.nan)
         vm = np.where(conv[:, None], np.atleast_2d(pf.vm), np.nan)
-        physical = scenario.qmax_mvar()
+        physical = scenario.qmax_mvar(p_mw)
         excursion = np.maximum(np.abs(q) - physical, 0.0).max(axis=1, initial=0.0)
-        return cls(strategy, float(k), scenario.net, q, losses, vm, st, flows, float(wall_ms), excursion, **kw)
+        curtailed = None if p_mw is None else np.maximum(scenario.der_p_mw - p_mw, 0.0)
+        return cls(
+            strategy, float(k), scenario.net, q, losses, vm, st, flows, float(wall_ms), excursion, curtailed_mw=curtailed, **kw
+        )
 
     @property
     def n_snapshots(self) -> int:
         return self.q_mvar.shape[0]
+
+    def take(self, rows: np.ndarray, wall_ms: float) -> "StrategyResult":
+        """The result of the snapshots `rows` (the solver record's and the extra arrays of
+        length S taken likewise, the other extra values kept), with wall time `wall_ms`."""
+        n = self.n_snapshots
+
+        def part(value: object) -> object:
+            return value[rows] if isinstance(value, np.ndarray) and value.ndim and value.shape[0] == n else value
+
+        lower = None if self.lower_bound_kw is None else self.lower_bound_kw[rows]
+        return StrategyResult(
+            self.strategy,
+            self.k,
+            self.net,
+            self.q_mvar[rows],
+            self.losses_kw[rows],
+            self.vm[rows],
+            self.status[rows],
+            self.power_flows[rows],
+            float(wall_ms),
+            self.excursion_mvar[rows],
+            lower,
+            None if self.solver is None else self.solver.take(rows),
+            {key: part(value) for key, value in self.extra.items()},
+            None if self.curtailed_mw is None else self.curtailed_mw[rows],
+        )
+
+    @property
+    def curtailed_kw(self) -> np.ndarray:
+        """(S,) active power curtailed over all DER, kW (0 where none; NaN where the strategy
+        gave no setpoint)."""
+        total = np.zeros(self.n_snapshots) if self.curtailed_mw is None else 1e3 * self.curtailed_mw.sum(axis=1)
+        return np.where(np.isnan(self.q_mvar).any(axis=1), np.nan, total)
 
     @property
     def vmin(self) -> np.ndarray:
@@ -188,6 +253,7 @@ class StrategyResult:
             "vmax": self.vmax[i],
             "power_flows": int(self.power_flows[i]),
             "excursion_mvar": self.excursion_mvar[i],
+            "curtailed_kw": self.curtailed_kw[i],
             "wall_ms": float(self.wall_ms),
         }
         if self.lower_bound_kw is not None:

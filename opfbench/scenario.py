@@ -154,6 +154,58 @@ class Scenario:
             and equal(night_q(self), night_q(other))
         )
 
+    def same_rows(self, other: "Scenario") -> np.ndarray:
+        """(S,) bool: snapshot i carries the same data here and in `other` (the same network
+        object and number of snapshots) — loads, DER P, forecast and "Q at night" — so a
+        snapshot-wise strategy (`StrategySpec.snapshot_wise`) gives both the same result."""
+        n = self.n_snapshots
+        if self.net is not other.net or other.n_snapshots != n:
+            return np.zeros(n, dtype=bool)
+
+        def equal(a: np.ndarray | None, b: np.ndarray | None) -> np.ndarray:
+            if a is None or b is None:
+                return np.full(n, a is None and b is None)
+            return (a == b).reshape(n, -1).all(axis=1)
+
+        def night_q(s: Scenario) -> np.ndarray:
+            return np.zeros(n, dtype=bool) if s.pv_night_q is None else s.pv_night_q
+
+        return (
+            equal(self.load_scale, other.load_scale)
+            & equal(self.load_p_mw, other.load_p_mw)
+            & equal(self.load_q_mvar, other.load_q_mvar)
+            & equal(self.der_p_mw, other.der_p_mw)
+            & equal(self.der_p_forecast_mw, other.der_p_forecast_mw)
+            & (night_q(self) == night_q(other))
+        )
+
+    @classmethod
+    def union(cls, parts: "list[tuple[Scenario, np.ndarray]]") -> "Scenario":
+        """One scenario of the snapshots `rows` of each (scenario, rows) in turn: the same
+        network, loads given the same way, all with a forecast or none."""
+        first = parts[0][0]
+        if any(s.net is not first.net or s.per_load != first.per_load for s, _ in parts):
+            raise InputError("scenario union: every part needs the same network and the same kind of loads")
+        if len({s.der_p_forecast_mw is None for s, _ in parts}) > 1:
+            raise InputError("scenario union: every part needs a forecast, or none")
+
+        def stacked(name: str) -> np.ndarray | None:
+            arrays = [getattr(s, name) for s, _ in parts]
+            return None if arrays[0] is None else np.concatenate([a[rows] for a, (_, rows) in zip(arrays, parts, strict=True)])
+
+        masks = [np.zeros(s.n_snapshots, dtype=bool) if s.pv_night_q is None else s.pv_night_q for s, _ in parts]
+        mask = np.concatenate([m[rows] for m, (_, rows) in zip(masks, parts, strict=True)])
+        der_p = np.concatenate([s.der_p_mw[rows] for s, rows in parts])
+        return cls(
+            first.net,
+            stacked("load_scale"),
+            der_p,
+            stacked("der_p_forecast_mw"),
+            mask if mask.any() else None,
+            stacked("load_p_mw"),
+            stacked("load_q_mvar"),
+        )
+
     def _check_range(self, label: str, p: np.ndarray) -> None:
         """P ≤ rating (MW) per DER, up to round-off, and P ≥ 0 — or P ≥ −S̄ for an inverter
         unit, which may draw its own consumption."""
@@ -227,11 +279,14 @@ class Scenario:
             return self._bus_load
         return self.load_scale[:, None] * (self.net.load_p_mw + 1j * self.net.load_q_mvar)[None, :]
 
-    def injections(self, der_q_mvar: np.ndarray) -> np.ndarray:
-        """Bus injections (S, n_bus) complex MW for DER reactive setpoints (S, n_der) MVAr."""
+    def injections(self, der_q_mvar: np.ndarray, der_p_mw: np.ndarray | None = None) -> np.ndarray:
+        """Bus injections (S, n_bus) complex MW for DER reactive setpoints (S, n_der) MVAr,
+        with the DER at their available power P^C, or at `der_p_mw` (S, n_der) MW where a
+        rule curtails."""
+        p = self.der_p_mw if der_p_mw is None else der_p_mw
         if self.load_scale is None:
-            return bus_injections(self.net, self.der_p_mw, der_q_mvar, bus_load_mva=self._bus_load)
-        return bus_injections(self.net, self.der_p_mw, der_q_mvar, self.load_scale)
+            return bus_injections(self.net, p, der_q_mvar, bus_load_mva=self._bus_load)
+        return bus_injections(self.net, p, der_q_mvar, self.load_scale)
 
     def load_q_at_der_mvar(self) -> np.ndarray:
         """Each DER's share of the reactive load at its own bus (S, n_der) MVAr — what LLMA
@@ -318,15 +373,22 @@ class Scenario:
         the snapshots where `mask` (S,) is True."""
         return Scenario(self.net, self.load_scale, self.der_p_mw, self.der_p_forecast_mw, mask, self.load_p_mw, self.load_q_mvar)
 
+    def night_q(self) -> np.ndarray | bool:
+        """(S, n_der) where the solar units have the "Q at night" capability, or False
+        (nowhere)."""
+        if self.pv_night_q is None or not self.pv_night_q.any():
+            return False
+        return self.pv_night_q[:, None] & self.net.der_solar[None, :]
+
     def qmax_mvar(self, p_mw: np.ndarray | None = None) -> np.ndarray:
         """(S, n_der) physical Qmax at active power `p_mw` (default P^C), MVAr, with the
         "Q at night" capability for the solar units at the `pv_night_q` snapshots."""
         p = self.der_p_mw if p_mw is None else p_mw
         net = self.net
-        kinds, rating, s_rated = net.der_kinds, net.der_rating_mw, net.der_s_mva
-        if self.pv_night_q is None or not self.pv_night_q.any():
-            return qmax(kinds, p, rating, s_rated)
-        return qmax(kinds, p, rating, s_rated, night_q=self.pv_night_q[:, None] & net.der_solar[None, :])
+        night = self.night_q()
+        if night is False:
+            return qmax(net.der_kinds, p, net.der_rating_mw, net.der_s_mva)
+        return qmax(net.der_kinds, p, net.der_rating_mw, net.der_s_mva, night_q=night)
 
 
 def _check_net(net: object) -> None:

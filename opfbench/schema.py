@@ -19,7 +19,7 @@ from typing import TYPE_CHECKING, Any, Literal
 
 import numpy as np
 
-from opfbench.result import STATUSES
+from opfbench.result import STATUSES, Reference
 
 if TYPE_CHECKING:
     from opfbench.result import StrategyResult
@@ -31,7 +31,8 @@ NO_UNIT = "—"
 @dataclass(frozen=True)
 class StepContext:
     """What a per-step column is computed from: a strategy's result on a task's steps and
-    the task's labels. `time` (UTC ns, int64), `night` (S,) bool."""
+    the task's labels. `time` (UTC ns, int64), `night` (S,) bool; `reference` each step's
+    frontier point at the strategy's own compliance (None: no frontier, NaN columns)."""
 
     case: str
     night_mode: str
@@ -40,6 +41,15 @@ class StepContext:
     step_h: float
     night: np.ndarray
     res: StrategyResult
+    reference: Reference | None = None
+
+    @property
+    def frontier(self) -> Reference:
+        """`reference`, or NaN points (not curtailing) where there is none."""
+        if self.reference is not None:
+            return self.reference
+        nan = np.full(self.res.n_snapshots, np.nan)
+        return Reference(nan, nan, nan, np.zeros(self.res.n_snapshots, dtype=bool))
 
 
 Value = Callable[[StepContext], Any]  # one value for every row, or an array of the rows
@@ -170,6 +180,14 @@ STEPS = Table(
             "q_total_mvar", "number", "MVAr", "sum of the DER setpoints (positive = injected)", lambda c: c.res.q_mvar.sum(axis=1)
         ),
         Column(
+            "curtailed_kw",
+            "number",
+            "kW",
+            "active power the DER had available and did not deliver (Volt-Watt, reactive priority); 0 for a strategy "
+            "that curtails nothing, NaN where it gave no setpoint",
+            lambda c: c.res.curtailed_kw,
+        ),
+        Column(
             "excursion_mvar",
             "number",
             "MVAr",
@@ -180,7 +198,8 @@ STEPS = Table(
             "lower_bound_kw",
             "number",
             "kW",
-            "certified lower bound on the losses (formulations), NaN where none",
+            "certified lower bound on the losses (formulations; on losses + curtailed power for one that curtails), NaN "
+            "where none",
             lambda c: _nan(c) if c.res.lower_bound_kw is None else np.asarray(c.res.lower_bound_kw, dtype=float),
         ),
         Column(
@@ -233,6 +252,30 @@ STEPS = Table(
             "reach` where the interval bounds proved the step infeasible without a solver); empty otherwise",
             _solver("solver_status", str, ""),
         ),
+        Column(
+            "frontier_kw",
+            "number",
+            "kW",
+            "the frontier's optimum (losses + curtailed power) at the smallest grid ε covering the step's voltage "
+            "excursion: the reference at equal compliance; NaN where that ε has no optimum (or the step no figure)",
+            lambda c: c.frontier.cost_kw,
+        ),
+        Column(
+            "frontier_bound_kw",
+            "number",
+            "kW",
+            "that frontier point's certified bound (the relaxation's); NaN where not solved",
+            lambda c: c.frontier.bound_kw,
+        ),
+        Column("frontier_eps_pu", "number", "p.u.", "that ε (`inf`: the physical limits alone)", lambda c: c.frontier.eps_pu),
+        Column(
+            "frontier_curtails",
+            "true/false",
+            NO_UNIT,
+            "that frontier is the optimum's that may curtail (`acopf:curtail=true`): the reference of a configuration "
+            "that curtails",
+            lambda c: np.asarray(c.frontier.curtails, dtype=bool),
+        ),
     ),
     extra=Column(
         "<extra>",
@@ -255,6 +298,7 @@ DER_Q = Table(
         Column("bus", "integer", NO_UNIT, "the DER's bus (the case's bus number; several DER may share one)"),
         Column("kind", "text", NO_UNIT, "the DER's kind (PV, DFIG, inverter)"),
         Column("q_mvar", "number", "MVAr", "its reactive setpoint (positive = injected)"),
+        Column("curtailed_mw", "number", "MW", "the active power it had available and did not deliver"),
     ),
 )
 """One row per configuration × step × DER (`study.run_tables.detail_rows`)."""
@@ -281,6 +325,18 @@ TASK_SUMMARY = Table(
         ),
         Column("measured_hours", "number", "h", "their length"),
         Column("energy_kwh", "number", "kWh", "sum of losses × step length over the steps with a figure"),
+        Column("curtailed_kwh", "number", "kWh", "sum of curtailed power × step length"),
+        Column("frontier_kwh", "number", "kWh", "sum of `frontier_kw` × step length over the steps that have one"),
+        Column("frontier_missing", "integer", NO_UNIT, "steps without a frontier optimum"),
+        Column("frontier_bound_kwh", "number", "kWh", "sum of `frontier_bound_kw` × step length over the steps that have one"),
+        Column("frontier_bound_missing", "integer", NO_UNIT, "steps without a frontier bound"),
+        Column(
+            "below_frontier_steps",
+            "integer",
+            NO_UNIT,
+            "steps whose cost (losses + curtailed) lies more than 1e-4 kW below `frontier_kw`",
+        ),
+        Column("frontier_curtails", "true/false", NO_UNIT, "as in `steps.parquet`"),
         Column("not_ok_steps", "integer", NO_UNIT, "steps whose status is not ok"),
         Column("not_settled_steps", "integer", NO_UNIT, "steps where a closed-loop rule did not settle"),
         Column("pf_diverged_steps", "integer", NO_UNIT, "steps of status pf-diverged"),
@@ -315,6 +371,51 @@ SUMMARY = Table(
         Column("energy_kwh", "number", "kWh", "the period's energy losses; empty unless every step has a figure"),
         Column("no_action_kwh", "number", "kWh", "no action's energy in the same case, k and night mode, forecast off"),
         Column("savings_pct", "number", "%", "100 · (1 − energy / no action's)"),
+        Column("curtailed_kwh", "number", "kWh", "active energy the DER had available and did not deliver"),
+        Column("cost_kwh", "number", "kWh", "energy + curtailed energy: what the frontier bounds"),
+        Column(
+            "frontier_kwh",
+            "number",
+            "kWh",
+            "the frontier's optimum at the configuration's own compliance, step by step (empty unless every step has one)",
+        ),
+        Column("frontier_bound_kwh", "number", "kWh", "its certified bound (empty unless every step has one)"),
+        Column(
+            "gap_eq_kwh",
+            "number",
+            "kWh",
+            "the gap at equal compliance: cost − frontier (≥ 0 where the optimum is global and the point in the OPF's set)",
+        ),
+        Column("gap_eq_pct", "number", "%", "100 · gap at equal compliance / frontier"),
+        Column(
+            "share_eq_pct",
+            "number",
+            "%",
+            "the share at equal compliance: 100 · (no action's energy − cost) / (no action's energy − frontier), ≤ 100; "
+            "empty where that reduction is below 1e-6 kWh",
+        ),
+        Column(
+            "share_pct",
+            "number",
+            "%",
+            "the plain, loss-only share: 100 · (no action's energy − energy) / (no action's energy − the AC OPF's), which "
+            "compares with an optimum that holds the band whatever the configuration does; empty without an AC OPF row "
+            "or where it reduces nothing",
+        ),
+        Column(
+            "frontier_curtails",
+            "true/false",
+            NO_UNIT,
+            "its frontier is the optimum's that may curtail (a configuration that curtails: Volt-Watt, reactive "
+            "priority, `acopf:curtail=true`)",
+        ),
+        Column("frontier_missing_steps", "integer", NO_UNIT, "steps without a frontier optimum at their compliance"),
+        Column(
+            "below_frontier_steps",
+            "integer",
+            NO_UNIT,
+            "steps whose cost lies below their frontier point (a rule outside the OPF's set, or an optimum that is not global)",
+        ),
         Column("not_ok_steps", "integer", NO_UNIT, "steps whose status is not ok"),
         Column("not_settled_steps", "integer", NO_UNIT, "steps where a closed-loop rule did not settle"),
         Column("voltage_violation_steps", "integer", NO_UNIT, "steps violating a voltage limit (of the converged ones)"),
@@ -353,6 +454,81 @@ SUMMARY = Table(
     ),
 )
 """One row per configuration (`study.run_tables.summarize`); figures written to 6 significant digits."""
+
+_CURTAIL = Column(
+    "curtail",
+    "true/false",
+    NO_UNIT,
+    "the frontier of the optimum that may curtail (objective losses + curtailed power), or of the plain AC OPF",
+)
+_FRONTIER_KEYS = (*_keys("steps.parquet")[:1], *_keys("steps.parquet")[2:4], _CURTAIL)
+
+FRONTIER = Table(
+    "frontier.parquet",
+    (
+        *_FRONTIER_KEYS,
+        Column("time", "time", NO_UNIT, "the step's start"),
+        Column("step_h", "number", "h", "the step's length"),
+        Column("eps_pu", "number", "p.u.", "the band's widening ε (`inf`: the physical limits alone)"),
+        Column(
+            "cost_kw",
+            "number",
+            "kW",
+            "the AC OPF's optimum (losses, + curtailed power where it curtails) with the band widened by ε; NaN where "
+            "there is none (infeasible, or only a fallback point)",
+        ),
+        Column("bound_kw", "number", "kW", "its certified bound (the relaxation's); NaN where not solved"),
+        Column("excursion_pu", "number", "p.u.", "the optimum's largest excursion beyond the unwidened band"),
+        Column("status", "text", NO_UNIT, "the AC OPF's status of the point (`opfbench.result.STATUSES`)"),
+        Column("solved", "true/false", NO_UNIT, "solved at this ε (false: the answer of another ε that covers it)"),
+    ),
+)
+"""One row per case × k × night mode × step × ε (`study.run_tables.frontier_rows`): the
+frontier of losses against compliance (`formulations.frontier`)."""
+
+TASK_FRONTIER_SUMMARY = Table(
+    "tasks/<id>.frontier_summary.parquet",
+    (
+        *_FRONTIER_KEYS,
+        Column("eps_pu", "number", "p.u.", "as in `frontier.parquet`"),
+        Column("steps", "integer", NO_UNIT, "the task's steps"),
+        Column("energy_kwh", "number", "kWh", "sum of cost × step length over the steps with an optimum"),
+        Column("missing", "integer", NO_UNIT, "steps without an optimum"),
+        Column("bound_kwh", "number", "kWh", "sum of the bound × step length"),
+        Column("bound_missing", "integer", NO_UNIT, "steps without a bound"),
+        Column("outside_h", "number", "h", "length of the steps whose optimum lies outside the unwidened band"),
+        Column("max_excursion_pu", "number", "p.u.", "the optimum's worst excursion beyond it"),
+        Column("solved", "integer", NO_UNIT, "steps solved at this ε"),
+    ),
+)
+"""A task's frontier sums per case, k, night mode and ε (`study.run_tables.partial_frontier`),
+combined into the frontier's summary by `study.run_tables.summarize_frontier`."""
+
+FRONTIER_SUMMARY = Table(
+    "frontier.csv",
+    (
+        _FRONTIER_KEYS[0],
+        Column("k", "number", NO_UNIT, "as in `summary.csv`"),
+        *_FRONTIER_KEYS[2:],
+        Column("eps_pu", "number", "p.u.", "as in `frontier.parquet`"),
+        Column("steps", "integer", NO_UNIT, "steps of the period"),
+        Column(
+            "energy_kwh",
+            "number",
+            "kWh",
+            "the optimum's energy over the period with the band widened by ε (empty unless every step has an optimum)",
+        ),
+        Column("bound_kwh", "number", "kWh", "its certified bound (empty unless every step has one)"),
+        Column("no_optimum_steps", "integer", NO_UNIT, "steps without an optimum at this ε"),
+        Column("voltage_violation_min", "number", "min", "minutes the optimum lies outside the unwidened band"),
+        Column("max_violation_pu", "number", "p.u.", "its worst excursion beyond it"),
+        Column(
+            "solved_steps", "integer", NO_UNIT, "steps solved at this ε (the others take the answer of an ε that covers them)"
+        ),
+    ),
+)
+"""One row per case × k × night mode × ε (`study.run_tables.summarize_frontier`); figures
+written to 6 significant digits."""
 
 _FAULT_LABELS = (
     Column("case", "text", NO_UNIT, "the case spec"),
@@ -415,7 +591,7 @@ FAULT_TASK_TRACES = Table(
 
 #: The declared tables by folder kind, in the page's order.
 TABLES: dict[str, tuple[Table, ...]] = {
-    "run": (STEPS, DER_Q, BUS_V, TASK_SUMMARY, SUMMARY),
+    "run": (STEPS, DER_Q, BUS_V, TASK_SUMMARY, SUMMARY, FRONTIER, TASK_FRONTIER_SUMMARY, FRONTIER_SUMMARY),
     "fault": (FAULT, TRACES, FAULT_TASK, FAULT_TASK_TRACES),
 }
 

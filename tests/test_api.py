@@ -44,6 +44,7 @@ def test_the_example_script_runs_a_study_and_reads_its_tables(tmp_path):
     assert lines[0].startswith("paper33: 33 buses, 5 DER") and "LFMA on one operating point" in lines[1]
     assert sum(line.split()[0] in ("no-action", "lfma", "lindistflow", "acopf") for line in lines) == 8  # 4 strategies × 2 k
     assert "LFMA at k = 0.4: 60 steps" in proc.stdout and (out / "report.html").is_file()
+    assert "frontier at k = 0.4: 7 widenings ε of the band, 420 rows" in proc.stdout  # 60 steps × 7 ε
     assert proc.stderr == ""  # the library says nothing on its own
 
 

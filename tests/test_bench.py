@@ -5,6 +5,7 @@ peers' voltages against ours, LFMA batched vs one snapshot at a time."""
 import builtins
 
 import numpy as np
+import pandas as pd
 import pytest
 
 import opfbench.bench.local as bench_local
@@ -12,7 +13,7 @@ import opfbench.bench.opf as bench_opf
 import opfbench.bench.pf as bench_pf
 from opfbench.bench.paper_day import paper_day_scenario
 from opfbench.bench.pf_large import measure, scaling
-from opfbench.errors import NetworkError
+from opfbench.errors import InputError, NetworkError
 from opfbench.io import load_network
 from opfbench.io.matpower import load_case_file
 from opfbench.powerflow import bus_injections, solve_pf
@@ -128,3 +129,38 @@ def test_opf_bench_agrees_with_pandapower_runopp():
 
 def test_load_case_names_the_large_feeders():
     assert load_network("feeder1k").n_bus == 990
+
+
+def test_the_suite_year_against_a_reference_names_what_changed(tmp_path):
+    """`bench run --suite --year --reference DIR`: certified shares and not-settled counts
+    compared per configuration (NaN = NaN), energies by their largest relative change."""
+    from opfbench.bench.run import compare_runs
+
+    summary = pd.DataFrame(
+        {
+            "case": ["g", "g", "g"],
+            "strategy": ["acopf", "lfma", "volt-var"],
+            "k": [0.0, 0.0, 0.4],
+            "night_mode": ["connected"] * 3,
+            "forecast": ["off"] * 3,
+            "energy_kwh": [10.0, 12.0, 11.0],
+            "certified_share": [1.0, np.nan, np.nan],
+            "not_settled_steps": [0, 0, 3],
+        }
+    )
+    for name in ("ref", "same", "changed", "other"):
+        (tmp_path / name).mkdir()
+    summary.to_csv(tmp_path / "ref" / "summary.csv", index=False)
+    summary.to_csv(tmp_path / "same" / "summary.csv", index=False)
+    same = compare_runs(tmp_path / "same", tmp_path / "ref")
+    assert same["certified_share_differs"] == [] and same["not_settled_differs"] == [] and same["identical_energies"]
+    changed = summary.assign(energy_kwh=[10.0, 12.0 * (1 + 1e-9), 11.0], not_settled_steps=[0, 0, 4])
+    changed.loc[0, "certified_share"] = 0.99
+    changed.to_csv(tmp_path / "changed" / "summary.csv", index=False)
+    diff = compare_runs(tmp_path / "changed", tmp_path / "ref")
+    assert diff["certified_share_differs"] == ["g/acopf/0.0/connected/off"]
+    assert diff["not_settled_differs"] == ["g/volt-var/0.4/connected/off"]
+    assert diff["energy_max_rel_diff"] == pytest.approx(1e-9) and not diff["identical_energies"]
+    summary.iloc[:2].to_csv(tmp_path / "other" / "summary.csv", index=False)
+    with pytest.raises(InputError, match="not a run of the same grid"):
+        compare_runs(tmp_path / "other", tmp_path / "ref")

@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from opfbench.capability import PAPER_KS, check_reserve, dfig_qmax, pv_qmax, pv_qmax_night, qmax
+from opfbench.capability import PAPER_KS, check_reserve, dfig_qmax, p_for_q, pv_qmax, pv_qmax_night, q_peak, qmax
 from opfbench.errors import InputError
 
 
@@ -68,3 +68,41 @@ def test_p_out_of_range(p):
 def test_unknown_kind():
     with pytest.raises(InputError, match="unknown DER kind"):
         qmax(("BESS",), np.array([0.1]), np.array([0.6]))
+
+
+# ----- reactive priority: the peak a unit reaches by curtailing, and the power it keeps ------
+KINDS3 = ("PV", "inverter", "DFIG")
+RATING3 = np.array([0.6, 0.6, 0.6])
+S3 = np.array([0.6, 0.6 / 0.9, 0.6])
+
+
+@pytest.mark.parametrize(
+    "share, expected",
+    [(1.0, [0.36, 0.6 / 0.9 * np.sin(np.arccos(0.9)), 0.6]), (0.5, [0.36, 0.6 / 0.9 * np.sin(np.arccos(0.9)), 0.6])],
+)
+def test_q_peak_is_where_the_power_factor_line_meets_the_circle(share, expected):
+    """PV peaks at P = 0.8·S̄ (0.36 MVAr of 0.6), the inverter at 0.9·S̄ (its rating: S̄ = P̄/0.9),
+    the DFIG at P = 0 (its curve falls from there): at full output they reach it by curtailing."""
+    full = np.broadcast_to(RATING3, (1, 3))
+    assert q_peak(KINDS3, full, RATING3, S3)[0] == pytest.approx(expected, abs=1e-12)
+    low = np.array([[0.1, 0.1, 0.1]])  # below the peak's power: nothing to gain by curtailing (but the DFIG)
+    assert q_peak(KINDS3, low, RATING3, S3)[0, :2] == pytest.approx(qmax(KINDS3, low, RATING3, S3)[0, :2], abs=1e-15)
+
+
+def test_p_for_q_keeps_the_most_power_that_still_covers_q():
+    """For Q up to the peak: (1 − k)·Qmax at the kept power covers |Q| exactly where power is
+    curtailed, and a hair more power would not; no curtailment where Qmax(P) already covers it;
+    a unit drawing its own consumption keeps it."""
+    rng = np.random.default_rng(7)
+    for share in (1.0, 0.6):
+        p = rng.uniform(0.0, 1.0, (200, 3)) * RATING3
+        q = rng.uniform(-1.0, 1.0, (200, 3)) * share * q_peak(KINDS3, p, RATING3, S3)
+        kept = p_for_q(KINDS3, q, p, RATING3, S3, share=share)
+        cover = share * qmax(KINDS3, kept, RATING3, S3)
+        assert (kept <= p + 1e-15).all() and (cover >= np.abs(q) - 1e-12).all()
+        cut = kept < p - 1e-12
+        assert cut.any() and np.allclose(cover[cut], np.abs(q[cut]), atol=1e-12)
+        more = np.minimum(kept + 1e-6, p)
+        assert (share * qmax(KINDS3, more, RATING3, S3)[cut] < np.abs(q[cut])).all()
+    assert p_for_q(("inverter",), np.array([0.1]), np.array([-0.05]), np.array([0.6]), np.array([0.7]))[0] == -0.05
+    assert p_for_q(KINDS3, np.zeros(3), RATING3, RATING3, S3).tolist() == RATING3.tolist()

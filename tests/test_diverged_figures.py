@@ -75,6 +75,10 @@ def test_summary_counts_diverged_steps_and_averages_over_the_rest():
             "wall_ms": 1.0,
             "solver_ms": np.nan,
             "certified_by": "",
+            "curtailed_kw": [0.0, np.nan, 0.0, np.nan],
+            "frontier_kw": [8.0, np.nan, 25.0, np.nan],
+            "frontier_bound_kw": [8.0, np.nan, 25.0, np.nan],
+            "frontier_curtails": False,
         }
     )
     key = ("c", "no-action", 0.0, "connected", "off")

@@ -557,3 +557,18 @@ def test_api_numbers_of_the_wrong_kind_or_domain(net):
             resolve_period("paper-day", "sun", step)
     with pytest.raises(InputError, match=r"scenario: pv_pu has NaN or inf at index \(1,\)"):
         Scenario.from_profiles(net, np.ones(3), np.array([0.1, np.nan, 0.1]), np.zeros(3))
+
+
+@pytest.mark.parametrize(
+    "command",
+    [
+        ["run", "--case", "case33bw?der=99:PV:0.5"],  # the case spec is refused while the run plans
+        ["run", "--case", "paper33", "--period", "2031-01-01..2031-01-02"],  # a period outside the data
+        ["fault", "paper33", "--fault-bus", "17", "--time", "25:00"],
+    ],
+)
+def test_a_refused_command_leaves_no_out_folder_behind(capsys, tmp_path, command):
+    out = tmp_path / "made" / "out"
+    assert main([*command, "--out", str(out)]) == 2
+    assert capsys.readouterr().err.count("\n") == 1
+    assert not (tmp_path / "made").exists()  # nor the parent it would have made

@@ -76,6 +76,10 @@ def test_generators_as_der(tmp_path):
         ("case33bw?der=gens", "der=gens reads a MATPOWER file's generators"),
         ("case33bw?der-pf=1.2", "der-pf must lie in"),
         ("case33bw?colour=red", "unknown option 'colour'"),
+        ("case33bw?line-z=1.1&line-z=1.2", "option line-z given twice"),
+        ("case33bw?der=18:PV:0.5&der=25:PV:0.5", "option der given twice"),
+        ("case33bw?der=18:inverter:0.5&der-pf=0.9&der-pf=0.95", "option der-pf given twice"),
+        ("case33bw?der=18:inverter:0.5&der-pf=nan", "der-pf must be a number in"),
         ("nope", "unknown case 'nope'"),
         ("missing.m", "not found"),
     ],
@@ -102,6 +106,17 @@ def test_cli_der_option_reaches_the_spec(capsys):
 
 def test_spec_text_is_canonical():
     assert parse_spec("x.m?der-pf=0.9&der=gens").text == "x.m?der=gens&der-pf=0.9"
+
+
+def test_option_values_are_kept_exactly_not_rounded(capsys):
+    spec = "case33bw?der=18:inverter:0.3&der-pf=0.91234567"
+    assert parse_spec(spec).text == spec and parse_spec("paper33?line-z=1.0000001").text == "paper33?line-z=1.0000001"
+    assert load_case(spec).network.der_s_mva[0] == 0.3 / 0.91234567  # the model is the value given, not 0.912346's
+    assert main(["pf", "case33bw", "--der", "18:inverter:0.3", "--der-pf", "0.91234567", "--json"]) == 0
+    assert f'"spec": "{spec}"' in capsys.readouterr().out
+    # given twice — in the spec and as a flag — is refused, naming it
+    assert main(["pf", "case33bw?der=18:inverter:0.3&der-pf=0.9", "--der-pf", "0.95"]) == 2
+    assert "option der-pf given twice" in capsys.readouterr().err
 
 
 def test_disk_cache_round_trip(tmp_path, monkeypatch):

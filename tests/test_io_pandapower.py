@@ -205,6 +205,18 @@ def test_values_pandapower_needs_are_refused_not_defaulted(meshed, change, messa
         from_pandapower(net, "meshed")
 
 
+@pytest.mark.parametrize("twin", [False, True])
+def test_a_line_without_impedance_is_refused_naming_it(meshed, twin):
+    net = copy.deepcopy(meshed)
+    row = net.line.index[0]
+    if twin:  # a zero-impedance copy beside a real line: merged as parallel lines, it would divide by zero
+        row = pp.create_line_from_parameters(net, net.line.from_bus.iloc[0], net.line.to_bus.iloc[0], 1.0, 0.0, 0.0, 0.0, 1.0)
+    else:
+        net.line.loc[row, ["r_ohm_per_km", "x_ohm_per_km"]] = 0.0
+    with pytest.raises(CaseFormatError, match=f"meshed: table 'line' index {row}: r_ohm_per_km = x_ohm_per_km = 0"):
+        from_pandapower(net, "meshed")
+
+
 def test_optional_values_left_empty_keep_pandapowers_defaults(meshed):
     net = copy.deepcopy(meshed)
     for table, column in (("sgen", "max_p_mw"), ("sgen", "sn_mva"), ("bus", "min_vm_pu"), ("trafo", "tap_step_percent")):

@@ -27,6 +27,7 @@ LAYERS: tuple[tuple[str, tuple[str, ...]], ...] = (
             "opfbench.jsonio",
             "opfbench.parquetio",
             "opfbench.digests",
+            "opfbench.exact",
             "opfbench.timing",
             "opfbench.folders",
             "opfbench.state",

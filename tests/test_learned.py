@@ -196,6 +196,15 @@ def test_bad_params_files_and_labels_are_refused(fitted, tmp_path, capsys):
     period = resolve_period(TEST, "20:00-05:00", 15)
     with pytest.raises(InputError, match="were fitted on paper33"):
         check_learned((f"learned-affine:params={good}",), ("case69-der",), period, "20:00-05:00")
+    # row sums halved with the slope limits made consistent: the grid's own sensitivity refuses the steeper loop
+    rows = [v * 0.25 for v in data["row_sum_pu_per_mvar"]]
+    steep = dict(data, row_sum_pu_per_mvar=rows, slope_max_mvar_per_pu=[data["rho"] / v for v in rows])
+    steep["parameters"] = [  # each slope at the (false) bound: 4 × what the grid allows
+        p | {"c": -data["rho"] / r / d["s_mva"]} for p, r, d in zip(data["parameters"], rows, data["ders"], strict=True)
+    ]
+    (tmp_path / "steep.json").write_text(json.dumps(steep))
+    assert main(["snapshot", "paper33", "--strategy", f"learned-affine:params={tmp_path / 'steep.json'}"]) == 2
+    assert "its slopes make the closed loop no contraction" in capsys.readouterr().err
     # paper33-meshed has paper33's DER (buses, ratings) on another grid: refused, named, before any work
     assert main(["snapshot", "paper33-meshed", "--strategy", f"learned-affine:params={good}"]) == 2
     assert "paper33-meshed is another grid" in capsys.readouterr().err
@@ -299,3 +308,55 @@ def test_line_z_perturbs_the_lines_only():
     for bad in ("0", "-1", "x", "inf"):
         with pytest.raises(InputError, match="line-z"):
             parse_spec(f"paper33?line-z={bad}")
+
+
+# ----- rules that keep the band -------------------------------------------------------------
+def _tight_training() -> learned.TrainingSet:
+    """case33bw with three large inverters at its feeder ends and its upper voltage limit
+    lowered to 1.04 p.u.: at light load and high output the optimum absorbs to hold the
+    band, where a rule fitted to its Q alone leaves it."""
+    from functools import partial
+
+    from opfbench.formulations.frontier import tightened
+    from opfbench.formulations.opf_strategies import run_acopf
+    from opfbench.scenario import Scenario
+
+    net = load_case("case33bw?der=18:inverter:1.2,33:inverter:1.2,25:inverter:1.2").network
+    net = net.with_changes(vmax=np.where(np.arange(net.n_bus) != net.slack, 1.04, net.vmax))
+    rng = np.random.default_rng(3)
+    load = rng.uniform(0.2, 1.0, 96)
+    scenario = Scenario(net, load, rng.uniform(0.3, 1.0, (96, 1)) * net.der_rating_mw)
+    opt = run_acopf(scenario, 0.0)
+    ok = opt.status == "ok"
+    assert ok.all()
+    return learned.TrainingSet(
+        "tight", "a", "", "", scenario, opt.q_mvar, ok, partial(tightened, scenario, 0.0, q_mvar=opt.q_mvar, ok=ok)
+    )
+
+
+def test_a_compliant_fit_refits_to_tightened_bands_until_the_rule_leaves_the_band_less(tmp_path):
+    """comply (the default): the plain fit leaves the band at training steps in closed loop;
+    refitted to the optimum of tightened bands, each margin's closed loop recorded, the rule
+    kept leaves it at fewer steps (the first margin with none, else the fewest); the file's
+    record is what the rule does in closed loop; comply=false is the plain fit."""
+    training = _tight_training()
+    params = fit_rule("learned-affine", training)
+    tried = params.fit["comply"]
+    assert tried[0]["margin_pu"] == 0.0 and tried[0]["outside_steps"] > 10
+    best = min(tried, key=lambda t: (t["outside_steps"], t["train_loss_kw"]))
+    assert best["outside_steps"] < tried[0]["outside_steps"] / 3 and best["margin_pu"] > 0
+    assert [t["margin_pu"] for t in tried] == list(learned.MARGINS[: len(tried)])
+    path = params.write(tmp_path / "rule.json")
+    res = run_strategy(f"learned-affine:params={path}", training.scenario, 0.0)
+    assert int((res.voltage_violation() > 1e-6).sum()) == best["outside_steps"]
+    assert np.nanmean(res.losses_kw) == pytest.approx(best["train_loss_kw"], rel=1e-9)
+    plain = fit_rule("learned-affine", training, comply=False)
+    assert plain.fit["comply"] == [] and plain.hyper["comply"] is False
+    np.testing.assert_allclose(plain.rule.coef_, fit_rule("learned-affine", replace_tightened(training)).rule.coef_)
+
+
+def replace_tightened(training: learned.TrainingSet) -> learned.TrainingSet:
+    """The training set without tightened optima: nothing to refit to."""
+    from dataclasses import replace
+
+    return replace(training, tightened=None)

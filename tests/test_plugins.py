@@ -130,7 +130,17 @@ def test_the_worked_example_is_a_closed_loop_rule_with_options():
             def r9(m):
                 return "high"
             """,
-            "rule 'r9' failed: ValueError",
+            "rule 'r9' returned <U4 values; a Q target is real numbers",
+        ),
+        (
+            """
+            from opfbench.strategies.rules import Targets
+
+            @local_rule("r11", reads=("v",))
+            def r11(m):
+                return Targets(0 * m.v_pu, m.p_rated_mw * (m.v_pu < 1.05))
+            """,
+            "caps active power but is not declared a rule that curtails",
         ),
         (
             """
@@ -200,6 +210,25 @@ def test_an_open_loop_rule_that_gives_nan_is_named_too(tmp_path):
     net = load_network("paper33")
     res = run_strategy("nan-p:above=0.5", Scenario(net, [1.0, 1.0], [[0.3] * 5, [0.3, 0.3, 0.6, 0.3, 0.3]]), 0.0)
     assert list(res.status) == [OK, RULE_NON_FINITE] and res.power_flows.tolist() == [1, 1]
+
+
+def test_a_plugin_rule_may_cap_active_power_where_it_says_it_curtails(tmp_path):
+    """A plugin's own Volt-Watt — `curtails=True`, returning Q targets and a cap (MW) — runs on
+    the engine as the built-in one does, reactive priority included."""
+    body = """
+    from opfbench.strategies.rules import Targets
+
+    @local_rule("my-vw", reads=("v",), options={"v_full": 1.06, "v_zero": 1.1}, curtails=True)
+    def my_vw(m, v_full, v_zero):
+        share = np.clip((v_zero - m.v_pu) / (v_zero - v_full), 0.0, 1.0)
+        return Targets(np.zeros(m.shape), share * m.p_rated_mw)
+    """
+    plugins.load(_plugin(tmp_path, body))
+    assert spec("my-vw").curtails and {o.name for o in spec("my-vw").options} >= {"safe", "priority"}
+    scenario = Scenario.snapshot(load_network("paper33"), 0.0, 1.0)
+    mine, built_in = run_strategy("my-vw", scenario, 0.0), run_strategy("volt-watt", scenario, 0.0)
+    assert mine.curtailed_mw is not None and built_in.curtailed_mw is not None and mine.curtailed_mw.sum() > 1e-3
+    np.testing.assert_allclose(mine.curtailed_mw, built_in.curtailed_mw, atol=1e-6)
 
 
 def test_the_entry_point_group_loads_an_installed_plugin(tmp_path, monkeypatch):

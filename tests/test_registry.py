@@ -142,3 +142,18 @@ def test_unknown_strategy_and_option_are_input_errors():
 def test_a_label_names_its_result():
     res = run_strategy("volt-var:curve=a,", Scenario.snapshot(load_network("paper33")), 0.0)
     assert res.strategy == "volt-var:curve=a"
+
+
+@pytest.mark.parametrize(
+    "label, key",
+    [("volt-var:curve=b,curve=a", "curve"), ("volt-var:curve=a,curve=a", "curve"), ("q-u:q_max=0.33,q_max=0.2", "q_max")],
+)
+def test_an_option_given_twice_is_refused_even_when_one_value_is_the_default(label, key):
+    with pytest.raises(InputError, match=f"option {key} given twice"):
+        configuration(label)
+
+
+@pytest.mark.parametrize("label", ["q-u:deadband=true,v=0.9/1.1,q=0.3/-0.3", "q-u:q_max=0.2,v=0.9/1.1,q=0.3/-0.3"])
+def test_q_u_points_with_the_characteristics_options_are_refused_not_ignored(label):
+    with pytest.raises(InputError, match="the points replace it"):
+        configuration(label)

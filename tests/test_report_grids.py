@@ -37,9 +37,9 @@ def _summary() -> pd.DataFrame:
 
 def test_leaderboard_shares_of_the_opf_reduction():
     board = leaderboard(_summary()).set_index(["case", "strategy"])
-    assert board.loc[("grid-a", "lfma"), "opf_share_pct"] == pytest.approx(50.0)
-    assert board.loc[("grid-a", "llma"), "opf_share_pct"] == pytest.approx(20.0)
-    assert board.loc[("grid-b", "llma"), "opf_share_pct"] == pytest.approx(-50.0)  # worse than no action
+    assert board.loc[("grid-a", "lfma"), "loss_only_share_pct"] == pytest.approx(50.0)
+    assert board.loc[("grid-a", "llma"), "loss_only_share_pct"] == pytest.approx(20.0)
+    assert board.loc[("grid-b", "llma"), "loss_only_share_pct"] == pytest.approx(-50.0)  # worse than no action
     assert board.loc[("grid-a", "acopf"), "rank"] == 1 and board.loc[("grid-a", "llma"), "rank"] == 4
     assert board.loc[("grid-a", "llma"), "voltage_violation_steps"] == 3 and "no-action" not in board.index.get_level_values(1)
 
@@ -47,7 +47,7 @@ def test_leaderboard_shares_of_the_opf_reduction():
 def test_leaderboard_without_an_opf_reduction_gives_no_share():
     s = _summary()
     s.loc[s.strategy == "acopf", "energy_kwh"] = s.loc[s.strategy == "acopf", "no_action_kwh"]
-    assert np.isnan(leaderboard(s).opf_share_pct).all()
+    assert np.isnan(leaderboard(s).loss_only_share_pct).all()
 
 
 def test_ranking_claim_per_grid():
@@ -86,10 +86,29 @@ def test_how_close_sets_train_beside_test_and_maps_a_perturbed_case_to_its_model
     both = pd.concat([test, perturbed])
     table = how_close(both, Kinds.of(both["strategy"]), train, {"grid-a?line-z=1.2": "grid-a"}).set_index(["case", "strategy"])
     assert "acopf" not in table.index.get_level_values(1) and "socp" not in table.index.get_level_values(1)
-    assert table.loc[("grid-a", "no-action"), "test_share_pct"] == 0.0
-    assert table.loc[("grid-a", "lfma"), "test_share_pct"] == pytest.approx(50.0)
-    assert table.loc[("grid-a", "lfma"), "train_share_pct"] == pytest.approx(75.0)
-    assert table.loc[("grid-a?line-z=1.2", "lfma"), "train_share_pct"] == pytest.approx(75.0)  # the model's training
-    assert np.isnan(table.loc[("grid-b", "lfma"), "train_share_pct"])  # no training on grid-b
+    assert table.loc[("grid-a", "no-action"), "test_loss_only_share_pct"] == 0.0
+    assert table.loc[("grid-a", "lfma"), "test_loss_only_share_pct"] == pytest.approx(50.0)
+    assert table.loc[("grid-a", "lfma"), "train_loss_only_share_pct"] == pytest.approx(75.0)
+    assert table.loc[("grid-a?line-z=1.2", "lfma"), "train_loss_only_share_pct"] == pytest.approx(75.0)  # the model's training
+    assert np.isnan(table.loc[("grid-b", "lfma"), "train_loss_only_share_pct"])  # no training on grid-b
     alone = how_close(test, Kinds.of(test["strategy"]))
-    assert alone["train_share_pct"].isna().all() and len(alone) == 6
+    assert alone["train_loss_only_share_pct"].isna().all() and len(alone) == 6
+
+
+def test_at_equal_compliance_the_leaderboard_and_how_close_rank_by_the_gap():
+    """With the frontier's columns (a run since the frontier): ranked by the gap at equal
+    compliance, fewer minutes outside first on a tie, the share there beside the loss-only
+    one; a rule that leaves the band and loses least ranks below one that holds it."""
+    s = _summary().assign(voltage_violation_min=0.0, max_violation_pu=0.0, not_settled_steps=0, curtailed_kwh=0.0)
+    gaps = {"no-action": 5.0, "llma": 4.0, "lfma": 6.0, "acopf": 0.0, "socp": 0.0}
+    s["gap_eq_kwh"] = s["strategy"].map(gaps)
+    s["share_eq_pct"] = 100.0 - 10 * s["gap_eq_kwh"]
+    s.loc[s.strategy == "socp", "voltage_violation_min"] = 15.0  # ties acopf's gap, less compliant
+    board = leaderboard(s).set_index(["case", "strategy"])
+    assert [board.loc[("grid-a", n), "rank"] for n in ("acopf", "socp", "llma", "lfma")] == [1, 2, 3, 4]
+    assert board.loc[("grid-a", "lfma"), "energy_kwh"] < board.loc[("grid-a", "llma"), "energy_kwh"]  # lower losses, ranked below
+    assert board.loc[("grid-a", "lfma"), "loss_only_share_pct"] == pytest.approx(50.0)
+    table = how_close(s, Kinds.of(s["strategy"])).set_index(["case", "strategy"])
+    ranks = [table.loc[("grid-a", n), "rank"] for n in ("llma", "no-action", "lfma")]  # the local rules alone
+    assert ranks == [1, 2, 3]
+    assert table.loc[("grid-a", "lfma"), "test_share_eq_pct"] == pytest.approx(40.0)

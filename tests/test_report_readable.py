@@ -75,9 +75,9 @@ def _board(violations: float, recovery: float | None) -> pd.DataFrame:
     ("violations", "recovery", "ids"),
     [
         (0.0, None, ["share-k-0"]),
-        (15.0, None, ["share-voltage-violation-min-0"]),
+        (15.0, None, ["share-k-0"]),  # compliance is the frontier figure's axis
         (0.0, -3.0, ["share-recovery-added-ms-0"]),
-        (15.0, -3.0, ["share-voltage-violation-min-0", "share-recovery-added-ms-0"]),
+        (15.0, -3.0, ["share-recovery-added-ms-0"]),
     ],
 )
 def test_the_share_is_plotted_against_what_the_case_has(violations, recovery, ids):
@@ -90,8 +90,8 @@ def test_the_headline_figure_cuts_a_share_far_below_no_action():
             "case": ["grid"] * 3,
             "k": [0.0] * 3,
             "strategy": ["no-action", "lfma", "learned-affine:train=2016-01-01..2016-10-01,rounds=3"],
-            "train_share_pct": [0.0, -2500.0, 95.0],
-            "test_share_pct": [0.0, -3000.0, 97.0],
+            "train_share_eq_pct": [0.0, -2500.0, 95.0],
+            "test_share_eq_pct": [0.0, -3000.0, 97.0],
         }
     )
     (plot,) = plots.how_close(board, " — grid")
@@ -99,7 +99,7 @@ def test_the_headline_figure_cuts_a_share_far_below_no_action():
     assert figure["layout"]["yaxis"]["range"][0] == plots.SHARE_FLOOR_PCT
     assert "axis cut" in plot.title
     assert "learned-affine:rounds=3" in figure["data"][0]["x"][1]  # the training period is the run's, said beside
-    (uncut,) = plots.how_close(board.assign(train_share_pct=[0.0, -20.0, 95.0], test_share_pct=[0.0, -30.0, 97.0]))
+    (uncut,) = plots.how_close(board.assign(train_share_eq_pct=[0.0, -20.0, 95.0], test_share_eq_pct=[0.0, -30.0, 97.0]))
     assert "axis cut" not in uncut.title and "range" not in json.loads(uncut.json)["layout"].get("yaxis", {})
 
 
@@ -168,3 +168,64 @@ def test_an_optimum_that_fell_back_but_reduced_losses_is_not_called_missing():
         for s, e in (("no-action", 10.0), ("acopf", 8.0))  # every step fallback-cold: still an optimum
     ]
     assert tables.without_optimum(pd.DataFrame(rows)) == []
+
+
+def test_the_frontier_figure_draws_the_frontier_as_a_staircase_and_every_configuration_as_a_point():
+    board = pd.DataFrame(
+        {
+            "case": ["grid"] * 3,
+            "k": [0.0] * 3,
+            "strategy": ["acopf", "lfma", "volt-watt"],
+            "cost_kwh": [100.0, 103.0, 104.0],
+            "max_violation_pu": [0.0, 0.004, 0.0],
+            "voltage_violation_min": [0.0, 75.0, 0.0],
+            "gap_eq_kwh": [0.0, 4.0, 4.0],
+            "share_eq_pct": [100.0, 60.0, 55.0],
+            "frontier_curtails": [False, False, True],
+        }
+    )
+    eps = [0.0, 0.0025, 0.005, 0.01, 0.02, 0.05, np.inf]
+    frontier = pd.DataFrame(
+        {
+            "case": "grid",
+            "k": 0.0,
+            "night_mode": "connected",
+            "curtail": [False] * 7 + [True],
+            "eps_pu": eps + [0.0],
+            "energy_kwh": [100.0, 99.5, 99.0, 98.8, 98.8, 98.8, 98.8, 99.0],
+        }
+    )
+    (plot,) = plots.frontier_vs_compliance(board, frontier)
+    data = json.loads(plot.json)["data"]
+    line, points = data[0], data[1:]
+    assert line["line"]["shape"] == "vh" and len(line["x"]) == 7 and line["x"][-1] > 0.05  # ∞ drawn at the right edge
+    assert [p["name"] for p in points] == ["lfma", "volt-watt", "acopf"] or {p["name"] for p in points} == {
+        "acopf",
+        "lfma",
+        "volt-watt",
+    }
+    symbols = {p["name"]: p["marker"]["symbol"] for p in points}
+    assert symbols["volt-watt"] == "diamond" and symbols["lfma"] == "circle"
+    assert plots.frontier_vs_compliance(board, None) == []
+
+
+def test_a_leaderboard_without_a_share_says_why():
+    def rows(case: str, energies: dict[str, float]) -> list[dict]:
+        return [
+            {"case": case, "strategy": s, "k": 0.0, "night_mode": "connected", "forecast": "off", "energy_kwh": e}
+            | {"no_action_kwh": 10.0, "steps": 4, "not_ok_steps": 0, "voltage_violation_min": 0.0}
+            for s, e in energies.items()
+        ]
+
+    summary = pd.DataFrame(
+        rows("no-opf", {"no-action": 10.0, "lfma": 9.0})
+        + rows("saves-nothing", {"no-action": 10.0, "lfma": 9.0, "acopf": 10.0})
+        + rows("fine", {"no-action": 10.0, "lfma": 9.0, "acopf": 8.0})
+    )
+    notes = [b.text for b in sections.grids(Inputs(run_dir=Path(), summary=summary)).blocks if b.kind == "note"]
+    assert [n for n in notes if "no loss-only share" in n] == [
+        "no-opf, k=0: no loss-only share of the AC OPF's loss reduction (—): the run has no acopf configuration (add it to "
+        "--strategies: the share is of its loss reduction).",
+        "saves-nothing, k=0: no loss-only share of the AC OPF's loss reduction (—): the acopf saves no loss here (10 kWh "
+        "against 10 kWh with no action).",
+    ]

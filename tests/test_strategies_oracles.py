@@ -1,7 +1,9 @@
 """The closed-loop rules against independent engines: OpenDSS's InvControl VOLTVAR (through
 opendssdirect.py; `tests/support/opendss_oracle.py`) and pandapower's DERController
 (Q(V) and cos φ(P) curves) — Q per DER within 1e-6 MVAr, |V| within 1e-7 p.u., losses
-within 1e-4 kW. Operating points: heavy load and little sun (the rules inject, the PV's
+within 1e-4 kW; Volt-Watt, Volt-VAR + Volt-Watt and reactive priority against OpenDSS's
+InvControl VOLTWATT (VoltwattYAxis=PMPPPU), CombiMode=VV_VW and PVSystem WattPriority=no
+where curtailment binds — P and Q per DER within 1e-6 p.u. of S̄. Operating points: heavy load and little sun (the rules inject, the PV's
 limits bind), nominal load at 80 % output (inject, no limit binding), light load at 90 %
 output (voltages above 1.02 p.u.: the rules absorb); Category A and B; k = 0 and 0.4.
 The full sweep on paper33 and case69-der is slow; a representative subset runs by default."""
@@ -24,13 +26,14 @@ from pandapower.control.controller.DERController import (
 )
 from pandapower.converter.pypower import from_ppc
 
+from opfbench.capability import q_peak
 from opfbench.io import load_network
 from opfbench.io.matpower import to_ppc
-from opfbench.registry.catalog import run_strategy
+from opfbench.registry.catalog import configuration, run_strategy
 from opfbench.scenario import Scenario
-from opfbench.strategies.limits import reactive_limit
-from opfbench.strategies.standards import VOLT_VAR
-from tests.support.opendss_oracle import opendss_volt_var
+from opfbench.strategies.limits import Capability, reactive_limit
+from opfbench.strategies.standards import VOLT_VAR, VOLT_WATT
+from tests.support.opendss_oracle import Unit, opendss_inverters, opendss_volt_var
 
 TOL_Q_MVAR, TOL_V_PU, TOL_LOSS_KW = 1e-6, 1e-7, 1e-4
 POINTS = {  # load scale, DER output share, what the rules do there
@@ -131,3 +134,67 @@ def test_volt_var_and_cosphi_p_equal_pandapower_der_controller(point, curve):
     q, vm = _pandapower(net, scenario, QModelCosphiPCurve(CosphiPCurve([0.0, 0.5, 1.0], [1.0, 1.0, -0.9])))
     assert (ours.q_mvar[0] < -0.1).all()
     assert np.abs(q - ours.q_mvar[0]).max() < TOL_Q_MVAR and np.abs(vm - ours.vm[0]).max() < TOL_V_PU
+
+
+# ----- active power: Volt-Watt, VV_VW, reactive priority ------------------------------------
+PEAK_PF = {"PV": 0.8, "inverter": 0.9}  # cos φ where each kind's Qmax(P) peaks (`capability`)
+
+
+def _units(net, scenario: Scenario) -> list[Unit]:
+    """Our DER as OpenDSS PVSystems with their own capability: kVA = S̄, Pmpp = P̄, kvarMax the
+    peak of Qmax and %PminkvarMax the power where it peaks (the power-factor line below it).
+    A DFIG's falling curve has no PVSystem counterpart: it gets kvarMax = Qmax at the power
+    it has and a kVA that never binds (the test checks its limit does not bind)."""
+    out = []
+    for d, (kind, rating, s) in enumerate(zip(net.der_kinds, net.der_rating_mw, net.der_s_mva, strict=True)):
+        p_kw = float(scenario.der_p_mw[0, d]) * 1e3
+        if kind == "DFIG":
+            out.append(Unit(10 * s * 1e3, rating * 1e3, p_kw, float(scenario.qmax_mvar()[0, d]) * 1e3))
+            continue
+        peak_p = min(PEAK_PF[kind] * s, rating)
+        peak_q = float(q_peak([kind], np.array([rating]), np.array([rating]), np.array([s]))[0])
+        out.append(Unit(s * 1e3, rating * 1e3, p_kw, peak_q * 1e3, 100 * peak_p / rating))
+    return out
+
+
+ACTIVE = {  # case, configuration at load 0 and full output (k = 0): curtailment binds
+    "paper33 volt-watt": ("paper33", "volt-watt"),
+    "paper33 vv_vw": ("paper33", "volt-var+volt-watt"),
+    "paper33 q-priority": ("paper33", "volt-var:priority=q"),
+    "paper33 vv_vw q-priority": ("paper33", "volt-var+volt-watt:curve=a,priority=q"),
+    "case69-der volt-watt": ("case69-der", "volt-watt:v=1.03/1.06,p=1/0"),
+    "case69-der vv_vw": ("case69-der", "volt-var+volt-watt:vw_v=1.03/1.06,vw_p=1/0"),
+    "case69-der q-priority": ("case69-der", "volt-var:curve=a,priority=q"),
+}
+
+
+@pytest.mark.parametrize("name", ACTIVE)
+def test_volt_watt_and_priority_equal_opendss_where_curtailment_binds(name):
+    case, label = ACTIVE[name]
+    net = load_network(case)
+    scenario = Scenario.snapshot(net, 0.0, 1.0)
+    ours = run_strategy(label, scenario, 0.0)
+    options = configuration(label).options()
+    volt_var = volt_watt = None
+    if "q" in options:
+        volt_var = (options["v"], options["q"]) if options["v"] else VOLT_VAR[options["curve"]]
+    if "vw_p" in options or "p" in options:
+        v, p = (options["vw_v"], options["vw_p"]) if "vw_p" in options else (options["v"], options["p"])
+        volt_watt = (v, p) if v else VOLT_WATT
+    load = scenario.bus_load_mva()[0]
+    q_priority = options["priority"] == "q"
+    theirs = opendss_inverters(
+        net, load.real, load.imag, _units(net, scenario), volt_var, volt_watt, net.der_s_mva, not q_priority
+    )
+    assert theirs.converged and ours.status[0] == "ok" and ours.curtailed_mw is not None
+    p_ours = scenario.der_p_mw[0] - ours.curtailed_mw[0]
+    assert (ours.curtailed_mw[0] > 1e-3).any()  # curtailment binds
+    if q_priority:
+        assert (np.abs(ours.q_mvar[0]) > 1e-3).any()
+    s_bar = net.der_s_mva
+    assert np.abs(theirs.p_mw - p_ours).max() / s_bar.min() < 1e-6
+    assert np.abs(theirs.q_mvar - ours.q_mvar[0]).max() / s_bar.min() < 1e-6
+    assert np.abs(theirs.vm - ours.vm[0]).max() < TOL_V_PU
+    dfig = np.array(net.der_kinds) == "DFIG"  # its limit (represented at P^C only) must not bind
+    limit = Capability(scenario, 0.0, priority=options["priority"]).limit(np.arange(1), p_ours[None, :])[0]
+    assert (np.abs(ours.q_mvar[0][dfig]) < np.minimum(limit, scenario.qmax_mvar()[0])[dfig] - 1e-3).all()

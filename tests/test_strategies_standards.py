@@ -9,15 +9,16 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from opfbench.errors import InputError
 from opfbench.io import load_network
 from opfbench.powerflow import solve_pf
 from opfbench.registry.catalog import configuration, run_strategy
 from opfbench.result import NOT_SETTLED, OK
 from opfbench.scenario import Scenario
 from opfbench.strategies import standards
-from opfbench.strategies.limits import reactive_limit
+from opfbench.strategies.limits import Capability, reactive_limit
 from opfbench.strategies.rule_engine import adapt_step_factor
-from opfbench.strategies.rules import Measurements
+from opfbench.strategies.rules import Measurements, Targets
 
 TOL_Q = 1e-6  # MVAr: the engine settles to 1e-7 MVAr and 1e-7 p.u.
 
@@ -31,6 +32,19 @@ def _measurements(v: np.ndarray | None = None, p: np.ndarray | None = None, rati
     rows = next(iter(values.values())).shape[0]
     return Measurements(
         frozenset({"v", "p"}), values, rows, np.array(s), np.array(rating), np.array(["PV", "PV"]), np.ones((2, 1), bool)
+    )
+
+
+def _measured_v(net, pf) -> Measurements:
+    """One snapshot's |V| at the DER buses of `net` as a rule measures it (from the flow `pf`)."""
+    return Measurements(
+        frozenset({"v"}),
+        {"v_pu": pf.vm[net.der_bus][None, :]},
+        1,
+        net.der_s_mva,
+        net.der_rating_mw,
+        np.array(net.der_kinds),
+        np.ones((len(net.der_bus), 1), bool),
     )
 
 
@@ -109,19 +123,12 @@ def test_closed_loop_steady_state_is_a_fixed_point_of_an_independent_power_flow(
     limit = reactive_limit(scenario, 0.2)
     for s in range(3):
         pf = solve_pf(net, scenario.injections(res.q_mvar)[s])
-        m = Measurements(
-            frozenset({"v"}),
-            {"v_pu": pf.vm[net.der_bus][None, :]},
-            1,
-            net.der_s_mva,
-            net.der_rating_mw,
-            np.array(net.der_kinds),
-            np.ones((5, 1), bool),
-        )
+        m = _measured_v(net, pf)
         rule = {
             o: v
             for o, v in config.options().items()
-            if o in config.spec.option and o not in ("safe", "max_steps", "tol_v_pu", "tol_q_mvar", "step_factor", "adaptive")
+            if o in config.spec.option
+            and o not in ("safe", "priority", "max_steps", "tol_v_pu", "tol_q_mvar", "step_factor", "adaptive")
         }
         target = np.clip(config.spec.target(m, **rule)[0], -limit[s], limit[s])
         assert np.abs(target - res.q_mvar[s]).max() < TOL_Q
@@ -168,3 +175,76 @@ def test_adaptive_step_factor_is_opendss_change_deltaq_factor():
     dv = np.array([0.9, 0.7, 0.1, 0.3, 0.5, 0.9, 0.1, 0.5])
     old = np.array([1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, -1.0])
     np.testing.assert_allclose(adapt_step_factor(alpha, dv, old), [0.4, 0.45, 0.6, 0.55, 0.5, 0.2, 0.9, 0.5])
+
+
+# ----- Volt-Watt, its combination with Volt-VAR, reactive priority --------------------------
+def test_volt_watt_caps_active_power_on_the_ieee_1547_curve():
+    """Full output up to 1.06 p.u., zero at 1.10, linear between, flat beyond, in p.u. of P̄
+    (not S̄); Q stays 0. The combination takes Volt-VAR's Q and Volt-Watt's cap."""
+    m = _measurements(v=np.array([[1.0, 1.07], [1.08, 1.2]]), rating=(0.6, 0.5), s=(0.7, 0.6))
+    out = standards.volt_watt(m)
+    assert out.q_mvar.tolist() == [[0.0, 0.0], [0.0, 0.0]]
+    np.testing.assert_allclose(out.p_max_mw, [[0.6, 0.5 * 0.75], [0.6 * 0.5, 0.0]], atol=1e-12)
+    both = standards.volt_var_volt_watt(m, curve="a")
+    np.testing.assert_allclose(both.q_mvar, standards.volt_var(m, curve="a"), atol=0)
+    np.testing.assert_allclose(both.p_max_mw, out.p_max_mw, atol=0)
+    own = standards.volt_watt(m, v=(1.0, 1.05), p=(1.0, 0.2))
+    np.testing.assert_allclose(own.p_max_mw, [[0.6, 0.5 * 0.2], [0.6 * 0.2, 0.5 * 0.2]], atol=1e-12)
+
+
+@pytest.mark.parametrize(
+    "label, problem",
+    [
+        ("volt-watt:v=1.06/1.1,p=0/1", "not increase"),
+        ("volt-watt:v=1.06/1.1,p=1/-0.1", "must lie in"),
+        ("volt-watt:v=1.1/1.06,p=1/0", "must increase"),
+        ("volt-watt:v=1.06/1.1", "give both v= and p="),
+        ("volt-var+volt-watt:vw_v=1.06/1.1", "give both vw_v= and vw_p="),
+        ("volt-var+volt-watt:curve=a,v=0.9/1.1,q=0.2/-0.2", "not both"),
+        ("volt-var:priority=x", "not one of p, q"),
+    ],
+)
+def test_volt_watt_options_a_rule_cannot_mean_are_refused(label, problem):
+    with pytest.raises(InputError, match=problem):
+        configuration(label)
+
+
+@pytest.mark.parametrize("label", ["volt-watt", "volt-var+volt-watt", "volt-var:priority=q", "volt-var+volt-watt:priority=q"])
+def test_active_and_reactive_power_settle_to_a_fixed_point_of_an_independent_power_flow(label):
+    """Light load, full sun on paper33 (|V| up to 1.065 p.u.): at the engine's P and Q, a
+    Newton–Raphson flow gives voltages at which the rule asks for the very same P and Q."""
+    net = load_network("paper33")
+    scenario = Scenario(net, [0.0, 0.3], np.array([1.0, 0.95])[:, None] * net.der_rating_mw)
+    res = run_strategy(label, scenario, 0.0)
+    assert list(res.status) == [OK] * 2 and res.curtailed_mw is not None and res.curtailed_mw[0].sum() > 1e-3
+    config = configuration(label)
+    rule = standards.volt_var_volt_watt if "+" in label else standards.volt_watt if "watt" in label else standards.volt_var
+    own = {o: v for o, v in config.options().items() if o in ("curve", "v", "q", "p", "vw_v", "vw_p")}
+    capability = Capability(scenario, 0.0, priority=config.options()["priority"])
+    p = scenario.der_p_mw - res.curtailed_mw
+    for s in range(2):
+        pf = solve_pf(net, scenario.injections(res.q_mvar, p)[s])
+        m = _measured_v(net, pf)
+        asked = rule(m, **own)
+        asked = asked if isinstance(asked, Targets) else Targets(asked)
+        q, p_wanted = capability.setpoints(np.array([s]), asked.q_mvar, asked.p_max_mw)
+        assert np.abs(q - res.q_mvar[s]).max() < TOL_Q
+        if p_wanted is not None:
+            assert np.abs(p_wanted - p[s]).max() < TOL_Q
+        assert res.excursion_mvar[s] == 0  # the delivered power's capability covers Q
+        assert res.losses_kw[s] == pytest.approx(float(pf.losses_kw), abs=1e-4)
+
+
+def test_active_priority_without_a_cap_curtails_nothing_and_reactive_priority_curtails_only_for_q():
+    """priority=p (the default) without a cap is the rule as before, bit for bit; with
+    priority=q a unit curtails only where its Q needs room, by as little as that needs."""
+    net = load_network("paper33")
+    scenario = Scenario(net, [0.0, 1.3], np.array([1.0, 0.3])[:, None] * net.der_rating_mw)
+    plain, p_first = run_strategy("volt-var", scenario, 0.2), run_strategy("volt-var:priority=p", scenario, 0.2)
+    assert plain.curtailed_mw is None and np.array_equal(plain.q_mvar, p_first.q_mvar)
+    q_first = run_strategy("volt-var:priority=q", scenario, 0.2)
+    cut = q_first.curtailed_mw
+    assert (
+        cut is not None and cut[0].max() > 1e-3 and cut[1].max() == 0
+    )  # full sun: room for Q is curtailed; at 30 %, none is needed
+    assert (np.abs(q_first.q_mvar[0]) > np.abs(plain.q_mvar[0]) + 1e-3).any()  # Q first: more Q than P-priority allows

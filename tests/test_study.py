@@ -31,12 +31,13 @@ def day_run(tmp_path_factory):
 
 CONFIG_KEYS = ["case", "strategy", "k", "night_mode", "forecast"]
 TIMING = ["wall_ms", "solver_ms"]
+REFERENCE = ["frontier_kw", "frontier_bound_kw", "frontier_eps_pu"]  # the optimum's, which depends on k
 
 
 def _repeated_configurations(table: pd.DataFrame) -> set[tuple[tuple, tuple]]:
-    """Pairs of configurations whose rows (every column but the keys and the timings) are
-    identical."""
-    values = [c for c in table.columns if c not in CONFIG_KEYS + TIMING]
+    """Pairs of configurations whose own rows (every column but the keys, the timings and
+    the frontier's reference) are identical."""
+    values = [c for c in table.columns if c not in CONFIG_KEYS + TIMING + REFERENCE]
     groups = {key: part[values].reset_index(drop=True) for key, part in table.groupby(CONFIG_KEYS, sort=True)}
     by_hash: dict[int, list[tuple]] = {}
     for key, part in groups.items():
@@ -239,13 +240,13 @@ def test_resume_refuse_fresh(tmp_path, capsys):
     out = str(tmp_path / "run")
     assert main([*SMALL, "--out", out]) == 0
     first = pd.read_parquet(tmp_path / "run" / "steps.parquet")
-    assert "(2 run now, 0 kept)" in capsys.readouterr().out
+    assert "(1 run now, 0 kept)" in capsys.readouterr().out
     assert main([*SMALL, "--out", out]) == 0  # everything kept
-    assert "(0 run now, 2 kept)" in capsys.readouterr().out
+    assert "(0 run now, 1 kept)" in capsys.readouterr().out
     # nothing left to run: no scheduler is contacted (this address answers nothing)
     on_cluster = [a for a in SMALL if a not in ("--workers", "1")]  # --workers and --scheduler exclude each other
     assert main([*on_cluster, "--out", out, "--scheduler", "tcp://127.0.0.1:9"]) == 0
-    assert "(0 run now, 2 kept)" in capsys.readouterr().out
+    assert "(0 run now, 1 kept)" in capsys.readouterr().out
     pd.testing.assert_frame_equal(first, pd.read_parquet(tmp_path / "run" / "steps.parquet"))
     assert main([*SMALL, "--k", "0.2", "--out", out]) == 2
     assert "another configuration (differs in: ks)" in capsys.readouterr().err
@@ -339,18 +340,17 @@ def test_the_repeat_check_finds_a_repeated_configuration(day_run):
 
 
 def test_the_default_grid_runs_a_forecast_only_where_a_strategy_reads_it():
-    """Planned without running: `opfbench run`'s default grid has 195 configurations (165
+    """Planned without running: `opfbench run`'s default grid has 225 configurations (195
     with forecast off: every built-in strategy; 30 with the oracle: the paper's Algorithm 3
     rules, `DEFAULT_FORECAST`); without that choice every strategy the registry says reads a
     forecast runs under the oracle too, and no other."""
     tasks = prepare(StudyConfig(forecast_strategies=DEFAULT_FORECAST)).tasks
-    assert {t.strategies for t in tasks if t.forecast == "oracle"} == {DEFAULT_FORECAST}
-    assert {t.strategies for t in tasks if t.forecast == "off"} == {DEFAULT_RUN}
-    configurations = {(t.case, s, t.k, m, t.forecast) for t in tasks for s in t.strategies for m in t.night_modes}
-    assert len(configurations) == 195 and len(tasks) == 2 * 5 * 4
+    assert {t.runs for t in tasks} == {(("off", DEFAULT_RUN), ("oracle", DEFAULT_FORECAST))}
+    configurations = {(t.case, s, t.k, m, f) for t in tasks for f, names in t.runs for s in names for m in t.night_modes}
+    assert len(configurations) == 225 and len(tasks) == 5 * 4  # a task runs every forecast source of its (k, chunk)
     every = prepare(StudyConfig()).tasks
     readers = {name for name in DEFAULT_RUN if get_strategy(name).uses_forecast}
-    assert {t.strategies for t in every if t.forecast == "oracle"} == {tuple(s for s in DEFAULT_RUN if s in readers)}
+    assert {dict(t.runs)["oracle"] for t in every} == {tuple(s for s in DEFAULT_RUN if s in readers)}
     assert BASELINE not in readers and {"llma", "lfma", "volt-var", "cosphi-p"} <= readers
 
 
@@ -415,3 +415,36 @@ def test_auto_chunk_is_six_hours_on_short_periods_and_a_month_otherwise():
     )
     year, tasks = family.config, family.tasks
     assert year.chunk == "month" and len(tasks) == 12
+
+
+def test_curtailed_energy_is_a_column_of_every_strategy(tmp_path):
+    """Volt-Watt on a curve that binds at paper33's midday voltages (below 1 p.u.): the steps carry the
+    power curtailed (kW), the DER table each unit's (MW), the summary the energy (kWh), and
+    a strategy that curtails nothing carries 0."""
+    config = StudyConfig(
+        strategies=("no-action", "volt-watt:v=0.9/1,p=1/0"),
+        ks=(0.0,),
+        night_modes=("connected",),
+        forecast=("off",),
+        period="2016-06-28T11:00..2016-06-28T12:00",
+    )
+    run = run_study(config, tmp_path)
+    steps = pd.read_parquet(tmp_path / "steps.parquet")
+    der = pd.read_parquet(tmp_path / "der_q.parquet")
+    summary = pd.read_csv(tmp_path / "summary.csv").set_index("strategy")
+    vw = "volt-watt:v=0.9/1,p=1/0"
+    assert (steps[steps.strategy == "no-action"].curtailed_kw == 0).all()
+    assert (steps[steps.strategy == vw].curtailed_kw > 0).any()
+    assert summary.loc[vw, "curtailed_kwh"] == pytest.approx((steps[steps.strategy == vw].curtailed_kw / 60).sum(), rel=1e-5)
+    assert summary.loc[vw, "curtailed_kwh"] > 0 and summary.loc["no-action", "curtailed_kwh"] == 0
+    by_step = der[der.strategy == vw].groupby("time").curtailed_mw.sum() * 1e3
+    np.testing.assert_allclose(by_step.to_numpy(), steps[steps.strategy == vw].curtailed_kw.to_numpy(), rtol=1e-12)
+    assert run.summary is not None and "curtailed_kwh" in run.summary
+    # where it curtails, a rule is compared with the optimum that may curtail; elsewhere with the plain one
+    rule = steps[steps.strategy == vw]
+    assert (rule.frontier_curtails == (rule.curtailed_kw > 0)).all() and not steps[
+        steps.strategy == "no-action"
+    ].frontier_curtails.any()
+    assert (steps.losses_kw + steps.curtailed_kw >= steps.frontier_kw - 1e-4).all()
+    front = pd.read_csv(tmp_path / "frontier.csv")
+    assert set(front.curtail) == {False, True} and (front[front.curtail].steps == rule.frontier_curtails.sum()).all()

@@ -6,7 +6,8 @@ each rule run as one batch, and LFMA run snapshot by snapshot on a sample for co
 `voltvar_day_ms` is the closed-loop Volt-VAR day (IEEE 1547 Category B, settled by the
 engine's damped iteration) and `voltvar_iterations_mean` the power flows it needs per
 snapshot on average (each iteration is one flow, the evaluation included);
-`voltvar_vs_lfma` its time over LFMA's day in the same process (target: ≤ 3).
+`voltvar_vs_lfma` its time over LFMA's day in the same process (target: ≤ 3). Times are CPU
+times (`opfbench.timing.best_ms` with `cpu=True`; the rules run single-threaded).
 """
 
 from __future__ import annotations
@@ -35,7 +36,7 @@ def bench_local(scenario: Scenario, k: float = 0.4, repeats: int = 3, loop_sampl
     for spec in specs():
         if spec.kind != "local" or spec.source != "opfbench" or spec.learned:  # learned rules: `bench learned`
             continue
-        ms, res = best_ms(partial(cold, run_strategy, spec.name, scenario, k), repeats)
+        ms, res = best_ms(partial(cold, run_strategy, spec.name, scenario, k), repeats, cpu=True)
         out["rules"][spec.name] = {
             "wall_ms": ms,
             "ms_per_snapshot": ms / n,
@@ -45,7 +46,7 @@ def bench_local(scenario: Scenario, k: float = 0.4, repeats: int = 3, loop_sampl
             "energy_losses_kwh": float(np.nansum(res.losses_kw) * 24.0 / n),
         }
     m = min(loop_sample, n)
-    ms, singles = best_ms(lambda: [run_strategy("lfma", scenario.take(slice(i, i + 1)), k) for i in range(m)], 1)
+    ms, singles = best_ms(lambda: [run_strategy("lfma", scenario.take(slice(i, i + 1)), k) for i in range(m)], 1, cpu=True)
     batch = run_strategy("lfma", scenario.take(slice(0, m)), k)
     out["lfma_one_by_one_max_dq_mvar"] = float(np.abs(np.concatenate([r.q_mvar for r in singles]) - batch.q_mvar).max())
     out["lfma_one_by_one_ms_extrapolated"] = ms * n / m

@@ -7,6 +7,7 @@ import math
 import re
 from pathlib import Path
 
+from opfbench.exact import number_text
 from opfbench.io.sources import formats
 from opfbench.jsonio import print_json
 
@@ -107,7 +108,7 @@ def add_case_options(parser: argparse.ArgumentParser) -> None:
 def case_spec(case: str, args: argparse.Namespace) -> str:
     """`case` with the --der/--der-pf options added to its spec (`opfbench.io.spec`)."""
     opts = [f"der={args.der}"] if getattr(args, "der", None) is not None else []
-    opts += [f"der-pf={args.der_pf:g}"] if getattr(args, "der_pf", None) is not None else []
+    opts += [f"der-pf={number_text(args.der_pf)}"] if getattr(args, "der_pf", None) is not None else []
     if not opts:
         return case
     return case + ("&" if "?" in case else "?") + "&".join(opts)

@@ -224,9 +224,12 @@ def finish_run(result: StudyRun, args: argparse.Namespace) -> int:
         "avg_loss_kw",
         "energy_kwh",
         "savings_pct",
+        "curtailed_kwh",
         "not_ok_steps",
         "voltage_violation_steps",
         "gap_pct",
+        "gap_eq_pct",
+        "share_eq_pct",
     ]
     print(summary[cols].to_string(index=False, float_format=lambda v: f"{v:.3f}"))
     print(

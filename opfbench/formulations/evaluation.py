@@ -59,8 +59,10 @@ def evaluated_result(
     extra: dict[str, np.ndarray],
     power_flows: np.ndarray | int = 0,
     pf: PowerFlowResult | None = None,
+    p_pu: np.ndarray | None = None,
 ) -> StrategyResult:
-    """A formulation's result: setpoints `q_pu` (S, n_der) evaluated by the batched AC power
+    """A formulation's result: setpoints `q_pu` (S, n_der) — with the DER's active power
+    `p_pu` (S, n_der) where the formulation curtails — evaluated by the batched AC power
     flow (or `pf`, that evaluation already done), with extra["ac_feasible"] (the point
     meets every limit, `OpfProblem.feasible`) and the scalar extra["slack_export"].
 
@@ -71,8 +73,9 @@ def evaluated_result(
     and kept as extra["relaxation_bound_kw"]."""
     net = scenario.net
     q_mvar = np.asarray(q_pu, dtype=float).reshape(scenario.n_snapshots, len(net.ders)) * net.base_mva
+    p_mw = None if p_pu is None else np.asarray(p_pu, dtype=float).reshape(q_mvar.shape) * net.base_mva
     if pf is None:
-        pf = solve_pf_batch(net, scenario.injections(q_mvar))
+        pf = solve_pf_batch(net, scenario.injections(q_mvar, p_mw))
     feasible = problem.feasible(pf, data.s_fixed)
     full: dict[str, object] = {**extra, "ac_feasible": feasible, "slack_export": problem.slack_export}
     if lower_bound_kw is not None:
@@ -91,4 +94,5 @@ def evaluated_result(
         lower_bound_kw=lower_bound_kw,
         solver=solver,
         extra=full,
+        p_mw=p_mw,
     )

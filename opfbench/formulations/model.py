@@ -107,6 +107,7 @@ def formulation(
                     role=role,
                     supports=networks,
                     network_check=check_supported,
+                    snapshot_wise=role != "exact",  # a batch model solves each snapshot from its data alone
                     source=source,
                     module=cls.__module__,
                 )

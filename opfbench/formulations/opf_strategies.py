@@ -40,6 +40,12 @@ def check_relaxation(net: Network) -> None:
 
 
 FALLBACK = Option("fallback", "chain", "chain: warm → cold IPOPT → SOCP → no action; paper: no action", choices=FALLBACKS)
+CURTAIL = Option(
+    "curtail",
+    False,
+    "the optimum may curtail the DER's active power too, at the cost of the energy curtailed (objective: losses + "
+    "curtailed power; formulations.curtail)",
+)
 
 
 @strategy(
@@ -55,15 +61,26 @@ FALLBACK = Option("fallback", "chain", "chain: warm → cold IPOPT → SOCP → 
     "acopf",
     kind="formulation",
     summary="centralized AC OPF (IPOPT), fallback chain ending at an AC-feasible point",
-    options=(FALLBACK, SLACK_EXPORT, SOLVER),
+    options=(FALLBACK, SLACK_EXPORT, SOLVER, CURTAIL),
     bound_rank=1,
     role="exact",
     network_check=check_exact,
 )
 def run_acopf(
-    scenario: Scenario, k: float, *, slack_export: bool = True, fallback: Fallback = "chain", solver: AcopfSolver = "auto"
+    scenario: Scenario,
+    k: float,
+    *,
+    slack_export: bool = True,
+    fallback: Fallback = "chain",
+    solver: AcopfSolver = "auto",
+    curtail: bool = False,
 ) -> StrategyResult:
-    """The AC OPF on every snapshot of `scenario` with reserve k (`runner.run_exact`)."""
+    """The AC OPF on every snapshot of `scenario` with reserve k (`runner.run_exact`); with
+    `curtail` the one that may curtail the DER's active power (`curtail.run_curtailing`)."""
+    if curtail:
+        from opfbench.formulations.curtail import run_curtailing
+
+        return run_curtailing(scenario, k, slack_export=slack_export, fallback=fallback, solver=solver)
     return run_problem_model("exact", "acopf", scenario, k, slack_export=slack_export, fallback=fallback, solver=solver)
 
 
@@ -75,6 +92,7 @@ def run_acopf(
     bound_rank=0,
     role="relaxation",
     network_check=check_relaxation,
+    snapshot_wise=True,  # a relaxation solves each snapshot from its data alone (`model.BatchModel`)
 )
 def run_socp(scenario: Scenario, k: float, *, slack_export: bool = True) -> StrategyResult:
     """The relaxation's setpoints on every snapshot, evaluated by the AC power flow

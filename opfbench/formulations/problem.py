@@ -36,7 +36,7 @@ from typing import Any, Callable
 import numpy as np
 import scipy.sparse as sp
 
-from opfbench.capability import check_reserve
+from opfbench.capability import INVERTER_TAN_PHI_MAX, TAN_PHI_MAX, check_reserve
 from opfbench.errors import NetworkError
 from opfbench.network import Network
 from opfbench.powerflow import PowerFlowResult
@@ -234,6 +234,74 @@ def snapshot_data(scenario: Scenario, k: float) -> SnapshotData:
     s_fixed = scenario.injections(zero_q) / net.base_mva
     q_limit = (1.0 - k) * scenario.qmax_mvar() / net.base_mva  # "Q at night" where the scenario says
     return SnapshotData(s_fixed, q_limit)
+
+
+NO_LIMIT_PU = 1e3  # p.u.: the offset of a capability piece that does not apply (night, no such piece)
+DFIG_SLOPE, DFIG_OFFSET = -5.0 / 6.0, 4.0 / 3.0  # the DFIG curve's falling piece, Qmax/P̄ = −5/6·P/P̄ + 4/3
+
+
+@dataclass(frozen=True)
+class PqCapability:
+    """Every DER's P–Q capability written for an OPF that decides its active power too
+    (`curtail`), per unit on the network's base, at reserve k: for each of two pieces j,
+    |Q| ≤ slope[:, j]·P + offset_j (the offsets per snapshot: `CurtailData.offset`), and for
+    the inverter-coupled units (`circle`) Q² + (share·P)² ≤ (share·S̄)² — `capability.qmax`
+    at every P, scaled by share = 1 − k: PV 0.75·P and the S̄ circle, the inverter
+    0.4843·|P| and the circle, the DFIG min(P̄, 4/3·P̄ − 5/6·P)."""
+
+    slope: np.ndarray  # (n_der, 2)
+    circle: np.ndarray  # (n_der,) bool
+    share: float
+    s_pu: np.ndarray  # (n_der,) S̄
+
+    @classmethod
+    def of(cls, net: Network, k: float) -> "PqCapability":
+        share = 1.0 - check_reserve(k)
+        kinds = np.asarray(net.der_kinds)
+        slope = np.zeros((len(kinds), 2))
+        slope[kinds == "PV", 0] = TAN_PHI_MAX
+        slope[kinds == "inverter", 0] = INVERTER_TAN_PHI_MAX
+        slope[kinds == "DFIG", 1] = DFIG_SLOPE
+        return cls(share * slope, kinds != "DFIG", share, net.der_s_mva / net.base_mva)
+
+
+@dataclass(frozen=True)
+class CurtailData:
+    """The inputs of an OPF that may curtail, per snapshot, p.u.: `s_fixed` (S, n_bus) the
+    injections it does not decide without the DER's active power; `p_avail` (S, n_der) the
+    power each DER has; `p_low` (S, n_der) the least it may deliver, min(P, 0) (only output
+    is curtailed); `offset` (S, n_der, 2) the capability pieces' offsets (`PqCapability`)."""
+
+    s_fixed: np.ndarray
+    p_avail: np.ndarray
+    p_low: np.ndarray
+    offset: np.ndarray
+
+    @property
+    def n_snapshots(self) -> int:
+        return self.s_fixed.shape[0]
+
+
+def curtail_data(scenario: Scenario, k: float) -> CurtailData:
+    """`CurtailData` of `scenario` at reserve k: the PV and inverter units' power-factor piece
+    lapses at the "Q at night" snapshots; an inverter drawing its own consumption (P < 0,
+    held there) keeps |Q| ≤ 0.4843·|P| through its offset."""
+    share = 1.0 - check_reserve(k)
+    net = scenario.net
+    base = net.base_mva
+    p_avail = scenario.der_p_mw / base
+    s_fixed = scenario.injections(np.zeros_like(p_avail), np.zeros_like(p_avail)) / base
+    kinds = np.asarray(net.der_kinds)
+    n, m = p_avail.shape
+    offset = np.full((n, m, 2), NO_LIMIT_PU)
+    night = scenario.night_q()
+    night = np.asarray(night) if isinstance(night, np.ndarray) else np.zeros((n, m), dtype=bool)
+    inverter = kinds == "inverter"
+    own = share * INVERTER_TAN_PHI_MAX * np.maximum(-p_avail, 0.0) * 2.0  # q ≤ a·P + 2a·|P| = a·|P| for P < 0
+    offset[:, :, 0] = np.where(kinds == "DFIG", share * net.der_rating_mw / base, np.where(inverter, own, 0.0))
+    offset[:, :, 0] = np.where(night & (kinds != "DFIG"), NO_LIMIT_PU, offset[:, :, 0])
+    offset[:, kinds == "DFIG", 1] = share * DFIG_OFFSET * net.der_rating_mw[kinds == "DFIG"] / base
+    return CurtailData(s_fixed, p_avail, np.minimum(p_avail, 0.0), offset)
 
 
 def bus_shunts(net: Network) -> tuple[np.ndarray, np.ndarray]:

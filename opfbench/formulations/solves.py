@@ -16,16 +16,22 @@ one more constraint, so where the unrestricted optimum already imports (slack P 
 the restricted optimum too, and where the unrestricted problem is infeasible so is the
 restricted one; only the other snapshots (the slack exports at the unrestricted optimum,
 or its solve failed) are solved again.
+
+`curtail_solves`: the OPF problem's relaxation that decides the DER's active power too
+(`models.conic`, `curtail`), shared by data the same way, per reserve k (its capability is
+compiled in).
 """
 
 from __future__ import annotations
 
+from typing import Callable
+
 import numpy as np
 
 from opfbench.formulations.model import BatchModel, built, model_for
-from opfbench.formulations.models.conic import SnapshotSolve, data_vector
-from opfbench.formulations.problem import SnapshotData, snapshot_data
-from opfbench.formulations.solver_cache import SolveCache
+from opfbench.formulations.models.conic import SnapshotSolve, curtail_vector, data_vector
+from opfbench.formulations.problem import CurtailData, PqCapability, SnapshotData, snapshot_data
+from opfbench.formulations.solver_cache import SolveCache, per_thread
 from opfbench.network import Network
 from opfbench.registry.specs import ModelSpec
 from opfbench.scenario import Scenario
@@ -73,20 +79,43 @@ def model_solves(
         return tuple(SnapshotSolve.not_solved() if skipped else next(part) for skipped in skip)
     unrestricted = None if slack_export else model_solves(model, net, data, True)
     thetas = data_vector(data.s_fixed, data.q_limit)
-    keys = _cache.keys(net, (model.name, bool(slack_export)), thetas)
-    out = _cache.get_many(keys)
+    options = (model.name, bool(slack_export))
+    found = _cache.get_many(_cache.keys(net, options, thetas))
     if unrestricted is not None:
-        out = [_restricted(unrestricted[i]) if solve is None else solve for i, solve in enumerate(out)]
+        found = [_restricted(unrestricted[i]) if solve is None else solve for i, solve in enumerate(found)]
+    return _solved(net, options, thetas, found, lambda: built(model, net, slack_export))
+
+
+def _solved(
+    net: Network, options: tuple, thetas: np.ndarray, found: list[SnapshotSolve | None], model: Callable[[], BatchModel]
+) -> tuple[SnapshotSolve, ...]:
+    """Every snapshot's solve: `found` (the cache's, None where it has none) and the others
+    solved by `model()` (built on first need only) — a snapshot whose data come again in
+    the batch once —, all then cached under `options`."""
+    keys = _cache.keys(net, options, thetas)
     first: dict[tuple, int] = {}  # a snapshot whose data come again in this batch is solved once
-    for i, solve in enumerate(out):
+    for i, solve in enumerate(found):
         if solve is None:
             first.setdefault(keys[i], i)
     todo = sorted(first.values())
-    instance: BatchModel | None = built(model, net, slack_export) if todo else None  # built on first need only
-    solved = dict(zip(todo, instance.solve_data(thetas[todo]) if instance is not None else [], strict=True))
-    solves = tuple(solve if solve is not None else solved[first[key]] for solve, key in zip(out, keys, strict=True))
+    solved = dict(zip(todo, model().solve_data(thetas[todo]) if todo else [], strict=True))
+    solves = tuple(solve if solve is not None else solved[first[key]] for solve, key in zip(found, keys, strict=True))
     _cache.put_many(list(zip(keys, solves, strict=True)))
     return solves
+
+
+def curtail_solves(net: Network, data: CurtailData, k: float, slack_export: bool = True) -> tuple[SnapshotSolve, ...]:
+    """The OPF problem's relaxation that decides the DER's active power too, solved on every
+    snapshot of `data` at reserve k, shared by data as `model_solves` is."""
+    spec = model_for("relaxation", net)
+    options = (f"{spec.name}-curtail", bool(slack_export), float(k))
+    thetas = curtail_vector(data.s_fixed, data.p_avail, data.p_low, data.offset)
+
+    def model() -> BatchModel:
+        build: Callable[..., BatchModel] = spec.build  # a conic model: it takes the capability to curtail
+        return per_thread(net, options, lambda: build(net, slack_export, PqCapability.of(net, k)))
+
+    return _solved(net, options, thetas, _cache.get_many(_cache.keys(net, options, thetas)), model)
 
 
 def relaxation_solves(

@@ -335,8 +335,16 @@ def _lines(grid: _Grid, pnet, br: _Branches) -> None:
     kv_f = grid.vn_kv.reindex(fb).to_numpy()
     z_base = kv_f**2 / grid.sn_mva
     length, par = line.positive("length_km"), line.positive("parallel", absent=1.0)
-    r = line.num("r_ohm_per_km") * length / z_base / par
-    x = line.num("x_ohm_per_km") * length / z_base / par
+    r_km, x_km = line.num("r_ohm_per_km"), line.num("x_ohm_per_km")
+    zero = (r_km == 0) & (x_km == 0)
+    if zero.any():
+        raise line.error(
+            line.index[zero][0],
+            "r_ohm_per_km = x_ohm_per_km = 0: a line without impedance is not modelled (join its buses with a closed "
+            "bus-bus switch, or give the line its impedance)",
+        )
+    r = r_km * length / z_base / par
+    x = x_km * length / z_base / par
     b = 2 * grid.f_hz * math.pi * line.num("c_nf_per_km") * 1e-9 * z_base * length * par
     g = line.num("g_us_per_km", empty=0.0, absent=0.0) * 1e-6 * z_base * length * par
     f = np.where(open_f, -1, fb)

@@ -25,9 +25,11 @@ them: the shipped names, MATPOWER `.m` and pandapower `.json` files, `simbench:C
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 from opfbench.errors import InputError
+from opfbench.exact import number_text
 from opfbench.io.sources import formats, source_of
 from opfbench.network import DER_ENERGIES, DER_KINDS
 
@@ -45,8 +47,8 @@ class CaseSpec:
     def text(self) -> str:
         """The canonical spec string."""
         opts = [f"der={self.der}"] if self.der is not None else []
-        opts += [f"der-pf={self.der_pf:g}"] if self.der_pf is not None else []
-        opts += [f"line-z={self.line_z!r}"] if self.line_z is not None else []
+        opts += [f"der-pf={number_text(self.der_pf)}"] if self.der_pf is not None else []
+        opts += [f"line-z={number_text(self.line_z)}"] if self.line_z is not None else []
         return self.source + ("?" + "&".join(opts) if opts else "")
 
     @property
@@ -66,10 +68,16 @@ def parse_spec(text: str) -> CaseSpec:
         raise InputError(f"a case is {formats()}, got {text!r}")
     source, sep, query = text.strip().partition("?")
     der, der_pf, line_z = None, None, None
+    seen: set[str] = set()
     for part in query.split("&") if sep else ():
         key, eq, value = part.partition("=")
         if not eq or not value:
             raise InputError(f"case {text!r}: option {part!r} must be key=value (der=…, der-pf=…, line-z=…)")
+        if key in seen:
+            raise InputError(
+                f"case {text!r}: option {key} given twice (as --{key} and ?{key}=, or twice in the spec); give it once"
+            )
+        seen.add(key)
         if key == "der":
             der = value
         elif key == "der-pf":
@@ -77,6 +85,8 @@ def parse_spec(text: str) -> CaseSpec:
                 der_pf = float(value)
             except ValueError:
                 raise InputError(f"case {text!r}: der-pf must be a number in (0, 1], got {value!r}") from None
+            if not math.isfinite(der_pf):
+                raise InputError(f"case {text!r}: der-pf must be a number in (0, 1], got {value!r}")
             if not 0 < der_pf <= 1:
                 raise InputError(f"case {text!r}: der-pf must lie in (0, 1], got {value}")
         elif key == "line-z":

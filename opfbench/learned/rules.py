@@ -44,8 +44,19 @@ affine fits had c > 0 and 32 of 1 344 test steps did not settle; with c ≤ 0, n
 
 End to end (`rounds=N`): N rounds of fit → closed-loop evaluation on the training period
 → refit with the voltages the rule itself produced in closed loop (the distribution it
-meets at run time); the round with the lowest closed-loop training losses is kept (each
-round's losses are in the parameters file).
+meets at run time); the round with the fewest training steps outside the voltage band,
+then the lowest closed-loop training losses, is kept (each round's figures are in the
+parameters file).
+
+Keeping the band (`comply=true`, the default): a slope-bounded rule cannot follow the
+optimum's steep Q where the band binds, so a rule fitted to the optimum itself leaves the
+band where the optimum just holds it (on 1-MV-rural for thousands of minutes). The fit is
+therefore checked in closed loop on the training period and, while some step lies outside
+the band, refitted to targets from the frontier below ε = 0: the optimum with the band
+tightened by the next margin of MARGINS (`TrainingSet.tightened`, which the study layer
+supplies). The first margin that leaves no training step outside is kept — else the one
+with the fewest, then the lowest losses — and every margin tried is in the parameters
+file (`fit["comply"]`).
 
 A fitted rule is written as JSON (`LearnedParams.write`, format FORMAT): the family, the
 case and its DERs (bus, S̄, P̄), the training period, the hash of the training data, the
@@ -84,6 +95,8 @@ MAX_GRID = 161  # at most this many breakpoint candidates per DER (the grid wide
 TOLERANCE = 1e-10  # Clarabel's gap and feasibility tolerances for the fits
 RIDGE = 1e-9  # × the Gram matrix's mean diagonal: makes unidentifiable coefficients 0
 MIN_LIMIT_SHARE = 1e-3  # a step is used for a DER where its limit exceeds this share of S̄
+MARGINS = (0.0, 0.0025, 0.005, 0.01, 0.02, 0.03, 0.05)  # p.u.: the band's tightenings a compliant fit tries, in order
+VIOLATION_PU = 1e-6  # a step lies outside the band beyond this
 SAMPLES_PER_PARAMETER = 2  # a DER's fit needs twice as many samples as parameters (fewer: its ridge, not the data, decides)
 #: The k and night mode the optimum is fitted at: the DER's whole capability (k = 0), PV
 #: connected at night, no forecast; at evaluation the target is clipped to ±(1 − k)·Qmax.
@@ -467,7 +480,9 @@ class TrainingSet:
     PV connected at night, no forecast), the AC OPF's optimal Q `q_mvar` (S, n_der) MVAr and
     `ok` (S,) the steps whose point is a certified optimum (status ok); `case` the case
     spec trained on, `period` the training period as given (START..END, END excluded),
-    `start`/`end` its first and last step (ISO)."""
+    `start`/`end` its first and last step (ISO); `tightened(margin)` (None: not given) the
+    optimum with every bus's voltage band tightened by `margin` p.u., as (q_mvar, ok) — the
+    targets of a compliant fit (module docstring)."""
 
     case: str
     period: str
@@ -476,6 +491,7 @@ class TrainingSet:
     scenario: Scenario
     q_mvar: np.ndarray
     ok: np.ndarray
+    tightened: Callable[[float], tuple[np.ndarray, np.ndarray]] | None = field(default=None, compare=False)
 
     def digest(self) -> str:
         """sha256 of the training data: every load's and DER's values, the optimum, the steps used."""
@@ -492,14 +508,41 @@ def features(scenario: Scenario, v_pu: np.ndarray) -> Features:
     return Features(v_pu, scenario.der_p_mw, scenario.load_p_at_der_mw(), scenario.load_q_at_der_mvar(), net.der_s_mva)
 
 
-def _closed_loop(rule: LearnedRule, scenario: Scenario) -> tuple[np.ndarray, float, int]:
-    """(|V| at the DER buses (S, n_der), mean losses kW, not-settled steps) of `rule` in
-    closed loop on `scenario` at TRAIN_K."""
+@dataclass(frozen=True)
+class ClosedLoop:
+    """A rule's closed loop on the training period at TRAIN_K: |V| at the DER buses
+    (S, n_der), mean losses (kW), steps not settled, steps outside the voltage band and the
+    worst excursion beyond it (p.u.)."""
+
+    v_der: np.ndarray
+    loss_kw: float
+    not_settled: int
+    outside: int
+    max_violation_pu: float
+
+    def record(self) -> dict:
+        return {
+            "train_loss_kw": self.loss_kw,
+            "not_settled_steps": self.not_settled,
+            "outside_steps": self.outside,
+            "max_violation_pu": self.max_violation_pu,
+        }
+
+
+def _closed_loop(rule: LearnedRule, scenario: Scenario) -> ClosedLoop:
+    """`rule` in closed loop on `scenario` at TRAIN_K (`ClosedLoop`)."""
     from opfbench.strategies.rule_engine import run_rule
     from opfbench.strategies.rules import Rule
 
     res = run_rule(rule.name, Rule(rule.name, lambda m: rule.predict(m), frozenset(rule.reads)), scenario, TRAIN_K, {})
-    return res.vm[:, scenario.net.der_bus], float(np.nanmean(res.losses_kw)), int((res.status == "not-settled").sum())
+    violation = res.voltage_violation()
+    return ClosedLoop(
+        res.vm[:, scenario.net.der_bus],
+        float(np.nanmean(res.losses_kw)),
+        int((res.status == "not-settled").sum()),
+        int((violation > VIOLATION_PU).sum()),
+        float(np.nanmax(violation, initial=0.0)),
+    )
 
 
 def usable(scenario: Scenario) -> np.ndarray:
@@ -534,44 +577,93 @@ def network_digest(net) -> str:
     return digest({f.name: getattr(net, f.name) for f in fields(net) if f.name != "name"})
 
 
-def fit_rule(family: str, training: TrainingSet, rho: float = RHO, rounds: int = 0, knots: int = KNOTS) -> "LearnedParams":
-    """Fit `family` to `training` (module docstring); `rounds` end-to-end refits."""
+def grid_contraction(net, slope_mvar_per_pu: np.ndarray) -> float:
+    """The closed loop's contraction factor max_i |c_i|·Σ_j |X_ij| (`sensitivity`) on `net`
+    with X measured at its nominal loads, DER at 0 and at 0.8 of rating (the larger)."""
+    from opfbench.scenario import Scenario
+    from opfbench.strategies.sensitivity import contraction_factor, voltage_sensitivity
+
+    return max(
+        contraction_factor(voltage_sensitivity(Scenario.snapshot(net, der_scale=d)), slope_mvar_per_pu) for d in (0.0, 0.8)
+    )
+
+
+def _rank(loop: ClosedLoop) -> tuple[int, float]:
+    """Fewer training steps outside the band first, then lower losses."""
+    return loop.outside, loop.loss_kw
+
+
+def _fit_at(
+    new: Callable[[], LearnedRule], training: TrainingSet, q_mvar: np.ndarray, ok: np.ndarray, slope_max: np.ndarray, rounds: int
+) -> tuple[LearnedRule, Features, np.ndarray, list[dict], ClosedLoop | None]:
+    """The rule fitted to the targets `q_mvar` (certified at `ok`) with `rounds` end-to-end
+    refits: (rule, features at the targets, steps used, each round's record, the kept
+    rule's closed loop where one was run)."""
     from opfbench.powerflow import solve_pf_batch
+
+    sc = training.scenario
+    net = sc.net
+    pf = solve_pf_batch(net, sc.injections(q_mvar))
+    converged = np.asarray(pf.converged, dtype=bool)
+    x = features(sc, np.abs(pf.v[:, net.der_bus]))
+    use = (ok & converged)[:, None] & usable(sc)
+    where = f"{training.case} over {training.period}"
+    check_samples(new(), net, use.sum(axis=0), f"{where} (steps whose optimum is certified and where it has a reactive limit)")
+    rule = new().fit(x, q_mvar, slope_max, use)
+    history: list[dict] = []
+    if not rounds:
+        return rule, x, use, history, None
+    best = rule
+    loop = best_loop = _closed_loop(rule, sc)
+    history.append({"round": 0} | loop.record())
+    for r in range(1, rounds + 1):
+        closed = use & np.isfinite(loop.v_der)
+        check_samples(new(), net, closed.sum(axis=0), f"{where}, round {r} (steps the rule settled in closed loop)")
+        rule = new().fit(x.with_v(loop.v_der), q_mvar, slope_max, closed)
+        loop = _closed_loop(rule, sc)
+        history.append({"round": r} | loop.record())
+        if _rank(loop) < _rank(best_loop):
+            best, best_loop = rule, loop
+    return best, x, use, history, best_loop
+
+
+def fit_rule(
+    family: str, training: TrainingSet, rho: float = RHO, rounds: int = 0, knots: int = KNOTS, comply: bool = True
+) -> "LearnedParams":
+    """Fit `family` to `training` (module docstring); `rounds` end-to-end refits; `comply`
+    refits to the optimum of tightened bands until the rule holds the band in closed loop
+    on the training period (where `training.tightened` is given)."""
     from opfbench.strategies.sensitivity import contraction_factor, slope_limit, voltage_sensitivity
 
     sc = training.scenario
     net = sc.net
     x_sens = voltage_sensitivity(sc.take(np.flatnonzero(training.ok)) if training.ok.any() else sc)
     slope_max = slope_limit(x_sens, rho)
-    pf = solve_pf_batch(net, sc.injections(training.q_mvar))
-    converged = np.asarray(pf.converged, dtype=bool)
-    x = features(sc, np.abs(pf.v[:, net.der_bus]))
-    use = (training.ok & converged)[:, None] & usable(sc)
     hyper = {key: value for key, value in {"knots": knots}.items() if key in FAMILIES[family].hyper}
 
     def new() -> LearnedRule:
         return family_rule(family, hyper)
 
-    where = f"{training.case} over {training.period}"
-    check_samples(new(), net, use.sum(axis=0), f"{where} (steps whose optimum is certified and where it has a reactive limit)")
-    rule = new().fit(x, training.q_mvar, slope_max, use)
-    history: list[dict] = []
-    if rounds:
-        best = rule
-        v_cl, loss, unsettled = _closed_loop(rule, sc)
-        history.append({"round": 0, "train_loss_kw": loss, "not_settled_steps": unsettled})
-        best_loss = loss
-        for r in range(1, rounds + 1):
-            closed = use & np.isfinite(v_cl)
-            check_samples(new(), net, closed.sum(axis=0), f"{where}, round {r} (steps the rule settled in closed loop)")
-            rule = new().fit(x.with_v(v_cl), training.q_mvar, slope_max, closed)
-            v_cl, loss, unsettled = _closed_loop(rule, sc)
-            history.append({"round": r, "train_loss_kw": loss, "not_settled_steps": unsettled})
-            if loss < best_loss:
-                best, best_loss = rule, loss
-        rule = best
+    q_mvar, ok = training.q_mvar, training.ok
+    rule, x, use, history, loop = _fit_at(new, training, q_mvar, ok, slope_max, rounds)
+    margins: list[dict] = []
+    if comply and training.tightened is not None:
+        loop = loop if loop is not None else _closed_loop(rule, sc)
+        margins.append({"margin_pu": 0.0} | loop.record())
+        chosen = (rule, x, use, history, loop, q_mvar, 0.0)
+        width = float(np.delete(net.vmax - net.vmin, net.slack).min(initial=np.inf))
+        for margin in (m for m in MARGINS[1:] if m < width / 2):  # a margin must leave a band
+            if chosen[4].outside == 0:
+                break
+            q_t, ok_t = training.tightened(margin)
+            fit = _fit_at(new, training, q_t, ok_t, slope_max, rounds)
+            tried = fit[4] if fit[4] is not None else _closed_loop(fit[0], sc)
+            margins.append({"margin_pu": margin} | tried.record())
+            if _rank(tried) < _rank(chosen[4]):
+                chosen = (fit[0], fit[1], fit[2], fit[3], tried, q_t, margin)
+        rule, x, use, history, loop, q_mvar, _ = chosen
     fitted = rule.predict(x)
-    err = np.where(use, fitted - training.q_mvar, np.nan) / net.der_s_mva
+    err = np.where(use, fitted - q_mvar, np.nan) / net.der_s_mva
     return LearnedParams(
         family=family,
         case=training.case,
@@ -589,7 +681,7 @@ def fit_rule(family: str, training: TrainingSet, rho: float = RHO, rounds: int =
         },
         data_sha256=training.digest(),
         rho=float(rho),
-        hyper=hyper | {"rounds": rounds},
+        hyper=hyper | {"rounds": rounds, "comply": comply},
         row_sum_pu_per_mvar=tuple(float(v) for v in np.abs(x_sens).sum(axis=1)),
         slope_max_mvar_per_pu=tuple(float(v) for v in slope_max),
         rule=rule,
@@ -598,6 +690,7 @@ def fit_rule(family: str, training: TrainingSet, rho: float = RHO, rounds: int =
             "rmse_pu": [float(v) if np.isfinite(v) else None for v in np.sqrt(np.nanmean(err**2, axis=0))] if use.any() else [],
             "contraction_factor": contraction_factor(x_sens, rule.v_slope()),
             "rounds": history,
+            "comply": margins,
         },
     )
 
@@ -713,8 +806,10 @@ class LearnedParams:
         return cls(family, case, network, bus, s, network_sha, train, digest, rho, hyper, row_sum, slope_max, rule, fit)
 
     def check_network(self, net, ref: str) -> None:
-        """InputError unless `net` is the grid this rule was fitted on: its DERs (bus numbers
-        and S̄, in order) and its whole model (`network_digest`)."""
+        """InputError unless `net` is the grid this rule was fitted on — its DERs (bus numbers
+        and S̄, in order) and its whole model (`network_digest`) — and its slopes make the
+        closed loop a contraction there (`grid_contraction` < 1: a file's row sums are its
+        own word; the grid's sensitivity is measured anew)."""
         buses = tuple(int(b) for b in net.bus_ids[net.der_bus])
         if len(buses) != len(self.der_bus):
             raise InputError(
@@ -731,6 +826,13 @@ class LearnedParams:
                 f"learned-rule parameters {ref} were fitted on {self.case} ({self.network}); {net.name} is another "
                 "grid (its branches, loads, limits or DER differ, network sha256 "
                 f"{network_digest(net)[:12]}… ≠ {self.network_sha256[:12]}…): fit the rule on this case"
+            )
+        factor = grid_contraction(net, self.rule.v_slope())
+        if factor >= 1:
+            raise InputError(
+                f"learned-rule parameters {ref}: on {net.name} its slopes make the closed loop no contraction (factor "
+                f"{factor:.3g} ≥ 1 with the grid's own sensitivity at its nominal loads; the fit keeps it at rho = "
+                f"{self.rho:g} on its training states): its sensitivities (row sums) are not this grid's"
             )
 
     def check_measurements(self, m: Measured, ref: str) -> None:
@@ -819,7 +921,7 @@ def check_options(family: str, options: dict) -> None:
         if not (sep and start.strip() and end.strip()):
             raise InputError(f"{family}: train must be a period START..END (END excluded), e.g. 2016-01-01..2016-10-01")
     else:
-        fit_options = {"rho": RHO, "rounds": 0, "knots": KNOTS}
+        fit_options = {"rho": RHO, "rounds": 0, "knots": KNOTS, "comply": True}
         given = [key for key, default in fit_options.items() if key in options and options[key] != default]
         if given:
             raise InputError(f"{family}: {', '.join(given)} are options of the fit; with params= the rule is fitted already")
@@ -848,7 +950,14 @@ def _target(family: str, m: Measured, train: str, params: str) -> np.ndarray:
 
 def fit_configuration(family: str, training: TrainingSet, options: dict) -> LearnedParams:
     """The registry's `fit` of the learned strategies: `fit_rule` with the label's fit options."""
-    return fit_rule(family, training, rho=options["rho"], rounds=options["rounds"], knots=options.get("knots", KNOTS))
+    return fit_rule(
+        family,
+        training,
+        rho=options["rho"],
+        rounds=options["rounds"],
+        knots=options.get("knots", KNOTS),
+        comply=options["comply"],
+    )
 
 
 def _rho(value: OptionValue) -> str | None:
@@ -872,6 +981,12 @@ LEARNED_OPTIONS = (
         "end-to-end rounds: refit on the voltages the rule produces in closed loop on the training period",
         check=_rounds,
     ),
+    Option(
+        "comply",
+        True,
+        "keep the voltage band: while the fitted rule leaves it in closed loop on the training period, refit to the "
+        "optimum with the band tightened by 0.0025 … 0.05 p.u. (false: fit the optimum itself)",
+    ),
 )
 
 
@@ -884,6 +999,7 @@ def _learned(name: str, summary: str, reads: tuple[str, ...], check: Callable[[d
         summary=summary + " (slope-bounded), closed loop",
         check=check,
         fit=fit_configuration,
+        snapshot_wise=True,
     )
 
 
@@ -893,7 +1009,9 @@ def _learned(name: str, summary: str, reads: tuple[str, ...], check: Callable[[d
     ("v", "p", "load"),
     check_affine,
 )
-def affine_target(m: Measured, train: str = "", params: str = "", rho: float = RHO, rounds: int = 0) -> np.ndarray:
+def affine_target(
+    m: Measured, train: str = "", params: str = "", rho: float = RHO, rounds: int = 0, comply: bool = True
+) -> np.ndarray:
     """learned-affine's Q target (S, n_der) MVAr (module docstring)."""
     return _target(AffineRule.name, m, train, params)
 
@@ -906,7 +1024,7 @@ def affine_target(m: Measured, train: str = "", params: str = "", rho: float = R
     Option("knots", KNOTS, "knots of the curve, at quantiles of the DER's training voltages"),
 )
 def vv_target(
-    m: Measured, train: str = "", params: str = "", rho: float = RHO, rounds: int = 0, knots: int = KNOTS
+    m: Measured, train: str = "", params: str = "", rho: float = RHO, rounds: int = 0, comply: bool = True, knots: int = KNOTS
 ) -> np.ndarray:
     """learned-vv's Q target (S, n_der) MVAr (module docstring)."""
     return _target(VoltVarRule.name, m, train, params)
@@ -918,6 +1036,8 @@ def vv_target(
     ("v",),
     check_ieee1547,
 )
-def ieee1547_target(m: Measured, train: str = "", params: str = "", rho: float = RHO, rounds: int = 0) -> np.ndarray:
+def ieee1547_target(
+    m: Measured, train: str = "", params: str = "", rho: float = RHO, rounds: int = 0, comply: bool = True
+) -> np.ndarray:
     """learned-1547's Q target (S, n_der) MVAr (module docstring)."""
     return _target(Ieee1547Rule.name, m, train, params)

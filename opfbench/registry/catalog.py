@@ -138,6 +138,13 @@ class Configuration:
     def uses_forecast(self) -> bool:
         return self.spec.uses_forecast
 
+    @property
+    def curtails(self) -> bool:
+        """Its DER may deliver less active power than they have: a rule that caps it, any
+        rule with reactive priority (`priority=q`), the AC OPF with `curtail=true`."""
+        options = self.options()
+        return self.spec.curtails or options.get("priority") == "q" or options.get("curtail") is True
+
     def options(self, settings: Mapping[str, object] | None = None) -> dict[str, OptionValue]:
         """Every option's value: the label's, else the run-level setting the option names,
         else its default."""
@@ -164,6 +171,7 @@ def configuration(label: str) -> Configuration:
     name, _, rest = label.strip().partition(":")
     entry = spec(name)
     given: dict[str, OptionValue] = {}
+    seen: set[str] = set()  # a value equal to the default is not kept, but it was given
     known = entry.option
     for item in (part.strip() for part in rest.split(",")) if rest else ():
         if not item:
@@ -172,8 +180,9 @@ def configuration(label: str) -> Configuration:
         key, text = key.strip(), text.strip()
         if not eq or not key:
             raise InputError(f"strategy label {label!r}: {item!r} is not key=value")
-        if key in given:
-            raise InputError(f"strategy label {label!r}: option {key} given twice")
+        if key in seen:
+            raise InputError(f"strategy label {label!r}: option {key} given twice; give it once")
+        seen.add(key)
         if key not in known:
             raise InputError(f"strategy label {label!r}: {name} takes no option {key} (options: {', '.join(known) or 'none'})")
         try:

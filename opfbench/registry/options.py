@@ -16,6 +16,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from opfbench.errors import InputError
+from opfbench.exact import number_text
 
 _DECIMAL = re.compile(r"^[+-]?(?:\d+\.?\d*|\.\d+)(?:[eE][+-]?\d+)?$", re.ASCII)
 OptionValue = bool | int | float | str | tuple[float, ...]
@@ -85,18 +86,21 @@ class Option:
             raise InputError(f"{self.format(value)} has a value that is not finite")
         if self.choices and value not in self.choices:
             raise InputError(f"{value!r} is not one of {', '.join(self.choices)}")
-        problem = self.check(value) if self.check is not None else None
+        try:
+            problem = self.check(value) if self.check is not None else None
+        except (Exception, SystemExit) as exc:  # a plugin's check with a bug of its own: named, never a traceback
+            raise InputError(f"its check failed on {self.format(value)} ({type(exc).__name__}: {exc})") from None
         if problem:
-            raise InputError(problem)
+            raise InputError(str(problem))
 
     def format(self, value: OptionValue) -> str:
         """`value` as written in a canonical label (numbers exactly: repr, no trailing .0)."""
         if isinstance(value, bool):
             return "true" if value else "false"
         if isinstance(value, float):
-            return _number_text(value)
+            return number_text(value)
         if isinstance(value, tuple):
-            return "/".join(_number_text(v) for v in value)
+            return "/".join(number_text(v) for v in value)
         return str(value)
 
     def describe(self) -> dict:
@@ -125,8 +129,3 @@ def _decimal(text: str) -> float:
     if not math.isfinite(value):
         raise InputError(f"{text!r} is not finite")
     return value
-
-
-def _number_text(value: float) -> str:
-    text = repr(float(value))
-    return text[:-2] if text.endswith(".0") else text

@@ -20,6 +20,8 @@ DEFAULT_RUN = (
     *PAPER_RULES,
     "volt-var",
     "watt-var",
+    "volt-watt",
+    "volt-var+volt-watt",
     "const-pf",
     "cosphi-p",
     "q-u",

@@ -41,7 +41,7 @@ SUPPORTS = ("radial", "meshed")
 UNBALANCED = ("unbalanced-radial", "unbalanced-meshed")
 """The classes of three-phase (`PhaseNetwork`) feeders; no balanced model claims them."""
 OPFBENCH = "opfbench"  # the source of the built-in entries
-_NAME = re.compile(r"^[a-z0-9][a-z0-9._-]*$")
+_NAME = re.compile(r"^[a-z0-9][a-z0-9._+-]*$")  # "+" joins rules run together: volt-var+volt-watt
 Runner = Callable[..., "StrategyResult"]
 
 
@@ -65,14 +65,18 @@ class StrategySpec:
     cannot model, before any work; `check(options)` refuses option combinations;
     `columns`: extra per-step result columns (name → meaning, from `StrategyResult.extra`);
     `fit(name, training, options)`: a learned strategy's fit, `fit_options` the options it
-    takes; `source`: "opfbench" or the plugin that registered it, `module` the module that
-    declared it."""
+    takes; `snapshot_wise`: each snapshot's result is a function of that snapshot's data
+    alone, bit for bit, whatever other snapshots the scenario holds (the study runs such a
+    strategy once on the distinct snapshots of several night modes; a solver warm-started
+    along the scenario is not); `source`: "opfbench" or the plugin that registered it,
+    `module` the module that declared it; `curtails`: a local rule that caps its DER's
+    active power (its target returns `rules.Targets`)."""
 
     name: str
     kind: Kind
     summary: str
     runner: Runner
-    target: Callable[..., np.ndarray] | None = None
+    target: Callable[..., Any] | None = None  # (S, n_der) MVAr, or `strategies.rules.Targets`
     reads: tuple[str, ...] = ()
     closed_loop: bool = False
     options: tuple[Option, ...] = ()
@@ -86,8 +90,10 @@ class StrategySpec:
     columns: dict[str, str] = field(default_factory=dict)
     fit: Callable[..., Any] | None = None
     fit_options: tuple[str, ...] = ()
+    snapshot_wise: bool = False
     source: str = OPFBENCH
     module: str = ""
+    curtails: bool = False
 
     @property
     def option(self) -> dict[str, Option]:
@@ -155,9 +161,11 @@ class StrategySpec:
             "summary": self.summary,
             "reads": list(self.reads) if self.kind == "local" else ["the whole network (centralized)"],
             "closed_loop": self.closed_loop,
+            "curtails": self.curtails,
             "learned": self.learned,
             "uses_forecast": self.uses_forecast,
             "lower_bound": self.bound_rank is not None,
+            "snapshot_wise": self.snapshot_wise,
             "supports": list(self.supports),
             "options": [o.describe() for o in self.options],
             "fixed": {k: v for k, v in self.fixed.items()},
@@ -231,14 +239,16 @@ MODELS: dict[str, ModelSpec] = PROCESS.table("formulation models")
 
 def _check_name(what: str, name: str, source: str, held: StrategySpec | ModelSpec | None) -> None:
     if not _NAME.match(name):
-        raise InputError(f"{source}: {what} name {name!r} must be lower-case letters, digits, '.', '_' or '-'")
+        raise InputError(f"{source}: {what} name {name!r} must be lower-case letters, digits, '.', '_', '+' or '-'")
     if held is not None and held.source != source:
         raise InputError(f"{source}: {what} name {name!r} is taken (by {held.source})")
+    if held is not None:  # one source, one entry a name: the second would silently replace the first
+        raise InputError(f"{what} {name!r} is registered twice by {source}: give each its own name")
 
 
 def register(spec: StrategySpec) -> None:
-    """Add a strategy; InputError for a name that is taken by another source or not a valid
-    name (lower-case letters, digits, '.', '_', '-')."""
+    """Add a strategy; InputError for a name that is taken (by another source, or already
+    by this one) or not a valid name (lower-case letters, digits, '.', '_', '+', '-')."""
     _check_name("strategy", spec.name, spec.source, STRATEGIES.get(spec.name))
     STRATEGIES[spec.name] = spec
 
@@ -293,6 +303,7 @@ def strategy(
     network_check: Callable[[Network], None] | None = None,
     check: Callable[[dict], None] | None = None,
     columns: Mapping[str, str] | None = None,
+    snapshot_wise: bool = False,
 ) -> Callable[[Runner], Runner]:
     """Register the decorated `runner(scenario, k, **options) -> StrategyResult` as the
     strategy `name` (fields: `StrategySpec`). Stacked, one runner serves several entries
@@ -315,6 +326,7 @@ def strategy(
                 network_check=network_check,
                 check=check,
                 columns=dict(columns or {}),
+                snapshot_wise=snapshot_wise,
                 source=source_of(runner.__module__),
                 module=runner.__module__,
             )

@@ -25,7 +25,7 @@ from opfbench.errors import InputError
 from opfbench.io.spec import parse_spec
 from opfbench.report.sources import check_given, report_sources
 from opfbench.report.tables import REFERENCE_NIGHT, Kinds
-from opfbench.schema import DER_Q, FAULT, KEYS, STEPS, SUMMARY, TRACES, Table
+from opfbench.schema import DER_Q, FAULT, FRONTIER_SUMMARY, KEYS, STEPS, SUMMARY, TRACES, Table
 from opfbench.study.store import SCHEMA
 
 RUN_COMMAND = "opfbench run --out {dir}"
@@ -68,6 +68,8 @@ class Inputs:
     year_dir: Path | None = None
     field_summary: pd.DataFrame | None = None  # the committed year on real grids (docs/field-year)
     field_manifest: dict | None = None
+    field_frontier: pd.DataFrame | None = None
+    frontier: pd.DataFrame | None = None  # frontier.csv: losses against compliance (a run before it has none)
     train_summary: pd.DataFrame | None = None  # train/summary.csv: the rules over the training period
     learned: dict[str, dict] = field(default_factory=dict)  # the run's learned/<file>.json -> what it holds (a row)
     studies: list[Inputs] = field(default_factory=list)  # committed learned-rule studies (docs/learned), if the run trained none
@@ -150,7 +152,24 @@ FORECAST_METRICS = ("mse_scaled", "mape_pct", "mae_kw", "rmse_kw", "skill", "fit
 """The metrics of a forecast JSON the report shows."""
 SUMMARY_COUNTS = tuple(c.name for c in SUMMARY if c.dtype == "integer")
 """Columns of summary.csv that count steps: whole numbers ≥ 0."""
-SUMMARY_OPTIONAL_NUMBERS = ("pf_converged_steps", "pf_diverged_steps", "rule_non_finite_steps")
+SUMMARY_OPTIONAL_NUMBERS = (
+    "pf_converged_steps",
+    "pf_diverged_steps",
+    "rule_non_finite_steps",
+    "curtailed_kwh",
+    "cost_kwh",
+    "frontier_kwh",
+    "frontier_bound_kwh",
+    "gap_eq_kwh",
+    "gap_eq_pct",
+    "share_eq_pct",
+    "share_pct",
+    "frontier_missing_steps",
+    "below_frontier_steps",
+)
+"""Columns of summary.csv a run writes that an older one may lack (checked where present)."""
+FRONTIER_KINDS = _kinds(FRONTIER_SUMMARY, tuple(FRONTIER_SUMMARY.names))
+"""frontier.csv's columns the report uses."""
 
 
 def _number(value: object) -> bool:
@@ -417,16 +436,8 @@ def _summary(path: Path, command: str) -> pd.DataFrame | None:
     `DOMAINS`)."""
     if not _present(path, command):
         return None
-    try:
-        text = path.read_bytes().decode("utf-8")
-        keys = {"case": str, "strategy": str, "night_mode": str, "forecast": str}
-        summary = pd.read_csv(io.StringIO(text), dtype=keys, float_precision="round_trip")  # k exactly as written
-    except OSError as exc:
-        raise InputError(f"{path}: cannot read it ({exc.strerror})") from None
-    except UnicodeDecodeError as exc:
-        raise _damaged(path, f"not a UTF-8 text file (byte {exc.start})", command) from None
-    except (ValueError, pd.errors.ParserError, pd.errors.EmptyDataError) as exc:
-        raise _damaged(path, f"not a readable CSV table ({exc})", command) from None
+    keys = {"case": str, "strategy": str, "night_mode": str, "forecast": str}
+    summary = _csv(path, command, keys)
     missing = [c for c in (*_KEYS, *SUMMARY_NUMBERS) if c not in summary.columns]
     if missing:
         raise _damaged(path, f"no column {', '.join(missing)}", command)
@@ -449,6 +460,44 @@ def _summary(path: Path, command: str) -> pd.DataFrame | None:
         row = summary[repeated].iloc[0]
         raise _damaged(path, "configuration " + ", ".join(f"{k}={row[k]}" for k in _KEYS) + " has more than one row", command)
     return summary
+
+
+def _csv(path: Path, command: str, text_columns: dict[str, type[str]]) -> pd.DataFrame:
+    """A CSV table (numbers read exactly as written); InputError naming the file unless it
+    is readable UTF-8 CSV text."""
+    try:
+        text = path.read_bytes().decode("utf-8")
+        return pd.read_csv(io.StringIO(text), dtype=text_columns, float_precision="round_trip")
+    except OSError as exc:
+        raise InputError(f"{path}: cannot read it ({exc.strerror})") from None
+    except UnicodeDecodeError as exc:
+        raise _damaged(path, f"not a UTF-8 text file (byte {exc.start})", command) from None
+    except (ValueError, pd.errors.ParserError, pd.errors.EmptyDataError) as exc:
+        raise _damaged(path, f"not a readable CSV table ({exc})", command) from None
+
+
+def _frontier(path: Path, command: str) -> pd.DataFrame | None:
+    """frontier.csv (None when absent: a run written before the frontier); InputError unless
+    UTF-8 CSV text with the columns the report uses, numbers where numbers belong (ε may
+    be inf: the physical limits alone)."""
+    if not path.is_file():
+        return None
+    frame = _csv(path, command, {"case": str, "night_mode": str})
+    missing = [c for c in FRONTIER_KINDS if c not in frame.columns]
+    if missing:
+        raise _damaged(path, f"no column {', '.join(missing)}", command)
+    for name, kind in FRONTIER_KINDS.items():
+        if kind == NUMBER and (not pd.api.types.is_numeric_dtype(frame[name]) or pd.api.types.is_bool_dtype(frame[name])):
+            raise _damaged(path, f"column {name!r} holds a value that is not a number", command)
+        if kind == FLAG and not pd.api.types.is_bool_dtype(frame[name]):
+            raise _damaged(path, f"column {name!r} holds a value that is not true or false", command)
+    eps = frame["eps_pu"].to_numpy(dtype=float)
+    if np.isnan(eps).any() or (eps < 0).any():
+        raise _damaged(path, "column 'eps_pu' holds a value that is not a widening ≥ 0", command)
+    _check_numbers(
+        path, {c: frame[c].to_numpy() for c, kind in FRONTIER_KINDS.items() if kind == NUMBER and c != "eps_pu"}, command
+    )
+    return frame if not frame.empty else None
 
 
 def _is_number(value: object) -> bool:
@@ -490,6 +539,7 @@ def load_inputs(
     command = RUN_COMMAND.format(dir=run)
     inp.manifest = _manifest(run / "manifest.json", command)
     inp.summary = _summary(run / "summary.csv", command)
+    inp.frontier = _frontier(run / "frontier.csv", command)
     inp.steps = _steps(run / "steps.parquet", inp.summary, inp.kinds(), command)
     # plotted: the reference rows
     inp.der_q = _filtered(
@@ -521,6 +571,7 @@ def load_study(folder: Path) -> Inputs:
     command = RUN_COMMAND.format(dir=folder)
     inp = Inputs(run_dir=folder, manifest=_manifest(folder / "manifest.json", command))
     inp.summary = _summary(folder / "summary.csv", command)
+    inp.frontier = _frontier(folder / "frontier.csv", command)
     _load_training(inp, command)
     return inp
 
@@ -582,6 +633,7 @@ def _load_sources(
         inp.missing["year run"] = YEAR_COMMAND
     inp.field_summary = _summary(DOCS_FIELD_YEAR / "summary.csv", FIELD_YEAR_COMMAND)
     inp.field_manifest = _manifest(DOCS_FIELD_YEAR / "manifest.json", FIELD_YEAR_COMMAND)
+    inp.field_frontier = _frontier(DOCS_FIELD_YEAR / "frontier.csv", FIELD_YEAR_COMMAND)
     if inp.field_summary is None or inp.field_manifest is None:
         inp.missing["real grids' year run"] = FIELD_YEAR_COMMAND
 

@@ -106,7 +106,18 @@ UNITS = {
     "mb": "MB",
 }
 """A column name's last word → the unit its heading shows in parentheses."""
-WORDS = {"opf": "OPF", "acopf": "AC OPF", "socp": "SOCP", "avg": "mean", "pv": "PV", "der": "DER"}
+WORDS = {
+    "opf": "OPF",
+    "acopf": "AC OPF",
+    "socp": "SOCP",
+    "avg": "mean",
+    "pv": "PV",
+    "der": "DER",
+    "eq": "at equal compliance",
+    "eps": "band widened by ε",
+}
+PHRASES = {"loss only": "loss-only"}
+"""Word pairs a heading writes as one."""
 
 
 def heading(column: str) -> str:
@@ -116,8 +127,12 @@ def heading(column: str) -> str:
         return column
     *words, last = column.split("_")
     if last not in UNITS:
-        return " ".join(WORDS.get(w, w) for w in [*words, last])
-    return " ".join(WORDS.get(w, w) for w in words) + f" ({UNITS[last]})"
+        text = " ".join(WORDS.get(w, w) for w in [*words, last])
+    else:
+        text = " ".join(WORDS.get(w, w) for w in words) + f" ({UNITS[last]})"
+    for pair, joined in PHRASES.items():
+        text = text.replace(pair, joined)
+    return text
 
 
 def table_html(frame: pd.DataFrame) -> str:

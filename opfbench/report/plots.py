@@ -258,39 +258,101 @@ def gap_vs_k(summary: pd.DataFrame) -> list[Plot]:
 
 
 SHARE_AXES = (
-    ("voltage_violation_min", "minutes outside the voltage limits", "%{x:.0f} min outside"),
     ("recovery_added_ms", "fault recovery time added over no action (ms, mean over the fault buses)", "%{x:.0f} ms added"),
 )
-"""What a share of the OPF's loss reduction is plotted against, when the case has it."""
+"""What a share is plotted against, when the case has it (compliance: `frontier_vs_compliance`)."""
+
+
+def share_column(board: pd.DataFrame) -> tuple[str, str]:
+    """The share a board's figures show and its name: at equal compliance where the board
+    has it, else (a run written before the frontier) the loss-only share, said so."""
+    if "share_eq_pct" in board and board["share_eq_pct"].notna().any():
+        return "share_eq_pct", "share at equal compliance"
+    return "loss_only_share_pct", "loss-only share of the AC OPF's reduction"
 
 
 def share_vs_costs(board: pd.DataFrame) -> list[Plot]:
-    """Per case: each strategy's share of the AC OPF's loss reduction (one point per k)
-    against what it costs — the minutes outside the voltage limits when any strategy has
-    some, the fault recovery time it adds when a fault study gave one; with neither, the
-    share against k (a `tables.leaderboard`)."""
+    """Per case: each strategy's share (`share_column`, one point per k) against the fault
+    recovery time it adds, when a fault study gave one; with none, the share against k (a
+    `tables.leaderboard`)."""
     out: list[Plot] = []
+    column, what = share_column(board)
     for i, case in enumerate(_cases(board)):
-        sub = board[board["case"] == case].dropna(subset=["opf_share_pct"])
-        axes = [
-            (column, title, text)
-            for column, title, text in SHARE_AXES
-            if column in sub and sub[column].notna().any() and (sub[column].fillna(0) != 0).any()
-        ] or [("k", "reserve coefficient k", "k=%{x}")]
-        for column, title, text in axes:
+        sub = board[board["case"] == case].dropna(subset=[column])
+        axes = [(c, title, text) for c, title, text in SHARE_AXES if c in sub and sub[c].notna().any()] or [
+            ("k", "reserve coefficient k", "k=%{x}")
+        ]
+        for x, title, text in axes:
             fig = _figure()
-            hover = f"k=%{{customdata[0]}}<br>%{{y:.1f}} % of the OPF's reduction<br>{text}<br>%{{customdata[1]:.2f}} kWh"
-            _lines_over_k(fig, sub.dropna(subset=[column]), column, "opf_share_pct", ["k", "energy_kwh"], hover)
+            hover = f"k=%{{customdata[0]}}<br>%{{y:.1f}} % ({what})<br>{text}<br>%{{customdata[1]:.2f}} kWh"
+            _lines_over_k(fig, sub.dropna(subset=[x]), x, column, ["k", "energy_kwh"], hover)
             out.append(
                 plot_json(
-                    f"share-{column.replace('_', '-')}-{i}",
-                    f"{case}: share of the AC OPF's loss reduction vs {title.split(' (')[0]} "
-                    "(one point per k, night connected, forecast off)",
+                    f"share-{x.replace('_', '-')}-{i}",
+                    f"{case}: {what} vs {title.split(' (')[0]} (one point per k, night connected, forecast off)",
                     fig,
                     title,
-                    "share of the AC OPF's loss reduction (%)",
+                    f"{what} (%)",
                 )
             )
+    return out
+
+
+def frontier_vs_compliance(board: pd.DataFrame, frontier: pd.DataFrame | None, name: str = "") -> list[Plot]:
+    """Per case and k (forecast off, PV connected at night): losses plus curtailed energy
+    against the worst excursion beyond the voltage band — the frontier as a line (the AC
+    OPF with the band widened by ε: on (ε_i−1, ε_i] its energy at ε_i, the reference of
+    any point whose excursions stay within ε_i, so no point of a configuration that does
+    not curtail lies below it) and each rule and formulation a point (`tables.leaderboard`'s
+    rows; its minutes outside, gap and share in the hover). A configuration that curtails
+    (◆) is compared, where it curtails, with the optimum that may curtail: it could lie
+    below the line by what curtailing there saves. `name` tells one run's figures from
+    another's."""
+    if frontier is None or frontier.empty or board.empty:
+        return []
+    out: list[Plot] = []
+    front = frontier[(frontier["night_mode"] == REFERENCE_NIGHT) & ~frontier["curtail"].astype(bool)]
+    for i, ((case, k), grp) in enumerate(board.groupby(["case", "k"], sort=False)):
+        line = front[(front["case"] == case) & np.isclose(front["k"], k)].dropna(subset=["energy_kwh"]).sort_values("eps_pu")
+        points = grp.dropna(subset=["cost_kwh", "max_violation_pu"])
+        if line.empty or points.empty:
+            continue
+        finite = line[np.isfinite(line["eps_pu"])]
+        right = 1.15 * max(float(finite["eps_pu"].max()), float(points["max_violation_pu"].max()), 1e-3)
+        fig = _figure()
+        fig.add_scatter(
+            x=[e if np.isfinite(e) else right for e in line["eps_pu"]],
+            y=list(line["energy_kwh"]),
+            mode="lines+markers",
+            line=dict(shape="vh", color="#000"),
+            name="frontier: AC OPF, band widened by ε",
+            customdata=[f"{e:g}" if np.isfinite(e) else "∞ (physical limits)" for e in line["eps_pu"]],
+            hovertemplate="ε = %{customdata} p.u.<br>%{y:.2f} kWh<extra>frontier</extra>",
+        )
+        for strategy, row in order(points).set_index("strategy").iterrows():
+            cut = bool(row.get("frontier_curtails", False) is True)
+            fig.add_scatter(
+                x=[row["max_violation_pu"]],
+                y=[row["cost_kwh"]],
+                mode="markers",
+                marker=dict(symbol="diamond" if cut else "circle", size=9),
+                name=escape(str(strategy)),
+                customdata=[[row["voltage_violation_min"], row.get("gap_eq_kwh", np.nan), row.get("share_eq_pct", np.nan)]],
+                hovertemplate="worst excursion %{x:.4f} p.u., %{customdata[0]:.0f} min outside<br>"
+                "%{y:.2f} kWh; gap at equal compliance %{customdata[1]:.2f} kWh, share %{customdata[2]:.1f} %",
+            )
+        out.append(
+            plot_json(
+                f"frontier-{re.sub(r'[^a-z0-9]+', '-', name.lower()).strip('-')}-{i}".replace("--", "-"),
+                f"{case}{name}, k={k:g}: losses + curtailed energy against the worst excursion beyond the voltage "
+                "band (PV connected at night, forecast off); the line is the frontier, on or below every point of a "
+                "rule that does not curtail (◆: one that curtails, compared where it does with the optimum that may)",
+                fig,
+                "worst excursion beyond the voltage band (p.u.)",
+                "losses + curtailed energy (kWh)",
+                height=460,
+            )
+        )
     return out
 
 
@@ -455,36 +517,40 @@ def _short(label: str) -> str:
 
 
 def how_close(table: pd.DataFrame, name: str = "") -> list[Plot]:
-    """The share of the AC OPF's loss reduction each local rule reaches, training and test
-    period side by side, per case, at the smallest k (a `tables.how_close`); `name` tells
-    one run's figure from another's."""
-    if table.empty or table["test_share_pct"].isna().all():
+    """The share at equal compliance each local rule reaches (the loss-only share for a run
+    written before the frontier, said so), training and test period side by side, per
+    case, at the smallest k (a `tables.how_close`); `name` tells one run's figure from
+    another's."""
+    eq = table["test_share_eq_pct"].notna().any() if not table.empty else False
+    train, test = ("train_share_eq_pct", "test_share_eq_pct") if eq else ("train_loss_only_share_pct", "test_loss_only_share_pct")
+    what = "at equal compliance" if eq else "of the AC OPF's loss reduction, loss-only"
+    if table.empty or test not in table or table[test].isna().all():
         return []
     k = float(table["k"].min())
     sub = table[np.isclose(table["k"], k)]
     cases = [escape(str(c)) for c in sub["case"]]
     names = [escape(_short(str(s))) for s in sub["strategy"]]
     fig = _figure()
-    for column, side in (("train_share_pct", "training period"), ("test_share_pct", "test period")):
-        if sub[column].notna().any():
+    for column, side in ((train, "training period"), (test, "test period")):
+        if column in sub and sub[column].notna().any():
             fig.add_bar(
                 x=[cases, names],
                 y=sub[column],
                 name=side,
-                hovertemplate="%{x}<br>%{y:.1f} % of the OPF's reduction<extra>" + side + "</extra>",
+                hovertemplate="%{x}<br>share %{y:.1f} % (" + what + ")<extra>" + side + "</extra>",
             )
     fig.update_layout(barmode="group")
-    low = float(np.nanmin(sub[["train_share_pct", "test_share_pct"]].to_numpy(dtype=float)))
-    cut = f"; axis cut at {SHARE_FLOOR_PCT:g} %, the table has every value" if low < SHARE_FLOOR_PCT else ""
+    shown = sub[[c for c in (train, test) if c in sub]].to_numpy(dtype=float)
+    cut = f"; axis cut at {SHARE_FLOOR_PCT:g} %, the table has every value" if np.nanmin(shown) < SHARE_FLOOR_PCT else ""
     if cut:
-        fig.update_yaxes(range=[SHARE_FLOOR_PCT, max(110.0, float(np.nanmax(sub[["train_share_pct", "test_share_pct"]])) + 5)])
+        fig.update_yaxes(range=[SHARE_FLOOR_PCT, max(110.0, float(np.nanmax(shown)) + 5)])
     return [
         plot_json(
             "how-close" + re.sub(r"[^a-z0-9]+", "-", name.lower()).rstrip("-"),
-            f"How close can a local rule get{name} (k={k:g}, PV connected at night, forecast off{cut})",
+            f"How close can a local rule get{name}: share {what} (k={k:g}, PV connected at night, forecast off{cut})",
             fig,
             "",
-            "share of the OPF's reduction (%)",
+            f"share {what} (%)",
             height=460,
         )
     ]

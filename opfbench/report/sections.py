@@ -39,19 +39,21 @@ def _ders(ders: list[dict]) -> str:
 
 
 def how_close(inputs: Inputs) -> Section:
-    """The headline: every local rule's share of the AC OPF's loss reduction, on the
-    training period (where the run trained learned rules) and the test period."""
+    """The headline: every local rule against the optimum at its own voltage compliance, on
+    the training period (where the run trained learned rules) and the test period, and the
+    frontier of losses against compliance with each rule a point."""
     sec = Section(
         "local",
         "How close can a local rule get",
-        "Per case and k (forecast off, PV connected at night): the share of the AC OPF's loss reduction, "
-        "(E_no-action − E)/(E_no-action − E_acopf), that each communication-free rule reaches — no action, the "
-        "paper's LLMA and LFMA, the rules in force (IEEE 1547 Volt-VAR and Watt-VAR, constant PF, VDE cos φ(P) and "
-        "Q(U)) and the rules learned from the certified optimum over a training period (learned-affine, learned-vv, "
-        "learned-1547) — on the training period and on the test period (the run's), with the test period's minutes "
-        "outside the voltage limits, worst excursion and the steps a closed-loop rule did not settle. A case with "
-        "line-z is the grid with perturbed line impedances; its learned rules were fitted on the unperturbed model, "
-        "so its test column is the price of model error.",
+        "Per case and k (forecast off, PV connected at night), each communication-free rule — no action, the "
+        "paper's LLMA and LFMA, the rules in force (IEEE 1547 Volt-VAR, Watt-VAR and Volt-Watt, constant PF, VDE "
+        "cos φ(P) and Q(U)) and the rules learned from the certified optimum over a training period "
+        "(learned-affine, learned-vv, learned-1547) — against the AC OPF at its own voltage compliance: the OPF "
+        "with the voltage band widened, step by step, just enough to cover the rule's own excursion beyond it (the "
+        "frontier). Ranked by the gap at equal compliance on the test period; the share there next to the "
+        "training period's, each period's minutes outside the voltage limits beside them, and the loss-only share "
+        "for comparison. " + tables.SHARES + " A case with line-z is the grid with perturbed line impedances; its "
+        "learned rules were fitted on the unperturbed model, so its test column is the price of model error.",
     )
     if inputs.summary is None:
         return sec.add(*_missing(inputs, "summary.csv"))
@@ -78,18 +80,25 @@ TRAINING_TIME = (
     "The wall time is the test period's: the training optimum and the in-sample evaluation ran before it, as "
     "nested runs of their own (train/reference, train/learned)."
 )
+BEFORE_FRONTIER = (
+    "This run was written before the frontier: its shares are loss-only (against the AC OPF that holds the "
+    "voltage band, whatever the rule does) and its ranking by energy."
+)
 
 
 def _how_close_blocks(inputs: Inputs, name: str) -> list[Block]:
-    """A run's shares of the AC OPF's loss reduction per local rule (train beside test),
-    its fitted rules and its figure; `name` tells the run apart."""
+    """A run's local rules at equal compliance (train beside test), its fitted rules, its
+    frontier figure and its share figure; `name` tells the run apart."""
     board = tables.how_close(inputs.summary, inputs.kinds(), inputs.train_summary, inputs.models())
     out = []
     if inputs.learned:
         fits = pd.DataFrame([{"file": ref} | row for ref, row in sorted(inputs.learned.items())])
         out.append(table(fits, f"The fitted rules{name} (each file a rule: NAME:params=FILE)"))
-    out.append(table(board, f"Share of the AC OPF's loss reduction per local rule, training vs test period{name}", 30))
-    return out + _plots(plots.how_close(board, name))
+    if inputs.summary is not None and not tables.at_equal_compliance(inputs.summary):
+        out.append(Block("note", text=BEFORE_FRONTIER))
+    out.append(table(board, f"Local rules at equal compliance, training vs test period{name} (rank 1 = smallest gap)", 30))
+    leader = tables.leaderboard(inputs.summary, baseline=True) if inputs.summary is not None else pd.DataFrame()
+    return out + _plots(plots.frontier_vs_compliance(leader, inputs.frontier, name)) + _plots(plots.how_close(board, name))
 
 
 def metadata(inputs: Inputs, price: tuple[float, str, str]) -> Section:
@@ -214,6 +223,17 @@ NO_OPTIMUM = (
     "{case}, k={k:g}: the AC OPF has no optimum at any of the {steps} steps (infeasible or failed: see the "
     "convergence section), so there is no reference and no share of its loss reduction (—)."
 )
+NO_SHARE = "{case}, k={k:g}: no loss-only share of the AC OPF's loss reduction (—): {why}."
+
+
+def _share_notes(summary: pd.DataFrame, night_mode: str = tables.REFERENCE_NIGHT) -> list[Block]:
+    """Why a leaderboard's share column is — for a case and k (`tables.share_undefined`,
+    `tables.without_optimum`)."""
+    notes = [Block("note", text=NO_OPTIMUM.format(case=c, k=k, steps=n)) for c, k, n in tables.without_optimum(summary)]
+    notes = notes if night_mode == tables.REFERENCE_NIGHT else []
+    return notes + [
+        Block("note", text=NO_SHARE.format(case=c, k=k, why=why)) for c, k, why in tables.share_undefined(summary, night_mode)
+    ]
 
 
 def _shown(board: pd.DataFrame) -> pd.DataFrame:
@@ -222,17 +242,19 @@ def _shown(board: pd.DataFrame) -> pd.DataFrame:
 
 
 def grids(inputs: Inputs) -> Section:
-    """The leaderboard per case (every rule and formulation against the AC OPF) and the
-    ranking claim checked per grid ("the rules work on any feeder")."""
+    """The leaderboard per case (every rule and formulation against the optimum at its own
+    compliance), the frontier, and the ranking claim checked per grid ("the rules work on
+    any feeder")."""
     sec = Section(
         "grids",
         "Leaderboard per case",
-        "Every rule and formulation per case and k (forecast off, PV connected at night): energy, savings, "
-        "the share of the AC OPF's loss reduction it reaches, (E_no-action − E)/(E_no-action − E_acopf), "
-        "minutes outside the case's voltage limits and the worst excursion beyond them, steps where a closed-loop "
-        "rule did not settle (not-settled) or the strategy's status is not ok, and — with a fault study — the "
-        "recovery time it adds over no action (mean over the fault buses, reference model, forecast off); then the "
-        "paper's ranking claim LFMA < LLMA < no action checked on each grid separately.",
+        "Every rule and formulation per case and k (forecast off, PV connected at night), ranked by its gap to the "
+        "AC OPF at its own voltage compliance: energy of losses and curtailed energy, the gap and share at equal "
+        "compliance, the loss-only share, minutes outside the case's voltage limits and the worst excursion beyond "
+        "them, steps where a closed-loop rule did not settle (not-settled) or the strategy's status is not ok, and — "
+        "with a fault study — the recovery time it adds over no action (mean over the fault buses, reference model, "
+        "forecast off); the frontier of losses against compliance, with each configuration a point; then the "
+        "paper's ranking claim LFMA < LLMA < no action checked on each grid separately. " + tables.SHARES,
     )
     if inputs.summary is None:
         return sec.add(*_missing(inputs, "summary.csv"))
@@ -241,11 +263,16 @@ def grids(inputs: Inputs) -> Section:
     ]
     for case, note in notes:
         sec.add(Block("note", text=f"{case}: {note}"))
-    for case, k, steps in tables.without_optimum(inputs.summary):
-        sec.add(Block("note", text=NO_OPTIMUM.format(case=case, k=k, steps=steps)))
+    sec.blocks += _share_notes(inputs.summary)
+    if not tables.at_equal_compliance(inputs.summary):
+        sec.add(Block("note", text=BEFORE_FRONTIER))
     recovery = tables.recovery(inputs.fault) if inputs.fault is not None else None
     board = tables.leaderboard(inputs.summary, recovery=recovery)
-    sec.add(table(_shown(board), "Leaderboard per case and k (rank 1 = lowest energy)", collapse_over=60))
+    sec.add(table(_shown(board), "Leaderboard per case and k (rank 1 = smallest gap at equal compliance)", collapse_over=60))
+    if inputs.frontier is not None:
+        front = tables.frontier_table(inputs.frontier)
+        sec.add(table(front, "The frontier: the AC OPF with the voltage band widened by ε (PV connected at night)", 40))
+    sec.blocks += _plots(plots.frontier_vs_compliance(board, inputs.frontier))
     sec.blocks += _plots(plots.share_vs_costs(board))
     return sec.add(table(ranking_per_case(inputs.summary), "The ranking claim per grid (forecast off, every night mode and k)"))
 
@@ -369,22 +396,29 @@ def field_year(inputs: Inputs, price: tuple[float, str, str]) -> Section:
         "Real grids over a year (SimBench, 2016 at 15 min)",
         "Every strategy on SimBench's 1-MV-rural (102 generators) and 1-LV-rural3 over 2016 on the grids' own "
         "per-load and per-generator profiles, k ∈ {0, 0.4}, PV connected and disconnected at night (a committed "
-        "run, docs/field-year): the leaderboard against the AC OPF, the energies, how many steps' optimum is "
-        "certified, and what the run cost.",
+        "run, docs/field-year): the leaderboard at equal compliance, the frontier of losses against compliance, the "
+        "energies, how many steps' optimum is certified, and what the run cost. " + tables.SHARES,
     )
     if inputs.field_summary is None or inputs.field_manifest is None:
         return sec.add(*_missing(inputs, "real grids' year run"))
     s = inputs.field_summary
     sec.add(_run_meta("docs/field-year", inputs.field_manifest))
+    if not tables.at_equal_compliance(s):
+        sec.add(Block("note", text=BEFORE_FRONTIER))
     for mode in ("connected", "disconnected"):
         board = tables.leaderboard(s, night_mode=mode)
         if board.empty:
             continue
-        sec.add(table(_shown(board), f"Leaderboard over the year, PV {mode} at night (rank 1 = lowest energy)"))
+        sec.blocks += _share_notes(s, mode)
+        sec.add(
+            table(_shown(board), f"Leaderboard over the year, PV {mode} at night (rank 1 = smallest gap at equal compliance)")
+        )
+    if inputs.field_frontier is not None:
+        sec.add(table(tables.frontier_table(inputs.field_frontier), "The frontier over the year (PV connected at night)"))
+    sec.blocks += _plots(plots.frontier_vs_compliance(tables.leaderboard(s), inputs.field_frontier, " over the year"))
     kinds = tables.Kinds.of(s["strategy"], inputs.field_manifest.get("strategies"))
     sec.add(table(tables.convergence_summary(s, kinds), "Steps not ok and certified optima over the year per formulation and k"))
     sec.blocks += _energy_tables(s, price, " over the year")
-    sec.blocks += _plots(plots.share_vs_costs(tables.leaderboard(s)))
     return sec
 
 

@@ -330,8 +330,9 @@ def wall_times(summary: pd.DataFrame) -> pd.DataFrame:
     return order(summary[CONFIG + ["steps", "wall_s", "solver_s"]])
 
 
-SHOWN_BOARD = ["case", "k", "rank", "strategy", "energy_kwh", "savings_pct", "opf_share_pct", "voltage_violation_min"]
-SHOWN_BOARD += ["max_violation_pu", "not_settled_steps", "not_ok_steps", "recovery_added_ms"]
+SHOWN_BOARD = ["case", "k", "rank", "strategy", "energy_kwh", "curtailed_kwh", "gap_eq_kwh", "gap_eq_pct", "share_eq_pct"]
+SHOWN_BOARD += ["loss_only_share_pct", "voltage_violation_min", "max_violation_pu", "not_settled_steps", "not_ok_steps"]
+SHOWN_BOARD += ["recovery_added_ms"]
 """The leaderboard's columns the report shows, in its order (energy and minutes say what
 the average losses and the violation steps would)."""
 
@@ -340,16 +341,32 @@ LEADERBOARD_COLUMNS = [
     "k",
     "strategy",
     "energy_kwh",
+    "curtailed_kwh",
+    "cost_kwh",
+    "frontier_kwh",
+    "gap_eq_kwh",
+    "gap_eq_pct",
+    "share_eq_pct",
+    "loss_only_share_pct",
     "avg_loss_kw",
     "savings_pct",
-    "opf_share_pct",
     "voltage_violation_min",
     "max_violation_pu",
     "voltage_violation_steps",
     "not_settled_steps",
     "not_ok_steps",
+    "below_frontier_steps",
+    "frontier_curtails",
     "recovery_added_ms",
 ]
+SHARES = (
+    "Shares: at equal compliance, (E_no-action − C)/(E_no-action − F) with C the configuration's losses plus "
+    "curtailed energy and F the AC OPF with the voltage band widened, step by step, just enough to cover the "
+    "configuration's own excursion beyond it (the frontier) — never above 100 %, the gap C − F never below 0; "
+    "loss-only, (E_no-action − E)/(E_no-action − E_acopf), which compares with an optimum that holds the band "
+    "whatever the configuration does, so a rule that leaves the band can exceed 100 % there."
+)
+"""What the report's shares mean, said wherever it prints one."""
 
 
 def _recovery_added(rec: pd.DataFrame | None) -> dict[tuple, float]:
@@ -363,17 +380,24 @@ def _recovery_added(rec: pd.DataFrame | None) -> dict[tuple, float]:
     return {(c, s, float(k)): float(v) for (c, s, k), v in mean.items()}
 
 
+def at_equal_compliance(summary: pd.DataFrame) -> bool:
+    """Whether `summary` holds the gaps at equal compliance (a run before the frontier does not)."""
+    return "gap_eq_kwh" in summary.columns and bool(summary["gap_eq_kwh"].notna().any())
+
+
 def leaderboard(
     summary: pd.DataFrame, night_mode: str = REFERENCE_NIGHT, recovery: pd.DataFrame | None = None, baseline: bool = False
 ) -> pd.DataFrame:
     """Per case × k (forecast off, one night mode), every rule and formulation other than
-    the baseline by its share of the AC OPF's loss reduction,
-    (E_no-action − E)/(E_no-action − E_acopf) in % (NaN where the OPF reduces nothing), with
-    its energy and average losses, minutes outside the case's voltage limits and the worst
-    excursion beyond them (p.u.), not-settled and not-ok steps, and — given a fault study's
-    `recovery` table — the recovery time it adds over no action (mean over the fault
-    buses, ms); ranked per case and k, lowest energy first; `baseline`: the baseline's row
-    too (share 0). A summary written before a column existed gives NaN there."""
+    the baseline at equal compliance (`SHARES`): its energy of losses and curtailed energy,
+    the gap to the frontier at its own compliance (kWh and % of the frontier's) and its
+    share there, the loss-only share beside it, minutes outside the case's voltage limits
+    and the worst excursion beyond them (p.u.), not-settled, not-ok and below-frontier
+    steps, and — given a fault study's `recovery` table — the recovery time it adds over
+    no action (mean over the fault buses, ms); ranked per case and k by the gap at equal
+    compliance (ties: fewer minutes outside first), or by energy where the summary was
+    written before the frontier; `baseline`: the baseline's row too. A summary written
+    before a column existed gives NaN there."""
     sub = summary[(summary["forecast"] == "off") & (summary["night_mode"] == night_mode)]
     added = _recovery_added(recovery)
     rows = []
@@ -388,7 +412,7 @@ def leaderboard(
                 | {
                     "case": case,
                     "k": k,
-                    "opf_share_pct": share,
+                    "loss_only_share_pct": share,
                     "recovery_added_ms": added.get((case, r["strategy"], float(k)), np.nan),
                 }
             )
@@ -397,8 +421,11 @@ def leaderboard(
         return out
     if recovery is None or recovery.empty:
         out = out.drop(columns="recovery_added_ms")
-    out["rank"] = out.groupby(["case", "k"])["energy_kwh"].rank(method="min").astype("Int64")  # none without an energy
-    return out.sort_values(["case", "k", "rank"], kind="stable").reset_index(drop=True)
+    by = ["gap_eq_kwh", "voltage_violation_min"] if at_equal_compliance(summary) else ["energy_kwh"]
+    out = out.sort_values(["case", "k", *by], kind="stable", na_position="last")
+    out["rank"] = out.groupby(["case", "k"]).cumcount() + 1
+    out["rank"] = out["rank"].where(out[by[0]].notna()).astype("Int64")  # none without a figure
+    return out.reset_index(drop=True)
 
 
 def without_optimum(summary: pd.DataFrame) -> list[tuple[str, float, int]]:
@@ -412,13 +439,46 @@ def without_optimum(summary: pd.DataFrame) -> list[tuple[str, float, int]]:
     return [(str(r.case), float(r.k), int(r.steps)) for r in none.itertuples()]
 
 
+def share_undefined(summary: pd.DataFrame, night_mode: str = REFERENCE_NIGHT) -> list[tuple[str, float, str]]:
+    """(case, k, why) wherever the `leaderboard`'s loss-only share of the AC OPF's loss reduction is
+    not given (—) for every row: the run has no AC OPF (or no baseline) there, one of
+    their energies is not known (a step without a figure), or the optimum saves nothing.
+    The case of an optimum that exists at no step is `without_optimum`'s, left to it."""
+    sub = summary[(summary["forecast"] == "off") & (summary["night_mode"] == night_mode)]
+    none = {(c, k) for c, k, _ in without_optimum(summary)} if night_mode == REFERENCE_NIGHT else set()
+    out = []
+    for (case, k), grp in sub.groupby(["case", "k"], sort=False):
+        if (str(case), float(k)) in none:
+            continue
+        ref = grp.loc[grp["strategy"] == REFERENCE_OPTIMUM, "energy_kwh"]
+        na = grp["no_action_kwh"].iloc[0]
+        if ref.empty:
+            why = f"the run has no {REFERENCE_OPTIMUM} configuration (add it to --strategies: the share is of its loss reduction)"
+        elif not np.isfinite(na):
+            why = f"the run has no {BASELINE} row (forecast off) to measure the reduction from"
+        elif not np.isfinite(ref.iloc[0]):
+            why = f"the {REFERENCE_OPTIMUM}'s energy is not known (a step without a figure)"
+        elif not na - float(ref.iloc[0]) > TOL_KWH:
+            why = f"the {REFERENCE_OPTIMUM} saves no loss here ({float(ref.iloc[0]):.6g} kWh against {na:.6g} kWh with no action)"
+        else:
+            continue
+        out.append((str(case), float(k), why))
+    return out
+
+
 LOCAL_COLUMNS = [
     "case",
     "k",
+    "rank",
     "strategy",
-    "train_share_pct",
-    "test_share_pct",
+    "train_share_eq_pct",
+    "test_share_eq_pct",
+    "test_gap_eq_pct",
+    "train_loss_only_share_pct",
+    "test_loss_only_share_pct",
     "test_energy_kwh",
+    "test_curtailed_kwh",
+    "train_voltage_violation_min",
     "test_voltage_violation_min",
     "test_max_violation_pu",
     "train_not_settled_steps",
@@ -430,34 +490,64 @@ def how_close(
     summary: pd.DataFrame, kinds: Kinds, train: pd.DataFrame | None = None, model_of: dict[str, str] | None = None
 ) -> pd.DataFrame:
     """Per case × k (forecast off, PV connected at night): every local rule — no action,
-    the paper's, the rules in force, the learned ones — by its share of the AC OPF's loss
-    reduction on the test period (the run, `summary`) and on the training period (`train`,
-    the run's training summary, whose cases are the cases' models: `model_of` maps a case
-    to its model's name, default itself), beside its test energy, minutes outside the
-    voltage limits, worst excursion and not-settled steps (the `leaderboard`'s figures).
-    NaN where a side lacks the rule or the OPF."""
+    the paper's, the rules in force, the learned ones — at equal compliance (`SHARES`) on
+    the test period (the run, `summary`) and on the training period (`train`, the run's
+    training summary, whose cases are the cases' models: `model_of` maps a case to its
+    model's name, default itself): its share there, its gap on the test period, the
+    loss-only share beside them, with each period's minutes outside the voltage limits,
+    the test's worst excursion, energy, curtailed energy and not-settled steps; ranked by
+    the test period's gap at equal compliance (the `leaderboard`'s rank). NaN where a side
+    lacks the rule or the figure."""
     test = leaderboard(summary, baseline=True)
-    test = test[~test["strategy"].astype(str).isin(kinds.formulations)]
+    test = test[~test["strategy"].astype(str).isin(kinds.formulations)].copy()
+    test["rank"] = test.groupby(["case", "k"])["rank"].rank(method="first").astype("Int64")
     out = pd.DataFrame(
         {
             "case": test["case"],
             "k": test["k"],
+            "rank": test["rank"],
             "strategy": test["strategy"],
-            "test_share_pct": test["opf_share_pct"],
+            "test_share_eq_pct": test["share_eq_pct"],
+            "test_gap_eq_pct": test["gap_eq_pct"],
+            "test_loss_only_share_pct": test["loss_only_share_pct"],
             "test_energy_kwh": test["energy_kwh"],
+            "test_curtailed_kwh": test["curtailed_kwh"],
             "test_voltage_violation_min": test["voltage_violation_min"],
             "test_max_violation_pu": test["max_violation_pu"],
             "test_not_settled_steps": test["not_settled_steps"],
         }
     )
     if train is not None and not train.empty:
-        side = leaderboard(train, baseline=True)[["case", "k", "strategy", "opf_share_pct", "not_settled_steps"]]
-        side = side.rename(
-            columns={"case": "model", "opf_share_pct": "train_share_pct", "not_settled_steps": "train_not_settled_steps"}
+        side = leaderboard(train, baseline=True)
+        side = side[
+            ["case", "k", "strategy", "share_eq_pct", "loss_only_share_pct", "voltage_violation_min", "not_settled_steps"]
+        ].rename(
+            columns={
+                "case": "model",
+                "share_eq_pct": "train_share_eq_pct",
+                "loss_only_share_pct": "train_loss_only_share_pct",
+                "voltage_violation_min": "train_voltage_violation_min",
+                "not_settled_steps": "train_not_settled_steps",
+            }
         )
         out["model"] = out["case"].map(lambda c: (model_of or {}).get(c, c))
         out = out.merge(side, on=["model", "k", "strategy"], how="left").drop(columns="model")
     for column in LOCAL_COLUMNS:
         if column not in out:
             out[column] = np.nan
-    return order(out[LOCAL_COLUMNS]).sort_values(["case", "k"], kind="stable").reset_index(drop=True)
+    return out[LOCAL_COLUMNS].sort_values(["case", "k", "rank"], kind="stable", na_position="last").reset_index(drop=True)
+
+
+FRONTIER_SHOWN = ["case", "k", "curtail", "eps_pu", "steps", "energy_kwh", "bound_kwh", "voltage_violation_min"]
+FRONTIER_SHOWN += ["max_violation_pu"]
+FRONTIER_SHOWN += ["no_optimum_steps", "solved_steps"]
+
+
+def frontier_table(frontier: pd.DataFrame, night_mode: str = REFERENCE_NIGHT) -> pd.DataFrame:
+    """The frontier of losses against compliance per case and k (one night mode), the plain
+    AC OPF's over every step and, over the steps where a configuration curtailed, the one
+    that may curtail (losses + curtailed energy): per ε the steps, the optimum's energy,
+    its certified bound's, its minutes outside the (unwidened) band and worst excursion,
+    the steps without an optimum, the steps solved at that ε."""
+    sub = frontier[frontier["night_mode"] == night_mode]
+    return sub[FRONTIER_SHOWN].sort_values(["case", "k", "curtail", "eps_pu"], kind="stable").reset_index(drop=True)

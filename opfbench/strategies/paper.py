@@ -42,13 +42,18 @@ BACK_TO_LLMA = 3  # Q_up and Q_do both changed sign (or Q_do hit zero): Q^F = Q^
 STOPPED = 4  # a power flow of this snapshot diverged earlier: setpoint frozen
 
 
-@local_rule("no-action", reads=(), uses_forecast=False, summary="every DER at Q = 0")
+@local_rule("no-action", reads=(), uses_forecast=False, summary="every DER at Q = 0", snapshot_wise=True)
 def no_action_target(m: Measurements) -> np.ndarray:
     """No action: every DER at Q = 0 MVAr."""
     return np.zeros(m.shape)
 
 
-@local_rule("llma", reads=("load",), summary="Algorithm 1: Q = the load's Q at the DER's own bus, within (1 − k)·Qmax")
+@local_rule(
+    "llma",
+    reads=("load",),
+    summary="Algorithm 1: Q = the load's Q at the DER's own bus, within (1 − k)·Qmax",
+    snapshot_wise=True,
+)
 def llma_target(m: Measurements) -> np.ndarray:
     """Algorithm 1, (S, n_der) MVAr: the DER's share of the reactive load at its own bus
     (the engine clips it to ±L: Q^H = min(Q_load, L) for the usual positive load)."""
@@ -174,6 +179,7 @@ def upstream_disagreements(scenario: Scenario, trace: LfmaTrace) -> np.ndarray:
     reads=("load", "flows"),
     options=(SAFE,),
     uses_forecast=True,
+    snapshot_wise=True,
 )
 def lfma(scenario: Scenario, k: float = 0.0, safe: bool = False) -> StrategyResult:
     """LFMA (Algorithm 2) with the bound L of `reactive_limit`. Snapshots whose power flow

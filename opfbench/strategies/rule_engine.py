@@ -28,6 +28,12 @@ step is ≤ `tol_v_pu`; it then stops iterating (only the unsettled ones are sol
 One that has not settled after `max_steps` steps keeps its last iterate — a converged
 operating point, so it has figures — with status "not-settled" and its residual recorded.
 
+Active power: a rule that caps it (Volt-Watt: `rules.Targets`) or runs with reactive
+priority (`priority="q"`) moves each DER's P as well as its Q (`limits.Capability`): the
+iteration settles both together, P_{n+1} = P_n + α_n·(P_wanted − P_n) with the same
+factors, from P_0 = P^C; the residual and `tol_q_mvar` then bound the change still asked
+of either (MVAr or MW), and the result carries the curtailed power.
+
 Statuses beyond "ok": "pf-diverged" (a flow did not converge: no figures), "not-settled",
 "rule-non-finite" (the rule gave NaN or inf for some DER: no setpoint, no figures).
 `StrategyResult.power_flows` counts every flow a snapshot needed, including the one that
@@ -47,9 +53,9 @@ from opfbench.capability import check_reserve
 from opfbench.powerflow import PowerFlowResult, solve_pf_batch
 from opfbench.result import NOT_SETTLED, OK, RULE_NON_FINITE, StrategyResult
 from opfbench.scenario import Scenario
-from opfbench.strategies.limits import clip, reactive_limit
+from opfbench.strategies.limits import Capability
 from opfbench.strategies.meters import LocalMeters
-from opfbench.strategies.rules import DEFAULT_SETTLING, RESIDUAL, Measurements, Rule, Settling, targets
+from opfbench.strategies.rules import DEFAULT_SETTLING, RESIDUAL, Measurements, Rule, Settling, Targets, targets
 from opfbench.timing import elapsed_ms, now
 
 
@@ -111,24 +117,40 @@ class Grid:
 
 
 def run_rule(
-    label: str, rule: Rule, scenario: Scenario, k: float, options: dict, safe: bool = False, settling: Settling = DEFAULT_SETTLING
+    label: str,
+    rule: Rule,
+    scenario: Scenario,
+    k: float,
+    options: dict,
+    safe: bool = False,
+    settling: Settling = DEFAULT_SETTLING,
+    priority: str = "p",
 ) -> StrategyResult:
     """Run `rule` on every snapshot of `scenario` at reserve k (see the module docstring);
     `options` go to the rule's target, `safe` caps Algorithm 3's limit at the physical
-    capability. The result is named `label`."""
+    capability, `priority` ("p" or "q") says which power yields where the apparent power
+    binds (`limits.Capability`). The result is named `label`."""
     t0 = now()
     k = check_reserve(k)
-    limit = reactive_limit(scenario, k, safe)
+    capability = Capability(scenario, k, safe, priority)
     plant = _Plant.of(scenario, rule.reads)
     if rule.closed_loop:
-        return _settle(label, rule, options, plant, k, limit, settling, t0)
+        return _settle(label, rule, options, plant, capability, settling, t0)
     n = scenario.n_snapshots
-    target = targets(rule, plant.measure(rule.reads, np.arange(n), None), options, n)
-    finite = np.isfinite(target).all(axis=1)
-    q = clip(np.where(finite[:, None], target, 0.0), limit)
-    pf = solve_pf_batch(scenario.net, scenario.injections(q))
-    res = StrategyResult.from_setpoints(label, k, scenario, q, elapsed_ms(t0), power_flows=1, pf=pf)
+    rows = np.arange(n)
+    wanted = targets(rule, plant.measure(rule.reads, rows, None), options, n)
+    finite = wanted.finite
+    q, p = capability.setpoints(rows, *_finite(wanted, finite))
+    pf = solve_pf_batch(scenario.net, scenario.injections(q, p))
+    res = StrategyResult.from_setpoints(label, k, scenario, q, elapsed_ms(t0), power_flows=1, pf=pf, p_mw=p)
     return _no_setpoint(res, ~finite)
+
+
+def _finite(wanted: Targets, finite: np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:
+    """The targets with every DER of a snapshot that gave a non-finite answer at Q = 0 and
+    no cap (those snapshots get no setpoint: `_no_setpoint`)."""
+    q = np.where(finite[:, None], wanted.q_mvar, 0.0)
+    return q, None if wanted.p_max_mw is None else np.where(finite[:, None], wanted.p_max_mw, np.inf)
 
 
 def _no_setpoint(res: StrategyResult, bad: np.ndarray) -> StrategyResult:
@@ -140,6 +162,8 @@ def _no_setpoint(res: StrategyResult, bad: np.ndarray) -> StrategyResult:
         res.vm[bad] = np.nan
         res.excursion_mvar[bad] = np.nan
         res.status[bad] = RULE_NON_FINITE
+        if res.curtailed_mw is not None:
+            res.curtailed_mw[bad] = np.nan
     return res
 
 
@@ -163,12 +187,12 @@ def adapt_step_factor(alpha: np.ndarray, dv: np.ndarray, dv_old: np.ndarray) -> 
 
 
 def _settle(
-    label: str, rule: Rule, options: dict, plant: _Plant, k: float, limit: np.ndarray, s: Settling, t0: float
+    label: str, rule: Rule, options: dict, plant: _Plant, capability: Capability, s: Settling, t0: float
 ) -> StrategyResult:
     """The closed-loop steady state of every snapshot (module docstring)."""
     scenario = plant.scenario
     net = scenario.net
-    n_snap, n_der = limit.shape
+    n_snap, n_der = scenario.n_snapshots, len(net.ders)
     place = np.zeros((n_der, net.n_bus))
     place[np.arange(n_der), net.der_bus] = 1.0  # DER → bus
     base = scenario.injections(np.zeros((n_snap, n_der)))
@@ -176,6 +200,9 @@ def _settle(
     v = np.array(first.v)
     converged = np.array(first.converged, dtype=bool)
     q = np.zeros((n_snap, n_der))
+    moves_p = rule.curtails or capability.priority != "p"
+    available = scenario.der_p_mw
+    p = np.array(available, dtype=float)  # P_0 = P^C
     flows = np.ones(n_snap, dtype=np.int64)
     residual = np.full(n_snap, np.nan)
     status = np.full(n_snap, OK, dtype=object)
@@ -187,10 +214,13 @@ def _settle(
     while rows.size:
         pf = PowerFlowResult(net, v[rows], np.ones(rows.size, dtype=bool), flows[rows])
         vm = np.abs(pf.v)
-        target = targets(rule, plant.measure(rule.reads, rows, pf), options, rows.size)
-        finite = np.isfinite(target).all(axis=1)
-        wanted = clip(np.where(finite[:, None], target, 0.0), limit[rows])
+        asked = targets(rule, plant.measure(rule.reads, rows, pf), options, rows.size)
+        finite = asked.finite
+        wanted, wanted_p = capability.setpoints(rows, *_finite(asked, finite))
         dq = np.abs(wanted - q[rows]).max(axis=1, initial=0.0)
+        if moves_p:
+            wanted_p = available[rows] if wanted_p is None else wanted_p
+            dq = np.maximum(dq, np.abs(wanted_p - p[rows]).max(axis=1, initial=0.0))
         dv_bus = np.abs(vm - vm_prev[rows])
         dv = dv_bus.max(axis=1, initial=0.0) if step else np.zeros(rows.size)
         residual[rows] = dq
@@ -207,7 +237,12 @@ def _settle(
         if not rows.size:
             break
         q[rows] = q[rows] + alpha[rows] * (wanted - q[rows])
-        answer = solve_pf_batch(net, base[rows] + 1j * (q[rows] @ place), v0=v[rows])
+        injections = base[rows] + 1j * (q[rows] @ place)
+        if moves_p:
+            assert wanted_p is not None
+            p[rows] = p[rows] + alpha[rows] * (wanted_p[going] - p[rows])
+            injections = injections + (p[rows] - available[rows]) @ place
+        answer = solve_pf_batch(net, injections, v0=v[rows])
         vm_prev[rows] = np.abs(v[rows])
         v[rows] = answer.v
         flows[rows] += 1
@@ -217,6 +252,15 @@ def _settle(
         step += 1
     final = PowerFlowResult(net, v, converged, flows)
     res = StrategyResult.from_setpoints(
-        label, k, scenario, q, elapsed_ms(t0), power_flows=flows, pf=final, status=status, extra={RESIDUAL: residual}
+        label,
+        capability.k,
+        scenario,
+        q,
+        elapsed_ms(t0),
+        power_flows=flows,
+        pf=final,
+        status=status,
+        extra={RESIDUAL: residual},
+        p_mw=p if moves_p else None,
     )
     return _no_setpoint(res, status == RULE_NON_FINITE)

@@ -2,8 +2,13 @@
 its Q target, and what it reads (`Rule.reads`); the engine that runs rules is
 `opfbench.strategies.rule_engine`. Light to import (numpy only): the registry and the CLI use it.
 
+A rule's answer is each DER's Q target, or — a rule that also limits active power, as
+IEEE 1547's Volt-Watt does — `Targets`: the Q targets and a cap on each DER's active power
+(the rule must declare that it curtails, `Rule.curtails`).
+
 Units: |V| p.u.; P in MW, Q in MVAr, positive = injected by the DER (loads: positive =
-consumed; lines: positive = leaving the DER's bus into the line).
+consumed; lines: positive = leaving the DER's bus into the line). The active power a rule
+reads ("p") is the DER's available power P^C, whatever it curtails.
 """
 
 from __future__ import annotations
@@ -21,6 +26,9 @@ READS = ("v", "p", "p_forecast", "load", "flows")
 #: Measured quantities the DER's own Q changes: a rule reading one is closed-loop.
 FEEDBACK = frozenset({"v", "flows"})
 RESIDUAL = "residual_mvar"
+#: An inverter's priority where its capability binds: active (p) or reactive (q) power
+#: (`limits.Capability`).
+PRIORITIES = ("p", "q")
 
 
 @dataclass(frozen=True)
@@ -106,34 +114,70 @@ class Measurements:
         return self._get("flows", "line_mva")
 
 
-Target = Callable[..., np.ndarray]
+@dataclass(frozen=True)
+class Targets:
+    """What a rule asks of each DER (S, n_der): `q_mvar` its Q target, MVAr; `p_max_mw` a
+    cap on its active power, MW (None: none — it delivers its available power)."""
+
+    q_mvar: np.ndarray
+    p_max_mw: np.ndarray | None = None
+
+    @property
+    def finite(self) -> np.ndarray:
+        """(S,) whether every DER's answer at the snapshot is finite."""
+        ok = np.isfinite(self.q_mvar).all(axis=1)
+        return ok if self.p_max_mw is None else ok & np.isfinite(self.p_max_mw).all(axis=1)
+
+
+Target = Callable[..., "np.ndarray | Targets"]
 
 
 @dataclass(frozen=True)
 class Rule:
     """A local rule: `target(m, **options)` → (S, n_der) Q target in MVAr (positive =
-    injected), reading `reads` ⊆ READS; `name` labels its messages."""
+    injected), or `Targets` where it `curtails` (caps active power); reading `reads` ⊆
+    READS; `name` labels its messages."""
 
     name: str
     target: Target
     reads: frozenset[str]
+    curtails: bool = False
 
     @property
     def closed_loop(self) -> bool:
         return bool(self.reads & FEEDBACK)
 
 
-def targets(rule: Rule, m: Measurements, options: dict, n_rows: int) -> np.ndarray:
-    """The rule's targets (rows, n_der) MVAr; InputError naming the rule for an exception,
-    a non-numeric answer or a wrong shape (non-finite values are the caller's to handle)."""
+def _real(rule: Rule, values: object, should: str) -> np.ndarray:
+    """`values` as floats; InputError (`should`: what they must be) unless they are real
+    numbers (complex: its imaginary part would be dropped; text, objects)."""
+    arr = np.asarray(values)
+    if arr.dtype.kind not in "biuf":
+        raise InputError(f"rule {rule.name!r} returned {arr.dtype} values; {should}")
+    return arr.astype(float)
+
+
+def targets(rule: Rule, m: Measurements, options: dict, n_rows: int) -> Targets:
+    """The rule's targets (rows, n_der): Q (MVAr) and, for a rule that curtails, a cap on
+    active power (MW); InputError naming the rule for an exception (a `sys.exit` too), an
+    answer that is not real numbers (complex included), a wrong shape or a cap on active
+    power from a rule that does not declare it curtails (non-finite values are the
+    caller's to handle)."""
     n_der = m.shape[1]
     try:
         raw = rule.target(m, **options)
-        out = np.asarray(raw, dtype=float)
+        answer = raw if isinstance(raw, Targets) else Targets(raw)
+        caps = None if answer.p_max_mw is None else _real(rule, answer.p_max_mw, "a cap on active power is real numbers (MW)")
+        out = Targets(_real(rule, answer.q_mvar, "a Q target is real numbers (MVAr)"), caps)
     except InputError:
         raise
-    except Exception as exc:  # a rule's own bug: named, never a traceback
-        raise InputError(f"rule {rule.name!r} failed: {type(exc).__name__}: {exc}") from exc
-    if out.shape != (n_rows, n_der):
-        raise InputError(f"rule {rule.name!r} returned shape {out.shape}; it must return (S, n_der) = ({n_rows}, {n_der})")
+    except (Exception, SystemExit) as exc:  # a rule's own bug, or its sys.exit: named, never a traceback or an exit
+        raise InputError(f"rule {rule.name!r} failed: {type(exc).__name__}: {exc}") from None
+    for what, arr in (("", out.q_mvar), (" active-power caps of", out.p_max_mw)):
+        if arr is not None and arr.shape != (n_rows, n_der):
+            raise InputError(
+                f"rule {rule.name!r} returned{what} shape {arr.shape}; it must return (S, n_der) = ({n_rows}, {n_der})"
+            )
+    if out.p_max_mw is not None and not rule.curtails:
+        raise InputError(f"rule {rule.name!r} caps active power but is not declared a rule that curtails")
     return out

@@ -107,8 +107,10 @@ class StudyConfig:
     the run-level setting of every option that declares it (`registry.Option.setting`).
     `strategies` are configuration labels (`NAME:key=value,…`), kept canonical
     (`registry.configuration`); `plugins` and `plugin_digests` (derived, not given) name
-    the plugins those strategies come from and their sources' sha256, so a changed plugin
-    is another configuration. `fitted` (derived by the run, not given): the learned
+    the plugins those strategies come from (a file's absolute path) and their fingerprints
+    (`plugins.PluginSource.digest`: the source and what it was seen to depend on), so a
+    changed plugin or helper is another configuration; `notes` say what each plugin's
+    fingerprint cannot see. `fitted` (derived by the run, not given): the learned
     configurations' fitted rules per case (`study.training`), their hashes part of the
     configuration."""
 
@@ -149,6 +151,8 @@ class StudyConfig:
         loaded = [load(ref) for ref in sources]
         object.__setattr__(self, "plugins", tuple(p.ref for p in loaded))
         object.__setattr__(self, "plugin_digests", tuple(p.digest for p in loaded))
+        said = tuple(p.note() for p in loaded)
+        object.__setattr__(self, "notes", self.notes + tuple(n for n in said if n not in self.notes))
         for mode in self.night_modes:
             if mode not in NIGHT_MODES:
                 raise InputError(f"unknown night mode {mode!r}; choose from {', '.join(NIGHT_MODES)}")
@@ -199,8 +203,9 @@ class StudyConfig:
 
     def digest(self) -> str:
         """Hash of everything that changes results (not the price labels, nor the fitted
-        rules: they follow from the rest, and each task's definition holds its case's)."""
-        body = {k: v for k, v in self.as_dict().items() if k not in (*LABEL_FIELDS, "fitted")}
+        rules: they follow from the rest, and each task's definition holds its case's; nor
+        where the plugins lie: their fingerprints say what they are)."""
+        body = {k: v for k, v in self.as_dict().items() if k not in (*LABEL_FIELDS, "fitted", "plugins")}
         return hashlib.sha256(json.dumps(body, sort_keys=True).encode()).hexdigest()[:16]
 
     def with_period(self, step_minutes: float, hours: float) -> "StudyConfig":

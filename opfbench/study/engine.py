@@ -242,7 +242,7 @@ def run_family(
     `reporter` (the run's `notes` keep the notes too); `notes=False` keeps the family's
     planning notes unsaid (a nested run's, which its parent says). Ctrl-C: `Stopped`, or
     the reporter's `hard_stop` (module docstring)."""
-    from opfbench.study.store import RunStore
+    from opfbench.study.store import RunStore, finished_tasks
 
     said: list[str] = []
 
@@ -255,6 +255,7 @@ def run_family(
         execution.scheduler_endpoint(scheduler)
     temporary = out is None
     folder = Path(tempfile.mkdtemp(prefix="opfbench-")) if out is None else Path(out)
+    made = _first_missing(folder)  # a refused run leaves no folder it made behind (nor its made parents)
     try:
         store = RunStore(folder, note)
         stopped_planning = "stopped while planning; nothing was run"
@@ -323,10 +324,24 @@ def run_family(
             run.wall_s = elapsed_ms(start) / 1e3
             store.finish_manifest(run.wall_s, run.workers, scheduler, run.task_wall, family.timings(run.wall_s))
         return run
+    except Exception:
+        if made is not None and not finished_tasks(folder):  # refused, or failed before any task finished
+            _remove(made, True)
+        raise
     finally:
         _remove(folder, temporary)
 
 
-def _remove(folder: Path, temporary: bool) -> None:
-    if temporary:
+def _first_missing(folder: Path) -> Path | None:
+    """The outermost folder of `folder`'s path that does not exist yet (None: it exists)."""
+    if folder.exists():
+        return None
+    top = folder.absolute()
+    while not top.parent.exists():
+        top = top.parent
+    return top
+
+
+def _remove(folder: Path, remove: bool) -> None:
+    if remove:
         shutil.rmtree(folder, ignore_errors=True)

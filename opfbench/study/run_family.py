@@ -17,15 +17,23 @@ from opfbench.jsonio import write_atomic
 from opfbench.learned.fitted import LEARNED_DIR, TRAIN_DIR, Fitted
 from opfbench.parquetio import ParquetStream
 from opfbench.registry.catalog import configuration
-from opfbench.schema import KEYS, TASK_SUMMARY
+from opfbench.schema import FRONTIER, KEYS, TASK_FRONTIER_SUMMARY, TASK_SUMMARY
 from opfbench.study.config import LABEL_FIELDS, StudyConfig
 from opfbench.study.engine import SILENT, EngineRun, Reporter, TaskOutput, run_family
 from opfbench.study.periods import Period
-from opfbench.study.run_tables import DETAIL_COLUMNS, extra_columns, step_columns, summarize
-from opfbench.study.task_scenarios import check_model_forecasts, study_period
+from opfbench.study.run_tables import DETAIL_COLUMNS, extra_columns, step_columns, summarize, summarize_frontier
+from opfbench.study.task_scenarios import check_model_forecasts, chunk_scenario, study_period
 from opfbench.study.tasks import RunTask, TaskInput, plan_tasks, task_input
 
-RUN_OUTPUTS = ("steps.parquet", "summary.csv", "der_q.parquet", "bus_v.parquet", "report.html")
+RUN_OUTPUTS = (
+    "steps.parquet",
+    "summary.csv",
+    "frontier.parquet",
+    "frontier.csv",
+    "der_q.parquet",
+    "bus_v.parquet",
+    "report.html",
+)
 
 
 @dataclass
@@ -65,8 +73,9 @@ def _case_info(case: str) -> dict:
 
 @dataclass
 class RunFamily:
-    """The run's tasks (see `study.tasks`); the assembler streams steps.parquet and the
-    detail tables and writes summary.csv from the tasks' partial sums."""
+    """The run's tasks (see `study.tasks`); the assembler streams steps.parquet, the
+    frontier's steps and the detail tables and writes summary.csv and frontier.csv from
+    the tasks' partial sums."""
 
     config: StudyConfig
     period: Period
@@ -78,12 +87,17 @@ class RunFamily:
 
     @property
     def tables(self) -> tuple[str, ...]:
-        return ("steps", "summary", *self.config.detail_tables)
+        return ("steps", "summary", "frontier", "frontier_summary", *self.config.detail_tables)
 
     def columns(self, table: str) -> list[str]:
+        fixed = {
+            "summary": TASK_SUMMARY.names,
+            "frontier": FRONTIER.names,
+            "frontier_summary": TASK_FRONTIER_SUMMARY.names,
+        }
         if table == "steps":
             return step_columns(extra_columns(self.config.strategies))
-        return TASK_SUMMARY.names if table == "summary" else DETAIL_COLUMNS[table]
+        return fixed[table] if table in fixed else DETAIL_COLUMNS[table]
 
     @property
     def notes(self) -> tuple[str, ...]:
@@ -117,13 +131,15 @@ class RunFamily:
 
 
 class RunAssembler:
-    """steps.parquet (+ the detail tables) streamed task by task in planned order as arrow
-    tables (never pandas), summary.csv from the partial sums on commit; all atomic."""
+    """steps.parquet, frontier.parquet (+ the detail tables) streamed task by task in
+    planned order as arrow tables (never pandas), summary.csv and frontier.csv from the
+    partial sums on commit; all atomic."""
 
     def __init__(self, out: Path, detail: tuple[str, ...]):
         self.out = out
-        self.writers = {name: ParquetStream(out / f"{name}.parquet") for name in ("steps", *detail)}
+        self.writers = {name: ParquetStream(out / f"{name}.parquet") for name in ("steps", "frontier", *detail)}
         self.partials: list[pd.DataFrame] = []
+        self.frontier: list[pd.DataFrame] = []
         self.order: list[tuple] = []
 
     def add(self, task: RunTask, tables: dict[str, pa.Table]) -> None:
@@ -131,6 +147,7 @@ class RunAssembler:
             writer.write(tables[name])
         partial = tables["summary"].to_pandas()
         self.partials.append(partial)
+        self.frontier.append(tables["frontier_summary"].to_pandas())
         self.order.extend(map(tuple, partial[KEYS].itertuples(index=False)))
 
     def commit(self) -> pd.DataFrame:
@@ -140,6 +157,8 @@ class RunAssembler:
         # figures to 6 significant digits; k exactly (0.1 and 0.1000001 are two configurations)
         exact_k = summary.assign(k=summary["k"].map(_exact))
         write_atomic(self.out / "summary.csv", exact_k.to_csv(index=False, float_format="%.6g"))
+        front = summarize_frontier(self.frontier)
+        write_atomic(self.out / "frontier.csv", front.assign(k=front["k"].map(_exact)).to_csv(index=False, float_format="%.6g"))
         return summary
 
     def abort(self) -> None:
@@ -161,6 +180,7 @@ def prepare(config: StudyConfig) -> RunFamily:
     models = [s for s in config.forecast if s not in ("off", "oracle") and config.strategies_for(s)]
     check_model_forecasts(config.forecast_dir, models, period)  # a missing or incomplete forecast file: here, not in a worker
     running = {label for source in config.forecast for label in config.strategies_for(source)}
+    extra_columns(config.strategies)  # a plugin's column that is one of the table's own: refused here
     data = {}
     for case in config.cases:
         loaded = load_case(case)
@@ -169,7 +189,38 @@ def prepare(config: StudyConfig) -> RunFamily:
         for label in config.strategies:
             if label in running:
                 configuration(label).spec.check_network(net)
-    return RunFamily(config, period, plan_tasks(config, period, data))
+    tasks = plan_tasks(config, period, data)
+    _probe_plugins(tasks, config, period)
+    return RunFamily(config, period, tasks)
+
+
+def _probe_plugins(tasks: list[RunTask], config: StudyConfig, period: Period) -> None:
+    """Every plugin configuration run on the first steps of each case's first task that
+    has it under each forecast (`plugins.probe_case`: the real DER kinds, shapes and
+    read-only arrays), each night mode: InputError before anything is written."""
+    from opfbench.plugins import probe_case
+
+    probed: set[tuple[str, str, str]] = set()
+    for task in tasks:
+        for forecast, strategies in task.runs:
+            key = (task.case, forecast)
+            labels = [s for s in strategies if configuration(s).spec.source != "opfbench" and (*key, s) not in probed]
+            if not labels:
+                continue
+            probed.update((*key, s) for s in labels)
+            inp = task_input(task, config, period)
+            step = pd.Timedelta(hours=inp.step_h)
+            for mode in task.night_modes:
+                scenario = chunk_scenario(
+                    task.case, mode, forecast, inp.profiles, inp.night, min(2, inp.n_steps), step, inp.forecast_dir
+                )
+                probe_case(
+                    labels,
+                    scenario,
+                    task.k,
+                    f"{task.case}'s first steps (night mode {mode}, forecast {forecast})",
+                    dict(inp.settings),
+                )
 
 
 def run_study(

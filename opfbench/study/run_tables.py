@@ -1,6 +1,16 @@
 """The run's tables (columns: `opfbench.schema`, docs/CONTRACTS.md): per-step rows of one
-strategy result, the optional detail tables (per-DER Q, per-bus V), and the summary,
-built from per-task partial sums so that a year never has to sit in memory at once.
+strategy result, the optional detail tables (per-DER Q, per-bus V), the frontier's steps,
+and the summaries, built from per-task partial sums so that a year never has to sit in
+memory at once.
+
+Every configuration's step is compared with the frontier (`formulations.frontier`) at the
+smallest grid ε that covers its own excursion beyond the voltage band: its cost (losses
+plus curtailed power) against the optimum as compliant as it — the **gap at equal
+compliance** (≥ 0 where the optimum is global and the point is in the OPF's set) — and,
+over the period, the **share at equal compliance**: the reduction of the cost below no
+action's losses over the reduction that optimum makes, (E_na − C)/(E_na − F), ≤ 100 %.
+The plain, loss-only share (E_na − E)/(E_na − E_acopf) is kept beside it (`share_pct`):
+it compares a rule with an optimum that holds the band whatever the rule does.
 """
 
 from __future__ import annotations
@@ -8,20 +18,46 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 
+from opfbench.errors import InputError
+from opfbench.formulations.frontier import Frontier
 from opfbench.registry.catalog import configuration, describe
-from opfbench.registry.references import BASELINE
-from opfbench.result import NOT_SETTLED, OK, PF_DIVERGED, RULE_NON_FINITE, StrategyResult
-from opfbench.schema import BUS_V, DER_Q, KEYS, STEPS, SUMMARY, TASK_SUMMARY, StepContext
+from opfbench.registry.references import BASELINE, REFERENCE_OPTIMUM
+from opfbench.result import NOT_SETTLED, OK, PF_DIVERGED, RULE_NON_FINITE, Reference, StrategyResult
+from opfbench.schema import (
+    BUS_V,
+    DER_Q,
+    FRONTIER,
+    FRONTIER_SUMMARY,
+    KEYS,
+    STEPS,
+    SUMMARY,
+    TASK_FRONTIER_SUMMARY,
+    TASK_SUMMARY,
+    StepContext,
+)
 from opfbench.study.config import DETAIL_TABLES
 
 DETAIL_COLUMNS = {"der_q": DER_Q.names, "bus_v": BUS_V.names}
+FRONTIER_KEYS = ["case", "k", "night_mode", "curtail"]
+FRONTIER_COLUMNS = FRONTIER.names
 VIOLATION_PU = 1e-6  # a step violates the voltage limits beyond this
 EXCURSION_MVAR = 1e-9  # a step's setpoint exceeds the physical capability beyond this
+BELOW_KW = 1e-4  # a cost this far below its frontier point counts as below it (solver tolerances)
+SHARE_MIN_KWH = 1e-6  # a reduction below this defines no share
 
 
 def extra_columns(labels: tuple[str, ...]) -> tuple[str, ...]:
     """The extra per-step columns the strategies of `labels` declare (`StrategySpec.columns`),
-    each once, in the order they first appear."""
+    each once, in the order they first appear; InputError naming the strategy that
+    declares one of the table's own columns (before any work)."""
+    for label in labels:
+        spec = configuration(label).spec
+        clash = [c for c in spec.columns if c in STEPS.names]
+        if clash:
+            raise InputError(
+                f"strategy {spec.name} ({spec.source}) declares the extra column {clash[0]!r}, one of the steps table's "
+                f"own ({', '.join(STEPS.names)}): give its column another name"
+            )
     return tuple(dict.fromkeys(c for label in labels for c in configuration(label).spec.columns))
 
 
@@ -42,13 +78,35 @@ def step_rows(
     night: np.ndarray,
     res: StrategyResult,
     extra_columns: tuple[str, ...] = (),
+    reference: Reference | None = None,
 ) -> Columns:
     """The columns of one row per step of `res` (`schema.STEPS`, each computed by its
     declaration), for `stack`; the `extra_columns` from `res.extra` (NaN where this
-    strategy has none)."""
-    context = StepContext(case, night_mode, forecast, time.asi8, step_h, night, res)
+    strategy has none); the frontier point at the step's compliance
+    (`formulations.frontier.reference`; NaN without one)."""
+    context = StepContext(case, night_mode, forecast, time.asi8, step_h, night, res, reference)
     nan = np.full(res.n_snapshots, np.nan)
     return STEPS.compute(context) | {name: np.asarray(res.extra.get(name, nan), dtype=float) for name in extra_columns}
+
+
+def frontier_rows(case: str, k: float, night_mode: str, time: pd.DatetimeIndex, step_h: float, front: Frontier) -> Columns:
+    """The frontier's rows (see the contract: one per step of `time` — its steps — and grid
+    ε), for `stack`."""
+    n, m = front.cost_kw.shape
+    return {
+        "case": case,
+        "k": float(k),
+        "night_mode": night_mode,
+        "curtail": bool(front.curtail),
+        "time": np.repeat(time.asi8, m),
+        "step_h": float(step_h),
+        "eps_pu": np.tile(front.eps, n),
+        "cost_kw": front.cost_kw.reshape(-1),
+        "bound_kw": front.bound_kw.reshape(-1),
+        "excursion_pu": front.excursion_pu.reshape(-1),
+        "status": front.status.reshape(-1).astype(str),
+        "solved": front.solved.reshape(-1),
+    }
 
 
 def detail_rows(
@@ -60,19 +118,21 @@ def detail_rows(
     tables: tuple[str, ...] = DETAIL_TABLES,
 ) -> dict[str, Columns]:
     """The columns of the long tables named in `tables`, for `stack`: "der_q" per-DER
-    setpoints (DER name, bus id, kind, q_mvar), "bus_v" per-bus |V| (p.u.)."""
+    setpoints (DER name, bus id, kind, q_mvar, curtailed_mw), "bus_v" per-bus |V| (p.u.)."""
     net = res.net
     n = res.n_snapshots
     label: Columns = {"case": case, "strategy": res.strategy, "k": float(res.k), "night_mode": night_mode, "forecast": forecast}
 
     def der_q() -> Columns:
         n_der = len(net.ders)
+        curtailed = np.zeros(n * n_der) if res.curtailed_mw is None else res.curtailed_mw.reshape(-1)
         return label | {
             "time": np.repeat(time.asi8, n_der),
             "der": np.tile(np.asarray(net.der_names, dtype=str), n),
             "bus": np.tile(net.bus_ids[net.der_bus], n).astype(np.int64),
             "kind": np.tile(np.asarray(net.der_kinds, dtype=str), n),
             "q_mvar": res.q_mvar.reshape(-1),
+            "curtailed_mw": curtailed,
         }
 
     def bus_v() -> Columns:
@@ -117,6 +177,12 @@ def partial_summary(steps: pd.DataFrame) -> pd.DataFrame:
     measured = steps.losses_kw.notna()  # a converged power flow: the step has a loss and voltage figure
     s = steps.assign(
         energy=steps.losses_kw * steps.step_h,
+        curtailed=steps.curtailed_kw * steps.step_h,
+        front=steps.frontier_kw * steps.step_h,
+        front_missing=steps.frontier_kw.isna().astype(np.int64),
+        front_bound=steps.frontier_bound_kw * steps.step_h,
+        front_bound_missing=steps.frontier_bound_kw.isna().astype(np.int64),
+        below=(steps.losses_kw + steps.curtailed_kw < steps.frontier_kw - BELOW_KW).astype(np.int64),
         measured=measured.astype(np.int64),
         measured_h=steps.step_h.where(measured, 0.0),
         lb_energy=steps.lower_bound_kw * steps.step_h,
@@ -139,6 +205,13 @@ def partial_summary(steps: pd.DataFrame) -> pd.DataFrame:
             "pf_converged_steps": g.measured.sum(),
             "measured_hours": g.measured_h.sum(),
             "energy_kwh": g.energy.sum(),
+            "curtailed_kwh": g.curtailed.sum(),
+            "frontier_kwh": g.front.sum(),
+            "frontier_missing": g.front_missing.sum(),
+            "frontier_bound_kwh": g.front_bound.sum(),
+            "frontier_bound_missing": g.front_bound_missing.sum(),
+            "below_frontier_steps": g.below.sum(),
+            "frontier_curtails": g.frontier_curtails.max(),
             "not_ok_steps": g.not_ok.sum(),
             "not_settled_steps": g.not_settled.sum(),
             "pf_diverged_steps": g.pf_diverged.sum(),
@@ -163,7 +236,13 @@ def partial_summary(steps: pd.DataFrame) -> pd.DataFrame:
 
 PARTIAL_COLUMNS = tuple(TASK_SUMMARY.names[len(KEYS) :])
 """The columns of a task's partial sums (`partial_summary`) besides KEYS."""
-EXTREMES = {"vmin_pu": "min", "vmax_pu": "max", "max_excursion_mvar": "max", "max_violation_pu": "max"}
+EXTREMES = {
+    "vmin_pu": "min",
+    "vmax_pu": "max",
+    "max_excursion_mvar": "max",
+    "max_violation_pu": "max",
+    "frontier_curtails": "max",
+}
 """The partial sums' extremes (combined by `summarize` with these; the others are summed)."""
 
 
@@ -179,11 +258,22 @@ def summarize(partials: list[pd.DataFrame], order: list[tuple]) -> pd.DataFrame:
     energy for the same case, k and night mode with forecast off; lower_bound_kwh: the
     certified bound over the same steps from the strategy at its default options with the
     lowest `bound_rank` (the SOCP, slack may export, else the AC OPF's record of it), NaN
-    unless every step has one. voltage_violation_min: minutes of steps outside the case's
-    voltage limits, max_violation_pu the worst excursion beyond them; not_settled_steps:
-    steps where a closed-loop rule did not settle."""
+    unless every step has one. curtailed_kwh: the active energy the DER had and did not
+    deliver (a rule's Volt-Watt or reactive priority); cost_kwh = energy_kwh + curtailed_kwh.
+    voltage_violation_min: minutes of steps outside the case's voltage limits,
+    max_violation_pu the worst excursion beyond them; not_settled_steps: steps where a
+    closed-loop rule did not settle. At equal compliance (module docstring): frontier_kwh
+    the frontier's optimum at each step's compliance (NaN unless every step has one;
+    frontier_missing_steps count those without), frontier_bound_kwh its certified bound,
+    gap_eq_kwh = cost_kwh − frontier_kwh (gap_eq_pct of frontier_kwh), share_eq_pct =
+    100·(no_action_kwh − cost_kwh)/(no_action_kwh − frontier_kwh) where that reduction
+    exceeds SHARE_MIN_KWH, below_frontier_steps the steps whose cost lies more than
+    BELOW_KW under their frontier point, frontier_curtails whether that frontier is the
+    optimum's that may curtail (the reference of the configurations that curtail);
+    share_pct the plain loss-only share,
+    100·(no_action_kwh − energy_kwh)/(no_action_kwh − the reference optimum's energy)."""
     p = pd.concat(partials, ignore_index=True)
-    g = p.groupby(KEYS, sort=False)
+    g = p.groupby(KEYS, sort=False, observed=True)
     out = g[[c for c in PARTIAL_COLUMNS if c not in EXTREMES]].sum()
     for column, how in EXTREMES.items():
         out = out.join(g[column].agg(how))
@@ -208,6 +298,19 @@ def summarize(partials: list[pd.DataFrame], order: list[tuple]) -> pd.DataFrame:
     )
     out["gap_kwh"] = out.energy_kwh - out.lower_bound_kwh
     out["gap_pct"] = 100 * out.gap_kwh / out.lower_bound_kwh
+    out["cost_kwh"] = out.energy_kwh + out.curtailed_kwh
+    out["frontier_curtails"] = out.frontier_curtails.astype(bool)
+    out["frontier_missing_steps"] = out.pop("frontier_missing")
+    out["frontier_kwh"] = out.frontier_kwh.where(out.frontier_missing_steps == 0)
+    out["frontier_bound_kwh"] = out.frontier_bound_kwh.where(out.pop("frontier_bound_missing") == 0)
+    out["gap_eq_kwh"] = out.cost_kwh - out.frontier_kwh
+    out["gap_eq_pct"] = 100 * out.gap_eq_kwh / out.frontier_kwh
+    reduction = out.no_action_kwh - out.frontier_kwh
+    out["share_eq_pct"] = (100 * (out.no_action_kwh - out.cost_kwh) / reduction).where(reduction > SHARE_MIN_KWH)
+    optimum = out[(out.strategy == REFERENCE_OPTIMUM) & (out.forecast == "off")].set_index(["case", "k", "night_mode"]).energy_kwh
+    e_opt = pd.MultiIndex.from_frame(out[["case", "k", "night_mode"]]).map(optimum.to_dict().get).astype(float)
+    plain = out.no_action_kwh - e_opt
+    out["share_pct"] = (100 * (out.no_action_kwh - out.energy_kwh) / plain).where(plain > SHARE_MIN_KWH)
     integers = {c.name: np.int64 for c in SUMMARY if c.dtype == "integer"}
     return out[SUMMARY.names].astype(integers)
 
@@ -216,3 +319,50 @@ def _bound_rank(label: str) -> float:
     """The `bound_rank` of a label that is a strategy at its default options (NaN: none)."""
     spec = describe(label)
     return float(spec.bound_rank) if spec is not None and spec.bound_rank is not None and label == spec.name else np.nan
+
+
+def partial_frontier(front: pd.DataFrame) -> pd.DataFrame:
+    """Sums per (case, k, night mode, ε) of one task's frontier rows (combined by
+    `summarize_frontier`)."""
+    s = front.assign(
+        energy=front.cost_kw * front.step_h,
+        missing=front.cost_kw.isna().astype(np.int64),
+        bound=front.bound_kw * front.step_h,
+        bound_missing=front.bound_kw.isna().astype(np.int64),
+        outside_h=front.step_h.where(front.excursion_pu > VIOLATION_PU, 0.0),
+        solved=front.solved.astype(np.int64),
+    )
+    g = s.groupby([*FRONTIER_KEYS, "eps_pu"], sort=False, observed=True)
+    sums = pd.DataFrame(
+        {
+            "steps": g.size(),
+            "energy_kwh": g.energy.sum(),
+            "missing": g.missing.sum(),
+            "bound_kwh": g.bound.sum(),
+            "bound_missing": g.bound_missing.sum(),
+            "outside_h": g.outside_h.sum(),
+            "max_excursion_pu": g.excursion_pu.max(),
+            "solved": g.solved.sum(),
+        }
+    )
+    return sums.reset_index()[TASK_FRONTIER_SUMMARY.names]
+
+
+def summarize_frontier(partials: list[pd.DataFrame]) -> pd.DataFrame:
+    """The frontier of each (case, k, night mode): per grid ε the optimum's energy over the
+    period (NaN unless every step has an optimum at that ε; no_optimum_steps count those
+    without: infeasible, or only a fallback point), its certified bound's, the minutes its
+    optimum lies outside the (unwidened) band and its worst excursion there, and the steps
+    solved at that ε (the others take the answer of an ε that covers them)."""
+    if not partials:
+        return pd.DataFrame(columns=FRONTIER_SUMMARY.names)
+    p = pd.concat(partials, ignore_index=True)
+    g = p.groupby([*FRONTIER_KEYS, "eps_pu"], sort=False)
+    out = g[["steps", "energy_kwh", "missing", "bound_kwh", "bound_missing", "outside_h", "solved"]].sum()
+    out = out.join(g["max_excursion_pu"].max()).reset_index()
+    out["energy_kwh"] = out.energy_kwh.where(out.missing == 0)
+    out["bound_kwh"] = out.bound_kwh.where(out.pop("bound_missing") == 0)
+    out = out.rename(columns={"missing": "no_optimum_steps", "max_excursion_pu": "max_violation_pu", "solved": "solved_steps"})
+    out["voltage_violation_min"] = 60.0 * out.pop("outside_h")
+    integers = {c.name: np.int64 for c in FRONTIER_SUMMARY if c.dtype == "integer"}
+    return out[FRONTIER_SUMMARY.names].astype(integers)

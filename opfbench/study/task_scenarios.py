@@ -122,6 +122,40 @@ def _series_scenario(
 
 
 @dataclass(frozen=True)
+class SharedSnapshots:
+    """The distinct snapshots of several scenarios of one chunk (its night modes): `union`
+    holds each snapshot once — all of the first scenario's, then each later one's that no
+    earlier scenario has at the same step (`Scenario.same_rows`) —, `rows[j]` where
+    scenario j's snapshots are in it, `owned[j]` how many of them scenario j brought. A
+    snapshot-wise strategy runs once on `union`; each scenario takes its rows."""
+
+    union: Scenario
+    rows: tuple[np.ndarray, ...]
+    owned: tuple[int, ...]
+
+    @classmethod
+    def of(cls, scenarios: Sequence[Scenario]) -> "SharedSnapshots":
+        rows: list[np.ndarray] = []
+        parts: list[tuple[Scenario, np.ndarray]] = []
+        size = 0
+        for j, scenario in enumerate(scenarios):
+            where = np.full(scenario.n_snapshots, -1)
+            for earlier, at in zip(scenarios[:j], rows, strict=False):
+                same = (where < 0) & scenario.same_rows(earlier)
+                where[same] = at[same]
+            fresh = np.flatnonzero(where < 0)
+            where[fresh] = size + np.arange(fresh.size)
+            size += fresh.size
+            rows.append(where)
+            parts.append((scenario, fresh))
+        return cls(Scenario.union([p for p in parts if p[1].size]), tuple(rows), tuple(p[1].size for p in parts))
+
+    def share(self, j: int) -> float:
+        """The part of a union run's wall time scenario j is charged: the snapshots it brought."""
+        return self.owned[j] / self.union.n_snapshots
+
+
+@dataclass(frozen=True)
 class CaseCheck:
     """What `check_cases` found: the native step of the cases' own series (minutes, None
     when no case has one), whether some cases have none, the series' sources, and the

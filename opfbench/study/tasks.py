@@ -1,12 +1,21 @@
 """Tasks: the grid split into independent pieces of work.
 
-A task is (case, forecast, k, chunk of steps) and runs every requested strategy and
-night mode of that group. `acopf`, `acopf-paper` and `socp` share SOCP solves, and the
+A task is (case, k, chunk of steps) and runs every requested strategy, night mode and
+forecast source of that group, and the frontier of losses against voltage compliance of
+each night mode (`formulations.frontier`, on the forecast-off scenario: the OPF reads no
+forecast), which every configuration's steps are compared with — computed once, the
+forecast-off `acopf` rows its point at ε = 0; at the steps where a configuration that may
+curtail (Volt-Watt, reactive priority, `acopf:curtail=true`) did, also the frontier of the
+optimum that may curtail, which it is compared with there. `acopf`, `acopf-paper` and `socp` share SOCP solves, and the
 night modes — which differ only in the night hours, so their daytime snapshots are the
 same problems — solve each once: the formulations' solve cache is keyed on the data
-(`formulations.solves`), whatever Scenario objects carry it; and where two
-night modes give the very same scenario (no PV output in the night hours of the chunk), the
-second takes the first's results (`Scenario.same_data`) with its wall time 0. Its input
+(`formulations.solves`), whatever Scenario objects carry it; a snapshot-wise strategy
+(`StrategySpec.snapshot_wise`: every local rule, the SOCP) runs once on the distinct
+snapshots of the night modes (`task_scenarios.SharedSnapshots`: by day, and at night where
+the PV units produce nothing, the modes' snapshots are the same) and each mode takes its
+rows, charged the wall time of the snapshots it brought; and where two night modes give
+the very same scenario (no PV output in the night hours of the chunk), the second takes the
+first's results (`Scenario.same_data`) with its wall time 0. Its input
 carries its slice of the period's profiles, so it runs the same in this process, in a
 local worker process or on a remote Dask worker; the AC OPF starts cold at each chunk and
 warm-starts inside it — the same whatever the number of workers.
@@ -21,11 +30,13 @@ import pandas as pd
 from threadpoolctl import threadpool_limits
 
 from opfbench.errors import InputError
+from opfbench.formulations.frontier import Frontier, frontier, reference
 from opfbench.learned.fitted import Fitted
 from opfbench.learned.rules import install
 from opfbench.plugins import PluginSource, ensure, loaded
 from opfbench.registry.catalog import configuration, run_strategy
 from opfbench.registry.options import OptionValue
+from opfbench.registry.references import REFERENCE_OPTIMUM
 from opfbench.result import StrategyResult
 from opfbench.scenario import Scenario
 from opfbench.study.config import StudyConfig
@@ -33,36 +44,43 @@ from opfbench.study.engine import Task, TaskOutput
 from opfbench.study.periods import Period
 from opfbench.study.run_tables import (
     DETAIL_COLUMNS,
+    FRONTIER_COLUMNS,
     Columns,
     detail_rows,
     extra_columns,
+    frontier_rows,
+    partial_frontier,
     partial_summary,
     stack,
     step_columns,
     step_rows,
 )
-from opfbench.study.task_scenarios import chunk_scenario
+from opfbench.study.task_scenarios import SharedSnapshots, chunk_scenario
 
 
 @dataclass(frozen=True)
 class RunTask(Task):
-    """One piece of work of a run; `start`/`end` are the first and last step (ISO, local
-    time); `data_sha256` the case data's hash, `config_digest` the run's (both in its
-    definition, so a checkpoint of other data or another config never matches); `fitted`
-    (label, sha256) of the learned rules fitted for its case (in its definition when
-    there are some: a checkpoint of another fit never matches)."""
+    """One piece of work of a run; `runs` the strategies (configuration labels) of each
+    forecast source it runs; `start`/`end` are the first and last step (ISO, local time);
+    `data_sha256` the case data's hash, `config_digest` the run's (both in its definition,
+    so a checkpoint of other data or another config never matches); `fitted` (label,
+    sha256) of the learned rules fitted for its case (in its definition when there are
+    some: a checkpoint of another fit never matches)."""
 
     label: str
     case: str
     night_modes: tuple[str, ...]
-    forecast: str
+    runs: tuple[tuple[str, tuple[str, ...]], ...]
     k: float
-    strategies: tuple[str, ...]
     start: str
     end: str
     data_sha256: str
     config_digest: str
     fitted: tuple[tuple[str, str], ...] = ()
+
+    @property
+    def forecasts(self) -> tuple[str, ...]:
+        return tuple(source for source, _ in self.runs)
 
     def definition(self) -> dict:
         fitted = {"fitted": dict(self.fitted)} if self.fitted else {}
@@ -70,17 +88,17 @@ class RunTask(Task):
             "case": self.case,
             "data_sha256": self.data_sha256,
             "night_modes": list(self.night_modes),
-            "forecast": self.forecast,
+            "forecasts": {source: list(names) for source, names in self.runs},
             "k": self.k,
-            "strategies": list(self.strategies),
             "start": self.start,
             "end": self.end,
             "config_digest": self.config_digest,
         }
 
     def as_dict(self) -> dict:
-        fields = {"case": self.case, "night_modes": list(self.night_modes), "forecast": self.forecast, "k": self.k}
-        return super().as_dict() | fields | {"strategies": list(self.strategies), "start": self.start, "end": self.end}
+        fields = {"case": self.case, "night_modes": list(self.night_modes), "k": self.k}
+        runs = {"forecasts": {source: list(names) for source, names in self.runs}}
+        return super().as_dict() | fields | runs | {"start": self.start, "end": self.end}
 
 
 @dataclass(frozen=True)
@@ -105,36 +123,32 @@ class TaskInput:
 
 
 def plan_tasks(config: StudyConfig, period: Period, data_sha256: dict[str, str]) -> list[RunTask]:
-    """Every task of the grid, in a fixed order (case, forecast, k, chunk). A forecast
-    source with no strategy to run (only formulations asked) adds none. `data_sha256`:
-    each case's data hash."""
+    """Every task of the grid, in a fixed order (case, k, chunk), each running every
+    forecast source with a strategy to run (only formulations asked: none under a
+    forecast). `data_sha256`: each case's data hash."""
     tasks = []
     chunks = period.chunks(config.chunk)
     digest = config.digest()
+    runs = tuple((source, names) for source in config.forecast if (names := config.strategies_for(source)))
     for case in config.cases:
-        for source in config.forecast:
-            names = config.strategies_for(source)
-            if not names:
-                continue
-            for k in config.ks:
-                for rows in chunks:
-                    t0, t1 = period.index[rows.start], period.index[rows.stop - 1]
-                    label = f"{case}_{source}_k{k:g}_{t0:%Y%m%dT%H%M}"
-                    tasks.append(
-                        RunTask(
-                            label,
-                            case,
-                            config.night_modes,
-                            source,
-                            float(k),
-                            names,
-                            t0.isoformat(),
-                            t1.isoformat(),
-                            data_sha256[case],
-                            digest,
-                            tuple((f.label, f.sha256) for f in config.fitted if f.case == case),
-                        )
+        for k in config.ks:
+            for rows in chunks:
+                t0, t1 = period.index[rows.start], period.index[rows.stop - 1]
+                label = f"{case}_k{k:g}_{t0:%Y%m%dT%H%M}"
+                tasks.append(
+                    RunTask(
+                        label,
+                        case,
+                        config.night_modes,
+                        runs,
+                        float(k),
+                        t0.isoformat(),
+                        t1.isoformat(),
+                        data_sha256[case],
+                        digest,
+                        tuple((f.label, f.sha256) for f in config.fitted if f.case == case),
                     )
+                )
     return tasks
 
 
@@ -167,9 +181,23 @@ def fitted_options(fitted: tuple[Fitted, ...]) -> dict[str, dict[str, OptionValu
     return {f.label: configs[f.label].spec.fitted_options(f.ref) for f in fitted if configs[f.label].options()["train"]}
 
 
+def curtails(label: str) -> bool:
+    """Whether a configuration's DER may deliver less active power than they have: where
+    it curtails it is compared with the frontier of the optimum that may curtail
+    (`Configuration.curtails`)."""
+    return configuration(label).curtails
+
+
+def _curtailed(res: StrategyResult) -> np.ndarray:
+    """(S,) the steps where `res` curtailed some power."""
+    return np.nan_to_num(res.curtailed_kw) > 0
+
+
 def run_task(inp: TaskInput) -> TaskOutput:
-    """Run every night mode and strategy of the task, the strategies of a night mode on one
-    scenario (single-threaded BLAS, so results are bit-identical wherever it runs)."""
+    """Run every night mode, forecast source and strategy of the task, the strategies of a
+    (night mode, source) on one scenario — a snapshot-wise strategy once on the night modes'
+    distinct snapshots of the source —, and each night mode's frontier (module docstring;
+    single-threaded BLAS, so results are bit-identical wherever it runs)."""
     from opfbench.io import load_case
     from opfbench.timing import elapsed_ms, now
 
@@ -184,23 +212,62 @@ def run_task(inp: TaskInput) -> TaskOutput:
         step = pd.Timedelta(hours=inp.step_h)
         time, night = inp.profiles.index[: inp.n_steps], inp.night[: inp.n_steps]
         steps: list[Columns] = []
+        fronts: list[Columns] = []
         detail: dict[str, list[Columns]] = {name: [] for name in inp.detail}
         ran: list[tuple[Scenario, dict[str, StrategyResult]]] = []
-        for mode in t.night_modes:
-            scenario = chunk_scenario(t.case, mode, t.forecast, inp.profiles, inp.night, inp.n_steps, step, inp.forecast_dir)
-            same = next((results for earlier, results in ran if earlier.same_data(scenario)), None)
-            results = {}
-            for name in t.strategies:
-                res = results[name] = (
-                    replace(same[name], wall_ms=0.0)
-                    if same is not None
-                    else run_strategy(name, scenario, t.k, settings, **overrides.get(name, {}))
-                )
-                steps.append(step_rows(t.case, mode, t.forecast, time, inp.step_h, night, res, inp.columns))
-                for table, columns in detail_rows(t.case, mode, t.forecast, time, res, inp.detail).items():
-                    detail[table].append(columns)
-            if same is None:
-                ran.append((scenario, results))
+        drawn: list[tuple[Scenario, Frontier]] = []
+
+        def scenario_of(mode: str, source: str) -> Scenario:
+            return chunk_scenario(t.case, mode, source, inp.profiles, inp.night, inp.n_steps, step, inp.forecast_dir)
+
+        scenarios = {(mode, source): scenario_of(mode, source) for mode in t.night_modes for source, _ in t.runs}
+        shared = {
+            source: SharedSnapshots.of([scenarios[mode, source] for mode in t.night_modes])
+            for source, _ in t.runs
+            if len(t.night_modes) > 1
+        }
+        union: dict[tuple[str, str], StrategyResult] = {}  # snapshot-wise strategies, run once per source
+
+        def result(j: int, source: str, name: str) -> StrategyResult:
+            """`name` on night mode j under `source`: its rows of the night modes' union run, or its own run."""
+            share = shared.get(source)
+            if share is not None and configuration(name).spec.snapshot_wise:
+                if (source, name) not in union:
+                    union[source, name] = run_strategy(name, share.union, t.k, settings, **overrides.get(name, {}))
+                whole = union[source, name]
+                return whole.take(share.rows[j], whole.wall_ms * share.share(j))
+            return run_strategy(name, scenarios[t.night_modes[j], source], t.k, settings, **overrides.get(name, {}))
+
+        for j, mode in enumerate(t.night_modes):
+            by_source: dict[str, dict[str, StrategyResult]] = {}
+            for source, names in t.runs:
+                scenario = scenarios[mode, source]
+                same = next((results for earlier, results in ran if earlier.same_data(scenario)), None)
+                results = by_source[source] = {}
+                for name in names:
+                    results[name] = replace(same[name], wall_ms=0.0) if same is not None else result(j, source, name)
+                if same is None:
+                    ran.append((scenario, results))
+            plain = scenario_of(mode, "off")
+            front = next((f for earlier, f in drawn if earlier.same_data(plain)), None)
+            if front is None:
+                front = frontier(plain, t.k, at_zero=by_source.get("off", {}).get(REFERENCE_OPTIMUM))
+                drawn.append((plain, front))
+            fronts.append(frontier_rows(t.case, t.k, mode, time, inp.step_h, front))
+            cut = {(s, n): _curtailed(r) for s, results in by_source.items() for n, r in results.items() if curtails(n)}
+            rows = np.flatnonzero(np.logical_or.reduce([*cut.values(), np.zeros(inp.n_steps, dtype=bool)]))
+            cutting = frontier(plain.take(rows), t.k, curtail=True) if rows.size else None
+            if cutting is not None:
+                fronts.append(frontier_rows(t.case, t.k, mode, time[rows], inp.step_h, cutting))
+            for source, results in by_source.items():
+                for name, res in results.items():
+                    ref = reference(front, res.voltage_violation(), cutting, rows, cut.get((source, name)))
+                    steps.append(step_rows(t.case, mode, source, time, inp.step_h, night, res, inp.columns, ref))
+                    for table, columns in detail_rows(t.case, mode, source, time, res, inp.detail).items():
+                        detail[table].append(columns)
         table = stack(steps, step_columns(inp.columns), time.tz)
+        front_table = stack(fronts, FRONTIER_COLUMNS, time.tz)
     details = {name: stack(parts, DETAIL_COLUMNS[name], time.tz) for name, parts in detail.items()}
-    return TaskOutput(t, {"steps": table, "summary": partial_summary(table), **details}, elapsed_ms(start) / 1e3)
+    tables = {"steps": table, "summary": partial_summary(table), "frontier": front_table}
+    tables["frontier_summary"] = partial_frontier(front_table)
+    return TaskOutput(t, tables | details, elapsed_ms(start) / 1e3)

@@ -27,6 +27,8 @@ from __future__ import annotations
 import io
 import json
 import re
+from dataclasses import replace
+from functools import lru_cache, partial
 from pathlib import Path
 from typing import Any, Callable
 
@@ -34,6 +36,7 @@ import numpy as np
 import pandas as pd
 
 from opfbench.errors import InputError
+from opfbench.formulations.frontier import tightened
 from opfbench.io import load_network
 from opfbench.jsonio import write_atomic
 from opfbench.learned.fitted import LEARNED_DIR, TRAIN_DIR, Fitted
@@ -109,6 +112,7 @@ def train(config: Any, out: Path, run_nested: NestedRun, recorded: dict[str, str
     for model in models:
         q, ok = optimum(ref_run.out, model, len(load_network(model).ders))
         training = training_set(model, period, config.night, q, ok, config.step_minutes)
+        training = replace(training, tightened=lru_cache(partial(tightened, training.scenario, TRAIN_K, q_mvar=q, ok=ok)))
         for lc in trained:
             path = out / LEARNED_DIR / f"{_stem(model)}--{_stem(lc.label)}.json"
             ref = f"{LEARNED_DIR}/{path.name}"
@@ -157,7 +161,10 @@ def _fit(lc: LearnedConfig, training, path: Path, recorded: str | None) -> Learn
 
 def _hyper(options: dict) -> dict:
     """The fit's hyper-parameters as `LearnedParams.hyper` records them."""
-    return ({"knots": options["knots"]} if "knots" in options else {}) | {"rounds": options["rounds"]}
+    return ({"knots": options["knots"]} if "knots" in options else {}) | {
+        "rounds": options["rounds"],
+        "comply": options["comply"],
+    }
 
 
 def optimum(folder: Path, case: str, n_der: int) -> tuple[np.ndarray, np.ndarray]:

@@ -9,6 +9,11 @@ the bus mismatches, its objective and its constraints (`ConicModel._network_mode
 a relaxation, any AC-feasible point maps to a feasible point with the same losses, so its
 optimum is a lower bound on the AC OPF's; an approximation's optimum is an estimate.
 
+With `curtail` (a `problem.PqCapability`) the DER's active power is a variable too, within
+[min(P, 0), P] of the power P it has, Q within the capability at the power delivered
+(linear pieces and an S̄ cone), and the objective the losses plus the power curtailed
+(written as losses − ΣP_DER, the data ΣP added to the optimum).
+
 The objective reported is min(primal, dual) objective of Clarabel's solution (kW). Clarabel's
 "AlmostSolved" (reduced tolerances met) counts as solved and is recorded as such in
 solver_status; a solve that stalls after an in-place data update is retried once on a
@@ -29,7 +34,7 @@ from typing import Callable
 import cvxpy as cp
 import numpy as np
 
-from opfbench.formulations.problem import OpfProblem, Row
+from opfbench.formulations.problem import OpfProblem, PqCapability, Row
 from opfbench.formulations.solvers.clarabel_adapter import INFEASIBLE as CONIC_INFEASIBLE
 from opfbench.formulations.solvers.clarabel_adapter import ParametricConeProgram, relaxation_settings
 from opfbench.network import Network
@@ -60,6 +65,7 @@ class SnapshotSolve:
     iterations: int
     solves: int
     slack_p_pu: float = np.nan
+    p_pu: np.ndarray | None = None  # the DER's active power, where the model curtails
 
     @classmethod
     def not_solved(cls) -> "SnapshotSolve":
@@ -90,6 +96,12 @@ def data_vector(s_fixed: np.ndarray, q_limit: np.ndarray) -> np.ndarray:
     return np.concatenate([s_fixed.real, s_fixed.imag, q_limit], axis=-1)
 
 
+def curtail_vector(s_fixed: np.ndarray, p_avail: np.ndarray, p_low: np.ndarray, offset: np.ndarray) -> np.ndarray:
+    """A snapshot's data θ where the model curtails = [Re s_fixed, Im s_fixed, P, min(P, 0),
+    offsets of piece 0, of piece 1] (p.u.; `problem.CurtailData`'s arrays, (S, ·))."""
+    return np.concatenate([s_fixed.real, s_fixed.imag, p_avail, p_low, offset[..., 0], offset[..., 1]], axis=-1)
+
+
 def _rows(row: Row) -> list[cp.Constraint]:
     """A problem row lo ≤ expr ≤ hi as cvxpy constraints."""
     if np.array_equal(row.lo, row.hi):
@@ -117,14 +129,14 @@ class ConicModel:
     a model whose objective is not the losses its balance carries with `_slack_p_pu`.
     """
 
-    def __init__(self, net: Network, slack_export: bool = True):
+    def __init__(self, net: Network, slack_export: bool = True, curtail: PqCapability | None = None):
         self.problem = problem = OpfProblem.of(net, slack_export)
-        self.net = net
-        n = net.n_bus
+        self.net, self.curtail = net, curtail
+        n, n_der = net.n_bus, len(net.ders)
         self.p_fixed = cp.Variable(n, name="p_fixed")
         self.q_fixed = cp.Variable(n, name="q_fixed")
-        self.q_limit = cp.Variable(len(net.ders), name="q_limit")
-        self.q = cp.Variable(len(net.ders), name="q_der")
+        self.q = cp.Variable(n_der, name="q_der")
+        self.p = cp.Variable(n_der, name="p_der") if curtail is not None else None
         self.v = cp.Variable(n, name="v")  # |V|² p.u.²
         mismatch_p, mismatch_q, losses, constraints = self._network_model()
         others = problem.others
@@ -134,12 +146,41 @@ class ConicModel:
             self.v[problem.slack] == problem.v_slack**2,
             self.v[others] >= problem.vm_min**2,
             self.v[others] <= problem.vm_max**2,
-            self.q <= self.q_limit,
-            self.q >= -self.q_limit,
         ]
-        self.cvxpy_problem = cp.Problem(cp.Minimize(problem.kw_per_pu * losses), constraints)
-        data_vars = (self.p_fixed, self.q_fixed, self.q_limit)
+        objective = losses
+        if curtail is None:
+            self.q_limit = cp.Variable(n_der, name="q_limit")
+            constraints += [self.q <= self.q_limit, self.q >= -self.q_limit]
+            data_vars: tuple[cp.Variable, ...] = (self.p_fixed, self.q_fixed, self.q_limit)
+        else:
+            assert self.p is not None
+            constraints += self._capability(curtail)
+            objective = losses - cp.sum(self.p)
+            data_vars = (self.p_fixed, self.q_fixed, self.p_avail, self.p_low, *self.offset)
+        self.cvxpy_problem = cp.Problem(cp.Minimize(problem.kw_per_pu * objective), constraints)
         self.program = ParametricConeProgram(self.cvxpy_problem, data_vars, relaxation_settings(), screening=screens(net))
+
+    def _capability(self, cap: PqCapability) -> list[cp.Constraint]:
+        """The DER's active power within [min(P, 0), P] and Q within the capability at it
+        (`PqCapability`; the data P, min(P, 0) and the offsets as variables held fixed)."""
+        assert self.p is not None
+        n_der = len(self.net.ders)
+        self.p_avail = cp.Variable(n_der, name="p_avail")
+        self.p_low = cp.Variable(n_der, name="p_low")
+        self.offset = (cp.Variable(n_der, name="offset_0"), cp.Variable(n_der, name="offset_1"))
+        out = [self.p <= self.p_avail, self.p >= self.p_low]
+        for j, offset in enumerate(self.offset):
+            reach = cp.multiply(cap.slope[:, j], self.p) + offset
+            out += [self.q <= reach, -self.q <= reach]
+        c = np.flatnonzero(cap.circle)
+        if c.size:
+            out.append(cp.SOC(cap.share * cap.s_pu[c], cp.vstack([self.q[c], cap.share * self.p[c]]), axis=0))
+        return out
+
+    def _p_fixed_bus(self) -> cp.Expression:
+        """The active power injected at every bus that the model's flows balance: the fixed
+        injections and, where the model curtails, the DER's active power."""
+        return self.p_fixed if self.p is None else self.p_fixed + self.problem.der_at_bus @ self.p
 
     def _network_model(self) -> tuple[cp.Expression, cp.Expression, cp.Expression, list[cp.Constraint]]:
         """(mismatch_p, mismatch_q, branch losses, model constraints), p.u., per `problem`."""
@@ -182,9 +223,18 @@ class ConicModel:
         primal = np.array([a.primal for a in final])
         dual = np.array([a.dual for a in final])
         value = self.program.reader(x)
-        q_limit = thetas[solved, 2 * self.net.n_bus :]
-        q_pu = np.clip(value(self.q), -q_limit, q_limit)  # within solver tolerance of the limits anyway
-        slack_p = self._slack_p_pu(value, thetas[solved], primal)
+        n, n_der = self.net.n_bus, len(self.net.ders)
+        p_pu = None
+        if self.p is None:
+            q_limit = thetas[solved, 2 * n :]
+            q_pu = np.clip(value(self.q), -q_limit, q_limit)  # within solver tolerance of the limits anyway
+            slack_p = self._slack_p_pu(value, thetas[solved], primal)
+        else:  # the optimum: losses + curtailed = objective + ΣP; the slack's P as the objective carries it
+            p_avail, p_low = thetas[solved, 2 * n : 2 * n + n_der], thetas[solved, 2 * n + n_der : 2 * n + 2 * n_der]
+            q_pu, p_pu = value(self.q), np.clip(value(self.p), p_low, p_avail)
+            slack_p = self._slack_p_pu(value, thetas[solved], primal)
+            available = self.problem.kw_per_pu * p_avail.sum(axis=1)
+            primal, dual = primal + available, dual + available
         residual = self._cone_residual(value)
         gap = np.full(primal.size, np.nan) if residual is None else residual
         out, j = [], 0
@@ -204,6 +254,7 @@ class ConicModel:
                     a.iterations,
                     a.solves,
                     float(slack_p[j]),
+                    None if p_pu is None else p_pu[j],
                 )
             )
             j += 1

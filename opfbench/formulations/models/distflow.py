@@ -107,7 +107,7 @@ class DistFlowSocp(ConicModel):
         inv_s = 1 / branch_scale(net)[child]  # the cone's per-branch scale: α = 1 / inv_s²
         l_scaled = cp.multiply(inv_s**2, l_br)  # ℓ/α
         shunt_p = cp.multiply(self.problem.gsh + conductance, v) if conductance.any() else cp.multiply(self.problem.gsh, v)
-        mismatch_p = at_parent @ p_br - at_child @ (p_br - cp.multiply(r, l_br)) + shunt_p - self.p_fixed
+        mismatch_p = at_parent @ p_br - at_child @ (p_br - cp.multiply(r, l_br)) + shunt_p - self._p_fixed_bus()
         mismatch_q = (
             at_parent @ q_br
             - at_child @ (q_br - cp.multiply(x, l_br))

@@ -35,7 +35,7 @@ class JabrSocp(ConicModel):
         self.s_br = cp.Variable(br.n_branch, name="s_branch")  # Im V_f·conj(V_t)
         vf, vt = self.v[br.f], self.v[br.t]
         p_f, q_f, p_t, q_t = br.flows(vf, vt, self.c_br, self.s_br, cp.multiply)
-        mismatch_p = br.at_from @ p_f + br.at_to @ p_t + cp.multiply(self.problem.gsh, self.v) - self.p_fixed
+        mismatch_p = br.at_from @ p_f + br.at_to @ p_t + cp.multiply(self.problem.gsh, self.v) - self._p_fixed_bus()
         mismatch_q = (
             br.at_from @ q_f + br.at_to @ q_t - cp.multiply(self.problem.bsh, self.v) - self.q_fixed - self._der_q_at_buses()
         )

@@ -9,7 +9,11 @@ subject to the AC power balance (π model, `problem.PiBranches`) and the slack r
 `AcOpf` builds the NLP once per (network, slack_export) — fixed injections are NLP
 parameters, Q and |V| limits variable bounds — sparse throughout (vector expressions,
 sparse incidence; CasADi SX below MX_MIN_BUSES buses, MX from there on); IPOPT solves it
-cold or warm (`solvers.ipopt_adapter`).
+cold or warm (`solvers.ipopt_adapter`). With `curtail` the DER's active power is a
+variable too, within [min(P, 0), P] of the power P it has, Q within the capability at the
+power delivered (`problem.PqCapability`: linear pieces and the S̄ circle, their slopes,
+offsets and the share 1 − k parameters), and the objective the losses plus the power
+curtailed (`solve_curtailing`).
 """
 
 from __future__ import annotations
@@ -21,7 +25,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from opfbench.formulations.model import formulation
-from opfbench.formulations.problem import OpfProblem, incidence
+from opfbench.formulations.problem import CurtailData, OpfProblem, PqCapability, Row, incidence
 from opfbench.formulations.solvers.ipopt_adapter import IpoptNlp, IpoptSolve
 from opfbench.network import Network
 
@@ -39,13 +43,16 @@ def _sparse_dm(m: sp.spmatrix) -> ca.DM:
     return ca.DM.triplet(coo.row.tolist(), coo.col.tolist(), ca.DM(coo.data), coo.shape[0], coo.shape[1])
 
 
-def _nlp(problem: OpfProblem, sym: type[Sym]) -> tuple[dict[str, Sym], list]:
+def _nlp(problem: OpfProblem, sym: type[Sym], curtail: bool = False) -> tuple[dict[str, Sym], list]:
     """The NLP {x, p, f, g} of `problem` in CasADi symbols `sym` (SX or MX), and its
-    constraint rows (`OpfProblem.balance`)."""
+    constraint rows (`OpfProblem.balance`, then with `curtail` the capability's)."""
     net = problem.net
     n, n_der, m = net.n_bus, len(net.ders), problem.others.size
     theta_o, vm_o, q = sym.sym("theta", m), sym.sym("vm", m), sym.sym("q", n_der)
     p_fixed, q_fixed = sym.sym("p_fixed", n), sym.sym("q_fixed", n)
+    if curtail:  # the DER's P a variable: the fixed injections exclude it
+        p_der, p_avail = sym.sym("p_der", n_der), sym.sym("p_avail", n_der)
+        slope, offset, share = sym.sym("slope", 2 * n_der), sym.sym("offset", 2 * n_der), sym.sym("share", 1)
     place = _sparse_dm(incidence(problem.others, n))  # non-slack values onto all buses
     at_slack = np.zeros(n)
     at_slack[problem.slack] = problem.v_slack
@@ -60,7 +67,8 @@ def _nlp(problem: OpfProblem, sym: type[Sym]) -> tuple[dict[str, Sym], list]:
     v2 = vm**2
     p_f, q_f, p_t, q_t = br.flows(vm_f**2, vm_t**2, c, s, lambda a, e: ca.DM(a) * e)
     at_from, at_to = _sparse_dm(br.at_from), _sparse_dm(br.at_to)
-    mismatch_p = ca.mtimes(at_from, p_f) + ca.mtimes(at_to, p_t) + ca.DM(problem.gsh) * v2 - p_fixed
+    p_in = p_fixed + ca.mtimes(_sparse_dm(problem.der_at_bus), p_der) if curtail else p_fixed
+    mismatch_p = ca.mtimes(at_from, p_f) + ca.mtimes(at_to, p_t) + ca.DM(problem.gsh) * v2 - p_in
     mismatch_q = (
         ca.mtimes(at_from, q_f)
         + ca.mtimes(at_to, q_t)
@@ -69,14 +77,34 @@ def _nlp(problem: OpfProblem, sym: type[Sym]) -> tuple[dict[str, Sym], list]:
         - ca.mtimes(_sparse_dm(problem.der_at_bus), q)
     )
     rows = problem.balance(mismatch_p, mismatch_q, lambda e, i: e[i.tolist()])
-    losses = mismatch_p[problem.slack] + ca.sum1(p_fixed) - ca.dot(ca.DM(problem.gsh), v2)
-    nlp = {
-        "x": ca.vertcat(theta_o, vm_o, q),
-        "p": ca.vertcat(p_fixed, q_fixed),
-        "f": problem.kw_per_pu * losses,
-        "g": ca.vertcat(*(r.expr for r in rows)),
-    }
+    losses = mismatch_p[problem.slack] + ca.sum1(p_in) - ca.dot(ca.DM(problem.gsh), v2)
+    if not curtail:
+        x, params, cost = ca.vertcat(theta_o, vm_o, q), ca.vertcat(p_fixed, q_fixed), losses
+    else:
+        x, cost = ca.vertcat(theta_o, vm_o, q, p_der), losses + ca.sum1(p_avail - p_der)
+        params = ca.vertcat(p_fixed, q_fixed, p_avail, slope, offset, share)
+        rows += _capability_rows(problem, q, p_der, slope, offset, share)
+    nlp = {"x": x, "p": params, "f": problem.kw_per_pu * cost, "g": ca.vertcat(*(r.expr for r in rows))}
     return nlp, rows
+
+
+def _capability_rows(problem: OpfProblem, q: Sym, p: Sym, slope: Sym, offset: Sym, share: Sym) -> list[Row]:
+    """|Q| ≤ slope_j·P + offset_j for both pieces j (slope and offset stacked piece by
+    piece), and Q² + (share·P)² ≤ (share·S̄)² for the inverter-coupled units
+    (`problem.PqCapability`)."""
+    net = problem.net
+    n_der = len(net.ders)
+    out = []
+    for j in range(2):
+        reach = slope[j * n_der : (j + 1) * n_der] * p + offset[j * n_der : (j + 1) * n_der]
+        out += [Row(f"Q ≤ piece {j}", q - reach, np.full(n_der, -np.inf), np.zeros(n_der))]
+        out += [Row(f"−Q ≤ piece {j}", -q - reach, np.full(n_der, -np.inf), np.zeros(n_der))]
+    c = np.flatnonzero(np.asarray(net.der_kinds) != "DFIG")
+    if c.size:
+        s_pu = ca.DM(net.der_s_mva[c] / net.base_mva)
+        circle = q[c.tolist()] ** 2 + (share * p[c.tolist()]) ** 2 - (share * s_pu) ** 2
+        out.append(Row("S̄ circle", circle, np.full(c.size, -np.inf), np.zeros(c.size)))
+    return out
 
 
 @formulation(
@@ -94,18 +122,18 @@ class AcOpf:
     buses = 0, then, with `slack_export=False`, the slack's P ≥ 0).
     """
 
-    def __init__(self, net: Network, slack_export: bool = True):
+    def __init__(self, net: Network, slack_export: bool = True, curtail: bool = False):
         self.problem = problem = OpfProblem.of(net, slack_export)
-        self.net, self.slack_export = net, slack_export
+        self.net, self.slack_export, self.curtail = net, slack_export, curtail
         self.others = problem.others
-        m = self.others.size
-        nlp, rows = _nlp(problem, ca.MX) if net.n_bus >= MX_MIN_BUSES else _nlp(problem, ca.SX)
+        m, n_der = self.others.size, len(net.ders)
+        nlp, rows = _nlp(problem, ca.MX, curtail) if net.n_bus >= MX_MIN_BUSES else _nlp(problem, ca.SX, curtail)
         lbg, ubg = np.concatenate([r.lo for r in rows]), np.concatenate([r.hi for r in rows])
-        self.ipopt = IpoptNlp("acopf", nlp, lbg, ubg, setpoints=slice(2 * m, None))
+        self.ipopt = IpoptNlp("acopf_curtail" if curtail else "acopf", nlp, lbg, ubg, setpoints=slice(2 * m, None))
         inf = np.full(m, np.inf)
         self._lbx_fixed = np.concatenate([-inf, problem.vm_min])
         self._ubx_fixed = np.concatenate([inf, problem.vm_max])
-        self.flat_start = np.concatenate([np.zeros(m), np.ones(m), np.zeros(len(net.ders))])
+        self.flat_start = np.concatenate([np.zeros(m), np.ones(m), np.zeros((2 if curtail else 1) * n_der)])
 
     def solve(self, s_fixed: np.ndarray, q_limit: np.ndarray, start: IpoptSolve | None = None) -> IpoptSolve:
         """Solve one snapshot: fixed injections `s_fixed` (n_bus,) complex p.u., usable Q
@@ -116,5 +144,21 @@ class AcOpf:
             np.concatenate([self._lbx_fixed, -q_limit]),
             np.concatenate([self._ubx_fixed, q_limit]),
             self.flat_start,
+            start,
+        )
+
+    def solve_curtailing(
+        self, data: CurtailData, i: int, capability: PqCapability, start: IpoptSolve | None = None
+    ) -> IpoptSolve:
+        """Solve snapshot i of `data` where the DER's active power is a variable too (built
+        with `curtail`): its `q_pu` holds Q, then P (p.u.)."""
+        inf = np.full(len(self.net.ders), np.inf)
+        params = [data.s_fixed[i].real, data.s_fixed[i].imag, data.p_avail[i], capability.slope.T.reshape(-1)]
+        params += [data.offset[i].T.reshape(-1), [capability.share]]
+        return self.ipopt.solve(
+            np.concatenate(params),
+            np.concatenate([self._lbx_fixed, -inf, data.p_low[i]]),
+            np.concatenate([self._ubx_fixed, inf, data.p_avail[i]]),
+            np.concatenate([self.flat_start[: -2 * len(inf)], np.zeros(len(inf)), data.p_avail[i]]),
             start,
         )
