@@ -39,13 +39,14 @@ def row(name: str, steps: int) -> str:
     lp, lq, dp, _ = case.stored
     lp, lq, dp = lp * load[:, None], lq * load[:, None], dp * pv[:, None]
     start = time.perf_counter()
-    result = optimum(net, lp, lq, dp, 0.0, bound=False)
+    result = optimum(net, lp, lq, dp, 0.0)
     wall = time.perf_counter() - start
     none = solve_phase_flow(net, lp, lq, dp)
     lo, hi = net.band
     outside = ~((none.vm.min(axis=1) >= lo) & (none.vm.max(axis=1) <= hi))
     found = np.isfinite(result.objective_kw)
-    counts = ", ".join(f"{s} {n}" for s, n in sorted(Counter(result.status.tolist()).items()))
+    labels = [f"{s} (proven)" if p else s for s, p in zip(result.status.tolist(), result.proven.tolist(), strict=True)]
+    counts = ", ".join(f"{s} {n}" for s, n in sorted(Counter(labels).items()))
     return (
         f"| {name} | {len(net.ders)} | {steps} | {counts} | {outside.sum()} | "
         f"{result.losses_kw[found].sum():.3f} | {none.losses_kw[found].sum():.3f} | "

@@ -58,7 +58,7 @@ def test_opendss_confirms_the_optimum(ieee123_pv):
     case, file = ieee123_pv
     net = case.network
     lp, lq, dp = _snapshots(case, SNAPSHOTS)
-    result = optimum(net, lp, lq, dp, 0.0, bound=False)
+    result = optimum(net, lp, lq, dp, 0.0)
     assert (result.status == OK).all(), result.status
     a, b, base, _ = net.monitored
     lo, hi = net.band
@@ -81,7 +81,7 @@ def test_the_optimum_is_never_above_no_action_where_no_action_meets_the_band(iee
     net = case.network
     snapshots = [(m, s) for m in (0.8, 1.1) for s in (0.0, 0.4, 0.9)]
     lp, lq, dp = _snapshots(case, snapshots)
-    result = optimum(net, lp, lq, dp, 0.4, bound=False)
+    result = optimum(net, lp, lq, dp, 0.4)
     none = solve_phase_flow(net, lp, lq, dp)
     lo, hi = net.band
     in_band = (none.vm.min(axis=1) >= lo) & (none.vm.max(axis=1) <= hi)
@@ -96,8 +96,9 @@ def test_no_q_to_give_and_the_band_left_is_proven_infeasible_with_no_figure(ieee
     the power flow's point is the only one, so the OPF is infeasible — and gives no losses."""
     case, _ = ieee123_pv
     lp, lq, dp = _snapshots(case, [(0.3, 0.0), (1.0, 0.0)])
-    result = optimum(case.network, lp, lq, dp, 0.0, bound=False)
-    assert result.status[0] == INFEASIBLE and np.isnan(result.losses_kw[0]) and np.isnan(result.objective_kw[0])
+    result = optimum(case.network, lp, lq, dp, 0.0)
+    assert result.status[0] == INFEASIBLE and result.proven[0]
+    assert np.isnan(result.losses_kw[0]) and np.isnan(result.objective_kw[0])
     assert result.status[1] == OK and result.losses_kw[1] == pytest.approx(
         solve_phase_flow(case.network, lp[1:], lq[1:], dp[1:]).losses_kw[0]
     )
@@ -117,4 +118,4 @@ def test_bad_input_is_one_message_before_any_work(ieee123_pv, change, message):
     if change == "shape":
         dp = dp[:, :-1]
     with pytest.raises(InputError, match=message):
-        optimum(case.network, lp, lq, dp, k, bound=False)
+        optimum(case.network, lp, lq, dp, k)

@@ -1,18 +1,17 @@
 """The OPF problem on three-phase feeders: its exact model's optimum on every snapshot,
-confirmed by the three-phase power flow (every reported figure is the power flow's), and — where a relaxation serves the feeder — its
-certified lower bound (which models: `model.model_for(role, net)` on the feeder's class,
-"unbalanced-radial" or "unbalanced-meshed").
+confirmed by the three-phase power flow — every reported figure is the power flow's. The
+model is the one declared for the feeder's class (`model.model_for("exact", net)`:
+"unbalanced-radial" or "unbalanced-meshed", today `models.ac_three_phase`). No relaxation
+serves three-phase feeders yet, so no optimum here is certified by a bound.
 
 Per snapshot (`optimum`): the exact model warm from the previous snapshot's answer, then
-cold from the power flow's no-action point; a point is accepted only when the power flow
-at its Q setpoints converges, meets the band (`BAND_TOL`) and gives the model's losses
-within `CONFIRM_RTOL` — its figures are then the power flow's. Otherwise the snapshot
-falls back to no action (Q = 0) where that meets the band (status fallback-no-action),
-else reports `infeasible` (IPOPT detected infeasibility, or the relaxation proved it) or
-`solver-failed`, with no optimum. A snapshot where no DER has Q to give (night, or
-k = 1) has one operating point, the power flow's: its optimum where it meets the band,
-proven infeasible where it does not. With a relaxation, every snapshot's bound is solved;
-`certified` where the accepted optimum lies within `CERTIFY_RTOL` (relative) of it.
+cold from the power flow's no-action point; a point is accepted only when IPOPT converged
+and the power flow at its Q setpoints converges, meets the band (`BAND_TOL`) and gives the
+model's losses within `CONFIRM_RTOL`. Otherwise the snapshot falls back to no action
+(Q = 0) where that meets the band (status fallback-no-action), else reports `infeasible`
+(IPOPT detected it: a local verdict) or `solver-failed`, with no figure. A snapshot where
+no DER has Q to give (night, or k = 1) has one operating point, the power flow's: the
+optimum where it meets the band, proven infeasible where it does not (`proven`).
 
 Units: MW, MVAr (Q positive = injected), losses in kW.
 """
@@ -24,7 +23,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from opfbench.capability import check_reserve, qmax
-from opfbench.errors import InputError, NetworkError
+from opfbench.errors import InputError
 from opfbench.formulations.model import load_models, model_for
 from opfbench.multiphase import PhaseNetwork
 from opfbench.powerflow.multiphase import solve_phase_flow
@@ -37,39 +36,27 @@ IPOPT's constraint tolerance, which near-zero-impedance switches and regulators 
 the reported losses are the power flow's, at the NLP's setpoints)."""
 BAND_TOL = 1e-6
 """p.u. by which an accepted point's monitored voltages may leave the band (round-off)."""
-CERTIFY_RTOL = 1e-6
-"""An optimum is certified when it lies within this (relative) of the relaxation's bound."""
 
 
 @dataclass(frozen=True, eq=False)
 class PhaseOptimum:
     """The OPF on S snapshots. Arrays (S,): `status` (opfbench.result statuses),
-    `losses_kw` the power flow's at the reported setpoints (NaN where none), `objective_kw`
-    the exact model's optimum (NaN unless accepted), `bound_kw` the relaxation's (NaN
-    where none was solved or it failed), `certified`, `rank_one` (every PSD block of the
-    relaxation's solution numerically rank one; False where not solved), `iterations`
-    and `solve_ms` (IPOPT's, summed over attempts), `vmin`/`vmax` (p.u., monitored);
-    `q_mvar` (S, n_der) the setpoints (0 where no optimum). `relaxation` the bound's model
-    name ("" where none serves the feeder)."""
+    `losses_kw` the power flow's at the reported setpoints (NaN where there is no
+    operating point to report), `objective_kw` the exact model's optimum (NaN unless
+    accepted), `proven` (an infeasible snapshot proven so, module docstring),
+    `iterations` and `solve_ms` (IPOPT's, summed over attempts), `vmin`/`vmax` (p.u., the
+    monitored voltages; NaN with the losses); `q_mvar` (S, n_der) the setpoints (0 where
+    there is no optimum)."""
 
     status: np.ndarray
     q_mvar: np.ndarray
     losses_kw: np.ndarray
     objective_kw: np.ndarray
-    bound_kw: np.ndarray
-    certified: np.ndarray
-    rank_one: np.ndarray
+    proven: np.ndarray
     iterations: np.ndarray
     solve_ms: np.ndarray
     vmin: np.ndarray
     vmax: np.ndarray
-    relaxation: str
-
-    @property
-    def gap(self) -> np.ndarray:
-        """(S,) (optimum − bound) / optimum."""
-        with np.errstate(all="ignore"):
-            return (self.objective_kw - self.bound_kw) / self.objective_kw
 
 
 def q_limits(net: PhaseNetwork, der_p_mw: np.ndarray, k: float) -> np.ndarray:
@@ -97,12 +84,10 @@ def optimum(
     load_q_mvar: np.ndarray,
     der_p_mw: np.ndarray,
     k: float = 0.0,
-    *,
-    bound: bool = True,
 ) -> PhaseOptimum:
     """The OPF on S snapshots (module docstring): load P and Q (S, n_load) at their law's
-    reference, DER P (S, n_der), reserve k; `bound` solves the relaxation where one serves
-    the feeder. Checked before any work: shapes, finite values, k."""
+    reference, DER P (S, n_der), reserve k. Checked before any work: shapes, finite
+    values, k."""
     n_der = len(net.ders)
     n = np.atleast_2d(np.asarray(load_p_mw)).shape[0]
     load_p = _shaped("load P", load_p_mw, (n, net.n_load))
@@ -111,13 +96,6 @@ def optimum(
     limit = q_limits(net, der_p, k)
     load_models()
     exact = model_for("exact", net).build(net, True)
-    relaxation = None
-    if bound:
-        try:
-            spec = model_for("relaxation", net)
-        except NetworkError:
-            spec = None
-        relaxation = None if spec is None else (spec.name, spec.build(net, True))
 
     no_action = solve_phase_flow(net, load_p, load_q, der_p)
     lo, hi = net.band
@@ -126,18 +104,14 @@ def optimum(
     objective = np.full(n, np.nan)
     iterations = np.zeros(n, dtype=int)
     solve_ms = np.zeros(n)
-    bound_kw = np.full(n, np.nan)
-    rank_one = np.zeros(n, dtype=bool)
-    bound_infeasible = np.zeros(n, dtype=bool)
-    if relaxation is not None:
-        for i, b in enumerate(relaxation[1].solve_many(load_p, load_q, der_p, limit)):
-            bound_kw[i], rank_one[i], bound_infeasible[i] = b.objective_kw, b.rank_one, b.infeasible
+    proven = np.zeros(n, dtype=bool)
     start = None
     in_band = no_action.converged & (lo - BAND_TOL <= no_action.vm.min(axis=1)) & (no_action.vm.max(axis=1) <= hi + BAND_TOL)
     for i in range(n):
         if not limit[i].any() and no_action.converged[i]:  # no decision: the power flow's point is the only one
             status[i] = OK if in_band[i] else INFEASIBLE
             objective[i] = no_action.losses_kw[i] if in_band[i] else np.nan
+            proven[i] = not in_band[i]
             continue
         attempts, accepted = [], None
         if start is not None:
@@ -154,28 +128,22 @@ def optimum(
             status[i] = OK if accepted is attempts[0] else FALLBACK_COLD
         elif in_band[i]:
             status[i] = FALLBACK_NO_ACTION
-        elif bound_infeasible[i] or any(a.infeasible for a in attempts):
+        elif any(a.infeasible for a in attempts):
             status[i] = INFEASIBLE
         else:
             status[i] = SOLVER_FAILED
     flow = solve_phase_flow(net, load_p, load_q, der_p, q)
     settled = flow.converged & (status != INFEASIBLE) & (status != SOLVER_FAILED)
-    losses = np.where(settled, flow.losses_kw, np.nan)
-    with np.errstate(all="ignore"):
-        certified = np.isfinite(objective) & (objective - bound_kw <= CERTIFY_RTOL * np.abs(objective))
     return PhaseOptimum(
         status,
         q,
-        losses,
+        np.where(settled, flow.losses_kw, np.nan),
         objective,
-        bound_kw,
-        certified,
-        rank_one,
+        proven,
         iterations,
         solve_ms,
         np.where(settled, flow.vm.min(axis=1, initial=np.inf), np.nan),
         np.where(settled, flow.vm.max(axis=1, initial=-np.inf), np.nan),
-        "" if relaxation is None else relaxation[0],
     )
 
 
