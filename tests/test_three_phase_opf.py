@@ -106,7 +106,7 @@ def test_no_q_to_give_and_the_band_left_is_proven_infeasible_with_no_figure(ieee
 
 @pytest.mark.parametrize(
     ("change", "message"),
-    [("k", "reserve coefficient"), ("nan", "load P"), ("shape", "DER P")],
+    [("k", "reserve coefficient"), ("nan", "load P contains NaN"), ("shape", "DER P must have shape")],
 )
 def test_bad_input_is_one_message_before_any_work(ieee123_pv, change, message):
     case, _ = ieee123_pv

@@ -23,7 +23,6 @@ from dataclasses import dataclass
 import numpy as np
 
 from opfbench.capability import check_reserve, qmax
-from opfbench.errors import InputError
 from opfbench.formulations.model import load_models, model_for
 from opfbench.multiphase import PhaseNetwork
 from opfbench.powerflow.multiphase import solve_phase_flow
@@ -69,15 +68,6 @@ def q_limits(net: PhaseNetwork, der_p_mw: np.ndarray, k: float) -> np.ndarray:
     return (1.0 - k) * qmax([d.kind for d in net.ders], der_p_mw, rating, s)
 
 
-def _shaped(label: str, values: np.ndarray, shape: tuple[int, int]) -> np.ndarray:
-    arr = np.asarray(values, dtype=float)
-    if arr.shape != shape:
-        raise InputError(f"three-phase OPF: {label} must have shape {shape}, got {arr.shape}")
-    if not np.all(np.isfinite(arr)):
-        raise InputError(f"three-phase OPF: {label} contains NaN or inf")
-    return arr
-
-
 def optimum(
     net: PhaseNetwork,
     load_p_mw: np.ndarray,
@@ -86,18 +76,16 @@ def optimum(
     k: float = 0.0,
 ) -> PhaseOptimum:
     """The OPF on S snapshots (module docstring): load P and Q (S, n_load) at their law's
-    reference, DER P (S, n_der), reserve k. Checked before any work: shapes, finite
-    values, k."""
-    n_der = len(net.ders)
-    n = np.atleast_2d(np.asarray(load_p_mw)).shape[0]
-    load_p = _shaped("load P", load_p_mw, (n, net.n_load))
-    load_q = _shaped("load Q", load_q_mvar, (n, net.n_load))
-    der_p = _shaped("DER P", der_p_mw, (n, n_der))
+    reference, DER P (S, n_der), reserve k. Checked before any work: k, then shapes and
+    finite values (the power flow's checks)."""
+    check_reserve(k)
+    no_action = solve_phase_flow(net, load_p_mw, load_q_mvar, der_p_mw)  # checks shapes and values first
+    n, n_der = no_action.n_snapshots, len(net.ders)
+    load_p, load_q = (np.asarray(x, dtype=float).reshape(n, net.n_load) for x in (load_p_mw, load_q_mvar))
+    der_p = np.asarray(der_p_mw, dtype=float).reshape(n, n_der)
     limit = q_limits(net, der_p, k)
     load_models()
     exact = model_for("exact", net).build(net, True)
-
-    no_action = solve_phase_flow(net, load_p, load_q, der_p)
     lo, hi = net.band
     status = np.empty(n, dtype=object)
     q = np.zeros((n, n_der))
