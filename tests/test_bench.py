@@ -164,3 +164,36 @@ def test_the_suite_year_against_a_reference_names_what_changed(tmp_path):
     summary.iloc[:2].to_csv(tmp_path / "other" / "summary.csv", index=False)
     with pytest.raises(InputError, match="not a run of the same grid"):
         compare_runs(tmp_path / "other", tmp_path / "ref")
+
+
+def test_the_suite_year_against_a_stopped_reference_compares_its_finished_tasks(tmp_path):
+    """A reference run stopped before its summary: the tasks it finished, each against the
+    run's task of the same id — certified and not-settled counts per configuration."""
+    from opfbench.bench.run import compare_runs
+
+    part = pd.DataFrame(
+        {
+            "case": ["g", "g"],
+            "strategy": ["acopf", "volt-var"],
+            "k": [0.0, 0.0],
+            "night_mode": ["connected"] * 2,
+            "forecast": ["off"] * 2,
+            "energy_kwh": [10.0, 11.0],
+            "certified": [96, 0],
+            "not_settled_steps": [0, 2],
+        }
+    )
+    for name in ("ref", "run", "empty"):
+        (tmp_path / name / "tasks").mkdir(parents=True)
+    part.to_parquet(tmp_path / "ref" / "tasks" / "t1.summary.parquet")  # t2 never finished in the reference
+    part.to_parquet(tmp_path / "run" / "tasks" / "t1.summary.parquet")
+    part.assign(certified=[95, 0]).to_parquet(tmp_path / "run" / "tasks" / "t2.summary.parquet")
+    same = compare_runs(tmp_path / "run", tmp_path / "ref")
+    assert (same["tasks_compared"], same["reference_tasks"], same["configurations"]) == (1, 1, 2)
+    assert same["certified_share_differs"] == [] and same["not_settled_differs"] == [] and same["identical_energies"]
+    part.assign(certified=[95, 0], not_settled_steps=[0, 3]).to_parquet(tmp_path / "run" / "tasks" / "t1.summary.parquet")
+    diff = compare_runs(tmp_path / "run", tmp_path / "ref")
+    assert diff["certified_share_differs"] == ["t1/g/acopf/0.0/connected/off"]
+    assert diff["not_settled_differs"] == ["t1/g/volt-var/0.0/connected/off"]
+    with pytest.raises(InputError, match="no finished task"):
+        compare_runs(tmp_path / "empty", tmp_path / "ref")

@@ -138,12 +138,20 @@ def test_the_headline_shows_the_committed_learned_studies_when_the_run_trained_n
         assert study.train_summary is not None and len(study.learned) == 6  # 3 families, plain and end to end
         learned = study.summary[study.summary["strategy"].str.startswith("learned-")]
         assert (learned["not_settled_steps"] == 0).all()
+        if study.frontier is not None:  # re-run with the frontier: its shares at equal compliance
+            assert tables.at_equal_compliance(study.summary)
+            assert learned["share_eq_pct"].notna().any() and not (learned["share_eq_pct"] > 100.0).any()
+            assert not (learned["gap_eq_kwh"] < 0.0).any()
+    with_frontier = [s for s in studies if s.frontier is not None]
+    assert with_frontier
     run = studies[0]
     inputs = Inputs(run_dir=Path(), summary=run.summary, manifest=run.manifest, studies=studies)
     sec = sections.how_close(inputs)
     headings = [b.text for b in sec.blocks if b.kind == "heading"]
     assert headings == [f"A committed study: {s.run_dir.name}" for s in studies]
-    assert sum(b.kind == "plot" for b in sec.blocks) == 1 + len(studies)
+    # a share figure for the run and each study, and a frontier figure per case and k of each study that has one
+    frontiers = sum(s.summary.groupby(["case", "k"]).ngroups for s in with_frontier)
+    assert sum(b.kind == "plot" for b in sec.blocks) == 1 + len(studies) + frontiers
 
 
 def test_a_case_without_any_optimum_is_said_in_words():

@@ -11,7 +11,7 @@ from opfbench.study.periods import resolve_period
 from opfbench.study.task_scenarios import SharedSnapshots, chunk_scenario
 
 EVENING = "2016-06-28T19:00..2016-06-28T21:30"  # day and night rows, PV still producing after 20:00
-WALKED = ("q_mvar", "losses_kw", "vm", "status", "power_flows", "excursion_mvar", "lower_bound_kw")
+WALKED = ("q_mvar", "losses_kw", "vm", "status", "power_flows", "excursion_mvar", "lower_bound_kw", "curtailed_kw")
 
 
 @pytest.fixture(scope="module")

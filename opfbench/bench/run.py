@@ -25,7 +25,8 @@ cost beyond it (`suite_year_est_min`). Target (issue 33): the suite's year ≤ 1
 `suite_year_cpu_s`), and with `--reference DIR` compares it with another run of the same
 grid (e.g. by the code before a change: the slow reference): per configuration the certified
 share and the not-settled count must be the same (`vs_reference` lists any that are not)
-and the energies' largest relative difference is reported; `--out DIR` keeps the year's
+and the energies' largest relative difference is reported — against a reference run that
+was stopped, on the tasks it finished (`compare_runs`); `--out DIR` keeps the year's
 folder. On a machine shared with other jobs the wall time waits for them: the CPU time of
 each run and its worker processes is reported beside (`suite_step_cpu_s`,
 `suite_week_cpu_s`, the year extrapolated the same way `suite_year_est_cpu_h`; with two
@@ -151,35 +152,70 @@ def run_suite(repeats: int = 1) -> dict:
 SAME_KEYS = ["case", "strategy", "k", "night_mode", "forecast"]
 
 
-def compare_runs(run: Path, reference: Path) -> dict:
-    """What must not change between two runs of the same grid (`summary.csv`): per
-    configuration the certified share and the not-settled count — the configurations that
-    differ are listed —, and how far the energies moved (largest relative difference)."""
-    ours, ref = (pd.read_csv(folder / "summary.csv").set_index(SAME_KEYS).sort_index() for folder in (run, reference))
-    if not ours.index.equals(ref.index):
-        raise InputError(f"{reference}: not a run of the same grid as {run} (its configurations differ)")
+def _differing(ours: pd.DataFrame, ref: pd.DataFrame, column: str) -> list[str]:
+    """The index entries (joined by "/") where `column` differs (NaN = NaN)."""
+    a, b = ours[column], ref[column]
+    same = (a == b) | (a.isna() & b.isna())
+    return ["/".join(str(v) for v in key) for key in ours.index[~same.to_numpy()]]
 
-    def differing(column: str) -> list[str]:
-        a, b = ours[column], ref[column]
-        same = (a == b) | (a.isna() & b.isna())
-        return ["/".join(str(v) for v in key) for key in ours.index[~same.to_numpy()]]
 
+def _energies(ours: pd.DataFrame, ref: pd.DataFrame) -> dict:
     energy = (ours.energy_kwh - ref.energy_kwh).abs() / ref.energy_kwh.abs()
+    return {"energy_max_rel_diff": float(energy.max()), "identical_energies": bool((ours.energy_kwh == ref.energy_kwh).all())}
+
+
+def _task_summaries(folder: Path, names: list[str]) -> pd.DataFrame:
+    """The partial summaries of the tasks `names` (file stems) of a run folder, indexed by
+    task and configuration."""
+    parts = [pd.read_parquet(folder / "tasks" / f"{name}.summary.parquet").assign(task=name) for name in names]
+    return pd.concat(parts, ignore_index=True).set_index(["task", *SAME_KEYS]).sort_index()
+
+
+def compare_runs(run: Path, reference: Path) -> dict:
+    """What must not change between two runs of the same grid: per configuration the
+    certified share and the not-settled count — the configurations that differ are
+    listed —, and how far the energies moved (largest relative difference).
+
+    A finished reference (`summary.csv`) is compared configuration by configuration; a
+    reference run that was stopped (no summary yet) task by task on the tasks it finished
+    (`tasks/*.summary.parquet`, the same task ids as the run's: same definition), the
+    certified count and not-settled count of each configuration in each task
+    (`tasks_compared` of `reference_tasks`)."""
+    if (reference / "summary.csv").is_file():
+        ours, ref = (pd.read_csv(folder / "summary.csv").set_index(SAME_KEYS).sort_index() for folder in (run, reference))
+        if not ours.index.equals(ref.index):
+            raise InputError(f"{reference}: not a run of the same grid as {run} (its configurations differ)")
+        return {
+            "configurations": len(ours),
+            "certified_share_differs": _differing(ours, ref, "certified_share"),
+            "not_settled_differs": _differing(ours, ref, "not_settled_steps"),
+        } | _energies(ours, ref)
+    finished = sorted(f.name.removesuffix(".summary.parquet") for f in (reference / "tasks").glob("*.summary.parquet"))
+    common = [name for name in finished if (run / "tasks" / f"{name}.summary.parquet").is_file()]
+    if not common:
+        raise InputError(f"{reference}: no summary.csv and no finished task of {run}'s grid (tasks/*.summary.parquet)")
+    ours, ref = _task_summaries(run, common), _task_summaries(reference, common)
+    if not ours.index.equals(ref.index):
+        raise InputError(f"{reference}: not a run of the same grid as {run} (its tasks' configurations differ)")
     return {
-        "configurations": len(ours),
-        "certified_share_differs": differing("certified_share"),
-        "not_settled_differs": differing("not_settled_steps"),
-        "energy_max_rel_diff": float(energy.max()),
-        "identical_energies": bool((ours.energy_kwh == ref.energy_kwh).all()),
-    }
+        "configurations": len(ours.droplevel("task").index.unique()),
+        "reference_tasks": len(finished),
+        "tasks_compared": len(common),
+        "task_configurations": len(ours),
+        "certified_share_differs": _differing(ours, ref, "certified"),
+        "not_settled_differs": _differing(ours, ref, "not_settled_steps"),
+    } | _energies(ours, ref)
 
 
 def run_suite_year(reference: Path | None, keep: Path | None) -> dict:
     """The field suite's year on 2 workers, run once and timed (wall and CPU), compared with
     a reference run of the same grid when given (`compare_runs`)."""
-    if reference is not None and not (reference / "summary.csv").is_file():
+    if reference is not None and not (
+        (reference / "summary.csv").is_file() or any((reference / "tasks").glob("*.summary.parquet"))
+    ):
         raise InputError(
-            f"--reference {reference}: no summary.csv there (a finished `opfbench run --suite simbench --period year` folder)"
+            f"--reference {reference}: no summary.csv and no finished task there (a folder of `opfbench run --suite simbench "
+            "--period year`, finished or stopped)"
         )
     with tempfile.TemporaryDirectory(prefix="opfbench-bench-suite-year-") as tmp:
         out = keep if keep is not None else Path(tmp) / "year"
@@ -239,9 +275,12 @@ def print_table(f: dict) -> None:
         if "vs_reference" in f:
             v = f["vs_reference"]
             energies = "identical" if v["identical_energies"] else f"within {v['energy_max_rel_diff']:.1e} (relative)"
+            scope = f"{v['configurations']} configurations"
+            if "tasks_compared" in v:  # a stopped reference: its finished tasks
+                scope += f" in the {v['tasks_compared']} tasks it finished ({v['task_configurations']} task configurations)"
             print(
-                f"  against {f['reference']}: {v['configurations']} configurations, certified share differs in "
-                f"{len(v['certified_share_differs'])}, not-settled count in {len(v['not_settled_differs'])}; energies {energies}"
+                f"  against {f['reference']}: {scope}, certified share differs in {len(v['certified_share_differs'])}, "
+                f"not-settled count in {len(v['not_settled_differs'])}; energies {energies}"
             )
         return
     if "suite_week_s" in f:

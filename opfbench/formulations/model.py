@@ -28,6 +28,7 @@ evaluated by the AC power flow and every figure in the tables is the AC one.
 
 from __future__ import annotations
 
+import functools
 import importlib
 import pkgutil
 from collections.abc import Callable, Sequence
@@ -128,8 +129,11 @@ def _own_runner(name: str) -> Callable[..., StrategyResult]:
     return run
 
 
+@functools.cache
 def load_models() -> None:
-    """Import every built-in model module (`formulations/models/`): each registers itself."""
+    """Import every built-in model module (`formulations/models/`): each registers itself.
+    Once per process: the built-in entries outlive `PROCESS.reset`, and the package scan
+    costs about a millisecond, which per-row lookups (`catalog.rank`) used to pay each time."""
     from opfbench.formulations import models
 
     for info in pkgutil.iter_modules(models.__path__):

@@ -51,7 +51,9 @@ def order(frame: pd.DataFrame) -> pd.DataFrame:
     """Rows in the registry's strategy order (a strategy's configurations by label, unknown
     strategies last), then case, k, night mode, forecast."""
     keys = [c for c in ("case", "strategy", "k", "night_mode", "forecast") if c in frame.columns]
-    out = frame.assign(_rank=frame["strategy"].map(rank)) if "strategy" in frame else frame
+    # each distinct label ranked once (a steps frame repeats every label on each of its rows)
+    ranks = {label: rank(label) for label in frame["strategy"].unique()} if "strategy" in frame else {}
+    out = frame.assign(_rank=frame["strategy"].map(ranks)) if "strategy" in frame else frame
     by = [c if c != "strategy" else "_rank" for c in keys]
     by = [*by[: by.index("_rank") + 1], "strategy", *by[by.index("_rank") + 1 :]] if "_rank" in by else by
     out = out.sort_values(by, kind="stable") if by else out
@@ -362,7 +364,8 @@ LEADERBOARD_COLUMNS = [
 SHARES = (
     "Shares: at equal compliance, (E_no-action − C)/(E_no-action − F) with C the configuration's losses plus "
     "curtailed energy and F the AC OPF with the voltage band widened, step by step, just enough to cover the "
-    "configuration's own excursion beyond it (the frontier) — never above 100 %, the gap C − F never below 0; "
+    "configuration's own excursion beyond it (the frontier) — never above 100 %, the gap C − F never below 0, "
+    "where the configuration's point lies in the OPF's set (below-frontier steps count where it does not); "
     "loss-only, (E_no-action − E)/(E_no-action − E_acopf), which compares with an optimum that holds the band "
     "whatever the configuration does, so a rule that leaves the band can exceed 100 % there."
 )

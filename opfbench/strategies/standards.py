@@ -192,6 +192,7 @@ def check_volt_watt(options: dict) -> None:
     summary="IEEE 1547-2018 Volt-Watt: active power capped at P(V) in p.u. of P̄ (1.06/1 1.10/0), Q = 0, closed loop",
     check=check_volt_watt,
     curtails=True,
+    snapshot_wise=True,
 )
 def volt_watt(m: Measurements, v: Sequence[float] = (), p: Sequence[float] = ()) -> Targets:
     """Volt-Watt: active power capped at P(|V|) (`volt_watt_cap`), Q target 0."""
@@ -211,6 +212,7 @@ def check_volt_var_volt_watt(options: dict) -> None:
     summary="IEEE 1547-2018 Volt-VAR and Volt-Watt together (OpenDSS CombiMode=VV_VW), closed loop",
     check=check_volt_var_volt_watt,
     curtails=True,
+    snapshot_wise=True,
 )
 def volt_var_volt_watt(
     m: Measurements,

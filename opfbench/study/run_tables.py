@@ -286,7 +286,7 @@ def summarize(partials: list[pd.DataFrame], order: list[tuple]) -> pd.DataFrame:
     base = out[(out.strategy == BASELINE) & (out.forecast == "off")].set_index(["case", "k", "night_mode"]).energy_kwh
     out["no_action_kwh"] = pd.MultiIndex.from_frame(out[["case", "k", "night_mode"]]).map(base.to_dict().get).astype(float)
     out["savings_pct"] = 100 * (1 - out.energy_kwh / out.no_action_kwh)
-    bound = out.assign(rank=out.strategy.map(_bound_rank))
+    bound = out.assign(rank=out.strategy.map({label: _bound_rank(label) for label in out.strategy.unique()}))
     bound = bound[bound["rank"].notna() & (bound.lb_missing == 0)]
     bound = (
         bound.sort_values("rank", kind="stable")
