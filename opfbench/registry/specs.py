@@ -23,11 +23,11 @@ from typing import TYPE_CHECKING, Any, Literal
 import numpy as np
 
 from opfbench.errors import InputError
-from opfbench.multiphase import PhaseNetwork
 from opfbench.registry.options import Option, OptionValue
 from opfbench.state import PROCESS
 
 if TYPE_CHECKING:
+    from opfbench.multiphase import PhaseNetwork
     from opfbench.network import Network
     from opfbench.result import StrategyResult
     from opfbench.scenario import Scenario
@@ -48,6 +48,8 @@ Runner = Callable[..., "StrategyResult"]
 def network_class(net: Network | PhaseNetwork) -> str:
     """The class of `net` that `supports` / `ModelSpec.networks` name: "meshed" or "radial",
     "unbalanced-meshed" or "unbalanced-radial" for a three-phase feeder."""
+    from opfbench.multiphase import PhaseNetwork  # scipy: not at import (`opfbench --help` stays light)
+
     kind = "meshed" if net.meshed else "radial"
     return f"unbalanced-{kind}" if isinstance(net, PhaseNetwork) else kind
 
