@@ -13,7 +13,7 @@ from opfbench.cases.opendss_cases import opendss_copy
 from opfbench.io import load_case
 from opfbench.multiphase import PhaseNetwork
 from opfbench.powerflow.multiphase import solve_phase_flow
-from tests.support.opendss_feeders import UNBALANCED_ALL, UNBALANCED_SMALL, bus_vuf, line_impedance_ohm, set_tap, solve
+from tests.support.opendss_feeders import UNBALANCED_ALL, UNBALANCED_SMALL, bus_vuf, held_taps, line_impedance_ohm, solve
 
 V_TOL_PU = 1e-6
 LOSS_REL = 1e-4
@@ -53,16 +53,6 @@ def test_the_large_feeders_own_snapshot_is_opendss(name):
     _own_snapshot(name)
 
 
-def _taps(net: PhaseNetwork) -> list[str]:
-    """OpenDSS commands holding every regulator at the tap our model read."""
-    out = []
-    for t in net.transformers:
-        if t.regulated:
-            name = net.elements[t.element].name.split(".", 1)[1]
-            out += [set_tap(name, w + 1, wdg.tap) for w, wdg in enumerate(t.windings)]
-    return out
-
-
 @pytest.mark.parametrize(("name", "load_mult"), [("ieee13", 0.4), ("ieee13", 1.35), ("ieee123", 1.6), ("ieee37", 0.7)])
 def test_other_load_levels_with_the_taps_held(name, load_mult):
     """Loads scaled (OpenDSS's loadmult): the models' switches to impedance below vminpu
@@ -70,7 +60,7 @@ def test_other_load_levels_with_the_taps_held(name, load_mult):
     net, _ = _network(name)
     ours = solve_phase_flow(net, net.load_p_mw[None] * load_mult, net.load_q_mvar[None] * load_mult)
     with opendss_copy(name) as master:
-        theirs = solve(master, f"set loadmult={load_mult!r}", *_taps(net), controls=False)
+        theirs = solve(master, f"set loadmult={load_mult!r}", *held_taps(net), controls=False)
     _agrees(net, ours, theirs)
     if load_mult > 1.3:  # the case the switch to impedance matters for
         assert (ours.node_vm_pu[0][net.load_branches.a] < 0.95).any()

@@ -55,6 +55,7 @@ from opfbench.registry.specs import (
 if TYPE_CHECKING:
     from opfbench.formulations.models.conic import SnapshotSolve
     from opfbench.formulations.solvers.ipopt_adapter import IpoptSolve
+    from opfbench.multiphase import PhaseNetwork
     from opfbench.network import Network
     from opfbench.result import StrategyResult
     from opfbench.scenario import Scenario
@@ -139,7 +140,7 @@ def load_models() -> None:
         importlib.import_module(f"{models.__name__}.{info.name}")
 
 
-def model_for(role: Role, net: Network) -> ModelSpec:
+def model_for(role: Role, net: Network | PhaseNetwork) -> ModelSpec:
     """The model that serves the OPF problem's `role` on `net` (module docstring);
     NetworkError naming the network's class where none does."""
     load_models()

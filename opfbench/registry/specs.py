@@ -38,14 +38,20 @@ Role = Literal["exact", "relaxation", "approximation"]
 MEANING: dict[str, str] = {"exact": "optimum", "relaxation": "bound", "approximation": "estimate"}
 #: Network classes a strategy or a model runs on (`network_class`).
 SUPPORTS = ("radial", "meshed")
+UNBALANCED = ("unbalanced-radial", "unbalanced-meshed")
+"""The classes of three-phase (`PhaseNetwork`) feeders; no balanced model claims them."""
 OPFBENCH = "opfbench"  # the source of the built-in entries
 _NAME = re.compile(r"^[a-z0-9][a-z0-9._+-]*$")  # "+" joins rules run together: volt-var+volt-watt
 Runner = Callable[..., "StrategyResult"]
 
 
-def network_class(net: Network) -> str:
-    """The class of `net` that `supports` / `ModelSpec.networks` name: "meshed" or "radial"."""
-    return "meshed" if net.meshed else "radial"
+def network_class(net: Network | PhaseNetwork) -> str:
+    """The class of `net` that `supports` / `ModelSpec.networks` name: "meshed" or "radial",
+    "unbalanced-meshed" or "unbalanced-radial" for a three-phase feeder."""
+    from opfbench.multiphase import PhaseNetwork  # scipy: not at import (`opfbench --help` stays light)
+
+    kind = "meshed" if net.meshed else "radial"
+    return f"unbalanced-{kind}" if isinstance(net, PhaseNetwork) else kind
 
 
 @dataclass(frozen=True)
@@ -225,7 +231,7 @@ class ModelSpec:
 
     name: str
     role: Role
-    build: Callable[[Network, bool], Any]
+    build: Callable[[Network | PhaseNetwork, bool], Any]
     summary: str
     networks: tuple[str, ...] = SUPPORTS
     serves_problem: bool = False
@@ -236,7 +242,7 @@ class ModelSpec:
     def meaning(self) -> str:
         return MEANING[self.role]
 
-    def models(self, net: Network) -> bool:
+    def models(self, net: Network | PhaseNetwork) -> bool:
         return network_class(net) in self.networks
 
 

@@ -13,6 +13,8 @@ from pathlib import Path
 import numpy as np
 import opendssdirect as dss
 
+from opfbench.multiphase import PhaseNetwork
+
 UNBALANCED_SMALL = ("ieee13", "ieee34", "ieee37", "ieee123", "eulv")
 UNBALANCED_ALL = UNBALANCED_SMALL + ("ieee8500", "ckt5", "ckt7", "ckt24")
 TOLERANCE = 1e-10
@@ -144,3 +146,13 @@ def volt_var(
         np.asarray(dss.Circuit.AllBusMagPu()),
         bool(dss.Solution.Converged()),
     )
+
+
+def held_taps(net: PhaseNetwork) -> list[str]:
+    """OpenDSS commands holding every regulator at the tap our model read."""
+    out = []
+    for t in net.transformers:
+        if t.regulated:
+            name = net.elements[t.element].name.split(".", 1)[1]
+            out += [set_tap(name, w + 1, wdg.tap) for w, wdg in enumerate(t.windings)]
+    return out

@@ -73,15 +73,19 @@ class IpoptNlp:
     """IPOPT on one CasADi NLP (`nlp`: x, p, f, g), constraint bounds `lbg`..`ubg`; the
     decision entries `setpoints` of x are what a solve reports as `q_pu`. The cold and
     the warm instance are each created on first use (CasADi derives the NLP's Jacobian
-    and Hessian per instance: the expensive part on large feeders)."""
+    and Hessian per instance: the expensive part on large feeders). `options` override
+    IPOPT_OPTIONS for this NLP."""
 
-    def __init__(self, name: str, nlp: dict, lbg: np.ndarray, ubg: np.ndarray, setpoints: slice):
+    def __init__(
+        self, name: str, nlp: dict, lbg: np.ndarray, ubg: np.ndarray, setpoints: slice, options: dict[str, Any] | None = None
+    ):
         self.name, self.nlp, self.lbg, self.ubg, self.setpoints = name, nlp, lbg, ubg, setpoints
+        self.options = IPOPT_OPTIONS | (options or {})
         self._instances: dict[bool, ca.Function] = {}
 
     def instance(self, warm: bool) -> ca.Function:
         if warm not in self._instances:
-            options = IPOPT_OPTIONS | WARM_OPTIONS if warm else IPOPT_OPTIONS
+            options = self.options | WARM_OPTIONS if warm else self.options
             self._instances[warm] = ca.nlpsol(f"{self.name}_{'warm' if warm else 'cold'}", "ipopt", self.nlp, options)
         return self._instances[warm]
 

@@ -1,0 +1,136 @@
+"""The three-phase AC OPF (`formulations.models.ac_three_phase` through
+`formulations.three_phase.optimum`): its optimum confirmed by OpenDSS (the Q setpoints as
+fixed kvar on the same PVSystems, the regulator taps held), never above no action where
+no action meets the band, proven infeasible where nothing can reach the band, and its
+input checked before any work. The feeder: `ieee123` with single-phase PV on every second
+load (`opfbench.cases.opendss_pv`)."""
+
+from __future__ import annotations
+
+import shutil
+
+import numpy as np
+import pytest
+
+from opfbench.cases.opendss_cases import opendss_copy
+from opfbench.cases.opendss_pv import case_with_pv, with_pv
+from opfbench.errors import InputError
+from opfbench.formulations.model import model_for
+from opfbench.formulations.three_phase import BAND_TOL, optimum
+from opfbench.multiphase import PhaseNetwork
+from opfbench.powerflow.multiphase import solve_phase_flow
+from opfbench.result import INFEASIBLE, OK
+from tests.support.opendss_feeders import held_taps, solve
+
+# (load multiplier, PV irradiance): noon with the band binding, afternoon, evening peak
+SNAPSHOTS = ((0.9, 1.0), (1.0, 0.6), (1.1, 0.3))
+
+
+def _feeder(tmp, name: str, **placement):
+    """The shipped feeder with PV (`opendss_pv`), and a master file of the same feeder and
+    PV that outlives the temporary copy (OpenDSS's oracle compiles it)."""
+    with opendss_copy(name) as master:
+        case = case_with_pv(tmp, master, name, **placement)
+        shutil.copytree(master.parent.parent, tmp / "feeder")
+        file = with_pv(tmp, tmp / "feeder" / master.parent.name / master.name, case.network, **placement)
+    assert isinstance(case.network, PhaseNetwork)
+    return case, file
+
+
+@pytest.fixture(scope="module")
+def ieee123_pv(tmp_path_factory):
+    case, file = _feeder(tmp_path_factory.mktemp("ieee123_pv"), "ieee123")
+    assert len(case.network.ders) == 46
+    return case, file
+
+
+def _snapshots(case, snapshots):
+    lp, lq, dp, _ = case.stored
+    mult = np.array([s[0] for s in snapshots])[:, None]
+    sun = np.array([s[1] for s in snapshots])[:, None]
+    return lp * mult, lq * mult, dp * sun
+
+
+def test_the_three_phase_model_serves_unbalanced_feeders_by_its_declaration(ieee123_pv):
+    case, _ = ieee123_pv
+    assert model_for("exact", case.network).name == "ac3"
+
+
+def _confirmed_by_opendss(case, file, snapshots):
+    """The OPF's Q as fixed kvar on the same PVSystems in OpenDSS (loads by loadmult, PV by
+    irradiance, taps held): OpenDSS's losses within 1e-6 relative of the OPF's and every
+    monitored voltage within the band. Returns the OPF's result."""
+    net = case.network
+    lp, lq, dp = _snapshots(case, snapshots)
+    result = optimum(net, lp, lq, dp, 0.0)
+    assert (result.status == OK).all(), result.status
+    a, b, base, _ = net.monitored
+    lo, hi = net.band
+    for i, (mult, sun) in enumerate(snapshots):
+        kvar = [
+            f"{name}.irradiance={sun!r} kvar={float(q) * 1e3!r}" for name, q in zip(net.der_names, result.q_mvar[i], strict=True)
+        ]
+        theirs = solve(file, f"set loadmult={mult!r}", *held_taps(net), *kvar, controls=False)
+        assert theirs.converged and theirs.node_names == list(net.node_names)
+        assert theirs.losses_kw == pytest.approx(result.losses_kw[i], rel=1e-6)
+        vx = np.append(theirs.v, 0.0)
+        vm = np.abs(vx[a] - vx[b]) / base
+        assert lo - BAND_TOL <= vm.min() and vm.max() <= hi + BAND_TOL
+    assert np.abs(result.q_mvar).max() > 0.1 * max(d.s_rated_mva for d in net.ders)  # the DER do act
+    return result
+
+
+def test_opendss_confirms_the_optimum(ieee123_pv):
+    result = _confirmed_by_opendss(*ieee123_pv, SNAPSHOTS)
+    assert result.vmax[0] == pytest.approx(ieee123_pv[0].network.band[1], abs=1e-6)  # the band binds at noon
+
+
+@pytest.mark.slow
+def test_opendss_confirms_the_optimum_on_eulv(tmp_path):
+    """The European LV feeder (2721 nodes) with 4-kW PV on every second house."""
+    _confirmed_by_opendss(*_feeder(tmp_path, "eulv", kw=4.0), SNAPSHOTS)
+
+
+def test_the_optimum_is_never_above_no_action_where_no_action_meets_the_band(ieee123_pv):
+    case, _ = ieee123_pv
+    net = case.network
+    snapshots = [(m, s) for m in (0.8, 1.1) for s in (0.0, 0.4, 0.9)]
+    lp, lq, dp = _snapshots(case, snapshots)
+    result = optimum(net, lp, lq, dp, 0.4)
+    none = solve_phase_flow(net, lp, lq, dp)
+    lo, hi = net.band
+    in_band = (none.vm.min(axis=1) >= lo) & (none.vm.max(axis=1) <= hi)
+    assert in_band.sum() >= 2
+    assert not np.isnan(result.losses_kw[in_band]).any()
+    assert (result.losses_kw[in_band] <= none.losses_kw[in_band] * (1 + 1e-9)).all()
+    assert (result.losses_kw[in_band] < none.losses_kw[in_band] - 0.1)[dp[in_band].sum(axis=1) > 0].any()
+
+
+def test_no_q_to_give_and_the_band_left_is_proven_infeasible_with_no_figure(ieee123_pv):
+    """At night (PV at 0: an inverter has no Q) and light load the held taps leave the band:
+    the power flow's point is the only one, so the OPF is infeasible — and gives no losses."""
+    case, _ = ieee123_pv
+    lp, lq, dp = _snapshots(case, [(0.3, 0.0), (1.0, 0.0)])
+    result = optimum(case.network, lp, lq, dp, 0.0)
+    assert result.status[0] == INFEASIBLE and result.proven[0]
+    assert np.isnan(result.losses_kw[0]) and np.isnan(result.objective_kw[0])
+    assert result.status[1] == OK and result.losses_kw[1] == pytest.approx(
+        solve_phase_flow(case.network, lp[1:], lq[1:], dp[1:]).losses_kw[0]
+    )
+
+
+@pytest.mark.parametrize(
+    ("change", "message"),
+    [("k", "reserve coefficient"), ("nan", "load P contains NaN"), ("shape", "DER P must have shape")],
+)
+def test_bad_input_is_one_message_before_any_work(ieee123_pv, change, message):
+    case, _ = ieee123_pv
+    lp, lq, dp = _snapshots(case, SNAPSHOTS[:1])
+    k = 1.5 if change == "k" else 0.0
+    if change == "nan":
+        lp = lp.copy()
+        lp[0, 3] = np.nan
+    if change == "shape":
+        dp = dp[:, :-1]
+    with pytest.raises(InputError, match=message):
+        optimum(case.network, lp, lq, dp, k)
