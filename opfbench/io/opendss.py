@@ -37,6 +37,7 @@ from __future__ import annotations
 
 import os
 import threading
+from collections.abc import Iterator
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import TYPE_CHECKING
@@ -104,6 +105,15 @@ def _dss():
     import opendssdirect as dss
 
     return dss
+
+
+def _each(api) -> Iterator[None]:
+    """Make each element of an OpenDSS collection (`dss.Lines`, `dss.Loads`, …) the active
+    one in turn, in the circuit's order."""
+    i = api.First()
+    while i:
+        yield
+        i = api.Next()
 
 
 def _complex(values) -> np.ndarray:
@@ -277,10 +287,8 @@ class _Reader:
         lines: list[Line] = []
         transformers: list[Transformer] = []
         regulated = set()
-        i = dss.RegControls.First()
-        while i:
+        for _ in _each(dss.RegControls):
             regulated.add(dss.RegControls.Transformer().lower())
-            i = dss.RegControls.Next()
         for cls, kind in (
             ("Lines", "line"),
             ("Transformers", "transformer"),
@@ -288,8 +296,7 @@ class _Reader:
             ("Reactors", "reactor"),
         ):
             api = getattr(dss, cls)
-            i = api.First()
-            while i:
+            for _ in _each(api):
                 el = dss.CktElement
                 full = el.Name()
                 if el.Enabled():
@@ -301,7 +308,6 @@ class _Reader:
                         lines.append(self._line(index, nodes, y))
                     elif kind == "transformer":
                         transformers.append(self._transformer(index, api.Name().lower() in regulated))
-                i = api.Next()
         return elements, lines, transformers
 
     def _line(self, index: int, nodes: np.ndarray, y: np.ndarray) -> Line:
@@ -339,8 +345,7 @@ class _Reader:
     def _source(self) -> Source:
         dss = self.dss
         found = []
-        i = dss.Vsources.First()
-        while i:
+        for _ in _each(dss.Vsources):
             if dss.CktElement.Enabled():
                 found.append(dss.CktElement.Name())
                 full = dss.CktElement.Name()
@@ -355,7 +360,6 @@ class _Reader:
                 angles = np.deg2rad(dss.Vsources.AngleDeg() - 120.0 * np.arange(n))
                 keep = nodes[0] != GROUND
                 source = Source(full, buses[0], nodes[0][keep], y[np.ix_(keep, keep)], (mag * np.exp(1j * angles))[keep])
-            i = dss.Vsources.Next()
         if len(found) != 1:
             raise CaseFormatError(
                 f"{self.path}: opfbench models one source (Vsource); the circuit has {len(found)}: {', '.join(found) or 'none'}"
@@ -386,8 +390,7 @@ class _Reader:
         names, bus, p, q = [], [], [], []
         model, vmin, vmax, vlow, cvr_p, cvr_q = [], [], [], [], [], []
         owner, a, b, base, share = [], [], [], [], []
-        i = loads.First()
-        while i:
+        for _ in _each(loads):
             el = dss.CktElement
             full = el.Name()
             if el.Enabled():
@@ -429,7 +432,6 @@ class _Reader:
                     b.append(br[1])
                     base.append(br[2])
                     share.append(1.0 / phases)
-            i = loads.Next()
         models = LoadModels(np.array(model, dtype=int), vmin, vmax, vlow, cvr_p, cvr_q)
         return (
             names,
@@ -447,8 +449,7 @@ class _Reader:
         p_out, q_out = [], []
         for cls in ("PVsystems", "Generators"):
             api = getattr(dss, cls)
-            i = api.First()
-            while i:
+            for _ in _each(api):
                 el = dss.CktElement
                 full = el.Name()
                 if el.Enabled():
@@ -482,7 +483,6 @@ class _Reader:
                         b.append(br[1])
                         base.append(br[2])
                         share.append(1.0 / phases)
-                i = api.Next()
         p = np.clip(np.array(p_out, dtype=float), 0.0, [d.rating_mw for d in ders]) if ders else np.zeros(0)
         return ders, names, Branches(owner, a, b, base, share, len(ders)), p, np.array(q_out, dtype=float)
 
