@@ -58,6 +58,7 @@ MISMATCH_REL = 1e-8
 """The largest relative nodal current mismatch a converged snapshot may have (`_residual`)."""
 _CHUNK = 256  # columns per sparse solve when forming Z_KK (memory: n_node × _CHUNK)
 _BLOCK = 64  # snapshots per block when certifying (`_certify`)
+_ROUND_OFF_PU = 1e-12  # far above the round-off between two ways of forming a node's |V| (p.u.)
 _BLAS = ThreadpoolController()
 
 
@@ -238,17 +239,21 @@ class PhaseIterate:
 
 def voltages_within(net: PhaseNetwork, state: np.ndarray, before: np.ndarray, tol: float) -> np.ndarray:
     """(S',) whether no node's |V| (p.u. of its base) moved by more than `tol` from the
-    iterate states `before` to `state` (S', r). Dense: decided by the bound
-    |Δ|V_n|| ≤ |ΔV_n| ≤ Σ_k |Z_nk|·|ΔJ_k| where it is below tol/2 (far below any round-off
-    of the exact test), by the exact test where it is not."""
+    iterate states `before` to `state` (S', r). Dense, first from the nodes K alone (Z_KK):
+    a change above tol (by more than round-off) at one of them decides "no"; then the
+    bound |Δ|V_n|| ≤ |ΔV_n| ≤ Σ_k |Z_nk|·|ΔJ_k| decides "yes" where it is below tol/2;
+    the exact test on every node decides the rest."""
     sys_ = _system(net)
     within = np.zeros(state.shape[0], dtype=bool)
     exact = np.arange(state.shape[0])
-    if sys_.z_abs_pu is not None and exact.size:
+    if sys_.z_kk is not None and sys_.z_abs_pu is not None and exact.size:
         with _BLAS.limit(limits=1, user_api="blas"):
-            bound = (np.abs(state - before) @ sys_.z_abs_pu.T).max(axis=1, initial=0.0)
-        within = bound < tol / 2
-        exact = np.flatnonzero(~within)
+            at_k = sys_.v_source[sys_.k] + np.concatenate([state, before]) @ sys_.z_kk.T
+            moved_k = np.abs(np.abs(at_k[: len(state)]) - np.abs(at_k[len(state) :])) / sys_.base_k.T
+            exact = np.flatnonzero(moved_k.max(axis=1, initial=0.0) <= tol + _ROUND_OFF_PU)
+            bound = (np.abs(state[exact] - before[exact]) @ sys_.z_abs_pu.T).max(axis=1, initial=0.0)
+        within[exact] = bound < tol / 2
+        exact = exact[bound >= tol / 2]
     if exact.size:
         none = np.zeros(0, dtype=bool)
         now = np.abs(PhaseIterate(net, state[exact], none, none).v) / net.node_base_v
