@@ -2,8 +2,9 @@
 `PhaseIterate` (the currents at the nodes loads and DER touch, every node's voltage formed
 only where the settling check asks), the voltage check decided by a bound where it is far
 below the tolerance, and only each snapshot's last step certified. It must give what the
-loop gives when every step is a certified flow on every node — the same setpoints,
-statuses, flow counts and figures — on the dense and the sparse iteration alike."""
+loop gives when every step is a certified flow on every node (`CertifiedPhaseGrid`, the
+grid of feeders with `?taps=control`) — the same setpoints, statuses, flow counts and
+figures — on the dense and the sparse iteration alike."""
 
 from __future__ import annotations
 
@@ -16,45 +17,12 @@ import opfbench.powerflow.multiphase as multiphase
 import opfbench.strategies.rule_engine as rule_engine
 from opfbench.io import load_case
 from opfbench.multiphase import PhaseNetwork
-from opfbench.powerflow.multiphase import PhaseFlowResult, iterate_phase_flow, solve_phase_flow, voltages_within
+from opfbench.powerflow.multiphase import iterate_phase_flow, voltages_within
 from opfbench.registry.catalog import run_strategy
 from opfbench.scenario import Scenario
-from opfbench.strategies.grids import PhaseGrid
+from opfbench.strategies.grids import CertifiedPhaseGrid, grid_of
 
 IEEE13_DER = "?der=675:inverter:0.5,671:inverter:0.4,611.3:inverter:0.05,652.1:inverter:0.05"
-
-
-class CertifiedSteps(PhaseGrid):
-    """The loop as it ran before iterates: every step a certified flow on every node, the
-    state every node's voltage, the voltage check exact on every node."""
-
-    def __init__(self, scenario):
-        super().__init__(scenario)
-        self.losses_kw = np.full(scenario.n_snapshots, np.nan)
-        self.mismatch = np.full(scenario.n_snapshots, np.inf)
-
-    def step(self, rows, q_mvar, p_mw, state):
-        p = self.available[rows] if p_mw is None else p_mw
-        flow = solve_phase_flow(self.net, self.load_p[rows], self.load_q[rows], p, q_mvar, v0=state)
-        self.losses_kw[rows], self.mismatch[rows] = flow.losses_kw, flow.mismatch
-        return flow
-
-    def state(self, flow):
-        return flow.v
-
-    def stepped(self, flow):
-        return flow.converged
-
-    def view(self, state):
-        n = state.shape[0]
-        return PhaseFlowResult(self.net, state, np.ones(n, bool), np.zeros(n, np.int64), np.zeros(n), np.full(n, np.nan))
-
-    def voltages_within(self, state, before, tol):
-        base = self.net.node_base_v
-        return np.abs(np.abs(state) / base - np.abs(before) / base).max(axis=1, initial=0.0) <= tol
-
-    def final(self, state, converged, flows):
-        return PhaseFlowResult(self.net, state, converged, flows, self.mismatch, self.losses_kw)
 
 
 def _scenario(net: PhaseNetwork) -> Scenario:
@@ -81,7 +49,7 @@ def test_closed_loop_on_iterates_equals_certified_steps(spec, iteration, strateg
     assert (multiphase._system(net).z_nk is None) == (iteration == "sparse")
     scenario = _scenario(net)
     ours = run_strategy(strategy, scenario, 0.0)
-    monkeypatch.setattr(rule_engine, "grid_of", CertifiedSteps)
+    monkeypatch.setattr(rule_engine, "grid_of", CertifiedPhaseGrid)
     certified = run_strategy(strategy, scenario, 0.0)
     assert list(ours.status) == list(certified.status) and (ours.status == "ok").sum() >= 3
     np.testing.assert_array_equal(ours.power_flows, certified.power_flows)
@@ -111,3 +79,17 @@ def test_voltages_within_decides_as_the_exact_change(iteration, monkeypatch):
     for factor in (1 - 1e-6, 1 + 1e-6, 1e3):
         tol = factor * change[1]
         np.testing.assert_array_equal(voltages_within(net, after.state, before.state, tol), change <= tol)
+
+
+def test_a_feeder_under_tap_control_steps_on_certified_flows():
+    """With `?taps=control` the regulators move inside every solve, so the loop steps on
+    certified flows (`CertifiedPhaseGrid`), the taps settled per snapshot; the iterate has
+    no taps to move and refuses such a feeder."""
+    net = load_case("ieee13?der=675:inverter:0.5,671:inverter:0.4&taps=control").network
+    assert isinstance(net, PhaseNetwork) and net.tap_control and net.regulators
+    scenario = Scenario(net, np.array([0.4, 1.0]), np.array([0.9, 0.2])[:, None] * net.der_rating_mw[None, :], None)
+    assert isinstance(grid_of(scenario), CertifiedPhaseGrid)
+    res = run_strategy("volt-var", scenario, 0.0)
+    assert list(res.status) == ["ok", "ok"] and res.power_flows[0] > 2 and np.abs(res.q_mvar[0]).max() > 0
+    with pytest.raises(ValueError, match="tap control"):
+        iterate_phase_flow(net, net.load_p_mw[None], net.load_q_mvar[None])

@@ -110,7 +110,7 @@ class PhaseGrid:
         p = self.available[rows] if p_mw is None else p_mw
         return solve_phase_flow(self.net, self.load_p[rows], self.load_q[rows], p, q_mvar, v0=v0)
 
-    def step(self, rows: np.ndarray, q_mvar: np.ndarray, p_mw: np.ndarray | None, state: np.ndarray | None) -> PhaseIterate:
+    def step(self, rows: np.ndarray, q_mvar: np.ndarray, p_mw: np.ndarray | None, state: np.ndarray | None) -> Step:
         p = self.available[rows] if p_mw is None else p_mw
         self.der_p[rows], self.der_q[rows] = p, q_mvar
         return iterate_phase_flow(self.net, self.load_p[rows], self.load_q[rows], p, q_mvar, start=state)
@@ -125,7 +125,7 @@ class PhaseGrid:
         assert isinstance(flow, PhaseIterate)
         return np.asarray(flow.settled, dtype=bool)
 
-    def view(self, state: np.ndarray) -> PhaseIterate:
+    def view(self, state: np.ndarray) -> Step:
         n = state.shape[0]
         return PhaseIterate(self.net, state, np.ones(n, dtype=bool), np.zeros(n, dtype=np.int64))
 
@@ -148,6 +148,44 @@ class PhaseGrid:
         return certify(PhaseIterate(self.net, state, converged, flows), self.load_p, self.load_q, self.der_p, self.der_q)
 
 
+class CertifiedPhaseGrid(PhaseGrid):
+    """A three-phase feeder whose every closed-loop step is a certified power flow on every
+    node (the state: every node's voltage; the settling check exact on every node): for
+    feeders whose regulators move their taps inside the power flow (`?taps=control`), where
+    each snapshot's taps follow its own voltages and no one factorization serves them all."""
+
+    def __init__(self, scenario: Scenario) -> None:
+        super().__init__(scenario)
+        self.losses_kw = np.full(scenario.n_snapshots, np.nan)
+        self.mismatch = np.full(scenario.n_snapshots, np.inf)
+
+    def step(self, rows: np.ndarray, q_mvar: np.ndarray, p_mw: np.ndarray | None, state: np.ndarray | None) -> PhaseFlowResult:
+        flow = self.answer(rows, q_mvar, p_mw, state)
+        self.losses_kw[rows], self.mismatch[rows] = flow.losses_kw, flow.mismatch
+        return flow
+
+    def state(self, flow: Step) -> np.ndarray:
+        assert isinstance(flow, PhaseFlowResult)
+        return flow.v
+
+    def stepped(self, flow: Step) -> np.ndarray:
+        assert isinstance(flow, PhaseFlowResult)
+        return np.asarray(flow.converged, dtype=bool)
+
+    def view(self, state: np.ndarray) -> Step:
+        n = state.shape[0]
+        return PhaseFlowResult(
+            self.net, state, np.ones(n, dtype=bool), np.zeros(n, dtype=np.int64), np.zeros(n), np.full(n, np.nan)
+        )
+
+    def voltages_within(self, state: np.ndarray, before: np.ndarray, tol: float) -> np.ndarray:
+        base = self.net.node_base_v
+        return np.abs(np.abs(state) / base - np.abs(before) / base).max(axis=1, initial=0.0) <= tol
+
+    def final(self, state: np.ndarray, converged: np.ndarray, flows: np.ndarray) -> PhaseFlowResult:
+        return PhaseFlowResult(self.net, state, converged, flows, self.mismatch.copy(), self.losses_kw.copy())
+
+
 RuleGrid = BusGrid | PhaseGrid
 """What the rule engine asks of a grid: `answer(rows, q, p, v0)` the certified flow of some
 snapshots at DER setpoints (P None: P^C; v0 a warm start); for the closed loop
@@ -162,4 +200,7 @@ meters."""
 
 def grid_of(scenario: Scenario) -> RuleGrid:
     """The grid of the scenario's network (module docstring)."""
-    return PhaseGrid(scenario) if isinstance(scenario.net, PhaseNetwork) else BusGrid(scenario)
+    net = scenario.net
+    if not isinstance(net, PhaseNetwork):
+        return BusGrid(scenario)
+    return CertifiedPhaseGrid(scenario) if net.tap_control and net.regulators else PhaseGrid(scenario)
