@@ -52,13 +52,14 @@ def _per_step(net, load_p: np.ndarray, load_q: np.ndarray, der_p: np.ndarray) ->
 def run() -> dict:
     from opfbench.cases.opendss_cases import opendss_copy
     from opfbench.cases.opendss_pv import case_with_pv
+    from opfbench.multiphase import PhaseNetwork
     from opfbench.powerflow.multiphase import solve_phase_flow
     from opfbench.study.task_scenarios import chunk_scenario, study_period
 
     with tempfile.TemporaryDirectory() as tmp, opendss_copy("ieee123") as master:
         case = case_with_pv(Path(tmp), master, "ieee123")
-    assert case.stored is not None
     net = case.network
+    assert case.stored is not None and isinstance(net, PhaseNetwork)
     lp, lq, dp, _ = case.stored
     mult = 0.9 + 0.2 * np.sin(np.linspace(0.0, np.pi, STEPS))
     sun = np.sin(np.linspace(0.2, np.pi - 0.2, STEPS))
