@@ -1,8 +1,13 @@
 """The OPF problem on three-phase feeders: its exact model's optimum on every snapshot,
-confirmed by the three-phase power flow — every reported figure is the power flow's. The
-model is the one declared for the feeder's class (`model.model_for("exact", net)`:
-"unbalanced-radial" or "unbalanced-meshed", today `models.ac_three_phase`). No relaxation
-serves three-phase feeders yet, so no optimum here is certified by a bound.
+confirmed by the three-phase power flow — every reported figure is the power flow's — and
+the relaxation's lower bound that certifies it. The models are the ones declared for the
+feeder's class (`model.model_for(role, net)`: "unbalanced-radial" or "unbalanced-meshed";
+today `models.ac_three_phase` exact on both, `models.sdp_three_phase` the relaxation on
+radial feeders only — a meshed feeder gets no bound, refused with NetworkError).
+
+`bound` solves the relaxation per snapshot (compiled once); `certify` compares: a step is
+certified when the optimum's losses are within `CERTIFY_RTOL` (relative) of the bound,
+otherwise its gap is recorded; a step whose relaxation is infeasible is proven infeasible.
 
 Per snapshot (`optimum`): the exact model warm from the previous snapshot's answer, then
 cold from the power flow's no-action point; a point is accepted only when IPOPT converged
@@ -28,6 +33,8 @@ from opfbench.multiphase import PhaseNetwork
 from opfbench.powerflow.multiphase import solve_phase_flow
 from opfbench.result import FALLBACK_COLD, FALLBACK_NO_ACTION, INFEASIBLE, OK, SOLVER_FAILED
 
+CERTIFY_RTOL = 1e-6
+"""An optimum within this (relative) of the relaxation's bound is certified."""
 CONFIRM_RTOL = 1e-4
 """A model's point is accepted when the power flow's losses at its setpoints are within this
 (relative) of the model's own: the two model the same feeder (the NLP's own point carries
@@ -146,3 +153,72 @@ def _accepted(net: PhaseNetwork, solve, load_p: np.ndarray, load_q: np.ndarray, 
     lo, hi = net.band
     within = lo - BAND_TOL <= flow.vm[0].min() and flow.vm[0].max() <= hi + BAND_TOL
     return bool(within and abs(flow.losses_kw[0] - solve.objective_kw) <= CONFIRM_RTOL * abs(flow.losses_kw[0]))
+
+
+@dataclass(frozen=True, eq=False)
+class PhaseBound:
+    """The relaxation on S snapshots. Arrays (S,): `bound_kw` (NaN unless solved),
+    `rank_ratio` (the largest second-to-first eigenvalue ratio over its PSD blocks),
+    `rank_one` (every block rank one: `rank_ratio` ≤ the model's threshold), `infeasible`
+    (the solver certified the relaxation, hence the OPF, infeasible), `status` (the
+    solver's), `solve_ms` (per step); `compile_ms` the model's build plus first solve
+    (cvxpy compiles there) less that solve's own time."""
+
+    bound_kw: np.ndarray
+    rank_ratio: np.ndarray
+    rank_one: np.ndarray
+    infeasible: np.ndarray
+    status: np.ndarray
+    solve_ms: np.ndarray
+    compile_ms: float
+
+
+def bound(
+    net: PhaseNetwork,
+    load_p_mw: np.ndarray,
+    load_q_mvar: np.ndarray,
+    der_p_mw: np.ndarray,
+    k: float = 0.0,
+) -> PhaseBound:
+    """The relaxation's bound on S snapshots (arguments as `optimum`); NetworkError where no
+    relaxation serves the feeder (meshed). Checked before any work: k, the model, then
+    shapes and finite values (the power flow's checks, on the first snapshot)."""
+    import time
+
+    check_reserve(k)
+    load_models()
+    spec = model_for("relaxation", net)
+    solve_phase_flow(net, load_p_mw, load_q_mvar, der_p_mw)  # checks shapes and values first
+    load_p, load_q = (np.asarray(x, dtype=float).reshape(-1, net.n_load) for x in (load_p_mw, load_q_mvar))
+    der_p = np.asarray(der_p_mw, dtype=float).reshape(len(load_p), len(net.ders))
+    limit = q_limits(net, der_p, k)
+    start = time.perf_counter()
+    model = spec.build(net, True)
+    solves = []
+    for i in range(len(load_p)):
+        solves.append(model.solve(load_p[i], load_q[i], der_p[i], limit[i]))
+        if i == 0:
+            compile_ms = (time.perf_counter() - start) * 1e3 - solves[0].solve_ms
+    if not solves:
+        compile_ms = (time.perf_counter() - start) * 1e3
+
+    def field(name: str, dtype: type) -> np.ndarray:
+        return np.array([getattr(s, name) for s in solves], dtype=dtype)
+
+    return PhaseBound(
+        field("bound_kw", float),
+        field("rank_ratio", float),
+        field("rank_one", bool),
+        field("infeasible", bool),
+        field("status", object),
+        field("solve_ms", float),
+        compile_ms,
+    )
+
+
+def certify(opt: PhaseOptimum, relaxed: PhaseBound) -> tuple[np.ndarray, np.ndarray]:
+    """(certified, gap) per snapshot: the gap (optimum's losses − bound) / optimum's losses
+    where both exist (NaN elsewhere); certified where that gap is within CERTIFY_RTOL."""
+    with np.errstate(invalid="ignore", divide="ignore"):
+        gap = (opt.losses_kw - relaxed.bound_kw) / np.abs(opt.losses_kw)
+    return np.isfinite(gap) & (np.abs(gap) <= CERTIFY_RTOL), gap
