@@ -15,12 +15,19 @@ phase impedance matrix and half its shunt at each end, as OpenDSS's π model. A 
 or regulator: one core per phase unit, C_p and C_s the winding's node incidences (wye:
 phase − neutral, delta: phase − next phase, one-phase: conductor 1 − conductor 2), C_s
 scaled by the core's ratio at the *fixed* tap, Z the leakage impedance of each core —
-fitted to OpenDSS's own primitive admittance and checked to reproduce it (relative 1e-7;
-refused otherwise), so the model is the exact model's element, an ideal voltage ratio plus
-its own series impedance: nothing about a regulator is approximated or dropped, and its
-leakage losses stay in the objective. The source: its EMF e·ξ (the three phase voltages
-fixed, ξ the common phase reference, |ξ| = 1) behind its Thevenin impedance, a branch of
-its own.
+fitted to OpenDSS's own primitive admittance and checked to reproduce it (relative
+`FIT_RTOL`; refused otherwise; the ratio is kept complex, real up to OpenDSS's round-off,
+which a real ratio turns into 1e-7 p.u. of power per node), and its anti-float shunts.
+So a transformer or regulator is the exact model's element — an ideal voltage ratio at
+the fixed tap (v_j = v_i/t per core, the lossless ideal-transformer flow relation) plus
+its own series impedance, whose losses stay in the objective: nothing about it is
+relaxed beyond rank, and the relaxation stays a bound on the problem with taps held (the
+exact model's). A line (a switch) whose impedance is below `Z_IDEAL` p.u. is ideal: its
+two ends share one voltage matrix and it carries each conductor's power unchanged — the
+exact model's voltage drop there (below Z_IDEAL·|I|) and its losses (below
+Z_IDEAL·|I|²) are dropped, the one place the relaxation is not of the exact model
+itself. The source: its EMF e·ξ (the three phase voltages fixed, ξ the common
+phase reference, |ξ| = 1) behind its Thevenin impedance, a branch of its own.
 
 Each branch's free coordinates ζ are the sending nodes' voltages, the currents the
 relation leaves free and the receiving voltages it leaves free (a delta winding's common
@@ -28,7 +35,7 @@ mode); the receiving voltages are linear in ζ (v_j = E_s·ζ). The relaxation l
 per branch and drops rank(G) = 1, keeping G ⪰ 0: the sending block of G equals the bus
 matrix W_i that the parent branch gives (Gan–Low's W_j = W_i − (SZᴴ + ZSᴴ) + ZLZᴴ with
 S = v_i·Iᴴ, L = I·Iᴴ, generalised to the ratio C_p, C_s). On a radial feeder these
-cliques cover the exact model; a meshed feeder is refused (`RadialOnly`).
+cliques cover the exact model; a meshed feeder is refused (NetworkError).
 
 Per unit: node voltages on their base (`PhaseNetwork.node_base_v`), powers on `s_base`
 (the feeder's nominal load, ≥ 1 kVA), so line impedances are O(1e-4..1) and powers O(1).
@@ -43,13 +50,27 @@ its convex hull, so the optimum is a bound on the exact model's:
   [vminpu, vmaxpu] — relaxed to the region between the curve and its chord;
 - a delta (or neutral-connected) load or DER branch a → b: its current lifted with v_a,
   v_b in a block of its own (S drawn = (v_a − v_b)·i*);
-- DER: P fixed, Q a variable within ±(1 − k)·Qmax.
+- DER: P fixed, Q a variable within ±(1 − k)·Qmax, each branch's voltage at or above
+  `ac_three_phase.DER_VMIN_PU` (as in the exact model);
+- valid cuts that hold at every operating point and bound what the objective leaves free:
+  each lifted branch current |i|² ≤ |S|²/w at the worst end of w's range
+  (`branch_caps`), and at every node the lifted |current fed to it|² ≤ k·Σ of the |·|² of
+  the k currents it passes on (Kirchhoff and Cauchy–Schwarz, `_kcl_caps`). Without them a
+  near-lossless element's (or the source's, whose Thevenin losses are in no objective
+  term) current block grows at no cost and its mutual impedance moves power between
+  phases, and the bound falls far below the optimum.
 
 Where exactness is lost: a block of rank above one (`rank_one`, per block: the ratio of its
 second to its first eigenvalue above `RANK_RATIO`); the hulls of voltage-dependent loads
 (tight only at the ends of their range); delta branches, whose lifted current may split the
 branch's power between its two nodes unlike any voltage (Alsaleh et al.); and, at a
 regulator, the fixed tap (the bound is on the problem with taps held, as the exact model).
+A floating delta winding's common mode (ieee37, ieee123's xfm1) is fixed only by tiny
+shunts, so its blocks read as rank two while the losses do not depend on it.
+
+Only an "optimal" status gives a bound; "optimal_inaccurate" (Clarabel's AlmostSolved) and
+solver errors give none, and "infeasible" proves the exact problem infeasible (its
+Farkas certificate holds for the relaxation, which contains the exact feasible set).
 
 Built once per feeder: loads, DER P and the Q limits are cvxpy Parameters; cvxpy compiles at
 the first solve and re-solves from the compiled form (`solve`).
@@ -58,6 +79,7 @@ the first solve and re-solves from the compiled form (`solve`).
 from __future__ import annotations
 
 import time
+import warnings
 from dataclasses import dataclass
 
 import cvxpy as cp
@@ -76,7 +98,11 @@ RANK_RATIO = 1e-5
 FIT_RTOL = 1e-7
 """An element's impedance form must reproduce its primitive admittance to this (relative)."""
 KW_PER_MW = 1e3
-CLARABEL_ATTEMPTS = ({}, {"static_regularization_constant": 1e-7}, {"static_regularization_constant": 1e-6})
+CLARABEL_ATTEMPTS: tuple[dict[str, float], ...] = (
+    {},
+    {"static_regularization_constant": 1e-7},
+    {"static_regularization_constant": 1e-6},
+)
 """Clarabel's settings, tried in turn until one ends optimal or infeasible: its static
 regularisation raised from 1e-8, as the lifted blocks' near-zero directions (a
 near-lossless regulator's or transformer's current) can stall its KKT solves."""
@@ -150,8 +176,12 @@ class _Gram:
         re, im, sign = self._index(b)
         m = np.asarray(m, dtype=complex)
         cols = np.concatenate([re.ravel(), im.ravel()])
-        row_re = sp.csr_matrix((np.concatenate([m.real.ravel(), -(m.imag * sign).ravel()]), (np.zeros(cols.size, int), cols)), shape=(1, self.size))
-        row_im = sp.csr_matrix((np.concatenate([m.imag.ravel(), (m.real * sign).ravel()]), (np.zeros(cols.size, int), cols)), shape=(1, self.size))
+        row_re = sp.csr_matrix(
+            (np.concatenate([m.real.ravel(), -(m.imag * sign).ravel()]), (np.zeros(cols.size, int), cols)), shape=(1, self.size)
+        )
+        row_im = sp.csr_matrix(
+            (np.concatenate([m.imag.ravel(), (m.real * sign).ravel()]), (np.zeros(cols.size, int), cols)), shape=(1, self.size)
+        )
         return row_re, row_im
 
     def embedding(self, b: int) -> sp.csr_matrix:
@@ -211,7 +241,7 @@ def _transformer(name: str, nodes: np.ndarray, y: np.ndarray, conns: tuple[str, 
     where = {int(n): i for i, n in enumerate(flat[keep].tolist())}
     y = y[np.ix_([where[n] for n in order.tolist()], [where[n] for n in order.tolist()])]
     n_p = p.size
-    y_pp, y_ps, y_ss = y[:n_p, :n_p], y[:n_p, n_p:], y[n_p:, n_p:]
+    y_pp, y_ps = y[:n_p, :n_p], y[:n_p, n_p:]
     scale = np.abs(y).max()
     best: tuple[float, _Branch] | None = None
     for o_p in (1, -1):
@@ -224,7 +254,12 @@ def _transformer(name: str, nodes: np.ndarray, y: np.ndarray, conns: tuple[str, 
             yt = np.linalg.lstsq(basis_ps.astype(complex), y_ps.ravel(), rcond=None)[0]
             ratio = yt / y_core  # real up to round-off; kept complex so the form reproduces OpenDSS's admittance
             c_s_t = c_s * ratio[:, None]
-            model = np.block([[c_p.T @ np.diag(y_core) @ c_p, -c_p.T @ np.diag(y_core) @ c_s_t], [-c_s_t.T @ np.diag(y_core) @ c_p, c_s_t.T @ np.diag(y_core) @ c_s_t]])
+            model = np.block(
+                [
+                    [c_p.T @ np.diag(y_core) @ c_p, -c_p.T @ np.diag(y_core) @ c_s_t],
+                    [-c_s_t.T @ np.diag(y_core) @ c_p, c_s_t.T @ np.diag(y_core) @ c_s_t],
+                ]
+            )
             resid = y - model
             shunt = np.diag(np.diag(resid))  # OpenDSS's anti-float shunts of delta windings
             err = np.abs(resid - shunt).max() / scale
@@ -233,7 +268,9 @@ def _transformer(name: str, nodes: np.ndarray, y: np.ndarray, conns: tuple[str, 
                 best = (err, branch)
     assert best is not None
     if best[0] > FIT_RTOL:
-        raise NetworkError(f"{name}: no ideal-ratio-plus-impedance form reproduces its admittance (off by {best[0]:.1e} relative)")
+        raise NetworkError(
+            f"{name}: no ideal-ratio-plus-impedance form reproduces its admittance (off by {best[0]:.1e} relative)"
+        )
     return best[1]
 
 
@@ -281,7 +318,16 @@ class ThreePhaseSdp:
         src = net.source
         e_pu = src.emf_v / base[src.nodes]
         z_src = np.linalg.inv(np.diag(base[src.nodes]) @ src.y_s @ np.diag(base[src.nodes]) / (self.s_base * 1e6))
-        source = _Branch(src.name, np.array([-2]), src.nodes, e_pu[:, None], np.eye(len(src.nodes)), z_src, np.zeros((1, 1)), np.zeros((len(src.nodes),) * 2))
+        source = _Branch(
+            src.name,
+            np.array([-2]),
+            src.nodes,
+            e_pu[:, None],
+            np.eye(len(src.nodes)),
+            z_src,
+            np.zeros((1, 1)),
+            np.zeros((len(src.nodes),) * 2),
+        )
         ordered = [source, *branches]
         self._p_source: list = []
         self._coords: list[tuple[_Branch, int, np.ndarray, np.ndarray]] = []
@@ -293,7 +339,9 @@ class ThreePhaseSdp:
             if _is_ideal(br):  # no block: its receiving nodes are its sending nodes
                 for n_s, n_p in zip(br.s.tolist(), br.p.tolist(), strict=True):
                     if n_s in home:
-                        raise NetworkError(f"{net.name}: node {net.node_names[n_s]} is fed by two branches (not radial at node level)")
+                        raise NetworkError(
+                            f"{net.name}: node {net.node_names[n_s]} is fed by two branches (not radial at node level)"
+                        )
                     home[n_s] = home[n_p]
                 self._ideal.append(br)
                 shunts += [(br.p, br.y_p), (br.s, br.y_s)]
@@ -377,7 +425,9 @@ class ThreePhaseSdp:
                 shunts.append((uniq, np.diag(base[uniq]) @ y @ np.diag(base[uniq]) / (self.s_base * 1e6)))
                 continue
             if len(e.buses) != 2:
-                raise NetworkError(f"{net.name}: {e.name} has {len(e.buses)} terminals; the branch-flow SDP models two-terminal elements")
+                raise NetworkError(
+                    f"{net.name}: {e.name} has {len(e.buses)} terminals; the branch-flow SDP models two-terminal elements"
+                )
             children.setdefault(e.buses[0], []).append(idx)
             children.setdefault(e.buses[1], []).append(idx)
         out: list[_Branch] = []
@@ -397,7 +447,12 @@ class ThreePhaseSdp:
                 for idx in idxs:
                     e = net.elements[idx]
                     nodes = e.nodes if e.buses[0] == bus else e.nodes[::-1]
-                    y_pu = np.diag(base[np.maximum(e.nodes.ravel(), 0)]) @ e.yprim @ np.diag(base[np.maximum(e.nodes.ravel(), 0)]) / (self.s_base * 1e6)
+                    y_pu = (
+                        np.diag(base[np.maximum(e.nodes.ravel(), 0)])
+                        @ e.yprim
+                        @ np.diag(base[np.maximum(e.nodes.ravel(), 0)])
+                        / (self.s_base * 1e6)
+                    )
                     if e.buses[0] != bus:  # reorder the admittance to the flipped terminals
                         c = e.nodes.shape[1]
                         perm = np.concatenate([np.arange(c, 2 * c), np.arange(c)])
@@ -407,11 +462,15 @@ class ThreePhaseSdp:
                     elif idx in trafos:
                         t = trafos[idx]
                         if len(t.windings) != 2:
-                            raise NetworkError(f"{net.name}: {e.name} has {len(t.windings)} windings; the branch-flow SDP models two")
+                            raise NetworkError(
+                                f"{net.name}: {e.name} has {len(t.windings)} windings; the branch-flow SDP models two"
+                            )
                         w = t.windings if e.buses[0] == bus else t.windings[::-1]
                         parts.append(_transformer(e.name, nodes, y_pu, (w[0].conn, w[1].conn), t.phases))
                     else:
-                        raise NetworkError(f"{net.name}: {e.name} ({e.kind}) joins two buses; the branch-flow SDP models lines and transformers there")
+                        raise NetworkError(
+                            f"{net.name}: {e.name} ({e.kind}) joins two buses; the branch-flow SDP models lines and transformers there"
+                        )
                 out.append(_merge(parts))
         return out, shunts
 
@@ -540,9 +599,9 @@ class ThreePhaseSdp:
             constraints.append(sp.vstack(cap_rows).tocsr() @ x <= self.current_cap)
         if db.n:
             constraints.append(self._pair_w(db.a, db.b, db.vbase_v) >= DER_VMIN_PU**2)
-        a, b, base_m, _ = net.monitored
+        mon_a, mon_b, base_m, _ = net.monitored
         lo, hi = net.band
-        w_mon = self._pair_w(a, b, base_m)
+        w_mon = self._pair_w(mon_a, mon_b, base_m)
         constraints += [w_mon >= lo**2, w_mon <= hi**2]
         for blk in self._blocks:
             k = gram.sizes[blk]
@@ -619,7 +678,9 @@ class ThreePhaseSdp:
         low = {(int(i), int(j)): (lo * bm) ** 2 for i, j, bm in zip(a, b, base_m, strict=True)}
         out = {}
         for kind, br in (("load", net.load_branches), ("der", net.der_branches)):
-            out[kind] = np.array([low.get((int(i), int(j)), np.nan) / v**2 for i, j, v in zip(br.a, br.b, br.vbase_v, strict=True)])
+            out[kind] = np.array(
+                [low.get((int(i), int(j)), np.nan) / v**2 for i, j, v in zip(br.a, br.b, br.vbase_v, strict=True)]
+            )
         lm, owner = net.load_models, net.load_branches.owner
         out["load"] = np.where(lm.model[owner] != CONSTANT_Z, np.fmax(out["load"], lm.vminpu[owner] ** 2), out["load"])
         out["der"] = np.fmax(out["der"], DER_VMIN_PU**2)
@@ -655,7 +716,9 @@ class ThreePhaseSdp:
                 out.append(np.where(model == CONSTANT_PQ, np.maximum(1.0, w / lm.vmaxpu[owner] ** 2), w**e))
         return out[0], out[1]
 
-    def branch_caps(self, load_p_mw: np.ndarray, load_q_mvar: np.ndarray, der_p_mw: np.ndarray, q_limit_mvar: np.ndarray) -> dict[str, np.ndarray]:
+    def branch_caps(
+        self, load_p_mw: np.ndarray, load_q_mvar: np.ndarray, der_p_mw: np.ndarray, q_limit_mvar: np.ndarray
+    ) -> dict[str, np.ndarray]:
         """Per load and DER branch the cap on |i|² (p.u., inf where none): |S|²·c²/w at the
         worst end of w's range (|S|²/w is monotone in w on each law's piece), c = node base
         / branch base; a DER: (P² + Q̄²)·c²/w_low."""
@@ -669,12 +732,16 @@ class ThreePhaseSdp:
             out[kind] = mag * c**2 / self.s_base**2
         return out
 
-    def current_caps(self, load_p_mw: np.ndarray, load_q_mvar: np.ndarray, der_p_mw: np.ndarray, q_limit_mvar: np.ndarray) -> np.ndarray:
+    def current_caps(
+        self, load_p_mw: np.ndarray, load_q_mvar: np.ndarray, der_p_mw: np.ndarray, q_limit_mvar: np.ndarray
+    ) -> np.ndarray:
         """The caps of the lifted branches' |i|² (`branch_caps`), in `current_cap`'s order."""
         caps = self.branch_caps(load_p_mw, load_q_mvar, der_p_mw, q_limit_mvar)
         return np.array([caps[kind][j] for kind, j in self._cap_of])
 
-    def kcl_caps(self, load_p_mw: np.ndarray, load_q_mvar: np.ndarray, der_p_mw: np.ndarray, q_limit_mvar: np.ndarray) -> np.ndarray:
+    def kcl_caps(
+        self, load_p_mw: np.ndarray, load_q_mvar: np.ndarray, der_p_mw: np.ndarray, q_limit_mvar: np.ndarray
+    ) -> np.ndarray:
         """`kcl_cap`'s values: k·Σ of the caps of the wye branches at each row's node."""
         caps = self.branch_caps(load_p_mw, load_q_mvar, der_p_mw, q_limit_mvar)
         return np.array([k * sum(caps[kind][j] for kind, j in wyes) for k, wyes in self._kcl_wye])
@@ -746,20 +813,23 @@ class ThreePhaseSdp:
         """Per block at the last solution, its second-to-first eigenvalue ratio. The source's
         block (ξ, I) is measured by what its rank can change in the network instead: its
         current block L is in no objective term (the Thevenin losses are excluded, as in the
-        exact model), so an interior-point solution inflates it freely; only
-        Z·(L − I·Iᴴ)·Zᴴ reaches the source bus's voltages — its norm relative to theirs."""
+        exact model) and only capped (`_kcl_caps`), so an interior-point solution inflates
+        it within the cap; only Z·(L − I·Iᴴ)·Zᴴ reaches the source bus's voltages — its norm
+        relative to theirs."""
         x = self._x.value
-        out = []
+        if x is None:
+            raise RuntimeError("rank_ratios needs a solution")
+        out: list[float] = []
         for blk in self._blocks:
             g = self._gram.value(blk, x)
             if blk == self._source_block:
                 _, _, e_s, e_i = self._coords[0]
                 cur = g[1:, 0] / g[0, 0].real
                 excess = self._z_source @ (g[1:, 1:] - np.outer(cur, cur.conj())) @ self._z_source.conj().T
-                out.append(np.linalg.norm(excess, 2) / np.linalg.norm(e_s @ g @ e_s.conj().T, 2))
+                out.append(float(np.linalg.norm(excess, 2) / np.linalg.norm(e_s @ g @ e_s.conj().T, 2)))
                 continue
             eig = np.linalg.eigvalsh(g)[::-1]
-            out.append(eig[1] / max(eig[0], 1e-300) if eig.size > 1 else 0.0)
+            out.append(float(eig[1] / max(eig[0], 1e-300)) if eig.size > 1 else 0.0)
         return np.array(out)
 
     def solve(self, load_p_mw: np.ndarray, load_q_mvar: np.ndarray, der_p_mw: np.ndarray, q_limit_mvar: np.ndarray) -> BoundSolve:
@@ -775,7 +845,9 @@ class ThreePhaseSdp:
         start = time.perf_counter()
         for options in CLARABEL_ATTEMPTS:
             try:
-                self.problem.solve(solver=cp.CLARABEL, **options)
+                with warnings.catch_warnings():
+                    warnings.simplefilter("ignore", UserWarning)  # cvxpy's "inaccurate": the status says it
+                    self.problem.solve(solver=cp.CLARABEL, **options)
                 status = str(self.problem.status)
             except cp.error.SolverError:
                 status = "solver_error"
@@ -791,7 +863,9 @@ class ThreePhaseSdp:
 def _is_ideal(br: _Branch) -> bool:
     """A line whose impedance is below Z_IDEAL on equal bases at both ends (a switch)."""
     square = br.c_p.shape == br.c_s.shape and br.c_p.shape[0] == br.c_p.shape[1]
-    return bool(square and np.allclose(br.c_p, np.eye(br.p.size)) and np.allclose(br.c_s, br.c_p) and np.abs(br.z).max() < Z_IDEAL)
+    return bool(
+        square and np.allclose(br.c_p, np.eye(br.p.size)) and np.allclose(br.c_s, br.c_p) and np.abs(br.z).max() < Z_IDEAL
+    )
 
 
 def _pad(m: sp.csr_matrix, width: int) -> sp.csr_matrix:
@@ -827,6 +901,6 @@ def _merge(parts: list[_Branch]) -> _Branch:
         np.vstack([widen(b.c_p, b.p, pos_p, p.size) for b in parts]),
         np.vstack([widen(b.c_s, b.s, pos_s, s.size) for b in parts]),
         sla.block_diag(*[b.z for b in parts]),
-        sum(square(b.y_p, b.p, pos_p, p.size) for b in parts),
-        sum(square(b.y_s, b.s, pos_s, s.size) for b in parts),
+        np.sum([square(b.y_p, b.p, pos_p, p.size) for b in parts], axis=0),
+        np.sum([square(b.y_s, b.s, pos_s, s.size) for b in parts], axis=0),
     )
