@@ -14,12 +14,16 @@
   the paper day's load profile every 15 min) in one call, factorization included (≤ 500
   and ≤ 10 000 ms asked).
 
+<<<<<<< HEAD
 - `ieee123_sdp_compile_ms`: the SDP relaxation (`formulations.three_phase.bound`) on
   `ieee123` with PV on every second load, built and compiled once (its first solve's own
   time excluded); `ieee123_sdp_step_ms`: its median per-step solve over `SDP_STEPS`
   snapshots (≤ 60 000 and ≤ 2000 asked), `ieee123_sdp_optimal` how many ended optimal, and
   `ieee123_sdp_vs_ac_ratio` = that median / the AC OPF's median per step
   (`formulations.three_phase.optimum`, IPOPT's own time) on the same snapshots.
+=======
+- the three-phase AC OPF's keys (`ieee123_opf_…`, `eulv_opf_…`): `bench.unbalanced_opf`.
+>>>>>>> main
 
 Each time is the best of `REPEATS` calls (ms). Wall-clock figures: re-take them on a quiet
 machine.
@@ -83,6 +87,7 @@ def _dss_daily(case, scenario, pv_pu: np.ndarray) -> tuple[float, np.ndarray]:
 
 
 def run() -> dict:
+    from opfbench.bench import unbalanced_opf
     from opfbench.io import load_case
     from opfbench.multiphase import PhaseNetwork
     from opfbench.powerflow.multiphase import solve_phase_flow
@@ -115,7 +120,7 @@ def run() -> dict:
         ),
         REPEATS,
     )
-    return {
+    return unbalanced_opf.run() | {
         "eulv_snapshots": int(scenario.n_snapshots),
         "eulv_day_ms": day_ms,
         "eulv_dss_daily_ms": dss_ms,
