@@ -49,7 +49,7 @@ class StepContext:
         if self.reference is not None:
             return self.reference
         nan = np.full(self.res.n_snapshots, np.nan)
-        return Reference(nan, nan, nan, np.zeros(self.res.n_snapshots, dtype=bool))
+        return Reference(nan, nan, nan, np.zeros(self.res.n_snapshots, dtype=bool), nan)
 
 
 Value = Callable[[StepContext], Any]  # one value for every row, or an array of the rows
@@ -284,6 +284,15 @@ STEPS = Table(
             "that curtails",
             lambda c: np.asarray(c.frontier.curtails, dtype=bool),
         ),
+        Column(
+            "frontier_k",
+            "number",
+            NO_UNIT,
+            "the reserve k that frontier keeps: the configuration's, or 0 where its setpoints used the reserve (within "
+            "the DER's capability: Algorithm 3's forecast-aware limit); NaN where a setpoint exceeds the capability "
+            "itself (no frontier bounds a point no inverter can deliver; `frontier_kw` is NaN there)",
+            lambda c: c.frontier.k,
+        ),
     ),
     extra=Column(
         "<extra>",
@@ -345,6 +354,12 @@ TASK_SUMMARY = Table(
             "steps whose cost (losses + curtailed) lies more than 1e-4 kW below `frontier_kw`",
         ),
         Column("frontier_curtails", "true/false", NO_UNIT, "as in `steps.parquet`"),
+        Column(
+            "reserve_used_steps",
+            "integer",
+            NO_UNIT,
+            "steps compared with the frontier at k = 0 (their setpoints used the reserve; `frontier_k`)",
+        ),
         Column("not_ok_steps", "integer", NO_UNIT, "steps whose status is not ok"),
         Column("not_settled_steps", "integer", NO_UNIT, "steps where a closed-loop rule did not settle"),
         Column("pf_diverged_steps", "integer", NO_UNIT, "steps of status pf-diverged"),
@@ -419,7 +434,19 @@ SUMMARY = Table(
             "its frontier is the optimum's that may curtail (a configuration that curtails: Volt-Watt, reactive "
             "priority, `acopf:curtail=true`)",
         ),
-        Column("frontier_missing_steps", "integer", NO_UNIT, "steps without a frontier optimum at their compliance"),
+        Column(
+            "frontier_missing_steps",
+            "integer",
+            NO_UNIT,
+            "steps without a frontier optimum at their compliance (none at their ε, or setpoints beyond the DER's "
+            "capability: `excursion_steps`)",
+        ),
+        Column(
+            "reserve_used_steps",
+            "integer",
+            NO_UNIT,
+            "steps whose setpoints used the reserve k (within the DER's capability), compared with the frontier at k = 0",
+        ),
         Column(
             "below_frontier_steps",
             "integer",

@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 
 from opfbench.data import paper_day
-from opfbench.formulations.frontier import COVER_PU, EPSILONS, Frontier, excursion, frontier, reference, widened
+from opfbench.formulations.frontier import COVER_PU, EPSILONS, Frontier, Part, excursion, frontier, reference, widened
 from opfbench.formulations.opf_strategies import run_acopf
 from opfbench.io import load_network
 from opfbench.registry.catalog import configuration, run_strategy
@@ -126,10 +126,10 @@ def test_a_reference_takes_the_curtailing_frontier_where_the_rule_curtailed(tigh
     e = np.zeros(scenario.n_snapshots)
     curtailed = np.zeros(scenario.n_snapshots, dtype=bool)
     curtailed[[3, 4]] = True
-    ref = reference(plain, e, cutting, rows, curtailed)
+    ref = reference(plain, e, [(Part(cutting, rows), curtailed)])
     assert ref.curtails.tolist() == curtailed.tolist()
     np.testing.assert_array_equal(ref.cost_kw[[3, 4]], cutting.cost_kw[[1, 2], 0])
     np.testing.assert_array_equal(ref.cost_kw[~curtailed], plain.cost_kw[~curtailed, 0])
     curtailed[0] = True  # a step the curtailing frontier was not computed on
     with pytest.raises(ValueError, match="lacks a step"):
-        reference(plain, e, cutting, rows, curtailed)
+        reference(plain, e, [(Part(cutting, rows), curtailed)])

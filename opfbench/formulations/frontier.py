@@ -17,6 +17,20 @@ objective losses + curtailed power): the reference of a configuration at the ste
 it curtails (Volt-Watt, reactive priority), whose points lie in its set and not in the
 plain one's (`reference`); at its other steps the plain frontier's point bounds it.
 
+The capability a step used (`capability_used`). The OPF at reserve k lets every DER use
+(1 − k)·Qmax(P) at the power P it delivers. A rule's setpoint may use more: Algorithm 3
+(a forecast-aware limit, `strategies.limits`) evaluates the limit at the forecast P^F and
+so eats into the reserve — by design: the reserve k is an operator's policy for fault
+ride-through, which the paper trades for losses when a forecast says the capability will
+be there. The inverter can deliver such a point (it is within its capability Qmax(P)), so
+the step is compared with the frontier at k = 0 — the full capability, whose set holds it
+(`Part`, `reference`). A setpoint beyond Qmax(P) itself (Algorithm 3 without `safe`, e.g.
+Q from a PV unit whose power is still 0 at dawn while the forecast says it rises) is one
+no inverter delivers — it cannot exceed its rating — and lies in no OPF's set: no frontier
+point bounds it, so the step has no reference (NaN: counted as a step without one, and the
+period gets no gap or share at equal compliance; `safe=true` caps the limit at Qmax(P)).
+So the reference is a lower bound for every operating point a rule can reach.
+
 The frontier point at ε = 0 is the `acopf` strategy's own answer (passed in where the run
 has it). Widening a band that does not bind changes no optimum: where the ε = 0 optimum
 keeps every |V| at least `MARGIN_PU` inside its limits it is the point at every ε, and only
@@ -37,6 +51,7 @@ from __future__ import annotations
 import math
 import threading
 from collections import OrderedDict
+from collections.abc import Sequence
 from dataclasses import dataclass, replace
 
 import numpy as np
@@ -50,6 +65,8 @@ EPSILONS: tuple[float, ...] = (0.0, 0.0025, 0.005, 0.01, 0.02, 0.05, math.inf)
 COVER_PU = 1e-6  # an excursion up to ε + this is covered by ε (the OPF's voltage tolerance)
 MARGIN_PU = 1e-6  # an optimum this far inside every limit does not bind its band
 OPTIMA = (OK, FALLBACK_COLD)  # statuses whose point is a solver's optimum
+RESERVE_MVAR = 1e-7  # a setpoint this far beyond (1 − k)·Qmax uses the reserve (the rule engine's Q tolerance)
+CAPABILITY_MVAR = 1e-9  # a setpoint this far beyond Qmax exceeds the capability (`excursion_steps`' threshold)
 _WIDENED = 32  # widened networks kept per process (least recently used dropped)
 _cache: OrderedDict[tuple[Network, float], Network] = OrderedDict()
 _lock = threading.Lock()
@@ -104,6 +121,7 @@ class Frontier:
     status: np.ndarray
     solved: np.ndarray
     curtail: bool = False
+    k: float = 0.0
 
     @property
     def n_snapshots(self) -> int:
@@ -129,28 +147,57 @@ class Frontier:
         return cost, bound, np.where(missing, np.nan, self.eps[pick])
 
 
+@dataclass(frozen=True)
+class Part:
+    """A frontier computed on some of a task's steps, `rows` (sorted): the reference of a
+    configuration at those of its steps that lie outside the plain frontier's set (module
+    docstring) — it curtails (`front.curtail`), or uses its reserve (`front.k` = 0)."""
+
+    front: Frontier
+    rows: np.ndarray
+
+    def at(self, excursion_pu: np.ndarray, where: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """`Frontier.at` for the steps `where` (task rows, each among `rows`) at their excursions."""
+        at = np.searchsorted(self.rows, where)
+        if where.size and (at.max() >= self.rows.size or not np.array_equal(self.rows[at], where)):
+            raise ValueError("a partial frontier lacks a step it is the reference of")
+        return self.front.at(excursion_pu, at)
+
+
+def capability_used(scenario: Scenario, res: StrategyResult) -> tuple[np.ndarray, np.ndarray]:
+    """(beyond_reserve, beyond_capability), (S,) bool each: the steps where some setpoint of
+    `res` exceeds (1 − k)·Qmax(P) but not Qmax(P) — it used its reserve —, and those where it
+    exceeds Qmax(P) itself, P the power each DER delivers (module docstring)."""
+    p = scenario.der_p_mw if res.curtailed_mw is None else scenario.der_p_mw - np.nan_to_num(res.curtailed_mw)
+    cap = scenario.qmax_mvar(p)
+    with np.errstate(invalid="ignore"):
+        beyond_capability = (np.abs(res.q_mvar) > cap + CAPABILITY_MVAR).any(axis=1)
+        beyond_reserve = (np.abs(res.q_mvar) > (1.0 - res.k) * cap + RESERVE_MVAR).any(axis=1)
+    return beyond_reserve & ~beyond_capability, beyond_capability
+
+
 def reference(
     plain: Frontier,
     excursion_pu: np.ndarray,
-    cutting: Frontier | None = None,
-    rows: np.ndarray | None = None,
-    curtailed: np.ndarray | None = None,
+    parts: Sequence[tuple[Part, np.ndarray]] = (),
+    unbounded: np.ndarray | None = None,
 ) -> Reference:
-    """The plain frontier's point at each step's excursion (`Frontier.at`), and where the
-    configuration curtailed (`curtailed` (S,) bool) the point of `cutting`, the frontier of
-    the optimum that may curtail computed on the steps `rows` (sorted, holding those)."""
-    cost, bound, eps = plain.at(excursion_pu)
+    """Each step's frontier point at its excursion (`Frontier.at`): the plain frontier's, and
+    for each (part, steps) of `parts` — `steps` (S,) bool, a later part winning — the part's
+    point at those steps; NaN at the `unbounded` steps (S,) bool (beyond the capability: no
+    frontier bounds them). `Reference.k` is the reserve of each step's frontier."""
+    exc = np.asarray(excursion_pu, dtype=float)
+    cost, bound, eps = (a.copy() for a in plain.at(exc))
     curtails = np.zeros(cost.size, dtype=bool)
-    if cutting is None or rows is None or curtailed is None or not curtailed.any():
-        return Reference(cost, bound, eps, curtails)
-    where = np.flatnonzero(curtailed)
-    at = np.searchsorted(rows, where)
-    if at.max() >= rows.size or not np.array_equal(rows[at], where):
-        raise ValueError("the curtailing frontier lacks a step where the configuration curtailed")
-    c_cost, c_bound, c_eps = cutting.at(np.asarray(excursion_pu, dtype=float)[where], at)
-    cost, bound, eps = cost.copy(), bound.copy(), eps.copy()
-    cost[where], bound[where], eps[where], curtails[where] = c_cost, c_bound, c_eps, True
-    return Reference(cost, bound, eps, curtails)
+    k = np.full(cost.size, plain.k)
+    for part, steps in parts:
+        where = np.flatnonzero(steps)
+        if where.size:
+            cost[where], bound[where], eps[where] = part.at(exc[where], where)
+            curtails[where], k[where] = part.front.curtail, part.front.k
+    if unbounded is not None and unbounded.any():
+        cost[unbounded], bound[unbounded], eps[unbounded], k[unbounded] = np.nan, np.nan, np.nan, np.nan
+    return Reference(cost, bound, eps, curtails, k)
 
 
 def _cost(res: StrategyResult) -> np.ndarray:
@@ -221,7 +268,7 @@ def frontier(
         if rows.size:
             part = replace(scenario.take(rows), net=widened(net, grid[j]))
             record(rows, run_acopf(part, k, curtail=curtail), j)
-    return Frontier(grid, cost, bound, exc, status, solved, curtail)
+    return Frontier(grid, cost, bound, exc, status, solved, curtail, float(k))
 
 
 def tightened(scenario: Scenario, k: float, margin: float, q_mvar: np.ndarray, ok: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -30,7 +30,7 @@ import pandas as pd
 from threadpoolctl import threadpool_limits
 
 from opfbench.errors import InputError
-from opfbench.formulations.frontier import Frontier, frontier, reference
+from opfbench.formulations.frontier import Frontier, Part, capability_used, frontier, reference
 from opfbench.learned.fitted import Fitted
 from opfbench.learned.rules import install
 from opfbench.plugins import PluginSource, ensure, loaded
@@ -193,6 +193,26 @@ def _curtailed(res: StrategyResult) -> np.ndarray:
     return np.nan_to_num(res.curtailed_kw) > 0
 
 
+def _needs(
+    scenarios: dict[tuple[str, str], Scenario], mode: str, configs: list[tuple[str, str, StrategyResult]], n_steps: int
+) -> tuple[dict[tuple[bool, bool], dict[tuple[str, str], np.ndarray]], dict[tuple[str, str], np.ndarray]]:
+    """Per partial frontier (curtail, at k = 0) each configuration's (source, name) steps
+    (n_steps,) bool whose reference it is (`formulations.frontier`): the optimum that may
+    curtail where it curtailed (at k, or at k = 0 where it also used its reserve), the
+    plain optimum at k = 0 where it used its reserve only; and each configuration's steps
+    whose setpoints exceed the capability (no frontier bounds them)."""
+    out: dict[tuple[bool, bool], dict[tuple[str, str], np.ndarray]] = {}
+    unbounded: dict[tuple[str, str], np.ndarray] = {}
+    for source, name, res in configs:
+        cut = _curtailed(res) if curtails(name) else np.zeros(n_steps, dtype=bool)
+        reserve, beyond = capability_used(scenarios[mode, source], res)
+        masks = {(True, False): cut & ~reserve, (False, True): ~cut & reserve, (True, True): cut & reserve}
+        for kind, mask in masks.items():
+            out.setdefault(kind, {})[source, name] = mask
+        unbounded[source, name] = beyond
+    return out, unbounded
+
+
 def run_task(inp: TaskInput) -> TaskOutput:
     """Run every night mode, forecast source and strategy of the task, the strategies of a
     (night mode, source) on one scenario — a snapshot-wise strategy once on the night modes'
@@ -255,21 +275,23 @@ def run_task(inp: TaskInput) -> TaskOutput:
                 drawn.append((plain, front))
             if front is not None:
                 fronts.append(frontier_rows(t.case, t.k, mode, time, inp.step_h, front))
-            cut = {(s, n): _curtailed(r) for s, results in by_source.items() for n, r in results.items() if curtails(n)}
-            rows = np.flatnonzero(np.logical_or.reduce([*cut.values(), np.zeros(inp.n_steps, dtype=bool)]))
-            cutting = frontier(plain.take(rows), t.k, curtail=True) if rows.size and front is not None else None
-            if cutting is not None:
-                fronts.append(frontier_rows(t.case, t.k, mode, time[rows], inp.step_h, cutting))
-            for source, results in by_source.items():
-                for name, res in results.items():
-                    ref = (
-                        None
-                        if front is None
-                        else reference(front, res.voltage_violation(), cutting, rows, cut.get((source, name)))
-                    )
-                    steps.append(step_rows(t.case, mode, source, time, inp.step_h, night, res, inp.columns, ref))
-                    for table, columns in detail_rows(t.case, mode, source, time, res, inp.detail).items():
-                        detail[table].append(columns)
+            configs = [(source, name, res) for source, results in by_source.items() for name, res in results.items()]
+            needs, unbounded = ({}, {}) if front is None else _needs(scenarios, mode, configs, inp.n_steps)
+            parts: dict[tuple[bool, bool], Part] = {}
+            for (c, full), masks in needs.items():
+                rows = np.flatnonzero(np.logical_or.reduce([*masks.values(), np.zeros(inp.n_steps, dtype=bool)]))
+                if rows.size:
+                    part = parts[c, full] = Part(frontier(plain.take(rows), 0.0 if full else t.k, curtail=c), rows)
+                    if not full:  # the optimum that may curtail at k (at k = 0 it is a few steps of another k's: not written)
+                        fronts.append(frontier_rows(t.case, t.k, mode, time[rows], inp.step_h, part.front))
+            for source, name, res in configs:
+                ref = None
+                if front is not None:
+                    which = [(part, needs[kind][source, name]) for kind, part in parts.items()]
+                    ref = reference(front, res.voltage_violation(), which, unbounded[source, name])
+                steps.append(step_rows(t.case, mode, source, time, inp.step_h, night, res, inp.columns, ref))
+                for table, columns in detail_rows(t.case, mode, source, time, res, inp.detail).items():
+                    detail[table].append(columns)
         table = stack(steps, step_columns(inp.columns), time.tz)
         front_table = stack(fronts, FRONTIER_COLUMNS, time.tz)
     details = {name: stack(parts, DETAIL_COLUMNS[name], time.tz) for name, parts in detail.items()}
