@@ -49,7 +49,7 @@ class StepContext:
         if self.reference is not None:
             return self.reference
         nan = np.full(self.res.n_snapshots, np.nan)
-        return Reference(nan, nan, nan, np.zeros(self.res.n_snapshots, dtype=bool), nan)
+        return Reference(nan, nan, nan, np.zeros(self.res.n_snapshots, dtype=bool), np.full(self.res.n_snapshots, ""))
 
 
 Value = Callable[[StepContext], Any]  # one value for every row, or an array of the rows
@@ -285,13 +285,14 @@ STEPS = Table(
             lambda c: np.asarray(c.frontier.curtails, dtype=bool),
         ),
         Column(
-            "frontier_k",
-            "number",
+            "frontier_limit",
+            "text",
             NO_UNIT,
-            "the reserve k that frontier keeps: the configuration's, or 0 where its setpoints used the reserve (within "
-            "the DER's capability: Algorithm 3's forecast-aware limit); NaN where a setpoint exceeds the capability "
-            "itself (no frontier bounds a point no inverter can deliver; `frontier_kw` is NaN there)",
-            lambda c: c.frontier.k,
+            "what that frontier's DER may use: `reserve` (1 − k)·Qmax(P), the configuration's own limits; `forecast` "
+            "Algorithm 3's limit of its forecast source, capped at Qmax(P) (where its setpoints used the reserve); "
+            "`capability` Qmax(P), k = 0 (where they exceed that too); empty where a setpoint exceeds Qmax(P) itself "
+            "(no frontier bounds a point no inverter can deliver: `frontier_kw` is NaN)",
+            lambda c: np.asarray(c.frontier.limit, dtype=str),
         ),
     ),
     extra=Column(
@@ -358,7 +359,7 @@ TASK_SUMMARY = Table(
             "reserve_used_steps",
             "integer",
             NO_UNIT,
-            "steps compared with the frontier at k = 0 (their setpoints used the reserve; `frontier_k`)",
+            "steps whose setpoints used the reserve (`frontier_limit` forecast or capability)",
         ),
         Column("not_ok_steps", "integer", NO_UNIT, "steps whose status is not ok"),
         Column("not_settled_steps", "integer", NO_UNIT, "steps where a closed-loop rule did not settle"),
@@ -445,7 +446,8 @@ SUMMARY = Table(
             "reserve_used_steps",
             "integer",
             NO_UNIT,
-            "steps whose setpoints used the reserve k (within the DER's capability), compared with the frontier at k = 0",
+            "steps whose setpoints used the reserve k (within the DER's capability), compared with the frontier at the "
+            "capability they used (`frontier_limit` in `steps.parquet`)",
         ),
         Column(
             "below_frontier_steps",

@@ -133,3 +133,20 @@ def test_a_reference_takes_the_curtailing_frontier_where_the_rule_curtailed(tigh
     curtailed[0] = True  # a step the curtailing frontier was not computed on
     with pytest.raises(ValueError, match="lacks a step"):
         reference(plain, e, [(Part(cutting, rows), curtailed)])
+
+
+def test_an_optimum_at_a_given_reactive_limit_keeps_it_and_the_limit_stays_within_the_capability(tight):
+    """The frontier at the capability a rule used (`Scenario.q_limit_mvar`, Algorithm 3's
+    limit): the OPF's DER keep the given limit (here half the reserve-free capability, so the
+    optimum loses more than the one at k = 0), and a limit beyond the capability is refused."""
+    from opfbench.errors import InputError
+
+    scenario, front = tight
+    half = replace(scenario, q_limit_mvar=0.5 * scenario.qmax_mvar())
+    res = run_acopf(half, 0.0)
+    assert (np.abs(res.q_mvar) <= half.q_limit_mvar + 1e-9).all()
+    assert (np.abs(res.q_mvar) >= half.q_limit_mvar - 1e-6).any()  # it binds somewhere
+    assert (res.losses_kw >= front.cost_kw[:, -1] - 1e-4).all() and res.losses_kw.sum() > np.nansum(front.cost_kw[:, 0])
+    assert np.array_equal(half.take(np.array([2, 5])).q_limit_mvar, half.q_limit_mvar[[2, 5]])
+    with pytest.raises(InputError, match="q_limit_mvar must lie within"):
+        replace(scenario, q_limit_mvar=1.5 * scenario.qmax_mvar() + 1e-3)

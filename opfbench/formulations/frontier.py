@@ -17,33 +17,24 @@ objective losses + curtailed power): the reference of a configuration at the ste
 it curtails (Volt-Watt, reactive priority), whose points lie in its set and not in the
 plain one's (`reference`); at its other steps the plain frontier's point bounds it.
 
-The capability a step used (`capability_used`). The OPF at reserve k lets every DER use
-(1 − k)·Qmax(P) at the power P it delivers. A rule's setpoint may use more: Algorithm 3
-(a forecast-aware limit, `strategies.limits`) evaluates the limit at the forecast P^F and
-so eats into the reserve — by design: the reserve k is an operator's policy for fault
-ride-through, which the paper trades for losses when a forecast says the capability will
-be there. The inverter can deliver such a point (it is within its capability Qmax(P)), so
-the step is compared with the frontier at k = 0 — the full capability, whose set holds it
-(`Part`, `reference`). A setpoint beyond Qmax(P) itself (Algorithm 3 without `safe`, e.g.
-Q from a PV unit whose power is still 0 at dawn while the forecast says it rises) is one
-no inverter delivers — it cannot exceed its rating — and lies in no OPF's set: no frontier
-point bounds it, so the step has no reference (NaN: counted as a step without one, and the
-period gets no gap or share at equal compliance; `safe=true` caps the limit at Qmax(P)).
-So the reference is a lower bound for every operating point a rule can reach.
-
-The frontier point at ε = 0 is the `acopf` strategy's own answer (passed in where the run
-has it). Widening a band that does not bind changes no optimum: where the ε = 0 optimum
-keeps every |V| at least `MARGIN_PU` inside its limits it is the point at every ε, and only
-the other steps are solved again — first with the widest band, whose optimum (excursion
-e*) is the point at every ε ≥ e*, then at each grid ε below e*, largest first, each
-answer also covering the smaller ε its own excursion stays within. Each ε is solved by the
-AC OPF on the network with its band widened (`widened`), its fast path and fallback chain
-included; an answer counts as the optimum where its status is "ok" or "fallback-cold" (a
-solver's optimum), else the step has no optimum at that ε (infeasible, or only a fallback
-point), and its bound where the relaxation was solved.
-
-Units: kW, p.u.; costs are losses (active power the DER curtail, where a formulation may
-curtail, added).
+The capability a step used (`Part`, `reference`; the study picks each step's frontier). The
+OPF at reserve k lets every DER use (1 − k)·Qmax(P) at the power P it delivers (limit
+RESERVE). A rule's setpoint may use more: Algorithm 3 (`strategies.limits`) evaluates the
+limit at the forecast P^F too and so eats into the reserve — by design: the reserve k is an
+operator's policy for fault ride-through, which the paper trades for losses where the
+forecast says the capability will be there; the inverter can deliver such a point, for it
+lies within its capability Qmax(P^C). Such a step is compared with the frontier at the
+capability its setpoints used — the OPF whose DER may use Algorithm 3's limit of the rule's
+forecast source, capped at Qmax(P^C) (limit FORECAST, a scenario's `q_limit_mvar`: one
+frontier per forecast source, shared by every rule reading it) —, or, where a setpoint
+exceeds even that (or the rule curtails too), with the frontier at k = 0, the full
+capability (limit CAPABILITY). A setpoint beyond Qmax(P^C) itself (Algorithm 3 without
+`safe`, e.g. Q from a PV unit whose power is still 0 at dawn while the forecast says it
+rises) is one no inverter delivers — it cannot exceed its rating — and lies in no OPF's
+set: no frontier point bounds it, so the step has no reference (NaN: a step without one,
+and the period gets no gap or share at equal compliance; `safe=true` caps the limit at
+Qmax(P^C)). So each step's reference is a lower bound for every operating point a rule
+can reach, at the tightest of these sets that holds it.
 """
 
 from __future__ import annotations
@@ -65,8 +56,11 @@ EPSILONS: tuple[float, ...] = (0.0, 0.0025, 0.005, 0.01, 0.02, 0.05, math.inf)
 COVER_PU = 1e-6  # an excursion up to ε + this is covered by ε (the OPF's voltage tolerance)
 MARGIN_PU = 1e-6  # an optimum this far inside every limit does not bind its band
 OPTIMA = (OK, FALLBACK_COLD)  # statuses whose point is a solver's optimum
-RESERVE_MVAR = 1e-7  # a setpoint this far beyond (1 − k)·Qmax uses the reserve (the rule engine's Q tolerance)
+RESERVE_MVAR = 1e-7  # a setpoint this far beyond a limit exceeds it (the rule engine's Q tolerance)
 CAPABILITY_MVAR = 1e-9  # a setpoint this far beyond Qmax exceeds the capability (`excursion_steps`' threshold)
+#: What a frontier's DER may use (`Frontier.limit`, module docstring): (1 − k)·Qmax(P), the
+#: reserve kept; a forecast source's Algorithm 3 limit (capped at Qmax(P^C)); Qmax(P) (k = 0).
+RESERVE, FORECAST, CAPABILITY = "reserve", "forecast", "capability"
 _WIDENED = 32  # widened networks kept per process (least recently used dropped)
 _cache: OrderedDict[tuple[Network, float], Network] = OrderedDict()
 _lock = threading.Lock()
@@ -121,7 +115,7 @@ class Frontier:
     status: np.ndarray
     solved: np.ndarray
     curtail: bool = False
-    k: float = 0.0
+    limit: str = RESERVE
 
     @property
     def n_snapshots(self) -> int:
@@ -151,7 +145,8 @@ class Frontier:
 class Part:
     """A frontier computed on some of a task's steps, `rows` (sorted): the reference of a
     configuration at those of its steps that lie outside the plain frontier's set (module
-    docstring) — it curtails (`front.curtail`), or uses its reserve (`front.k` = 0)."""
+    docstring) — it curtails (`front.curtail`), or its setpoints used its reserve
+    (`front.limit` FORECAST or CAPABILITY)."""
 
     front: Frontier
     rows: np.ndarray
@@ -164,16 +159,17 @@ class Part:
         return self.front.at(excursion_pu, at)
 
 
-def capability_used(scenario: Scenario, res: StrategyResult) -> tuple[np.ndarray, np.ndarray]:
-    """(beyond_reserve, beyond_capability), (S,) bool each: the steps where some setpoint of
-    `res` exceeds (1 − k)·Qmax(P) but not Qmax(P) — it used its reserve —, and those where it
-    exceeds Qmax(P) itself, P the power each DER delivers (module docstring)."""
-    p = scenario.der_p_mw if res.curtailed_mw is None else scenario.der_p_mw - np.nan_to_num(res.curtailed_mw)
-    cap = scenario.qmax_mvar(p)
+def capability(scenario: Scenario, res: StrategyResult) -> np.ndarray:
+    """(S, n_der) MVAr: each DER's capability Qmax at the power it delivered in `res`."""
+    return scenario.qmax_mvar(
+        scenario.der_p_mw if res.curtailed_mw is None else scenario.der_p_mw - np.nan_to_num(res.curtailed_mw)
+    )
+
+
+def within(res: StrategyResult, limit_mvar: np.ndarray, tolerance: float = RESERVE_MVAR) -> np.ndarray:
+    """(S,) bool: every setpoint of `res` within ±`limit_mvar` (S, n_der), up to `tolerance` MVAr."""
     with np.errstate(invalid="ignore"):
-        beyond_capability = (np.abs(res.q_mvar) > cap + CAPABILITY_MVAR).any(axis=1)
-        beyond_reserve = (np.abs(res.q_mvar) > (1.0 - res.k) * cap + RESERVE_MVAR).any(axis=1)
-    return beyond_reserve & ~beyond_capability, beyond_capability
+        return (np.abs(res.q_mvar) <= limit_mvar + tolerance).all(axis=1)
 
 
 def reference(
@@ -184,20 +180,20 @@ def reference(
 ) -> Reference:
     """Each step's frontier point at its excursion (`Frontier.at`): the plain frontier's, and
     for each (part, steps) of `parts` — `steps` (S,) bool, a later part winning — the part's
-    point at those steps; NaN at the `unbounded` steps (S,) bool (beyond the capability: no
-    frontier bounds them). `Reference.k` is the reserve of each step's frontier."""
+    point at those steps; NaN (limit "") at the `unbounded` steps (S,) bool: setpoints beyond
+    the capability, which no frontier bounds."""
     exc = np.asarray(excursion_pu, dtype=float)
     cost, bound, eps = (a.copy() for a in plain.at(exc))
     curtails = np.zeros(cost.size, dtype=bool)
-    k = np.full(cost.size, plain.k)
+    limit = np.full(cost.size, plain.limit, dtype=object)
     for part, steps in parts:
         where = np.flatnonzero(steps)
         if where.size:
             cost[where], bound[where], eps[where] = part.at(exc[where], where)
-            curtails[where], k[where] = part.front.curtail, part.front.k
+            curtails[where], limit[where] = part.front.curtail, part.front.limit
     if unbounded is not None and unbounded.any():
-        cost[unbounded], bound[unbounded], eps[unbounded], k[unbounded] = np.nan, np.nan, np.nan, np.nan
-    return Reference(cost, bound, eps, curtails, k)
+        cost[unbounded], bound[unbounded], eps[unbounded], limit[unbounded] = np.nan, np.nan, np.nan, ""
+    return Reference(cost, bound, eps, curtails, limit)
 
 
 def _cost(res: StrategyResult) -> np.ndarray:
@@ -227,9 +223,11 @@ def frontier(
     at_zero: StrategyResult | None = None,
     eps: tuple[float, ...] = EPSILONS,
     curtail: bool = False,
+    limit: str = RESERVE,
 ) -> Frontier:
     """The frontier of `scenario` at reserve k (module docstring); `at_zero`: the AC OPF's
-    result on the same scenario and k (with the same `curtail`), where the caller has it."""
+    result on the same scenario and k (with the same `curtail`), where the caller has it;
+    `limit` says what the DER may use (recorded; the scenario and k give it)."""
     from opfbench.formulations.opf_strategies import run_acopf
 
     grid = np.asarray(eps, dtype=float)
@@ -268,7 +266,7 @@ def frontier(
         if rows.size:
             part = replace(scenario.take(rows), net=widened(net, grid[j]))
             record(rows, run_acopf(part, k, curtail=curtail), j)
-    return Frontier(grid, cost, bound, exc, status, solved, curtail, float(k))
+    return Frontier(grid, cost, bound, exc, status, solved, curtail, limit)
 
 
 def tightened(scenario: Scenario, k: float, margin: float, q_mvar: np.ndarray, ok: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

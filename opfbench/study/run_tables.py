@@ -5,7 +5,7 @@ memory at once.
 
 Every configuration's step is compared with the frontier (`formulations.frontier`) at the
 smallest grid ε that covers its own excursion beyond the voltage band, and at the capability
-its setpoints used (the frontier at k = 0 where they used the reserve; none where they
+its setpoints used (Algorithm 3's, or k = 0, where they used the reserve; none where they
 exceed the DER's capability, which no inverter delivers): its cost (losses
 plus curtailed power) against the optimum as compliant as it — the **gap at equal
 compliance** (≥ 0 where the optimum is global and the point is in the OPF's set) — and,
@@ -21,7 +21,7 @@ import numpy as np
 import pandas as pd
 
 from opfbench.errors import InputError
-from opfbench.formulations.frontier import Frontier
+from opfbench.formulations.frontier import CAPABILITY, FORECAST, Frontier
 from opfbench.registry.catalog import configuration, describe
 from opfbench.registry.references import BASELINE, REFERENCE_OPTIMUM
 from opfbench.result import NOT_SETTLED, OK, PF_DIVERGED, RULE_NON_FINITE, Reference, StrategyResult
@@ -47,6 +47,7 @@ VUF_LIMIT_PCT = 2.0  # EN 50160's limit of the voltage unbalance factor, %
 EXCURSION_MVAR = 1e-9  # a step's setpoint exceeds the physical capability beyond this
 BELOW_KW = 1e-4  # a cost this far below its frontier point counts as below it (solver tolerances)
 SHARE_MIN_KWH = 1e-6  # a reduction below this defines no share
+RESERVE_USED = (FORECAST, CAPABILITY)  # the frontier limits of a step whose setpoints used the reserve
 
 
 def extra_columns(labels: tuple[str, ...]) -> tuple[str, ...]:
@@ -188,7 +189,7 @@ def partial_summary(steps: pd.DataFrame) -> pd.DataFrame:
         front_bound=steps.frontier_bound_kw * steps.step_h,
         front_bound_missing=steps.frontier_bound_kw.isna().astype(np.int64),
         below=(cost < steps.frontier_kw - BELOW_KW).astype(np.int64),
-        reserve_used=(steps.frontier_k < steps.k).astype(np.int64),
+        reserve_used=steps.frontier_limit.isin(RESERVE_USED).astype(np.int64),
         measured=measured.astype(np.int64),
         measured_h=steps.step_h.where(measured, 0.0),
         lb_energy=steps.lower_bound_kw * steps.step_h,
@@ -277,8 +278,8 @@ def summarize(partials: list[pd.DataFrame], order: list[tuple]) -> pd.DataFrame:
     closed-loop rule did not settle. At equal compliance (module docstring): frontier_kwh
     the frontier's optimum at each step's compliance and the capability it used (NaN unless
     every step has one; frontier_missing_steps count those without — no optimum at their ε,
-    or setpoints beyond the DER's capability —, reserve_used_steps those compared with the
-    frontier at k = 0: their setpoints used the reserve), frontier_bound_kwh its certified bound,
+    or setpoints beyond the DER's capability —, reserve_used_steps those whose setpoints used
+    the reserve, compared at the capability they used), frontier_bound_kwh its certified bound,
     gap_eq_kwh = cost_kwh − frontier_kwh (a step's cost within BELOW_KW under its frontier
     point counts as on it: the solvers' tolerances), gap_eq_pct of frontier_kwh, share_eq_pct =
     100·(no_action_kwh − cost_kwh)/(no_action_kwh − frontier_kwh) where that reduction
