@@ -9,8 +9,8 @@ a lower bound for every operating point whose excursion beyond the band is at mo
 rule's step is compared with the frontier point at the smallest grid ε that covers the
 rule's own excursion at that step (`Frontier.at`): its gap there is never negative, up to
 the optimum being global (certified by the relaxation almost everywhere; IPOPT's local
-optimum elsewhere) and the rule's point lying in the OPF's set (within its capability,
-its active power its own).
+optimum elsewhere) and the rule's point lying in the OPF's set (within the capability the
+OPF's DER may use, below; its active power its own).
 
 With `curtail` the frontier is that of the AC OPF that may curtail (`acopf:curtail=true`:
 objective losses + curtailed power): the reference of a configuration at the steps where
