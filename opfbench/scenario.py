@@ -431,6 +431,11 @@ class Scenario(Generic[NetT]):
             return False
         return self.pv_night_q[:, None] & self.net.der_solar[None, :]
 
+    def usable_q_mvar(self, k: float) -> np.ndarray:
+        """(S, n_der) MVAr: the |Q| a formulation's DER may use at reserve k — `q_limit_mvar`
+        where given, else (1 − k)·Qmax(P^C)."""
+        return (1.0 - k) * self.qmax_mvar() if self.q_limit_mvar is None else np.array(self.q_limit_mvar)
+
     def qmax_mvar(self, p_mw: np.ndarray | None = None) -> np.ndarray:
         """(S, n_der) physical Qmax at active power `p_mw` (default P^C), MVAr, with the
         "Q at night" capability for the solar units at the `pv_night_q` snapshots."""

@@ -35,6 +35,20 @@ set: no frontier point bounds it, so the step has no reference (NaN: a step with
 and the period gets no gap or share at equal compliance; `safe=true` caps the limit at
 Qmax(P^C)). So each step's reference is a lower bound for every operating point a rule
 can reach, at the tightest of these sets that holds it.
+
+The frontier point at ε = 0 is the `acopf` strategy's own answer (passed in where the run
+has it). Widening a band that does not bind changes no optimum: where the ε = 0 optimum
+keeps every |V| at least `MARGIN_PU` inside its limits it is the point at every ε, and only
+the other steps are solved again — first with the widest band, whose optimum (excursion
+e*) is the point at every ε ≥ e*, then at each grid ε below e*, largest first, each
+answer also covering the smaller ε its own excursion stays within. Each ε is solved by the
+AC OPF on the network with its band widened (`widened`), its fast path and fallback chain
+included; an answer counts as the optimum where its status is "ok" or "fallback-cold" (a
+solver's optimum), else the step has no optimum at that ε (infeasible, or only a fallback
+point), and its bound where the relaxation was solved.
+
+Units: kW, p.u.; costs are losses (active power the DER curtail, where a formulation may
+curtail, added).
 """
 
 from __future__ import annotations
@@ -44,9 +58,11 @@ import threading
 from collections import OrderedDict
 from collections.abc import Sequence
 from dataclasses import dataclass, replace
+from typing import TypeVar
 
 import numpy as np
 
+from opfbench.multiphase import PhaseNetwork
 from opfbench.network import V_LIMIT_MAX_PU, Network
 from opfbench.result import FALLBACK_COLD, OK, Reference, StrategyResult
 from opfbench.scenario import Scenario
@@ -62,13 +78,16 @@ CAPABILITY_MVAR = 1e-9  # a setpoint this far beyond Qmax exceeds the capability
 #: reserve kept; a forecast source's Algorithm 3 limit (capped at Qmax(P^C)); Qmax(P) (k = 0).
 RESERVE, FORECAST, CAPABILITY = "reserve", "forecast", "capability"
 _WIDENED = 32  # widened networks kept per process (least recently used dropped)
-_cache: OrderedDict[tuple[Network, float], Network] = OrderedDict()
+_cache: OrderedDict[tuple[Network | PhaseNetwork, float], Network | PhaseNetwork] = OrderedDict()
+NetT = TypeVar("NetT", Network, PhaseNetwork)
 _lock = threading.Lock()
 
 
-def widened(net: Network, eps: float) -> Network:
+def widened(net: NetT, eps: float) -> NetT:
     """`net` with every bus's voltage band but the slack's widened by `eps` p.u. (vmin − ε ≥ 0,
-    vmax + ε ≤ V_LIMIT_MAX_PU; ∞: those limits; a negative ε tightens it), one object per
+    vmax + ε ≤ V_LIMIT_MAX_PU; ∞: those limits; a negative ε tightens it) — on a three-phase
+    feeder its band at every monitored voltage (`PhaseNetwork.with_band`: the source's EMF
+    is fixed behind its impedance, so no monitored voltage is held) —, one object per
     (network, ε) in this process so that the formulations' compiled programs and solves
     are shared by every caller."""
     if eps == 0:
@@ -77,20 +96,25 @@ def widened(net: Network, eps: float) -> Network:
     with _lock:
         if key in _cache:
             _cache.move_to_end(key)
-            return _cache[key]
-    other = np.arange(net.n_bus) != net.slack  # the slack's |V| is held at its setpoint: its band stays
-    vmin = np.maximum(net.vmin - eps, 0.0) if math.isfinite(eps) else np.zeros(net.n_bus)
-    out = net.with_changes(
-        vmin=np.where(other, vmin, net.vmin), vmax=np.where(other, np.minimum(net.vmax + eps, V_LIMIT_MAX_PU), net.vmax)
-    )
+            return _cache[key]  # type: ignore[return-value]
+    out: Network | PhaseNetwork
+    if isinstance(net, PhaseNetwork):
+        lo, hi = net.band
+        out = net.with_band(max(lo - eps, 0.0), min(hi + eps, V_LIMIT_MAX_PU))
+    else:
+        other = np.arange(net.n_bus) != net.slack  # the slack's |V| is held at its setpoint: its band stays
+        vmin = np.maximum(net.vmin - eps, 0.0) if math.isfinite(eps) else np.zeros(net.n_bus)
+        out = net.with_changes(
+            vmin=np.where(other, vmin, net.vmin), vmax=np.where(other, np.minimum(net.vmax + eps, V_LIMIT_MAX_PU), net.vmax)
+        )
     with _lock:
         out = _cache.setdefault(key, out)
         while len(_cache) > _WIDENED:
             _cache.popitem(last=False)
-    return out
+    return out  # type: ignore[return-value]
 
 
-def excursion(net: Network, vm: np.ndarray) -> np.ndarray:
+def excursion(net: Network | PhaseNetwork, vm: np.ndarray) -> np.ndarray:
     """(S,) the largest excursion (p.u.) of |V| `vm` (S, n_bus) beyond `net`'s voltage
     limits, 0 where within; NaN where `vm` is NaN (no converged flow)."""
     low = np.maximum(net.vmin - vm, 0.0)
@@ -208,7 +232,7 @@ def _bound(res: StrategyResult) -> np.ndarray:
     return np.full(res.n_snapshots, np.nan) if raw is None else np.asarray(raw, dtype=float)
 
 
-def _binds(net: Network, res: StrategyResult) -> np.ndarray:
+def _binds(net: Network | PhaseNetwork, res: StrategyResult) -> np.ndarray:
     """(S,) whether a step's ε = 0 answer may depend on its band: not an optimum, or some
     |V| within MARGIN_PU of a limit."""
     vm = res.vm

@@ -233,8 +233,7 @@ def snapshot_data(scenario: Scenario, k: float) -> SnapshotData:
     check_supported(net)
     zero_q = np.zeros_like(scenario.der_p_mw)
     s_fixed = scenario.injections(zero_q) / net.base_mva
-    usable = (1.0 - k) * scenario.qmax_mvar() if scenario.q_limit_mvar is None else scenario.q_limit_mvar
-    q_limit = usable / net.base_mva  # "Q at night" where the scenario says
+    q_limit = scenario.usable_q_mvar(k) / net.base_mva  # "Q at night" where the scenario says
     return SnapshotData(s_fixed, q_limit)
 
 

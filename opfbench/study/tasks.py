@@ -311,7 +311,7 @@ def run_task(inp: TaskInput) -> TaskOutput:
                     ran.append((scenario, results))
             plain = scenario_of(mode, "off")
             front = next((f for earlier, f in drawn if earlier.same_data(plain)), None)
-            if front is None and not plain.three_phase:  # the optimum on three-phase feeders: not yet (issue 30)
+            if front is None:
                 front = frontier(plain, t.k, at_zero=by_source.get("off", {}).get(REFERENCE_OPTIMUM))
                 drawn.append((plain, front))
             if front is not None:
@@ -321,7 +321,9 @@ def run_task(inp: TaskInput) -> TaskOutput:
             parts: dict[PartKey, Part] = {}
             for key, masks in needs.items():
                 rows = np.flatnonzero(np.logical_or.reduce([*masks.values(), np.zeros(inp.n_steps, dtype=bool)]))
-                if rows.size:
+                if rows.size and key[0] and plain.three_phase:  # no optimum that curtails there yet: no reference
+                    unbounded = {config: unbounded[config] | mask for config, mask in masks.items()}
+                elif rows.size:
                     part = parts[key] = _part(plain, scenarios, mode, key, rows, t.k)
                     if key[1] == RESERVE:  # the optimum that may curtail at k: a frontier of the run (the others are partial)
                         fronts.append(frontier_rows(t.case, t.k, mode, time[rows], inp.step_h, part.front))
