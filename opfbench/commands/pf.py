@@ -191,6 +191,10 @@ def _three_phase(args: argparse.Namespace, case: Case, net: PhaseNetwork) -> int
         }
     else:
         out |= dict.fromkeys(figures)
+    if res.tap_positions is not None:  # taps=control: where each regulator settled, p.u. tap
+        out["regulator_taps"] = {
+            r.name: float(r.taps[p]) for r, p in zip(net.regulators, res.tap_positions[0].tolist(), strict=True)
+        }
     out["notes"] = list(case.notes)
     if args.json:
         print_json(out)

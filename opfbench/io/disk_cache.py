@@ -38,6 +38,7 @@ _SOURCES = (
     "network.py",
     "multiphase/model.py",
     "multiphase/branches.py",
+    "multiphase/regulators.py",
     "data/simbench_profiles.py",
 )
 _FORMAT = 2

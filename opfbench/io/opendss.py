@@ -49,6 +49,7 @@ from opfbench.errors import CaseFormatError, InputError, NetworkError
 from opfbench.io.case import Case, CaseSeries
 from opfbench.multiphase import GROUND, Branches, Element, Line, LoadModels, PhaseNetwork, Source, Transformer, Winding
 from opfbench.multiphase.branches import LOAD_MODELS
+from opfbench.multiphase.regulators import PT_MAX, PT_MIN, Regulator
 from opfbench.network import DER
 
 if TYPE_CHECKING:
@@ -120,9 +121,11 @@ def _complex(values) -> np.ndarray:
     return np.asarray(values, dtype=float).view(complex)
 
 
-def read_opendss(path: str | Path, name: str | None = None) -> OpenDssCircuit:
+def read_opendss(path: str | Path, name: str | None = None, tap_control: bool = False) -> OpenDssCircuit:
     """Compile and solve the OpenDSS master file `path` and build its model (module
-    docstring); `name` names the network (default: the circuit's own name)."""
+    docstring); `name` names the network (default: the circuit's own name); with
+    `tap_control` also its RegControls, for the power flow to move their taps
+    (`opfbench.multiphase.regulators`)."""
     path = Path(path)
     if not path.is_file():
         raise CaseFormatError(f"OpenDSS file {str(path)!r} not found")
@@ -139,7 +142,7 @@ def read_opendss(path: str | Path, name: str | None = None) -> OpenDssCircuit:
             if not _has_circuit(dss):
                 raise CaseFormatError(f"{path}: OpenDSS compiled it but it defines no circuit (New Circuit.NAME …)")
             try:
-                return _Reader(dss, path, name).read()
+                return _Reader(dss, path, name, tap_control).read()
             except NetworkError as exc:  # the model's own checks (e.g. islanded nodes), named by the file
                 raise CaseFormatError(f"{path}: {exc}") from None
         finally:
@@ -162,10 +165,11 @@ def _message(exc: Exception) -> str:
 class _Reader:
     """One pass over the compiled, solved circuit."""
 
-    def __init__(self, dss, path: Path, name: str | None) -> None:
+    def __init__(self, dss, path: Path, name: str | None, tap_control: bool = False) -> None:
         self.dss = dss
         self.path = path
         self.name = name
+        self.tap_control = tap_control
         self.notes: list[str] = []
         self.load_shape: list[str] = []
 
@@ -175,6 +179,7 @@ class _Reader:
     def read(self) -> OpenDssCircuit:
         dss = self.dss
         self._check_classes()
+        compiled_taps = self._compiled_taps() if self.tap_control else {}
         self._solve()
         self.node_names = [n.lower() for n in dss.Circuit.AllNodeNames()]
         self.bus_names = [b.lower() for b in dss.Circuit.AllBusNames()]
@@ -193,6 +198,7 @@ class _Reader:
         ders, der_names, der_br, der_p, der_q = self._ders()
         frequency = float(dss.Solution.Frequency())
         band, band_name = EN_50160 if abs(frequency - 50.0) < 1e-9 else ANSI_RANGE_A
+        regulators = self._regulators(elements, compiled_taps) if self.tap_control else ()
         net = PhaseNetwork(
             self.name or dss.Circuit.Name(),
             frequency,
@@ -215,6 +221,8 @@ class _Reader:
             der_br,
             band,
             band_name,
+            regulators,
+            self.tap_control,
         )
         shapes = self._shapes()
         return OpenDssCircuit(net, load_p, load_q, der_p, der_q, tuple(self.notes), tuple(self.load_shape), shapes)
@@ -228,6 +236,121 @@ class _Reader:
             p = np.asarray(ls.PMult(), dtype=float)
             q = np.asarray(ls.QMult(), dtype=float)
             out[name] = LoadShape(p, q if q.shape == p.shape else p, float(ls.HrInterval()))
+        return out
+
+    # ----- regulators (taps=control) --------------------------------------------------
+    def _compiled_taps(self) -> dict[str, float]:
+        """The tap each RegControl's tap winding compiles to (before any solve), by
+        RegControl name."""
+        rc, t = self.dss.RegControls, self.dss.Transformers
+        out = {}
+        for _ in _each(rc):
+            name = rc.Name().lower()
+            t.Name(rc.Transformer())
+            t.Wdg(rc.TapWinding())
+            out[name] = float(t.Tap())
+        return out
+
+    def _regulators(self, elements: list[Element], compiled: dict[str, float]) -> tuple[Regulator, ...]:
+        """Every enabled RegControl as a `Regulator`: its settings, and its transformer's
+        primitive admittance at every tap position (OpenDSS's own, set tap by tap and put
+        back at the settled one). A RegControl using what opfbench does not emulate is
+        refused (`opfbench.multiphase.regulators`)."""
+        dss = self.dss
+        rc, t, run = dss.RegControls, dss.Transformers, dss.Text.Command
+        index = {e.name.lower(): i for i, e in enumerate(elements)}
+        settings = []
+        for _ in _each(rc):
+            name = rc.Name().lower()
+            full = f"RegControl.{name}"
+            if not dss.CktElement.Enabled():
+                continue
+
+            def prop(key: str, name: str = name) -> str:
+                run(f"? regcontrol.{name}.{key}")
+                return dss.Text.Result().strip().lower()
+
+            unsupported = [
+                what
+                for what, used in (
+                    ("reversible=yes", rc.IsReversible()),
+                    ("cogen=yes", prop("cogen").startswith("y")),
+                    ("a regulated bus (bus=)", bool(rc.MonitoredBus())),
+                    ("vlimit", rc.VoltageLimit() > 0),
+                    ("ldc_z", float(prop("ldc_z")) > 0),
+                    ("inversetime=yes", rc.IsInverseTime()),
+                )
+                if used
+            ]
+            if unsupported:
+                self.refuse(full, f"taps=control does not emulate {', '.join(unsupported)}; use the settled taps (taps=held)")
+            transformer = f"transformer.{rc.Transformer().lower()}"
+            if transformer not in index:
+                self.refuse(full, f"its transformer {rc.Transformer()} is not an enabled element")
+            phase_text = prop("ptphase")
+            pt_phase = PT_MAX if phase_text.startswith("max") else PT_MIN if phase_text.startswith("min") else int(phase_text)
+            t.Name(rc.Transformer())
+            t.Wdg(rc.Winding())
+            delta = bool(t.IsDelta())
+            kv = float(t.kV())
+            phases = int(elements[index[transformer]].nodes.shape[1]) - 1
+            base_v = kv * 1e3 / (np.sqrt(3.0) if not delta and phases in (2, 3) else 1.0)
+            t.Wdg(rc.TapWinding())
+            fields = dict(
+                name=name,
+                element=index[transformer],
+                winding=int(rc.Winding()),
+                tap_winding=int(rc.TapWinding()),
+                vreg=float(rc.ForwardVreg()),
+                band=float(rc.ForwardBand()),
+                pt_ratio=float(rc.PTRatio()),
+                ct_rating=float(rc.CTPrimary()),
+                r=float(rc.ForwardR()),
+                x=float(rc.ForwardX()),
+                pt_phase=pt_phase,
+                delta=delta,
+                delay=float(rc.Delay()),
+                tap_limit=int(rc.MaxTapChange()),
+                base_v=base_v,
+            )
+            settings.append((fields, compiled[name], float(t.Tap()), float(t.MinTap()), float(t.MaxTap()), int(t.NumTaps())))
+        seen = [(f["element"], f["tap_winding"]) for f, *_ in settings]
+        if len(set(seen)) != len(seen):
+            self.refuse("RegControl", "two RegControls move the same winding's tap; taps=control needs one each")
+        out = []
+        for fields, compiled_tap, settled_tap, lo, hi, n_taps in settings:
+            full = f"RegControl.{fields['name']}"
+            increment = (hi - lo) / n_taps if n_taps > 0 else 0.0
+            if increment <= 0:
+                self.refuse(full, "its transformer has no tap range (NumTaps, MinTap, MaxTap)")
+            k_lo = -int(np.ceil((compiled_tap - lo) / increment - 1e-9))
+            k_hi = int(np.ceil((hi - compiled_tap) / increment - 1e-9))
+            taps = np.clip(compiled_tap + np.arange(k_lo, k_hi + 1) * increment, lo, hi)
+            settled = int(np.argmin(np.abs(taps - settled_tap)))
+            if abs(taps[settled] - settled_tap) > 1e-9:
+                self.refuse(full, f"settled tap {settled_tap!r} is off the tap grid through the compiled {compiled_tap!r}")
+            el = elements[int(fields["element"])]
+            yprims = self._tap_yprims(el.name, int(fields["tap_winding"]), taps, settled_tap, el.yprim.shape[0])
+            out.append(Regulator(**fields, taps=taps, yprims=yprims, start=-k_lo, settled=settled))
+        if out:
+            self.notes.append(
+                f"taps=control: {len(out)} regulator(s) move their taps in the power flow as OpenDSS's static RegControl "
+                "does (time delays order the moves and delay nothing: a snapshot has no time)"
+            )
+        return tuple(out)
+
+    def _tap_yprims(self, element: str, winding: int, taps: np.ndarray, settled: float, size: int) -> np.ndarray:
+        """(n_pos, size, size) the transformer's primitive admittance at each tap of its
+        winding `winding` (OpenDSS's, rebuilt at each), the settled tap put back after."""
+        dss, run = self.dss, self.dss.Text.Command
+        out = np.empty((len(taps), size, size), dtype=complex)
+        short = element.split(".", 1)[1]
+        for k, tap in enumerate([*taps.tolist(), settled]):
+            run(f"transformer.{short}.wdg={winding} tap={tap!r}")
+            dss.Solution.BuildYMatrix(0, False)
+            if k < len(taps):
+                dss.Circuit.SetActiveElement(element)
+                out[k] = self._yprim(size)
         return out
 
     # ----- the compiled circuit ------------------------------------------------------
@@ -541,9 +664,9 @@ def opendss_case(spec: CaseSpec, path: Path | None, name: str | None) -> Case:
         if path is None:
             assert name is not None
             with opendss_copy(name) as master:
-                circuit = read_opendss(master, name)
+                circuit = read_opendss(master, name, spec.taps == "control")
         else:
-            circuit = read_opendss(path, name)
+            circuit = read_opendss(path, name, spec.taps == "control")
         stored = (circuit.load_p_mw, circuit.load_q_mvar, circuit.der_p_mw, circuit.der_q_mvar)
         notes = circuit.notes if circuit.network.ders else circuit.notes + (NO_DER_NOTE,)
         series = None

@@ -1,7 +1,7 @@
 """Case specs: the one string that names a case everywhere (command line, config, task,
 worker, tables).
 
-    SOURCE[?der=DER&der-pf=PF&line-z=F]
+    SOURCE[?der=DER&der-pf=PF&line-z=F&taps=MODE]
 
 SOURCE is one of the case sources `opfbench.io.sources` declares (its `formats()` names
 them: the shipped names, MATPOWER `.m` and pandapower `.json` files, `simbench:CODE`,
@@ -22,6 +22,12 @@ them: the shipped names, MATPOWER `.m` and pandapower `.json` files, `simbench:C
   model (`CaseSpec.model`: the spec without `line-z`), the operator's view of the grid:
   its result on the perturbed case is the price of model error.
 
+- `taps=held|control` (three-phase feeders): the regulators' taps held where OpenDSS
+  settled the file's own snapshot (`held`, the default), or moved in every power flow by
+  opfbench's emulation of OpenDSS's static RegControl (`control`:
+  `opfbench.multiphase.regulators`; each snapshot starts from the taps the file compiles
+  to, as OpenDSS's snapshot solve does).
+
 An option at its default (der-pf=0.9, line-z=1) is the case without it: one text per case.
 """
 
@@ -37,6 +43,7 @@ from opfbench.network import DER_ENERGIES, DER_KINDS
 
 DEFAULT_DER_PF = 0.90  # S̄ = P̄ / 0.90: VDE-AR-N 4105's cos φ 0.90 at full output
 NOMINAL_LINE_Z = 1.0  # line-z's identity: the source's impedances
+TAP_MODES = ("held", "control")  # taps=: the first is the default
 
 
 @dataclass(frozen=True)
@@ -47,6 +54,7 @@ class CaseSpec:
     der: str | None = None
     der_pf: float | None = None
     line_z: float | None = None
+    taps: str | None = None
 
     @property
     def text(self) -> str:
@@ -54,12 +62,13 @@ class CaseSpec:
         opts = [f"der={self.der}"] if self.der is not None else []
         opts += [f"der-pf={number_text(self.der_pf)}"] if self.der_pf is not None else []
         opts += [f"line-z={number_text(self.line_z)}"] if self.line_z is not None else []
+        opts += [f"taps={self.taps}"] if self.taps is not None else []
         return self.source + ("?" + "&".join(opts) if opts else "")
 
     @property
     def model(self) -> "CaseSpec":
         """The case as modelled: this spec without its perturbation (`line-z`)."""
-        return CaseSpec(self.source, self.der, self.der_pf)
+        return CaseSpec(self.source, self.der, self.der_pf, taps=self.taps)
 
     @property
     def three_phase(self) -> bool:
@@ -79,12 +88,12 @@ def parse_spec(text: str) -> CaseSpec:
     if not isinstance(text, str) or not text.strip():
         raise InputError(f"a case is {formats()}, got {text!r}")
     source, sep, query = text.strip().partition("?")
-    der, der_pf, line_z = None, None, None
+    der, der_pf, line_z, taps = None, None, None, None
     seen: set[str] = set()
     for part in query.split("&") if sep else ():
         key, eq, value = part.partition("=")
         if not eq or not value:
-            raise InputError(f"case {text!r}: option {part!r} must be key=value (der=…, der-pf=…, line-z=…)")
+            raise InputError(f"case {text!r}: option {part!r} must be key=value (der=…, der-pf=…, line-z=…, taps=…)")
         if key in seen:
             raise InputError(
                 f"case {text!r}: option {key} given twice (as --{key} and ?{key}=, or twice in the spec); give it once"
@@ -103,10 +112,22 @@ def parse_spec(text: str) -> CaseSpec:
                 raise InputError(f"case {text!r}: der-pf must lie in (0, 1], got {value}")
         elif key == "line-z":
             line_z = _factor(text, value)
+        elif key == "taps":
+            if value not in TAP_MODES:
+                raise InputError(f"case {text!r}: taps must be one of {', '.join(TAP_MODES)}, got {value!r}")
+            taps = value
         else:
-            raise InputError(f"case {text!r}: unknown option {key!r} (der, der-pf, line-z)")
+            raise InputError(f"case {text!r}: unknown option {key!r} (der, der-pf, line-z, taps)")
     # one text per case: an option at its default is the case without it (as in strategy labels)
-    spec = CaseSpec(source, der, None if der_pf == DEFAULT_DER_PF else der_pf, None if line_z == NOMINAL_LINE_Z else line_z)
+    spec = CaseSpec(
+        source,
+        der,
+        None if der_pf == DEFAULT_DER_PF else der_pf,
+        None if line_z == NOMINAL_LINE_Z else line_z,
+        None if taps == TAP_MODES[0] else taps,
+    )
+    if spec.taps is not None and not spec.three_phase:
+        raise InputError(f"case {text!r}: taps= applies to three-phase (OpenDSS) feeders; this case is {spec.kind}")
     if der is not None and der != "gens":
         parse_der_list(der, text, phased=spec.three_phase)
     if spec.kind == "opendss" and not spec.source.removeprefix("opendss:").strip():

@@ -36,7 +36,7 @@ linearised model needs):
 from __future__ import annotations
 
 import copy
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from functools import cached_property
 
 import numpy as np
@@ -45,6 +45,7 @@ from scipy.sparse.csgraph import connected_components
 
 from opfbench.errors import NetworkError
 from opfbench.multiphase.branches import GROUND, Branches, LoadModels
+from opfbench.multiphase.regulators import Regulator
 from opfbench.network import DER, DerFleet
 
 ELEMENT_KINDS = ("line", "transformer", "capacitor", "reactor")
@@ -148,7 +149,10 @@ class PhaseNetwork(DerFleet):
     `node_bus`, `node_phase` (n_node,). Loads: `load_names` (OpenDSS's `Load.x`), `load_bus`,
     nominal `load_p_mw`, `load_q_mvar` (n_load,), `load_models`, `load_branches`. DER:
     `ders` (`DER.bus` a bus index), `der_names`, `der_branches`. `band` (low, high) p.u. and
-    `band_name` (the standard it is from).
+    `band_name` (the standard it is from). `regulators` (read with `?taps=control`): the
+    RegControls with their transformers' admittance at every tap position; `tap_control`
+    the power flow moves their taps as OpenDSS's static control would
+    (`opfbench.multiphase.regulators`), else the taps stay where the elements have them.
 
     Checked on construction: array shapes, node and bus indices, positive base voltages at
     every node a load, DER or monitored voltage uses, finite admittances, and that every
@@ -176,6 +180,8 @@ class PhaseNetwork(DerFleet):
     der_branches: Branches = field(default_factory=Branches.empty)
     band: tuple[float, float] = (0.95, 1.05)
     band_name: str = "ANSI C84.1 Range A"
+    regulators: tuple[Regulator, ...] = ()
+    tap_control: bool = False
 
     def __post_init__(self) -> None:
         for name, dtype in (
@@ -247,6 +253,15 @@ class PhaseNetwork(DerFleet):
                 f"{islanded.size} node(s) islanded from the source {self.source.name} by the enabled elements: {names}"
                 + (" …" if islanded.size > 20 else "")
             )
+
+    def with_tap_positions(self, positions: tuple[int, ...]) -> "PhaseNetwork":
+        """This network with each regulator's transformer at tap position `positions[i]`
+        (indices into `Regulator.taps`) and the taps held there (no tap control)."""
+        elements = list(self.elements)
+        for reg, pos in zip(self.regulators, positions, strict=True):
+            e = elements[reg.element]
+            elements[reg.element] = Element(e.name, e.kind, e.buses, e.nodes, reg.yprims[pos])
+        return replace(self, elements=tuple(elements), tap_control=False)
 
     # ----- sizes and names -----------------------------------------------------------
     @property

@@ -19,6 +19,12 @@ impedances Z_NK = (A⁻¹)_{:,K} are formed once, an iteration is one small dens
 Z_KK·J on all snapshots' columns, and every node follows from one product Z_NK·J at the
 end; with many the iteration solves with the sparse factor on every node.
 
+With `PhaseNetwork.tap_control` (the case's `?taps=control`) the solve is the inner loop
+of OpenDSS's control loop: solve every snapshot at its regulators' tap positions, let the
+regulators sample and move (`opfbench.multiphase.regulators`), solve again, until no
+regulator is armed in the snapshot (at most `MAX_CONTROL_ITER` rounds; one that is still
+armed then has not converged). Snapshots at equal positions share one factorization.
+
 A snapshot has converged when its largest node-voltage update is below `tol` p.u. of the
 node's base voltage and the equations hold at the result: at every node the current
 mismatch |Y·V − I_source − I_branches(V)| is below `MISMATCH_REL` of the currents that
@@ -38,6 +44,7 @@ from threadpoolctl import ThreadpoolController
 
 from opfbench.errors import InputError
 from opfbench.multiphase import GROUND, PhaseNetwork
+from opfbench.multiphase.regulators import ControlState, act, control_voltage, sample
 from opfbench.powerflow.common import MAX_SWEEP_ITER, SWEEP_TOLERANCE
 from opfbench.powerflow.sparse import factorize
 
@@ -48,6 +55,8 @@ DENSE_MAX_ENTRIES = 2**22
 this many entries (64 MB)."""
 MISMATCH_REL = 1e-8
 """The largest relative nodal current mismatch a converged snapshot may have (`_residual`)."""
+MAX_CONTROL_ITER = 100
+"""Rounds of solve-and-move a snapshot's regulators get to settle (`taps=control`)."""
 _CHUNK = 256  # columns per sparse solve when forming Z_KK (memory: n_node × _CHUNK)
 _BLAS = ThreadpoolController()
 
@@ -56,7 +65,8 @@ _BLAS = ThreadpoolController()
 class PhaseFlowResult:
     """Node voltages `v` (S, n_node) complex V of S snapshots, `converged` (S,) bool,
     `iterations` (S,), `mismatch` (S,) the largest relative nodal current mismatch at the
-    result (`_residual`), `losses_kw` (S,)
+    result (`_residual`), `tap_positions` (S, n_regulator) where the regulators settled
+    (`taps=control`; indices into `Regulator.taps`, else None), `losses_kw` (S,)
     active losses in the power-delivery elements (the source's Thevenin impedance
     excluded, as OpenDSS's circuit losses): the power the source delivers minus what the
     branches draw — free of the round-off that summing V·conj(Y·V) over near-zero-impedance
@@ -68,6 +78,7 @@ class PhaseFlowResult:
     iterations: np.ndarray
     mismatch: np.ndarray
     losses_kw: np.ndarray
+    tap_positions: np.ndarray | None = None
 
     @property
     def n_snapshots(self) -> int:
@@ -203,6 +214,68 @@ def solve_phase_flow(
     Z or I: its power at the base voltage), each DER's P and Q (S, n_der) MW/MVAr
     generated (default 0); `v0` (S, n_node) complex V an optional warm start (rows that
     are not finite and non-zero start from the no-load state)."""
+    if net.tap_control and net.regulators:
+        return _solve_controlled(net, load_p_mw, load_q_mvar, der_p_mw, der_q_mvar, v0, tol, max_iter)
+    return _solve_fixed(net, load_p_mw, load_q_mvar, der_p_mw, der_q_mvar, v0, tol, max_iter)
+
+
+@lru_cache(maxsize=64)
+def _tapped(net: PhaseNetwork, positions: tuple[int, ...]) -> PhaseNetwork:
+    return net.with_tap_positions(positions)
+
+
+def _solve_controlled(net, load_p_mw, load_q_mvar, der_p_mw, der_q_mvar, v0, tol, max_iter) -> PhaseFlowResult:
+    """`solve_phase_flow` with the regulators' control loop (module docstring)."""
+    regs = net.regulators
+    load_p = np.atleast_2d(np.asarray(load_p_mw, dtype=float))
+    n_snap = load_p.shape[0]
+    load_p = _powers("load P", load_p, n_snap, net.n_load)
+    load_q = _powers("load Q", load_q_mvar, n_snap, net.n_load)
+    der_p = _powers("DER P", der_p_mw, n_snap, len(net.ders))
+    der_q = _powers("DER Q", der_q_mvar, n_snap, len(net.ders))
+    state = ControlState.start(regs, n_snap)
+    v = np.zeros((n_snap, net.n_node), dtype=complex) if v0 is None else np.array(v0, dtype=complex).reshape(n_snap, net.n_node)
+    converged = np.zeros(n_snap, dtype=bool)
+    iterations = np.zeros(n_snap, dtype=np.int64)
+    mismatch = np.full(n_snap, np.inf)
+    losses = np.full(n_snap, np.nan)
+    active = np.arange(n_snap)
+    for _ in range(MAX_CONTROL_ITER):
+        groups: dict[tuple[int, ...], list[int]] = {}
+        for row in active.tolist():
+            groups.setdefault(tuple(state.position[row].tolist()), []).append(row)
+        for positions, rows_list in groups.items():
+            rows = np.array(rows_list)
+            flow = _solve_fixed(
+                _tapped(net, positions), load_p[rows], load_q[rows], der_p[rows], der_q[rows], v[rows], tol, max_iter
+            )
+            v[rows], converged[rows], mismatch[rows], losses[rows] = flow.v, flow.converged, flow.mismatch, flow.losses_kw
+            iterations[rows] += flow.iterations
+        sub = ControlState(state.position[active], state.armed[active], state.pending[active])
+        for i, reg in enumerate(regs):
+            nodes = net.elements[reg.element].nodes
+            sample(reg, i, sub, control_voltage(reg, nodes, v[active], reg.yprims[sub.position[:, i]]))
+        going = act(regs, sub) & converged[active]  # a diverged snapshot stops its control loop, as OpenDSS's does
+        state.position[active], state.armed[active], state.pending[active] = sub.position, sub.armed, sub.pending
+        active = active[going]
+        if not active.size:
+            break
+    else:
+        converged[active] = False  # still armed after MAX_CONTROL_ITER rounds: not settled
+    return PhaseFlowResult(net, v, converged, iterations, mismatch, losses, state.position.copy())
+
+
+def _solve_fixed(
+    net: PhaseNetwork,
+    load_p_mw: np.ndarray,
+    load_q_mvar: np.ndarray,
+    der_p_mw: np.ndarray | None,
+    der_q_mvar: np.ndarray | None,
+    v0: np.ndarray | None,
+    tol: float,
+    max_iter: int,
+) -> PhaseFlowResult:
+    """`solve_phase_flow` at the taps the network's elements have."""
     load_p = np.atleast_2d(np.asarray(load_p_mw, dtype=float))
     n_snap = load_p.shape[0]
     load_p = _powers("load P", load_p, n_snap, net.n_load)
