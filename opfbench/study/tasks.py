@@ -321,9 +321,7 @@ def run_task(inp: TaskInput) -> TaskOutput:
             parts: dict[PartKey, Part] = {}
             for key, masks in needs.items():
                 rows = np.flatnonzero(np.logical_or.reduce([*masks.values(), np.zeros(inp.n_steps, dtype=bool)]))
-                if rows.size and key[0] and plain.three_phase:  # no optimum that curtails there yet: no reference
-                    unbounded = {config: unbounded[config] | mask for config, mask in masks.items()}
-                elif rows.size:
+                if rows.size:
                     part = parts[key] = _part(plain, scenarios, mode, key, rows, t.k)
                     if key[1] == RESERVE:  # the optimum that may curtail at k: a frontier of the run (the others are partial)
                         fronts.append(frontier_rows(t.case, t.k, mode, time[rows], inp.step_h, part.front))
