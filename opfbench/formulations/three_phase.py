@@ -240,7 +240,9 @@ def run_phase(
     net = scenario.net
     assert isinstance(net, PhaseNetwork)
     load_p, load_q = scenario.element_loads()
-    limit = (1.0 - check_reserve(k)) * scenario.qmax_mvar()  # "Q at night" where the scenario says
+    if curtail and scenario.q_limit_mvar is not None:  # its capability is a function of the power it delivers
+        raise ValueError("the AC OPF that may curtail takes no fixed reactive limit (q_limit_mvar)")
+    limit = scenario.usable_q_mvar(check_reserve(k))  # "Q at night" where the scenario says
     offsets = capability_offsets(scenario, k, 1.0) if curtail else None
     opt = optimum(
         net,
