@@ -12,7 +12,7 @@ import json
 import numpy as np
 import pytest
 
-from opfbench.cases.opendss_cases import opendss_copy
+from opfbench.cases.opendss_cases import opendss_copy, opendss_master
 from opfbench.cli import main
 from opfbench.io import load_case
 from opfbench.multiphase import GROUND, PhaseNetwork
@@ -122,7 +122,7 @@ def test_snapshot_json_keys_q_by_der_name(capsys):
         (["snapshot", "eulv?der=nowhere.1:inverter:0.004", "--strategy", "llma"], "no such bus"),
         (["snapshot", "ieee13?der=611.1:inverter:0.05", "--strategy", "llma"], "phase 1"),
         (["snapshot", "ieee13?der=611.4:inverter:0.05", "--strategy", "llma"], "phases 1, 2, 3"),
-        (["snapshot", "ieee13", "--strategy", "volt-var"], "no DER"),
+        (["snapshot", f"opendss:{opendss_master('ieee13')}", "--strategy", "volt-var"], "no DER"),
     ],
 )
 def test_bad_der_on_a_feeder_exits_2(capsys, argv, expected):
