@@ -153,8 +153,8 @@ def test_lfma_reads_per_phase_flows_and_finds_the_upstream_line():
 def test_run_eulv_on_its_own_load_shapes_with_vuf_columns(tmp_path):
     """`opfbench run --case eulv`: every house on its own 1-min shape on the paper day (the
     loads OpenDSS's LoadShape gives, read here independently), the PV on the period's
-    profile; the steps and summary carry the declared VUF columns; no frontier (the optimum
-    on three-phase feeders is issue 30's) and the report is written."""
+    profile; the steps and summary carry the declared VUF columns; the frontier is drawn
+    (`test_three_phase_leaderboard`) and the report is written."""
     import opendssdirect as dss
     import pandas as pd
 

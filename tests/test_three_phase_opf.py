@@ -7,6 +7,7 @@ load (`opfbench.cases.opendss_pv`)."""
 
 from __future__ import annotations
 
+import math
 import shutil
 
 import numpy as np
@@ -15,11 +16,14 @@ import pytest
 from opfbench.cases.opendss_cases import opendss_copy
 from opfbench.cases.opendss_pv import case_with_pv, with_pv
 from opfbench.errors import InputError
+from opfbench.formulations.frontier import COVER_PU, frontier, widened
 from opfbench.formulations.model import model_for
 from opfbench.formulations.three_phase import BAND_TOL, optimum
 from opfbench.multiphase import PhaseNetwork
+from opfbench.network import V_LIMIT_MAX_PU
 from opfbench.powerflow.multiphase import solve_phase_flow
 from opfbench.result import INFEASIBLE, OK
+from opfbench.scenario import Scenario
 from tests.support.opendss_feeders import held_taps, solve
 
 # (load multiplier, PV irradiance): noon with the band binding, afternoon, evening peak
@@ -104,6 +108,26 @@ def test_the_optimum_is_never_above_no_action_where_no_action_meets_the_band(iee
     assert not np.isnan(result.losses_kw[in_band]).any()
     assert (result.losses_kw[in_band] <= none.losses_kw[in_band] * (1 + 1e-9)).all()
     assert (result.losses_kw[in_band] < none.losses_kw[in_band] - 0.1)[dp[in_band].sum(axis=1) > 0].any()
+
+
+def test_the_frontier_widens_the_band_of_one_compiled_model(ieee123_pv):
+    """The frontier on ieee123 at noon (the band binds) and in the evening (it does not):
+    non-increasing in ε, each point within its own widened band, the widened feeders
+    derived from this one (`origin`: one compiled model serves every ε), solved again only
+    where the band binds."""
+    case, _ = ieee123_pv
+    net = case.network
+    lp, lq, dp = _snapshots(case, SNAPSHOTS)
+    scenario = Scenario.from_series(net, lp, lq, dp)
+    front = frontier(scenario, 0.0)
+    assert not np.isnan(front.cost_kw).any() and (np.diff(front.cost_kw, axis=1) <= 1e-6).all()
+    assert (front.excursion_pu <= front.eps + COVER_PU).all()
+    assert front.cost_kw[0, -1] < front.cost_kw[0, 0] - 0.1  # noon: a wider band saves losses
+    assert front.solved[0, [0, -1]].all() and not front.solved[2, 1:].any()  # evening: solved once
+    wide = widened(net, 0.02)
+    assert wide.origin is net and wide.band == (net.band[0] - 0.02, net.band[1] + 0.02) and wide.ybus is net.ybus
+    assert widened(net, math.inf).band == (0.0, V_LIMIT_MAX_PU)
+    assert front.excursion_pu[0, 1] > 0  # the optimum at ε = 0.0025 uses its widening
 
 
 def test_no_q_to_give_and_the_band_left_is_proven_infeasible_with_no_figure(ieee123_pv):

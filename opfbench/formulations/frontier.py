@@ -38,9 +38,11 @@ import math
 import threading
 from collections import OrderedDict
 from dataclasses import dataclass, replace
+from typing import TypeVar
 
 import numpy as np
 
+from opfbench.multiphase import PhaseNetwork
 from opfbench.network import V_LIMIT_MAX_PU, Network
 from opfbench.result import FALLBACK_COLD, OK, Reference, StrategyResult
 from opfbench.scenario import Scenario
@@ -51,13 +53,16 @@ COVER_PU = 1e-6  # an excursion up to ε + this is covered by ε (the OPF's volt
 MARGIN_PU = 1e-6  # an optimum this far inside every limit does not bind its band
 OPTIMA = (OK, FALLBACK_COLD)  # statuses whose point is a solver's optimum
 _WIDENED = 32  # widened networks kept per process (least recently used dropped)
-_cache: OrderedDict[tuple[Network, float], Network] = OrderedDict()
+_cache: OrderedDict[tuple[Network | PhaseNetwork, float], Network | PhaseNetwork] = OrderedDict()
+NetT = TypeVar("NetT", Network, PhaseNetwork)
 _lock = threading.Lock()
 
 
-def widened(net: Network, eps: float) -> Network:
+def widened(net: NetT, eps: float) -> NetT:
     """`net` with every bus's voltage band but the slack's widened by `eps` p.u. (vmin − ε ≥ 0,
-    vmax + ε ≤ V_LIMIT_MAX_PU; ∞: those limits; a negative ε tightens it), one object per
+    vmax + ε ≤ V_LIMIT_MAX_PU; ∞: those limits; a negative ε tightens it) — on a three-phase
+    feeder its band at every monitored voltage (`PhaseNetwork.with_band`: the source's EMF
+    is fixed behind its impedance, so no monitored voltage is held) —, one object per
     (network, ε) in this process so that the formulations' compiled programs and solves
     are shared by every caller."""
     if eps == 0:
@@ -66,20 +71,25 @@ def widened(net: Network, eps: float) -> Network:
     with _lock:
         if key in _cache:
             _cache.move_to_end(key)
-            return _cache[key]
-    other = np.arange(net.n_bus) != net.slack  # the slack's |V| is held at its setpoint: its band stays
-    vmin = np.maximum(net.vmin - eps, 0.0) if math.isfinite(eps) else np.zeros(net.n_bus)
-    out = net.with_changes(
-        vmin=np.where(other, vmin, net.vmin), vmax=np.where(other, np.minimum(net.vmax + eps, V_LIMIT_MAX_PU), net.vmax)
-    )
+            return _cache[key]  # type: ignore[return-value]
+    out: Network | PhaseNetwork
+    if isinstance(net, PhaseNetwork):
+        lo, hi = net.band
+        out = net.with_band(max(lo - eps, 0.0), min(hi + eps, V_LIMIT_MAX_PU))
+    else:
+        other = np.arange(net.n_bus) != net.slack  # the slack's |V| is held at its setpoint: its band stays
+        vmin = np.maximum(net.vmin - eps, 0.0) if math.isfinite(eps) else np.zeros(net.n_bus)
+        out = net.with_changes(
+            vmin=np.where(other, vmin, net.vmin), vmax=np.where(other, np.minimum(net.vmax + eps, V_LIMIT_MAX_PU), net.vmax)
+        )
     with _lock:
         out = _cache.setdefault(key, out)
         while len(_cache) > _WIDENED:
             _cache.popitem(last=False)
-    return out
+    return out  # type: ignore[return-value]
 
 
-def excursion(net: Network, vm: np.ndarray) -> np.ndarray:
+def excursion(net: Network | PhaseNetwork, vm: np.ndarray) -> np.ndarray:
     """(S,) the largest excursion (p.u.) of |V| `vm` (S, n_bus) beyond `net`'s voltage
     limits, 0 where within; NaN where `vm` is NaN (no converged flow)."""
     low = np.maximum(net.vmin - vm, 0.0)
@@ -138,11 +148,15 @@ def reference(
 ) -> Reference:
     """The plain frontier's point at each step's excursion (`Frontier.at`), and where the
     configuration curtailed (`curtailed` (S,) bool) the point of `cutting`, the frontier of
-    the optimum that may curtail computed on the steps `rows` (sorted, holding those)."""
+    the optimum that may curtail computed on the steps `rows` (sorted, holding those) —
+    none (NaN) there without it: the plain optimum bounds no point that curtails."""
     cost, bound, eps = plain.at(excursion_pu)
     curtails = np.zeros(cost.size, dtype=bool)
-    if cutting is None or rows is None or curtailed is None or not curtailed.any():
+    if curtailed is None or not curtailed.any():
         return Reference(cost, bound, eps, curtails)
+    if cutting is None or rows is None:
+        gone = np.asarray(curtailed, dtype=bool)
+        return Reference(np.where(gone, np.nan, cost), np.where(gone, np.nan, bound), np.where(gone, np.nan, eps), curtails)
     where = np.flatnonzero(curtailed)
     at = np.searchsorted(rows, where)
     if at.max() >= rows.size or not np.array_equal(rows[at], where):
@@ -165,7 +179,7 @@ def _bound(res: StrategyResult) -> np.ndarray:
     return np.full(res.n_snapshots, np.nan) if raw is None else np.asarray(raw, dtype=float)
 
 
-def _binds(net: Network, res: StrategyResult) -> np.ndarray:
+def _binds(net: Network | PhaseNetwork, res: StrategyResult) -> np.ndarray:
     """(S,) whether a step's ε = 0 answer may depend on its band: not an optimum, or some
     |V| within MARGIN_PU of a limit."""
     vm = res.vm

@@ -6,13 +6,15 @@ DistFlow on radial feeders, Jabr's on meshed ones); the generic runner runs them
 
 from __future__ import annotations
 
+from opfbench.errors import InputError
 from opfbench.formulations.acopf_options import ACOPF_SOLVERS, FALLBACKS, AcopfSolver, Fallback
 from opfbench.formulations.model import SLACK_EXPORT, model_for
 from opfbench.formulations.problem import check_supported
 from opfbench.formulations.runner import run_problem_model
+from opfbench.multiphase import PhaseNetwork
 from opfbench.network import Network
 from opfbench.registry.options import Option
-from opfbench.registry.specs import strategy
+from opfbench.registry.specs import SUPPORTS, UNBALANCED, strategy
 from opfbench.result import StrategyResult
 from opfbench.scenario import Scenario
 
@@ -25,9 +27,13 @@ SOLVER = Option(
 )
 
 
-def check_exact(net: Network) -> None:
+def check_exact(net: Network | PhaseNetwork) -> None:
     """NetworkError before any work unless the problem is modelled on `net` and an exact
-    model and a relaxation serve it (the AC OPF's bound and fast path)."""
+    model and a relaxation serve it (the AC OPF's bound and fast path) — on a three-phase
+    feeder an exact model (no relaxation serves one yet: `three_phase`)."""
+    if isinstance(net, PhaseNetwork):
+        model_for("exact", net)
+        return
     check_supported(net)
     model_for("exact", net)
     model_for("relaxation", net)
@@ -55,6 +61,7 @@ CURTAIL = Option(
     options=(SOLVER,),
     fixed={"fallback": "paper", "slack_export": False},
     role="exact",
+    supports=SUPPORTS + UNBALANCED,
     network_check=check_exact,
 )
 @strategy(
@@ -64,6 +71,7 @@ CURTAIL = Option(
     options=(FALLBACK, SLACK_EXPORT, SOLVER, CURTAIL),
     bound_rank=1,
     role="exact",
+    supports=SUPPORTS + UNBALANCED,
     network_check=check_exact,
 )
 def run_acopf(
@@ -77,6 +85,10 @@ def run_acopf(
 ) -> StrategyResult:
     """The AC OPF on every snapshot of `scenario` with reserve k (`runner.run_exact`); with
     `curtail` the one that may curtail the DER's active power (`curtail.run_curtailing`)."""
+    if curtail and scenario.three_phase:
+        raise InputError(
+            f"strategy 'acopf': option curtail=true is not modelled on three-phase feeders ({scenario.net.name}) yet"
+        )
     if curtail:
         from opfbench.formulations.curtail import run_curtailing
 

@@ -34,6 +34,7 @@ from opfbench.formulations.model import built, model_for
 from opfbench.formulations.policy import IpoptPolicy, fast_path, merge_flows
 from opfbench.formulations.problem import OpfProblem, snapshot_data
 from opfbench.formulations.solves import model_solves, relaxation_solves
+from opfbench.formulations.three_phase import run_phase
 from opfbench.powerflow import solve_pf_batch
 from opfbench.registry.specs import ModelSpec, Role
 from opfbench.result import FROM_NO_ACTION, FROM_SOLVER, INFEASIBLE, OK, SOLVER_FAILED, StrategyResult
@@ -52,7 +53,12 @@ def run_model(
     solver: AcopfSolver = "auto",
 ) -> StrategyResult:
     """`model` on every snapshot of `scenario` with reserve k (module docstring), the result
-    named `name` (default: the model's); `fallback` and `solver` apply to an exact model."""
+    named `name` (default: the model's); `fallback` and `solver` apply to an exact model —
+    on a three-phase feeder `three_phase.run_phase` (no relaxation there yet: IPOPT on
+    every snapshot, whatever `solver` says)."""
+    if scenario.three_phase and model.role == "exact":
+        check_option("AC OPF solver", solver, ACOPF_SOLVERS)
+        return run_phase(model, scenario, k, name=name, slack_export=slack_export, fallback=fallback)
     if model.role == "exact":
         return run_exact(model, scenario, k, name=name, slack_export=slack_export, fallback=fallback, solver=solver)
     return run_batch(model, scenario, k, name=name, slack_export=slack_export)

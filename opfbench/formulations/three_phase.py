@@ -1,17 +1,25 @@
 """The OPF problem on three-phase feeders: its exact model's optimum on every snapshot,
 confirmed by the three-phase power flow — every reported figure is the power flow's. The
 model is the one declared for the feeder's class (`model.model_for("exact", net)`:
-"unbalanced-radial" or "unbalanced-meshed", today `models.ac_three_phase`). No relaxation
-serves three-phase feeders yet, so no optimum here is certified by a bound.
+"unbalanced-radial" or "unbalanced-meshed", today `models.ac_three_phase`), built once per
+feeder and thread (`solver_cache.per_thread`, on the feeder a widened band was derived
+from: `PhaseNetwork.origin` — the band is a per-solve input). No relaxation serves
+three-phase feeders yet, so no optimum here is certified by a bound: an accepted point is
+IPOPT's local optimum confirmed by the power flow (`certified_by` stays empty).
 
 Per snapshot (`optimum`): the exact model warm from the previous snapshot's answer, then
-cold from the power flow's no-action point; a point is accepted only when IPOPT converged
-and the power flow at its Q setpoints converges, meets the band (`BAND_TOL`) and gives the
-model's losses within `CONFIRM_RTOL`. Otherwise the snapshot falls back to no action
-(Q = 0) where that meets the band (status fallback-no-action), else reports `infeasible`
-(IPOPT detected it: a local verdict) or `solver-failed`, with no figure. A snapshot where
-no DER has Q to give (night, or k = 1) has one operating point, the power flow's: the
-optimum where it meets the band, proven infeasible where it does not (`proven`).
+(failure policy "chain") cold from the power flow's no-action point; a point is accepted
+only when IPOPT converged and the power flow at its Q setpoints converges, meets the band
+(`BAND_TOL`) and gives the model's losses within `CONFIRM_RTOL`. Otherwise the snapshot
+falls back to no action (Q = 0) where that meets the band (status fallback-no-action),
+else reports `infeasible` (IPOPT detected it: a local verdict) or `solver-failed`. Under
+the paper's policy ("paper") IPOPT runs once (warm where it can). A snapshot where no DER
+has Q to give (night, or k = 1) has one operating point, the power flow's: the optimum
+where it meets the band, proven infeasible where it does not (`proven`).
+
+`run_phase` is the strategy's side (`acopf` and `acopf-paper` on a three-phase scenario,
+through `runner.run_model`): the setpoints of `optimum` — Q = 0 where there is none, as
+on balanced feeders — evaluated by the power flow, with statuses and the solver record.
 
 Units: MW, MVAr (Q positive = injected), losses in kW.
 """
@@ -23,10 +31,25 @@ from dataclasses import dataclass
 import numpy as np
 
 from opfbench.capability import check_reserve, qmax
-from opfbench.formulations.model import load_models, model_for
+from opfbench.formulations.acopf_options import FALLBACKS, Fallback, check_option
+from opfbench.formulations.evaluation import solver_record
+from opfbench.formulations.model import built, load_models, model_for
 from opfbench.multiphase import PhaseNetwork
-from opfbench.powerflow.multiphase import solve_phase_flow
-from opfbench.result import FALLBACK_COLD, FALLBACK_NO_ACTION, INFEASIBLE, OK, SOLVER_FAILED
+from opfbench.powerflow.multiphase import PhaseFlowResult, solve_phase_flow
+from opfbench.registry.specs import ModelSpec
+from opfbench.result import (
+    FALLBACK_COLD,
+    FALLBACK_NO_ACTION,
+    FROM_COLD,
+    FROM_NO_ACTION,
+    FROM_SOLVER,
+    INFEASIBLE,
+    OK,
+    SOLVER_FAILED,
+    StrategyResult,
+)
+from opfbench.scenario import Scenario
+from opfbench.timing import elapsed_ms, now
 
 CONFIRM_RTOL = 1e-4
 """A model's point is accepted when the power flow's losses at its setpoints are within this
@@ -35,6 +58,7 @@ IPOPT's constraint tolerance, which near-zero-impedance switches and regulators 
 the reported losses are the power flow's, at the NLP's setpoints)."""
 BAND_TOL = 1e-6
 """p.u. by which an accepted point's monitored voltages may leave the band (round-off)."""
+PROVEN_NO_Q = "no Q to give: the power flow's point is the only one"  # solver_status of such a snapshot
 
 
 @dataclass(frozen=True, eq=False)
@@ -44,8 +68,10 @@ class PhaseOptimum:
     operating point to report), `objective_kw` the exact model's optimum (NaN unless
     accepted), `proven` (an infeasible snapshot proven so, module docstring),
     `iterations` and `solve_ms` (IPOPT's, summed over attempts), `vmin`/`vmax` (p.u., the
-    monitored voltages; NaN with the losses); `q_mvar` (S, n_der) the setpoints (0 where
-    there is no optimum)."""
+    monitored voltages; NaN with the losses), `solver_status` (IPOPT's per attempt, joined
+    by " → "), `warm` (the first attempt was warm); `q_mvar` (S, n_der) the setpoints (0
+    where there is no optimum); `flow` the power flow at those setpoints (Q = 0 where
+    there is no optimum: the point a strategy reports there, under its status)."""
 
     status: np.ndarray
     q_mvar: np.ndarray
@@ -56,6 +82,9 @@ class PhaseOptimum:
     solve_ms: np.ndarray
     vmin: np.ndarray
     vmax: np.ndarray
+    solver_status: np.ndarray
+    warm: np.ndarray
+    flow: PhaseFlowResult
 
 
 def q_limits(net: PhaseNetwork, der_p_mw: np.ndarray, k: float) -> np.ndarray:
@@ -74,18 +103,26 @@ def optimum(
     load_q_mvar: np.ndarray,
     der_p_mw: np.ndarray,
     k: float = 0.0,
+    *,
+    q_limit_mvar: np.ndarray | None = None,
+    fallback: Fallback = "chain",
+    slack_export: bool = True,
 ) -> PhaseOptimum:
     """The OPF on S snapshots (module docstring): load P and Q (S, n_load) at their law's
-    reference, DER P (S, n_der), reserve k. Checked before any work: k, then shapes and
-    finite values (the power flow's checks)."""
+    reference, DER P (S, n_der), reserve k — or the usable |Q| `q_limit_mvar` (S, n_der)
+    where the caller has it (a scenario's, "Q at night" included) —, the failure policy,
+    whether the source may take power back. Checked before any work: k and the policy,
+    then shapes and finite values (the power flow's checks)."""
     check_reserve(k)
+    check_option("AC OPF failure policy", fallback, FALLBACKS)
     no_action = solve_phase_flow(net, load_p_mw, load_q_mvar, der_p_mw)  # checks shapes and values first
     n, n_der = no_action.n_snapshots, len(net.ders)
     load_p, load_q = (np.asarray(x, dtype=float).reshape(n, net.n_load) for x in (load_p_mw, load_q_mvar))
     der_p = np.asarray(der_p_mw, dtype=float).reshape(n, n_der)
-    limit = q_limits(net, der_p, k)
+    limit = q_limits(net, der_p, k) if q_limit_mvar is None else np.asarray(q_limit_mvar, dtype=float).reshape(n, n_der)
     load_models()
-    exact = model_for("exact", net).build(net, True)
+    origin = net.origin  # the model is built once for the feeder; the band is the solve's
+    exact = built(model_for("exact", origin), origin, slack_export)  # type: ignore[arg-type]
     lo, hi = net.band
     status = np.empty(n, dtype=object)
     q = np.zeros((n, n_der))
@@ -93,23 +130,33 @@ def optimum(
     iterations = np.zeros(n, dtype=int)
     solve_ms = np.zeros(n)
     proven = np.zeros(n, dtype=bool)
+    solver_status = np.full(n, "", dtype=object)
+    warm = np.zeros(n, dtype=bool)
     start = None
     in_band = no_action.converged & (lo - BAND_TOL <= no_action.vm.min(axis=1)) & (no_action.vm.max(axis=1) <= hi + BAND_TOL)
+    if not slack_export:
+        in_band &= no_action.source_kva.real >= 0  # no action is a point only where the source does not take power back
     for i in range(n):
         if not limit[i].any() and no_action.converged[i]:  # no decision: the power flow's point is the only one
             status[i] = OK if in_band[i] else INFEASIBLE
             objective[i] = no_action.losses_kw[i] if in_band[i] else np.nan
             proven[i] = not in_band[i]
+            solver_status[i] = PROVEN_NO_Q
             continue
         attempts, accepted = [], None
-        if start is not None:
-            attempts.append(exact.solve(load_p[i], load_q[i], der_p[i], limit[i], start=start))
-            accepted = attempts[-1] if _accepted(net, attempts[-1], load_p[i], load_q[i], der_p[i]) else None
-        if accepted is None and no_action.converged[i]:
-            attempts.append(exact.solve(load_p[i], load_q[i], der_p[i], limit[i], x0=exact.initial(no_action.v[i])))
-            accepted = attempts[-1] if _accepted(net, attempts[-1], load_p[i], load_q[i], der_p[i]) else None
+        snapshot = (load_p[i], load_q[i], der_p[i])
+        starts: list[dict] = [{"start": start}] if start is not None else []
+        if no_action.converged[i] and (fallback == "chain" or not starts):
+            starts.append({"x0": exact.initial(no_action.v[i])})  # cold, from the power flow's point
+        for how in starts:
+            attempts.append(exact.solve(*snapshot, limit[i], band=(lo, hi), **how))
+            if _accepted(net, attempts[-1], *snapshot, slack_export):
+                accepted = attempts[-1]
+                break
         iterations[i] = sum(a.iterations for a in attempts)
         solve_ms[i] = sum(a.solve_ms for a in attempts)
+        solver_status[i] = " → ".join(a.status for a in attempts)
+        warm[i] = bool(attempts) and attempts[0].warm
         if accepted is not None:
             start = accepted
             q[i], objective[i] = accepted.q_pu, accepted.objective_kw
@@ -132,12 +179,74 @@ def optimum(
         solve_ms,
         np.where(settled, flow.vm.min(axis=1, initial=np.inf), np.nan),
         np.where(settled, flow.vm.max(axis=1, initial=-np.inf), np.nan),
+        solver_status,
+        warm,
+        flow,
     )
 
 
-def _accepted(net: PhaseNetwork, solve, load_p: np.ndarray, load_q: np.ndarray, der_p: np.ndarray) -> bool:
+def run_phase(
+    model: ModelSpec,
+    scenario: Scenario,
+    k: float,
+    *,
+    name: str = "",
+    slack_export: bool = True,
+    fallback: Fallback = "chain",
+) -> StrategyResult:
+    """The exact model on every snapshot of a three-phase `scenario` (module docstring), the
+    result named `name` (default: the model's). The solver record: objective_kw (the
+    model's losses where accepted), solver_status (IPOPT's per attempt; `PROVEN_NO_Q` where
+    no DER has Q), fallback, certified_by "" (nothing certifies a three-phase point yet),
+    iterations and solve_ms (IPOPT's, summed over attempts); extra: warm_start,
+    ac_feasible (the reported point meets the band), slack_export. No lower bound."""
+    begin = now()
+    net = scenario.net
+    assert isinstance(net, PhaseNetwork)
+    load_p, load_q = scenario.element_loads()
+    limit = (1.0 - check_reserve(k)) * scenario.qmax_mvar()  # "Q at night" where the scenario says
+    opt = optimum(net, load_p, load_q, scenario.der_p_mw, k, q_limit_mvar=limit, fallback=fallback, slack_export=slack_export)
+    answered = (opt.status == OK) | (opt.status == FALLBACK_COLD)
+    source = np.where(opt.status == FALLBACK_COLD, FROM_COLD, np.where(answered, FROM_SOLVER, FROM_NO_ACTION))
+    source = np.where(opt.solver_status == PROVEN_NO_Q, np.where(opt.status == OK, FROM_SOLVER, FROM_NO_ACTION), source)
+    rows = [
+        {
+            "objective_kw": float(opt.objective_kw[i]),
+            "solver_status": str(opt.solver_status[i]),
+            "fallback": str(source[i]),
+            "certified_by": "",
+            "solve_ms": float(opt.solve_ms[i]),
+            "iterations": int(opt.iterations[i]),
+            "warm_start": bool(opt.warm[i]),
+        }
+        for i in range(scenario.n_snapshots)
+    ]
+    record, extra = solver_record(model, rows)
+    lo, hi = net.band
+    flow = opt.flow
+    with np.errstate(invalid="ignore"):
+        feasible = flow.converged & (flow.vm.min(axis=1) >= lo - BAND_TOL) & (flow.vm.max(axis=1) <= hi + BAND_TOL)
+    full: dict[str, object] = {**extra, "ac_feasible": feasible, "slack_export": bool(slack_export)}
+    return StrategyResult.from_setpoints(
+        name or model.name,
+        k,
+        scenario,
+        opt.q_mvar,
+        elapsed_ms(begin),
+        power_flows=1,  # the no-action flow every snapshot starts from (the confirmations are the solves')
+        pf=flow,
+        status=opt.status,
+        solver=record,
+        extra=full,
+    )
+
+
+def _accepted(
+    net: PhaseNetwork, solve, load_p: np.ndarray, load_q: np.ndarray, der_p: np.ndarray, slack_export: bool = True
+) -> bool:
     """IPOPT converged, and the power flow at the solve's setpoints converges, meets the
-    band and gives the model's losses within CONFIRM_RTOL."""
+    band (and, where the source may not take power back, draws power from it) and gives
+    the model's losses within CONFIRM_RTOL."""
     if not solve.success or not np.isfinite(solve.objective_kw) or not np.all(np.isfinite(solve.q_pu)):
         return False
     flow = solve_phase_flow(net, load_p[None], load_q[None], der_p[None], solve.q_pu[None])
@@ -145,4 +254,6 @@ def _accepted(net: PhaseNetwork, solve, load_p: np.ndarray, load_q: np.ndarray, 
         return False
     lo, hi = net.band
     within = lo - BAND_TOL <= flow.vm[0].min() and flow.vm[0].max() <= hi + BAND_TOL
+    if not slack_export and flow.source_kva[0].real < -BAND_TOL:
+        return False
     return bool(within and abs(flow.losses_kw[0] - solve.objective_kw) <= CONFIRM_RTOL * abs(flow.losses_kw[0]))

@@ -35,6 +35,7 @@ linearised model needs):
 
 from __future__ import annotations
 
+import copy
 from dataclasses import dataclass, field, replace
 from functools import cached_property
 
@@ -343,6 +344,23 @@ class PhaseNetwork(DerFleet):
         db = self.der_branches
         count = np.bincount(db.owner, minlength=len(self.ders)).astype(float)
         return sp.csr_matrix((1.0 / count[db.owner], (db.owner, np.arange(db.n))), shape=(len(self.ders), db.n))
+
+    @cached_property
+    def origin(self) -> PhaseNetwork:
+        """The feeder this one was derived from by `with_band` (itself if none): the two
+        differ in their band only, so what is built for one (a compiled OPF) serves both."""
+        return self
+
+    def with_band(self, low: float, high: float) -> PhaseNetwork:
+        """This feeder with the voltage band (low, high) p.u. (0 ≤ low < high; low 0 is
+        the physical limit alone): a copy that shares every derived matrix with this one
+        (none depends on the band), `origin` this one's. ValueError for no band."""
+        if not 0 <= low < high:
+            raise ValueError(f"{self.name}: voltage band {low:g}–{high:g} p.u. is not a band (0 ≤ low < high)")
+        out = copy.copy(self)  # the cached derived matrices come along; the checks passed for this one
+        object.__setattr__(out, "band", (float(low), float(high)))
+        out.__dict__["origin"] = self.origin
+        return out
 
     @property
     def vmin(self) -> np.ndarray:

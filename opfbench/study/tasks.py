@@ -250,14 +250,15 @@ def run_task(inp: TaskInput) -> TaskOutput:
                     ran.append((scenario, results))
             plain = scenario_of(mode, "off")
             front = next((f for earlier, f in drawn if earlier.same_data(plain)), None)
-            if front is None and not plain.three_phase:  # the optimum on three-phase feeders: not yet (issue 30)
+            if front is None:
                 front = frontier(plain, t.k, at_zero=by_source.get("off", {}).get(REFERENCE_OPTIMUM))
                 drawn.append((plain, front))
             if front is not None:
                 fronts.append(frontier_rows(t.case, t.k, mode, time, inp.step_h, front))
             cut = {(s, n): _curtailed(r) for s, results in by_source.items() for n, r in results.items() if curtails(n)}
             rows = np.flatnonzero(np.logical_or.reduce([*cut.values(), np.zeros(inp.n_steps, dtype=bool)]))
-            cutting = frontier(plain.take(rows), t.k, curtail=True) if rows.size and front is not None else None
+            cuts = rows.size and front is not None and not plain.three_phase  # three-phase: no optimum that curtails yet
+            cutting = frontier(plain.take(rows), t.k, curtail=True) if cuts else None
             if cutting is not None:
                 fronts.append(frontier_rows(t.case, t.k, mode, time[rows], inp.step_h, cutting))
             for source, results in by_source.items():

@@ -198,7 +198,10 @@ class ThreePhaseAc:
             (u[switching.tolist()], net.load_models.vminpu[lb.owner][switching], np.full(switching.size, np.inf)),
             (u[bounded.tolist()], np.full(bounded.size, -np.inf), net.load_models.vmaxpu[lb.owner][bounded]),
         ]
+        if not slack_export:  # the source may not take power back from the feeder
+            rows.append((p_source, np.zeros(1), np.full(1, np.inf)))
         self.n_monitored = len(a)
+        self.band_rows = slice(2 * n, 2 * n + len(a))  # where `solve` puts another band
         nlp = {
             "x": ca.vertcat(q, e, f),
             "p": ca.vertcat(p_load, q_load, p_der),
@@ -234,13 +237,19 @@ class ThreePhaseAc:
         q_limit_mvar: np.ndarray,
         x0: np.ndarray | None = None,
         start: IpoptSolve | None = None,
+        band: tuple[float, float] | None = None,
     ) -> IpoptSolve:
         """One snapshot: loads' P and Q (n_load,) at their law's reference, DER P (n_der,),
-        usable |Q| (n_der,) MVAr; warm from `start`, else cold from `x0` (`initial`)."""
+        usable |Q| (n_der,) MVAr; warm from `start`, else cold from `x0` (`initial`);
+        `band` (low, high) p.u. in place of the feeder's (a widened band: the frontier)."""
         p = np.concatenate([load_p_mw, load_q_mvar, der_p_mw])
         big = np.full(2 * self.net.n_node, np.inf)
         lbx = np.concatenate([-q_limit_mvar, -big])
         ubx = np.concatenate([q_limit_mvar, big])
         if x0 is None and start is None:
             raise ValueError("a cold solve needs a start point x0 (ThreePhaseAc.initial)")
-        return self.nlp.solve(p, lbx, ubx, x0 if x0 is not None else start.x, start)  # type: ignore[union-attr]
+        lbg, ubg = self.nlp.lbg, self.nlp.ubg
+        if band is not None and tuple(band) != tuple(self.net.band):
+            lbg, ubg = lbg.copy(), ubg.copy()
+            lbg[self.band_rows], ubg[self.band_rows] = band[0] ** 2, band[1] ** 2
+        return self.nlp.solve(p, lbx, ubx, x0 if x0 is not None else start.x, start, lbg, ubg)  # type: ignore[union-attr]

@@ -89,10 +89,22 @@ class IpoptNlp:
             self._instances[warm] = ca.nlpsol(f"{self.name}_{'warm' if warm else 'cold'}", "ipopt", self.nlp, options)
         return self._instances[warm]
 
-    def solve(self, p: np.ndarray, lbx: np.ndarray, ubx: np.ndarray, x0: np.ndarray, start: IpoptSolve | None) -> IpoptSolve:
-        """Solve at parameters `p` within the variable bounds `lbx`..`ubx`: warm from
-        `start`'s primal and dual point when given, else cold from `x0`."""
-        args = {"p": p, "lbx": lbx, "ubx": ubx, "lbg": self.lbg, "ubg": self.ubg}
+    def solve(
+        self,
+        p: np.ndarray,
+        lbx: np.ndarray,
+        ubx: np.ndarray,
+        x0: np.ndarray,
+        start: IpoptSolve | None,
+        lbg: np.ndarray | None = None,
+        ubg: np.ndarray | None = None,
+    ) -> IpoptSolve:
+        """Solve at parameters `p` within the variable bounds `lbx`..`ubx` (and the
+        constraint bounds `lbg`..`ubg`, default the NLP's): warm from `start`'s primal and
+        dual point when given, else cold from `x0`."""
+        lbg = self.lbg if lbg is None else lbg
+        ubg = self.ubg if ubg is None else ubg
+        args = {"p": p, "lbx": lbx, "ubx": ubx, "lbg": lbg, "ubg": ubg}
         solver = self.instance(warm=start is not None)
         if start is None:
             out = solver(x0=x0, **args)
