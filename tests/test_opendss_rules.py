@@ -201,3 +201,30 @@ def test_run_eulv_on_its_own_load_shapes_with_vuf_columns(tmp_path):
         net, load_p[None], (load_p * net.load_q_mvar / net.load_p_mw)[None], (pv_pu * net.der_rating_mw)[None]
     )
     assert row.losses_kw == pytest.approx(flow.losses_kw[0], rel=1e-9)
+
+
+def test_a_users_own_feeder_in_one_command_as_the_readme_gives_it(tmp_path):
+    """The README's own-feeder command, taken from the README and run on a copy of the
+    shipped ieee13 master (a shorter period, no frontier: the rules alone): every rule runs on the listed DER, named
+    `BUS.PHASES`, and the run writes its tables and report."""
+    import shlex
+    from pathlib import Path
+
+    import pandas as pd
+
+    readme = (Path(__file__).resolve().parents[1] / "README.md").read_text()
+    line = next(l for l in readme.splitlines() if "opfbench run --case opendss:my/Master.dss --der" in l)
+    argv = shlex.split(line[line.index("opfbench run") : line.rindex("`")])[1:]
+    out = tmp_path / "mine"
+    with opendss_copy("ieee13") as master:
+        argv = [str(master) if a == "opendss:my/Master.dss" else a for a in argv]
+        argv = [f"opendss:{a}" if a == str(master) else a for a in argv]
+        extra = ["--period", "2016-06-28T12:00..2016-06-28T12:02", "--k", "0", "--night-modes", "connected", "--no-frontier"]
+        assert main([*argv, *extra, "--forecast", "off", "--workers", "1", "--quiet", "--out", str(out)]) == 0
+    steps = pd.read_parquet(out / "steps.parquet")
+    strategies = argv[argv.index("--strategies") + 1 :]
+    assert sorted(steps.strategy.unique()) == sorted(strategies) and len(steps) == 2 * len(strategies)
+    assert (steps.status == "ok").all() and (out / "report.html").is_file()
+    der = pd.read_parquet(out / "der_q.parquet")
+    buses = [item.split(":")[0] for item in argv[argv.index("--der") + 1].split(",")]
+    assert set(der.der) == {b if "." in b else f"{b}.1.2.3" for b in buses}  # a bus without phases: all of ieee13's three
