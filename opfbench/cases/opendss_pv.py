@@ -94,7 +94,7 @@ def pv_lines(net: PhaseNetwork, every: int = 2, share: float = 1.0, kw: float | 
         assert place.load is not None
         bus = net.bus_names.index(place.bus)
         nodes = ".".join(map(str, place.phases))
-        kv = float(net.bus_kv_ln[bus]) * (np.sqrt(3.0) if place.delta else 1.0)
+        kv = float(net.bus_kv_ln[bus] * (np.sqrt(3.0) if place.delta else 1.0))
         conn = " conn=delta" if place.delta else ""
         rated = place.rating_mw * 1e3
         out.append(
