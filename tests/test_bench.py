@@ -29,6 +29,7 @@ PF_KEYS = {
     "batch_max_iterations",
     "batch_vs_single_max_dv_pu",
     "pandapower_loop_1440_ms",
+    "pandapower_loop_snapshots",
     "ratio_vs_pandapower",
     "pandapower_max_dv_pu",
     "pandapower_numba",
@@ -53,7 +54,13 @@ def no_peers(monkeypatch):
 def test_pf_bench_without_peers(no_peers, capsys):
     f = bench_pf.run()
     assert set(f) == PF_KEYS
-    for key in ("pandapower_loop_1440_ms", "ratio_vs_pandapower", "pgm_batch_1440_ms", "ratio_vs_pgm"):
+    for key in (
+        "pandapower_loop_1440_ms",
+        "pandapower_loop_snapshots",
+        "ratio_vs_pandapower",
+        "pgm_batch_1440_ms",
+        "ratio_vs_pgm",
+    ):
         assert f[key] is None
     assert f["single_ms"] > 0 and f["batch_1440_ms"] > 0 and f["batch_converged"] == 1440
     assert f["batch_vs_single_max_dv_pu"] < 1e-9
@@ -65,7 +72,8 @@ def test_pf_peers_agree_with_us_on_the_paper_day(monkeypatch):
     monkeypatch.setattr(bench_pf, "NUMBA", False)  # numba's first-call compilation takes a minute
     day = paper_day_scenario("paper33")
     s = day.injections(0.0)[::60]
-    assert bench_pf._pandapower_loop_ms(day.net, s)[1] < 1e-6
+    assert bench_pf._pandapower_loop_ms(day.net, s, every=1)[1] < 1e-6
+    assert bench_pf._pandapower_loop_ms(day.net, s, every=12)[1] < 1e-6  # the sample of the benchmark, scaled
     assert bench_pf._pgm_batch_ms(day.net, s)[1] < 1e-6
 
 
@@ -122,7 +130,8 @@ def test_opf_bench_agrees_with_pandapower_runopp():
     """pandapower's OPF (PIPS) as the independent optimum: the same losses on every
     snapshot, its slack held at its setpoint as ours is (left free, runopp raises it to the
     bus's Vmax and reports up to 27 kW less on paper33)."""
-    f = bench_opf.bench_opf(n=6)
+    f = bench_opf.bench_opf(n=6, peer_every=1)
+    assert f["pandapower_snapshots"] == 6
     assert f["pandapower_failures"] == 0 and f["pandapower_agrees"] == 6, f["pandapower_max_loss_diff_kw"]
     assert f["pandapower_max_loss_diff_kw"] <= bench_opf.AGREEMENT_KW
 

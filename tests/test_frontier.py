@@ -133,3 +133,27 @@ def test_a_reference_takes_the_curtailing_frontier_where_the_rule_curtailed(tigh
     curtailed[0] = True  # a step the curtailing frontier was not computed on
     with pytest.raises(ValueError, match="lacks a step"):
         reference(plain, e, cutting, rows, curtailed)
+
+
+def test_a_proven_infeasibility_covers_every_narrower_band_with_the_answer_a_solve_gives():
+    """paper33 with its lower limit raised to 0.98 p.u., 19:00–21:00: the evening steps have
+    no point within the narrow bands, which the interval bounds prove; a proof at ε covers
+    every smaller ε unsolved, with what solving there gives (no action, no bound)."""
+    net = load_network("paper33")
+    others = np.arange(net.n_bus) != net.slack
+    day = paper_day()
+    rows = slice(1140, 1260, 20)
+    scenario = Scenario.from_profiles(
+        net.with_changes(vmin=np.where(others, 0.98, net.vmin)), *(day[c].to_numpy()[rows] for c in ("load", "pv", "wind"))
+    )
+    front = frontier(scenario, 0.0)
+    covered = (front.status == "infeasible") & ~front.solved
+    covered[:, 0] = False  # ε = 0 is the acopf strategy's own answer
+    assert covered.any()
+    for j in np.flatnonzero(covered.any(axis=0)):
+        res = run_acopf(replace(scenario, net=widened(scenario.net, EPSILONS[j])), 0.0)
+        at = covered[:, j]
+        assert (res.status[at] == "infeasible").all() and res.extra["proven_infeasible"][at].all()
+        np.testing.assert_array_equal(front.excursion_pu[at, j], excursion(scenario.net, res.vm[at]))
+        assert np.isnan(front.cost_kw[at, j]).all() and np.isnan(front.bound_kw[at, j]).all()
+        assert np.isnan(res.lower_bound_kw[at]).all()

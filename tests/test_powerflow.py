@@ -50,6 +50,16 @@ def test_heavy_load_reports_non_convergence():
     assert list(batch.converged) == [True, False]
 
 
+def test_a_singular_jacobian_ends_newton_without_a_step():
+    from opfbench.powerflow.dense import DenseNewton
+
+    newton = DenseNewton(load_network("paper33"))
+    newton.y_rows = np.zeros_like(newton.y_rows)  # no branch: every derivative is 0
+    newton.y_sub_conj = np.zeros_like(newton.y_sub_conj)
+    v = np.ones(newton.y_rows.shape[1], dtype=complex)
+    assert newton.step(v, np.ones(2 * len(newton.pvpq) - len(newton.pv))) is None
+
+
 def test_nan_injection_is_a_clear_error():
     net = load_network("paper33")
     with pytest.raises(InputError, match="NaN"):

@@ -9,7 +9,6 @@ from __future__ import annotations
 
 import json
 
-import numpy as np
 import pandas as pd
 import pytest
 
@@ -17,7 +16,7 @@ from opfbench.cli import main
 from opfbench.formulations.frontier import EPSILONS
 from opfbench.result import FALLBACK_COLD, INFEASIBLE, OK
 
-RULES = ("no-action", "llma", "lfma", "volt-var", "volt-watt")
+RULES = ("no-action", "llma", "lfma", "volt-var")
 TOL_KW = 1e-6  # kW: the power flow's and IPOPT's round-off on eulv's ~0.1–1 kW of losses
 
 
@@ -38,6 +37,7 @@ def _check_day(steps: pd.DataFrame, summary: pd.DataFrame, front: pd.DataFrame) 
     assert by.certified_share["acopf"] == 0 and by.not_ok_steps["acopf"] == 0
     assert by.max_vuf_pct["acopf"] > 0 and by.vuf_min["acopf"] == 0
     # the frontier: one row per ε, its ε = 0 point the acopf rows'
+    assert not front.curtail.any()  # no rule here curtails (`test_three_phase_opf`: the frontier that may curtail)
     assert front.eps_pu.tolist() == list(EPSILONS) and (front.steps == n).all() and (front.no_optimum_steps == 0).all()
     assert front.energy_kwh[0] == pytest.approx(by.energy_kwh["acopf"], rel=1e-6)
     # no optimum above a rule that holds the band (and does not curtail), at any step
@@ -52,11 +52,6 @@ def _check_day(steps: pd.DataFrame, summary: pd.DataFrame, front: pd.DataFrame) 
     full = rules[rules.frontier_missing_steps == 0]
     assert (full.gap_eq_kwh >= -1e-9).all() and (full.share_eq_pct <= 100 + 1e-9).all()
     assert by.share_eq_pct["no-action"] == 0 and by.share_eq_pct["llma"] > 0 and by.share_eq_pct["volt-var"] < 0
-    # a rule that curtails is compared with the optimum that may curtail, which three-phase
-    # feeders do not have yet: its curtailed steps have no frontier point, and say so
-    vw = by.loc["volt-watt"]
-    curtailed = int((steps[steps.strategy == "volt-watt"].curtailed_kw > 0).sum())
-    assert curtailed > 0 and vw.frontier_missing_steps == curtailed and np.isnan(vw.share_eq_pct)
 
 
 def test_the_optimum_leads_the_leaderboard_of_an_hourly_eulv_day(tmp_path):
@@ -72,17 +67,16 @@ def test_the_optimum_leads_the_leaderboard_of_the_eulv_paper_day(tmp_path):
 def test_formulations_on_a_three_phase_feeder(capsys):
     """`acopf-paper` runs (the source may not take power back: with the PV at 80 % of their
     rating eulv exports, so it is infeasible there — counted, no action's point reported
-    under that status, as on balanced feeders); the SOCP and the optimum that curtails are
-    not modelled on three-phase feeders: one message each, exit 2."""
+    under that status, as on balanced feeders); the SOCP is not modelled on three-phase
+    feeders: one message, exit 2."""
     light = _snapshot(capsys, "acopf-paper", "0.2")
     assert light["status"] == OK and light["certified_by"] == "" and light["slack_export"] is False
     assert light["losses_kw"] < _snapshot(capsys, "no-action", "0.2")["losses_kw"] - 1e-3
     export = _snapshot(capsys, "acopf-paper", "0.8")
     assert export["status"] == INFEASIBLE and export["fallback"] == "no-action" and export["q_mvar"]["34.1"] == 0
-    for label, message in (("socp", "runs on radial, meshed networks"), ("acopf:curtail=true", "curtail=true is not modelled")):
-        assert main(["snapshot", "eulv", "--strategy", label]) == 2
-        err = capsys.readouterr().err
-        assert message in err and "Traceback" not in err
+    assert main(["snapshot", "eulv", "--strategy", "socp"]) == 2
+    err = capsys.readouterr().err
+    assert "runs on radial, meshed networks" in err and "Traceback" not in err
 
 
 def _snapshot(capsys, label: str, der_scale: str) -> dict:

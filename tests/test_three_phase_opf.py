@@ -18,10 +18,12 @@ from opfbench.cases.opendss_pv import case_with_pv, with_pv
 from opfbench.errors import InputError
 from opfbench.formulations.frontier import COVER_PU, frontier, widened
 from opfbench.formulations.model import model_for
+from opfbench.formulations.opf_strategies import run_acopf
 from opfbench.formulations.three_phase import BAND_TOL, optimum
 from opfbench.multiphase import PhaseNetwork
 from opfbench.network import V_LIMIT_MAX_PU
 from opfbench.powerflow.multiphase import solve_phase_flow
+from opfbench.registry.catalog import run_strategy
 from opfbench.result import INFEASIBLE, OK
 from opfbench.scenario import Scenario
 from tests.support.opendss_feeders import held_taps, solve
@@ -128,6 +130,29 @@ def test_the_frontier_widens_the_band_of_one_compiled_model(ieee123_pv):
     assert wide.origin is net and wide.band == (net.band[0] - 0.02, net.band[1] + 0.02) and wide.ybus is net.ybus
     assert widened(net, math.inf).band == (0.0, V_LIMIT_MAX_PU)
     assert front.excursion_pu[0, 1] > 0  # the optimum at ε = 0.0025 uses its widening
+
+
+def test_rules_that_curtail_lie_on_or_above_the_three_phase_frontier_that_may_curtail(ieee123_pv):
+    """ieee123 in full sun with its upper limit lowered to 1.04 p.u.: the optimum that may
+    curtail (losses + curtailed power, `acopf:curtail=true`) is a frontier at or below the
+    plain one at every ε, and Volt-Watt (curtailing from 1.0 p.u.) never lies below it at its
+    own compliance; the optimum curtails where nothing else holds the band."""
+    case, _ = ieee123_pv
+    net = case.network.with_band(case.network.band[0], 1.04)
+    lp, lq, dp = _snapshots(case, [(0.9, 1.0), (1.0, 0.9)])
+    scenario = Scenario.from_series(net, lp, lq, dp)
+    plain, cutting = frontier(scenario, 0.0), frontier(scenario, 0.0, curtail=True)
+    assert cutting.curtail and not np.isnan(cutting.cost_kw[:, 0]).any()
+    both = ~np.isnan(plain.cost_kw) & ~np.isnan(cutting.cost_kw)  # IPOPT may fail at an ε (no point there, counted)
+    assert both.mean() > 0.8
+    assert (cutting.cost_kw[both] <= plain.cost_kw[both] * (1 + 1e-4)).all()  # IPOPT's optimality on ac3: ~3e-5 relative
+    res = run_strategy("volt-watt:v=1/1.04,p=1/0", scenario, 0.0)
+    assert res.curtailed_kw.sum() > 1.0
+    cost, _, _ = cutting.at(res.voltage_violation())
+    assert (res.losses_kw + res.curtailed_kw >= cost - 1e-4).all()
+    optimum_cut = run_acopf(scenario, 0.0, curtail=True)
+    assert (optimum_cut.status == OK).all() and optimum_cut.vmax.max() <= 1.04 + BAND_TOL
+    np.testing.assert_allclose(optimum_cut.losses_kw + optimum_cut.curtailed_kw, cutting.cost_kw[:, 0], rtol=1e-9)
 
 
 def test_no_q_to_give_and_the_band_left_is_proven_infeasible_with_no_figure(ieee123_pv):

@@ -90,6 +90,7 @@ class _Snapshot:
             "relaxation_gap": self.socp.relaxation_gap,
             "socp_status": socp["solver_status"],
             "socp_ms": socp["solve_ms"],
+            "proven_infeasible": self.status == INFEASIBLE and not self.attempts,  # by the relaxation
         }
 
 

@@ -22,7 +22,11 @@ has it). Widening a band that does not bind changes no optimum: where the ε = 0
 keeps every |V| at least `MARGIN_PU` inside its limits it is the point at every ε, and only
 the other steps are solved again — first with the widest band, whose optimum (excursion
 e*) is the point at every ε ≥ e*, then at each grid ε below e*, largest first, each
-answer also covering the smaller ε its own excursion stays within. Each ε is solved by the
+answer also covering the smaller ε its own excursion stays within, and an answer whose
+infeasibility is proven (the relaxation certified it, or the interval bounds did:
+`proven_infeasible` in its extra) covering every smaller ε — a narrower band only removes
+points, so no point exists there either, and the answer is the same: no action, no
+bound. Each ε is solved by the
 AC OPF on the network with its band widened (`widened`), its fast path and fallback chain
 included; an answer counts as the optimum where its status is "ok" or "fallback-cold" (a
 solver's optimum), else the step has no optimum at that ε (infeasible, or only a fallback
@@ -179,6 +183,12 @@ def _bound(res: StrategyResult) -> np.ndarray:
     return np.full(res.n_snapshots, np.nan) if raw is None else np.asarray(raw, dtype=float)
 
 
+def _proven_infeasible(res: StrategyResult) -> np.ndarray:
+    """(S,) the steps whose infeasibility `res` proved (by the relaxation or the interval
+    bounds, not a solver's report: `policy.Settled`)."""
+    return np.asarray(res.extra.get("proven_infeasible", np.zeros(res.n_snapshots, dtype=bool)), dtype=bool)
+
+
 def _binds(net: Network | PhaseNetwork, res: StrategyResult) -> np.ndarray:
     """(S,) whether a step's ε = 0 answer may depend on its band: not an optimum, or some
     |V| within MARGIN_PU of a limit."""
@@ -211,11 +221,13 @@ def frontier(
 
     def record(rows: np.ndarray, res: StrategyResult, at: int) -> np.ndarray:
         """Store `res` (the answer at ε index `at` on `rows`) wherever it covers an ε ≤ that
-        is still empty; returns its excursions."""
+        is still empty (its excursion within it, or its infeasibility proven); returns its
+        excursions."""
         e = excursion(net, res.vm)
         first = np.searchsorted(grid, np.nan_to_num(e, nan=np.inf) - COVER_PU, side="left")
+        proven = _proven_infeasible(res)
         for j in range(at + 1):
-            fill = np.ones(rows.size, dtype=bool) if j == at else (first <= j) & (status[rows, j] == "")
+            fill = np.ones(rows.size, dtype=bool) if j == at else ((first <= j) | proven) & (status[rows, j] == "")
             r = rows[fill]
             cost[r, j], bound[r, j], exc[r, j] = _cost(res)[fill], _bound(res)[fill], e[fill]
             status[r, j] = res.status[fill]

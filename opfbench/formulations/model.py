@@ -157,7 +157,7 @@ def build_problem_model(role: Role, net: Network, slack_export: bool = True) -> 
     return model_for(role, net).build(net, slack_export)
 
 
-def built(model: ModelSpec, net: Network, slack_export: bool = True) -> Any:
+def built(model: ModelSpec, net: Network | PhaseNetwork, slack_export: bool = True) -> Any:
     """`model` built for `net`, once per network and slack rule in this thread (a model
     keeps solver state: never shared between threads)."""
     return per_thread(net, (model.name, bool(slack_export)), lambda: model.build(net, slack_export))

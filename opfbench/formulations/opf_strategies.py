@@ -6,11 +6,11 @@ DistFlow on radial feeders, Jabr's on meshed ones); the generic runner runs them
 
 from __future__ import annotations
 
-from opfbench.errors import InputError
 from opfbench.formulations.acopf_options import ACOPF_SOLVERS, FALLBACKS, AcopfSolver, Fallback
 from opfbench.formulations.model import SLACK_EXPORT, model_for
 from opfbench.formulations.problem import check_supported
 from opfbench.formulations.runner import run_problem_model
+from opfbench.formulations.three_phase import run_phase
 from opfbench.multiphase import PhaseNetwork
 from opfbench.network import Network
 from opfbench.registry.options import Option
@@ -86,8 +86,14 @@ def run_acopf(
     """The AC OPF on every snapshot of `scenario` with reserve k (`runner.run_exact`); with
     `curtail` the one that may curtail the DER's active power (`curtail.run_curtailing`)."""
     if curtail and scenario.three_phase:
-        raise InputError(
-            f"strategy 'acopf': option curtail=true is not modelled on three-phase feeders ({scenario.net.name}) yet"
+        return run_phase(
+            model_for("exact", scenario.net),
+            scenario,
+            k,
+            name="acopf",
+            slack_export=slack_export,
+            fallback=fallback,
+            curtail=True,
         )
     if curtail:
         from opfbench.formulations.curtail import run_curtailing

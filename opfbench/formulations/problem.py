@@ -38,7 +38,7 @@ import scipy.sparse as sp
 
 from opfbench.capability import INVERTER_TAN_PHI_MAX, TAN_PHI_MAX, check_reserve
 from opfbench.errors import NetworkError
-from opfbench.network import Network
+from opfbench.network import DerFleet, Network
 from opfbench.powerflow import PowerFlowResult
 from opfbench.scenario import Scenario
 
@@ -255,14 +255,34 @@ class PqCapability:
     s_pu: np.ndarray  # (n_der,) S̄
 
     @classmethod
-    def of(cls, net: Network, k: float) -> "PqCapability":
+    def of(cls, net: DerFleet, k: float, base_mva: float | None = None) -> "PqCapability":
+        """The capability of `net`'s DER at reserve k, per unit on `base_mva` (default the
+        network's own base; a three-phase feeder has none: its models work in MW, base 1)."""
         share = 1.0 - check_reserve(k)
         kinds = np.asarray(net.der_kinds)
         slope = np.zeros((len(kinds), 2))
         slope[kinds == "PV", 0] = TAN_PHI_MAX
         slope[kinds == "inverter", 0] = INVERTER_TAN_PHI_MAX
         slope[kinds == "DFIG", 1] = DFIG_SLOPE
-        return cls(share * slope, kinds != "DFIG", share, net.der_s_mva / net.base_mva)
+        base = base_mva if base_mva is not None else net.base_mva if isinstance(net, Network) else 1.0
+        return cls(share * slope, kinds != "DFIG", share, net.der_s_mva / base)
+
+    def rows(self, q: Any, p: Any, slope: Any, offset: Any, share: Any) -> list[Row]:
+        """The capability as constraint rows of a modelling tool's expressions (CasADi,
+        elementwise): |Q| ≤ slope_j·P + offset_j for both pieces j (`slope` and `offset`
+        stacked piece by piece, `share` a scalar — the model's parameters), and
+        Q² + (share·P)² ≤ (share·S̄)² for the inverter-coupled units."""
+        n_der = self.s_pu.size
+        out = []
+        for j in range(2):
+            reach = slope[j * n_der : (j + 1) * n_der] * p + offset[j * n_der : (j + 1) * n_der]
+            out += [Row(f"Q ≤ piece {j}", q - reach, np.full(n_der, -np.inf), np.zeros(n_der))]
+            out += [Row(f"−Q ≤ piece {j}", -q - reach, np.full(n_der, -np.inf), np.zeros(n_der))]
+        c = np.flatnonzero(self.circle)
+        if c.size:
+            circle = q[c.tolist()] ** 2 + (share * p[c.tolist()]) ** 2 - share**2 * self.s_pu[c] ** 2
+            out.append(Row("S̄ circle", circle, np.full(c.size, -np.inf), np.zeros(c.size)))
+        return out
 
 
 @dataclass(frozen=True)
@@ -286,11 +306,19 @@ def curtail_data(scenario: Scenario, k: float) -> CurtailData:
     """`CurtailData` of `scenario` at reserve k: the PV and inverter units' power-factor piece
     lapses at the "Q at night" snapshots; an inverter drawing its own consumption (P < 0,
     held there) keeps |Q| ≤ 0.4843·|P| through its offset."""
-    share = 1.0 - check_reserve(k)
     net = scenario.net
     base = net.base_mva
     p_avail = scenario.der_p_mw / base
     s_fixed = scenario.injections(np.zeros_like(p_avail), np.zeros_like(p_avail)) / base
+    return CurtailData(s_fixed, p_avail, np.minimum(p_avail, 0.0), capability_offsets(scenario, k, base))
+
+
+def capability_offsets(scenario: Scenario, k: float, base_mva: float) -> np.ndarray:
+    """(S, n_der, 2) the offsets of the capability pieces (`PqCapability`) of `scenario`'s
+    DER at reserve k, p.u. on `base_mva` (`curtail_data`)."""
+    share = 1.0 - check_reserve(k)
+    net = scenario.net
+    p_avail = scenario.der_p_mw / base_mva
     kinds = np.asarray(net.der_kinds)
     n, m = p_avail.shape
     offset = np.full((n, m, 2), NO_LIMIT_PU)
@@ -298,10 +326,10 @@ def curtail_data(scenario: Scenario, k: float) -> CurtailData:
     night = np.asarray(night) if isinstance(night, np.ndarray) else np.zeros((n, m), dtype=bool)
     inverter = kinds == "inverter"
     own = share * INVERTER_TAN_PHI_MAX * np.maximum(-p_avail, 0.0) * 2.0  # q ≤ a·P + 2a·|P| = a·|P| for P < 0
-    offset[:, :, 0] = np.where(kinds == "DFIG", share * net.der_rating_mw / base, np.where(inverter, own, 0.0))
+    offset[:, :, 0] = np.where(kinds == "DFIG", share * net.der_rating_mw / base_mva, np.where(inverter, own, 0.0))
     offset[:, :, 0] = np.where(night & (kinds != "DFIG"), NO_LIMIT_PU, offset[:, :, 0])
-    offset[:, kinds == "DFIG", 1] = share * DFIG_OFFSET * net.der_rating_mw[kinds == "DFIG"] / base
-    return CurtailData(s_fixed, p_avail, np.minimum(p_avail, 0.0), offset)
+    offset[:, kinds == "DFIG", 1] = share * DFIG_OFFSET * net.der_rating_mw[kinds == "DFIG"] / base_mva
+    return offset
 
 
 def bus_shunts(net: Network) -> tuple[np.ndarray, np.ndarray]:

@@ -23,6 +23,7 @@ from typing import Callable, Generic, Hashable, Sequence, TypeVar
 
 import numpy as np
 
+from opfbench.multiphase import PhaseNetwork
 from opfbench.network import Network
 from opfbench.state import PROCESS
 
@@ -33,7 +34,7 @@ EXACT_KEY_BYTES = 4096  # θ up to this size is its own key (512 float64: feeder
 _local = threading.local()
 
 
-def per_thread(net: Network, key: Hashable, build: Callable[[], T]) -> T:
+def per_thread(net: Network | PhaseNetwork, key: Hashable, build: Callable[[], T]) -> T:
     """`build()` once per (net, key) in the calling thread; later calls return that object."""
     cache: OrderedDict | None = getattr(_local, "cache", None)
     if cache is None:

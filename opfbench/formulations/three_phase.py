@@ -34,6 +34,9 @@ from opfbench.capability import check_reserve, qmax
 from opfbench.formulations.acopf_options import FALLBACKS, Fallback, check_option
 from opfbench.formulations.evaluation import solver_record
 from opfbench.formulations.model import built, load_models, model_for
+from opfbench.formulations.models.ac_three_phase import ThreePhaseAc
+from opfbench.formulations.problem import PqCapability, capability_offsets
+from opfbench.formulations.solver_cache import per_thread
 from opfbench.multiphase import PhaseNetwork
 from opfbench.powerflow.multiphase import PhaseFlowResult, solve_phase_flow
 from opfbench.registry.specs import ModelSpec
@@ -58,6 +61,10 @@ IPOPT's constraint tolerance, which near-zero-impedance switches and regulators 
 the reported losses are the power flow's, at the NLP's setpoints)."""
 BAND_TOL = 1e-6
 """p.u. by which an accepted point's monitored voltages may leave the band (round-off)."""
+CURTAIL_SNAP_MW = 1e-6
+"""MW: a DER the OPF that may curtail leaves less than this short of its power is taken at
+its power (IPOPT's barrier stops short of the bound P ≤ P_avail by its tolerance; 1 W is
+no curtailment)."""
 PROVEN_NO_Q = "no Q to give: the power flow's point is the only one"  # solver_status of such a snapshot
 
 
@@ -71,7 +78,8 @@ class PhaseOptimum:
     monitored voltages; NaN with the losses), `solver_status` (IPOPT's per attempt, joined
     by " → "), `warm` (the first attempt was warm); `q_mvar` (S, n_der) the setpoints (0
     where there is no optimum); `flow` the power flow at those setpoints (Q = 0 where
-    there is no optimum: the point a strategy reports there, under its status)."""
+    there is no optimum: the point a strategy reports there, under its status); `p_mw`
+    (S, n_der) the power the DER deliver where the OPF may curtail (None otherwise)."""
 
     status: np.ndarray
     q_mvar: np.ndarray
@@ -85,6 +93,7 @@ class PhaseOptimum:
     solver_status: np.ndarray
     warm: np.ndarray
     flow: PhaseFlowResult
+    p_mw: np.ndarray | None = None
 
 
 def q_limits(net: PhaseNetwork, der_p_mw: np.ndarray, k: float) -> np.ndarray:
@@ -107,12 +116,15 @@ def optimum(
     q_limit_mvar: np.ndarray | None = None,
     fallback: Fallback = "chain",
     slack_export: bool = True,
+    curtail_offsets: np.ndarray | None = None,
 ) -> PhaseOptimum:
     """The OPF on S snapshots (module docstring): load P and Q (S, n_load) at their law's
     reference, DER P (S, n_der), reserve k — or the usable |Q| `q_limit_mvar` (S, n_der)
     where the caller has it (a scenario's, "Q at night" included) —, the failure policy,
-    whether the source may take power back. Checked before any work: k and the policy,
-    then shapes and finite values (the power flow's checks)."""
+    whether the source may take power back; with `curtail_offsets` (S, n_der, 2) MW (the
+    capability pieces' offsets, `problem.capability_offsets`) the OPF that may curtail
+    (its objective losses + curtailed power; `models.ac_three_phase`). Checked before any
+    work: k and the policy, then shapes and finite values (the power flow's checks)."""
     check_reserve(k)
     check_option("AC OPF failure policy", fallback, FALLBACKS)
     no_action = solve_phase_flow(net, load_p_mw, load_q_mvar, der_p_mw)  # checks shapes and values first
@@ -122,10 +134,19 @@ def optimum(
     limit = q_limits(net, der_p, k) if q_limit_mvar is None else np.asarray(q_limit_mvar, dtype=float).reshape(n, n_der)
     load_models()
     origin = net.origin  # the model is built once for the feeder; the band is the solve's
-    exact = built(model_for("exact", origin), origin, slack_export)  # type: ignore[arg-type]
+    curtail = curtail_offsets is not None
+    capability = PqCapability.of(net, k, base_mva=1.0)
+    if curtail:
+        spec = model_for("exact", origin)
+        exact = per_thread(
+            origin, (f"{spec.name}-curtail", slack_export), lambda: ThreePhaseAc(origin, slack_export, curtail=True)
+        )
+    else:
+        exact = built(model_for("exact", origin), origin, slack_export)
     lo, hi = net.band
     status = np.empty(n, dtype=object)
     q = np.zeros((n, n_der))
+    p = der_p.copy()
     objective = np.full(n, np.nan)
     iterations = np.zeros(n, dtype=int)
     solve_ms = np.zeros(n)
@@ -137,7 +158,8 @@ def optimum(
     if not slack_export:
         in_band &= no_action.source_kva.real >= 0  # no action is a point only where the source does not take power back
     for i in range(n):
-        if not limit[i].any() and no_action.converged[i]:  # no decision: the power flow's point is the only one
+        undecided = not limit[i].any() and not (curtail and (der_p[i] > 0).any())
+        if undecided and no_action.converged[i]:  # no decision: the power flow's point is the only one
             status[i] = OK if in_band[i] else INFEASIBLE
             objective[i] = no_action.losses_kw[i] if in_band[i] else np.nan
             proven[i] = not in_band[i]
@@ -147,10 +169,12 @@ def optimum(
         snapshot = (load_p[i], load_q[i], der_p[i])
         starts: list[dict] = [{"start": start}] if start is not None else []
         if no_action.converged[i] and (fallback == "chain" or not starts):
-            starts.append({"x0": exact.initial(no_action.v[i])})  # cold, from the power flow's point
+            starts.append({"x0": exact.initial(no_action.v[i], der_p[i])})  # cold, from the power flow's point
+        cap = (capability, curtail_offsets[i]) if curtail_offsets is not None else None
         for how in starts:
-            attempts.append(exact.solve(*snapshot, limit[i], band=(lo, hi), **how))
-            if _accepted(net, attempts[-1], *snapshot, slack_export):
+            attempts.append(exact.solve(*snapshot, limit[i], band=(lo, hi), capability=cap, **how))
+            point = _setpoints(attempts[-1], der_p[i])
+            if _accepted(net, attempts[-1], point, *snapshot, slack_export):
                 accepted = attempts[-1]
                 break
         iterations[i] = sum(a.iterations for a in attempts)
@@ -159,7 +183,7 @@ def optimum(
         warm[i] = bool(attempts) and attempts[0].warm
         if accepted is not None:
             start = accepted
-            q[i], objective[i] = accepted.q_pu, accepted.objective_kw
+            (q[i], p[i]), objective[i] = point, accepted.objective_kw
             status[i] = OK if accepted is attempts[0] else FALLBACK_COLD
         elif in_band[i]:
             status[i] = FALLBACK_NO_ACTION
@@ -167,7 +191,7 @@ def optimum(
             status[i] = INFEASIBLE
         else:
             status[i] = SOLVER_FAILED
-    flow = solve_phase_flow(net, load_p, load_q, der_p, q)
+    flow = solve_phase_flow(net, load_p, load_q, p, q)
     settled = flow.converged & (status != INFEASIBLE) & (status != SOLVER_FAILED)
     return PhaseOptimum(
         status,
@@ -182,6 +206,7 @@ def optimum(
         solver_status,
         warm,
         flow,
+        p if curtail else None,
     )
 
 
@@ -193,10 +218,12 @@ def run_phase(
     name: str = "",
     slack_export: bool = True,
     fallback: Fallback = "chain",
+    curtail: bool = False,
 ) -> StrategyResult:
     """The exact model on every snapshot of a three-phase `scenario` (module docstring), the
-    result named `name` (default: the model's). The solver record: objective_kw (the
-    model's losses where accepted), solver_status (IPOPT's per attempt; `PROVEN_NO_Q` where
+    result named `name` (default: the model's); with `curtail` the one that may curtail
+    (the result carries the power curtailed). The solver record: objective_kw (the
+    model's cost where accepted: losses, plus the power curtailed), solver_status (IPOPT's per attempt; `PROVEN_NO_Q` where
     no DER has Q), fallback, certified_by "" (nothing certifies a three-phase point yet),
     iterations and solve_ms (IPOPT's, summed over attempts); extra: warm_start,
     ac_feasible (the reported point meets the band), slack_export. No lower bound."""
@@ -205,7 +232,18 @@ def run_phase(
     assert isinstance(net, PhaseNetwork)
     load_p, load_q = scenario.element_loads()
     limit = (1.0 - check_reserve(k)) * scenario.qmax_mvar()  # "Q at night" where the scenario says
-    opt = optimum(net, load_p, load_q, scenario.der_p_mw, k, q_limit_mvar=limit, fallback=fallback, slack_export=slack_export)
+    offsets = capability_offsets(scenario, k, 1.0) if curtail else None
+    opt = optimum(
+        net,
+        load_p,
+        load_q,
+        scenario.der_p_mw,
+        k,
+        q_limit_mvar=limit,
+        fallback=fallback,
+        slack_export=slack_export,
+        curtail_offsets=offsets,
+    )
     answered = (opt.status == OK) | (opt.status == FALLBACK_COLD)
     source = np.where(opt.status == FALLBACK_COLD, FROM_COLD, np.where(answered, FROM_SOLVER, FROM_NO_ACTION))
     source = np.where(opt.solver_status == PROVEN_NO_Q, np.where(opt.status == OK, FROM_SOLVER, FROM_NO_ACTION), source)
@@ -238,22 +276,43 @@ def run_phase(
         status=opt.status,
         solver=record,
         extra=full,
+        p_mw=opt.p_mw,
     )
 
 
+def _setpoints(solve, der_p: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """A solve's (Q, P) MVAr/MW (n_der,) each: P the power each DER has, or where the model
+    may curtail (`q_pu` holds Q, then P) the solve's, at the power it has where it curtails
+    less than CURTAIL_SNAP_MW (the interior point stops that short of an active bound)."""
+    n_der = der_p.size
+    if solve.q_pu.size == n_der:
+        return solve.q_pu, der_p
+    p = solve.q_pu[n_der:]
+    return solve.q_pu[:n_der], np.where(der_p - p < CURTAIL_SNAP_MW, der_p, p)
+
+
 def _accepted(
-    net: PhaseNetwork, solve, load_p: np.ndarray, load_q: np.ndarray, der_p: np.ndarray, slack_export: bool = True
+    net: PhaseNetwork,
+    solve,
+    point: tuple[np.ndarray, np.ndarray],
+    load_p: np.ndarray,
+    load_q: np.ndarray,
+    der_p: np.ndarray,
+    slack_export: bool = True,
 ) -> bool:
-    """IPOPT converged, and the power flow at the solve's setpoints converges, meets the
-    band (and, where the source may not take power back, draws power from it) and gives
-    the model's losses within CONFIRM_RTOL."""
-    if not solve.success or not np.isfinite(solve.objective_kw) or not np.all(np.isfinite(solve.q_pu)):
+    """IPOPT converged, and the power flow at the solve's setpoints `point` (Q, P:
+    `_setpoints`) converges, meets the band (and, where the source may not take power
+    back, draws power from it) and gives the model's cost — losses, plus the power
+    curtailed — within CONFIRM_RTOL."""
+    q, p = point
+    if not solve.success or not np.isfinite(solve.objective_kw) or not np.all(np.isfinite(q)) or not np.all(np.isfinite(p)):
         return False
-    flow = solve_phase_flow(net, load_p[None], load_q[None], der_p[None], solve.q_pu[None])
+    flow = solve_phase_flow(net, load_p[None], load_q[None], p[None], q[None])
     if not flow.converged[0]:
         return False
     lo, hi = net.band
     within = lo - BAND_TOL <= flow.vm[0].min() and flow.vm[0].max() <= hi + BAND_TOL
     if not slack_export and flow.source_kva[0].real < -BAND_TOL:
         return False
-    return bool(within and abs(flow.losses_kw[0] - solve.objective_kw) <= CONFIRM_RTOL * abs(flow.losses_kw[0]))
+    cost = flow.losses_kw[0] + 1e3 * float(np.sum(der_p - p))
+    return bool(within and abs(cost - solve.objective_kw) <= CONFIRM_RTOL * abs(cost))

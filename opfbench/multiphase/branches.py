@@ -157,15 +157,28 @@ class BranchLaw:
             mag = np.abs(v_branch)
             u = mag / vbase_v
             unit = np.where(mag > 0, v_branch / mag, 1.0)
-            h_p = np.power(u, self.h_p)
-            h_q = np.power(u, self.h_q)
+            h_p = _power(u, self.h_p)
+            h_q = _power(u, self.h_q)
             if self.switches.any():
                 low = self.switches & (u <= self.vlow)
                 ramp = self.switches & ~low & (u <= self.vmin)
                 high = self.switches & (u > self.vmax)
-                slope = (self.at_vmin - self.vlow) / np.where(self.vmin > self.vlow, self.vmin - self.vlow, 1.0)
-                outside = np.select([low, ramp, high], [u, self.vlow + slope * (u - self.vlow), u / self.above_div], 0.0)
                 band = ~(low | ramp | high)
-                h_p = np.where(band, h_p, outside)
-                h_q = np.where(band, h_q, outside)
+                if not band.all():
+                    slope = (self.at_vmin - self.vlow) / np.where(self.vmin > self.vlow, self.vmin - self.vlow, 1.0)
+                    outside = np.select([low, ramp, high], [u, self.vlow + slope * (u - self.vlow), u / self.above_div], 0.0)
+                    h_p = np.where(band, h_p, outside)
+                    h_q = np.where(band, h_q, outside)
         return (p_w * h_p - 1j * (q_var * h_q)) * unit / vbase_v
+
+
+def _power(u: np.ndarray, exponent: np.ndarray) -> np.ndarray:
+    """u**exponent, exponents (n_branch, 1); one exponent shared by every branch that is
+    −1, 0 or 1 (constant power, current or impedance) as a reciprocal, ones or u."""
+    if exponent.size and np.all(exponent == exponent.flat[0]):
+        shared = float(exponent.flat[0])
+        if shared == -1.0:
+            return 1.0 / u
+        if shared in (0.0, 1.0):
+            return np.ones_like(u) if shared == 0.0 else u
+    return np.power(u, exponent)

@@ -30,6 +30,13 @@ node's base voltage and the equations hold at the result: at every node the curr
 mismatch |Y·V − I_source − I_branches(V)| is below `MISMATCH_REL` of the currents that
 meet there (`_residual`). One that has not after `max_iter` iterations is reported not
 converged (its voltages are no operating point and carry no figure).
+
+The two halves are separate calls: `iterate_phase_flow` runs the iteration and keeps a
+`PhaseIterate` (the currents J on K when dense, every node's voltage when sparse), from
+which every node's voltage follows on demand; `certify` forms every node's voltage, the
+mismatch and the losses. `solve_phase_flow` is the two in one. A closed loop answering
+many setpoints (`opfbench.strategies.grids.PhaseGrid`) iterates and certifies only the
+flow that gives its figures.
 """
 
 from __future__ import annotations
@@ -44,6 +51,7 @@ from threadpoolctl import ThreadpoolController
 
 from opfbench.errors import InputError
 from opfbench.multiphase import GROUND, PhaseNetwork
+from opfbench.multiphase.branches import BranchLaw
 from opfbench.multiphase.regulators import ControlState, act, control_voltage, sample
 from opfbench.powerflow.common import MAX_SWEEP_ITER, SWEEP_TOLERANCE
 from opfbench.powerflow.sparse import factorize
@@ -58,6 +66,8 @@ MISMATCH_REL = 1e-8
 MAX_CONTROL_ITER = 100
 """Rounds of solve-and-move a snapshot's regulators get to settle (`taps=control`)."""
 _CHUNK = 256  # columns per sparse solve when forming Z_KK (memory: n_node × _CHUNK)
+_BLOCK = 64  # snapshots per block when certifying (`_certify`)
+_ROUND_OFF_PU = 1e-12  # far above the round-off between two ways of forming a node's |V| (p.u.)
 _BLAS = ThreadpoolController()
 
 
@@ -98,8 +108,7 @@ class PhaseFlowResult:
     def vm(self) -> np.ndarray:
         """(S, n_monitored) the voltages the band applies to, p.u. (`PhaseNetwork.monitored`)."""
         a, b, base, _ = self.net.monitored
-        vx = np.concatenate([self.v, np.zeros((self.n_snapshots, 1), dtype=complex)], axis=1)
-        return np.abs(vx[:, a] - vx[:, b]) / base
+        return _magnitude_across(self.v, a, b) / base
 
     @cached_property
     def der_vm(self) -> np.ndarray:
@@ -107,9 +116,7 @@ class PhaseFlowResult:
         neutral, or phase to phase for a delta unit) in p.u. of their bases, averaged over
         its phases (`PhaseNetwork.der_measure`)."""
         db = self.net.der_branches
-        vx = np.concatenate([self.v, np.zeros((self.n_snapshots, 1), dtype=complex)], axis=1)
-        u = np.abs(vx[:, db.a] - vx[:, db.b]) / db.vbase_v
-        return np.asarray((self.net.der_measure @ u.T).T)
+        return _measured(self.net, _magnitude_across(self.v, db.a, db.b))
 
     @cached_property
     def source_kva(self) -> np.ndarray:
@@ -146,6 +153,20 @@ class _System:
     load_inject: sp.csr_matrix  # (m, n_load_branch): branch current (a → b) → node injections
     der_inject: sp.csr_matrix  # (m, n_der_branch)
     base_k: np.ndarray  # (m, 1) node base voltages on K
+    law: BranchLaw  # the load branches' current law
+    ybus_abs: sp.csc_matrix  # |Y| entrywise (the residual's scale)
+    z_abs_pu: np.ndarray | None  # (n_node, m) |Z_NK| / each node's base voltage (`voltages_within`)
+
+    def injections(
+        self, v_k: np.ndarray, p_br: np.ndarray, q_br: np.ndarray, s_der: np.ndarray, vbase_load: np.ndarray
+    ) -> np.ndarray:
+        """(m, S') branch currents injected into the nodes K at their voltages v_k (m, S'),
+        for the branch powers of those S' snapshots (`_branch_powers`)."""
+        vx = np.concatenate([v_k, np.zeros((1, v_k.shape[1]), dtype=complex)])
+        drawn = self.law.current(vx[self.load_a] - vx[self.load_b], p_br, q_br, vbase_load)
+        with np.errstate(all="ignore"):
+            given = np.conj(s_der / (vx[self.der_a] - vx[self.der_b]))
+        return self.load_inject @ drawn + self.der_inject @ given
 
 
 @lru_cache(maxsize=8)
@@ -185,7 +206,87 @@ def _system(net: PhaseNetwork) -> _System:
         lb.incidence(net.n_node)[k].tocsr() * -1.0,
         db.incidence(net.n_node)[k].tocsr(),
         net.node_base_v[k][:, None],
+        net.load_models.branch_law(lb.owner),
+        abs(net.ybus).tocsc(),
+        None if z_nk is None else np.abs(z_nk) / net.node_base_v[:, None],
     )
+
+
+@dataclass(frozen=True, eq=False)
+class PhaseIterate:
+    """S snapshots' power flow as the iteration left it, before its certificate
+    (`certify`): `state` (S, r) what every node's voltage follows from — the currents J
+    (S, |K|) that the branches and the load admittances inject at the nodes K (dense), or
+    every node's V (S, n_node) (sparse) —, `settled` (S,) the last update was below the
+    tolerance (and finite), `iterations` (S,)."""
+
+    net: PhaseNetwork
+    state: np.ndarray
+    settled: np.ndarray
+    iterations: np.ndarray
+
+    @cached_property
+    def v(self) -> np.ndarray:
+        """(S, n_node) complex V of every node: V = A⁻¹·I_source + (A⁻¹)_{:,K}·J (dense)."""
+        sys_ = _system(self.net)
+        if sys_.z_nk is None:
+            return self.state
+        with _BLAS.limit(limits=1, user_api="blas"):
+            return sys_.v_source + self.state @ sys_.z_nk.T
+
+    @cached_property
+    def der_vm(self) -> np.ndarray:
+        """(S, n_der) the voltage each DER measures, p.u. (`PhaseFlowResult.der_vm`), from
+        the voltages at K alone."""
+        sys_ = _system(self.net)
+        if sys_.z_kk is None:
+            v_k = self.state[:, sys_.k]
+        else:
+            with _BLAS.limit(limits=1, user_api="blas"):
+                v_k = sys_.v_source[sys_.k] + self.state @ sys_.z_kk.T
+        vx = np.concatenate([v_k, np.zeros((v_k.shape[0], 1), dtype=complex)], axis=1)
+        return _measured(self.net, np.abs(vx[:, sys_.der_a] - vx[:, sys_.der_b]))
+
+
+def voltages_within(net: PhaseNetwork, state: np.ndarray, before: np.ndarray, tol: float) -> np.ndarray:
+    """(S',) whether no node's |V| (p.u. of its base) moved by more than `tol` from the
+    iterate states `before` to `state` (S', r). Dense, first from the nodes K alone (Z_KK):
+    a change above tol (by more than round-off) at one of them decides "no"; then the
+    bound |Δ|V_n|| ≤ |ΔV_n| ≤ Σ_k |Z_nk|·|ΔJ_k| decides "yes" where it is below tol/2;
+    the exact test on every node decides the rest."""
+    sys_ = _system(net)
+    within = np.zeros(state.shape[0], dtype=bool)
+    exact = np.arange(state.shape[0])
+    if sys_.z_kk is not None and sys_.z_abs_pu is not None and exact.size:
+        with _BLAS.limit(limits=1, user_api="blas"):
+            at_k = sys_.v_source[sys_.k] + np.concatenate([state, before]) @ sys_.z_kk.T
+            moved_k = np.abs(np.abs(at_k[: len(state)]) - np.abs(at_k[len(state) :])) / sys_.base_k.T
+            exact = np.flatnonzero(moved_k.max(axis=1, initial=0.0) <= tol + _ROUND_OFF_PU)
+            bound = (np.abs(state[exact] - before[exact]) @ sys_.z_abs_pu.T).max(axis=1, initial=0.0)
+        within[exact] = bound < tol / 2
+        exact = exact[bound >= tol / 2]
+    if exact.size:
+        none = np.zeros(0, dtype=bool)
+        now = np.abs(PhaseIterate(net, state[exact], none, none).v) / net.node_base_v
+        then = np.abs(PhaseIterate(net, before[exact], none, none).v) / net.node_base_v
+        within[exact] = np.abs(now - then).max(axis=1, initial=0.0) <= tol
+    return within
+
+
+def _measured(net: PhaseNetwork, magnitude: np.ndarray) -> np.ndarray:
+    """(S, n_der) each DER's measured voltage from its branches' |V| (S, n_der_branch) V:
+    in p.u. of the branch base, averaged over the unit's branches."""
+    u = magnitude / net.der_branches.vbase_v
+    return np.asarray((net.der_measure @ u.T).T)
+
+
+def _magnitude_across(v: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """(S, len(a)) |V_a − V_b| (|V_a| where b is GROUND) of node voltages v (S, n_node)."""
+    out = np.abs(v[:, a])
+    to = np.flatnonzero(b != GROUND)
+    if to.size:
+        out[:, to] = np.abs(v[:, a[to]] - v[:, b[to]])
+    return out
 
 
 def _powers(label: str, values: np.ndarray | None, n_snap: int, n: int) -> np.ndarray:
@@ -197,6 +298,29 @@ def _powers(label: str, values: np.ndarray | None, n_snap: int, n: int) -> np.nd
     if not np.all(np.isfinite(arr)):
         raise InputError(f"three-phase power flow: {label} contains NaN or inf")
     return arr
+
+
+_Powers = tuple[np.ndarray, np.ndarray, np.ndarray]
+"""The branches' powers (n_branch, S): load P (W) and Q (var) at their law's reference,
+DER complex power generated (W + j var)."""
+
+
+def _branch_powers(
+    net: PhaseNetwork, load_p_mw: np.ndarray, load_q_mvar: np.ndarray, der_p_mw: np.ndarray | None, der_q_mvar: np.ndarray | None
+) -> _Powers:
+    """The elements' powers (checked: shapes, finite) spread over their branches."""
+    load_p = np.atleast_2d(np.asarray(load_p_mw, dtype=float))
+    n_snap = load_p.shape[0]
+    load_p = _powers("load P", load_p, n_snap, net.n_load)
+    load_q = _powers("load Q", load_q_mvar, n_snap, net.n_load)
+    der_p = _powers("DER P", der_p_mw, n_snap, len(net.ders))
+    der_q = _powers("DER Q", der_q_mvar, n_snap, len(net.ders))
+    lb, db = net.load_branches, net.der_branches
+    return (
+        load_p.T[lb.owner] * lb.share[:, None] * 1e6,
+        load_q.T[lb.owner] * lb.share[:, None] * 1e6,
+        (der_p.T + 1j * der_q.T)[db.owner] * db.share[:, None] * 1e6,
+    )
 
 
 def solve_phase_flow(
@@ -277,37 +401,64 @@ def _solve_fixed(
     tol: float,
     max_iter: int,
 ) -> PhaseFlowResult:
-    """`solve_phase_flow` at the taps the network's elements have, on checked arrays (S, n)."""
-    n_snap = load_p.shape[0]
+    """`solve_phase_flow` at the taps the network's elements have (arrays as `solve_phase_flow` checked them)."""
+    powers = _branch_powers(net, load_p, load_q, der_p, der_q)
     sys_ = _system(net)
-    lb, db = net.load_branches, net.der_branches
-    law = net.load_models.branch_law(lb.owner)
-    vbase_load = lb.vbase_v[:, None]
-    m = len(sys_.k)
-    powers = (
-        load_p.T[lb.owner] * lb.share[:, None] * 1e6,
-        load_q.T[lb.owner] * lb.share[:, None] * 1e6,
-        (der_p.T + 1j * der_q.T)[db.owner] * db.share[:, None] * 1e6,
-    )
-
-    def injections(v_k: np.ndarray, p_br: np.ndarray, q_br: np.ndarray, s_der: np.ndarray) -> np.ndarray:
-        """(m, S') branch currents injected into the nodes K at their voltages v_k (m, S'),
-        for the branch powers of those S' snapshots."""
-        vx = np.concatenate([v_k, np.zeros((1, v_k.shape[1]), dtype=complex)])
-        drawn = law.current(vx[sys_.load_a] - vx[sys_.load_b], p_br, q_br, vbase_load)
-        with np.errstate(all="ignore"):
-            given = np.conj(s_der / (vx[sys_.der_a] - vx[sys_.der_b]))
-        return sys_.load_inject @ drawn + sys_.der_inject @ given
-
-    dense = sys_.z_nk is not None
-    warm = None
+    start = None
     if v0 is not None:
-        warm = np.asarray(v0, dtype=complex).reshape(n_snap, net.n_node).T
-        usable = np.isfinite(warm).all(axis=0) & (np.abs(warm) > 0).any(axis=0)
+        n_snap = powers[0].shape[1]
+        start = np.asarray(v0, dtype=complex).reshape(n_snap, net.n_node).T
+        start = start if sys_.z_nk is None else start[sys_.k]
+    return _certify(_iterate(net, sys_, powers, start, tol, max_iter), sys_, powers)
+
+
+def iterate_phase_flow(
+    net: PhaseNetwork,
+    load_p_mw: np.ndarray,
+    load_q_mvar: np.ndarray,
+    der_p_mw: np.ndarray | None = None,
+    der_q_mvar: np.ndarray | None = None,
+    start: np.ndarray | None = None,
+    tol: float = SWEEP_TOLERANCE,
+    max_iter: int = MAX_SWEEP_ITER,
+) -> PhaseIterate:
+    """The iteration of `solve_phase_flow` without its certificate (`certify`), warm
+    started from an earlier `PhaseIterate.state` (S, r) of the same network (`start`)."""
+    if net.tap_control and net.regulators:
+        raise ValueError(f"{net.name}: regulators under tap control move inside the solve; iterate with solve_phase_flow")
+    powers = _branch_powers(net, load_p_mw, load_q_mvar, der_p_mw, der_q_mvar)
+    sys_ = _system(net)
+    carried = None
+    if start is not None:  # the carried nodes' voltages of the earlier iterate
+        state = np.asarray(start, dtype=complex)
+        with _BLAS.limit(limits=1, user_api="blas"):
+            carried = (state if sys_.z_kk is None else sys_.v_source[sys_.k] + state @ sys_.z_kk.T).T
+    return _iterate(net, sys_, powers, carried, tol, max_iter)
+
+
+def certify(
+    flow: PhaseIterate, load_p_mw: np.ndarray, load_q_mvar: np.ndarray, der_p_mw: np.ndarray | None, der_q_mvar: np.ndarray | None
+) -> PhaseFlowResult:
+    """The certified power flow of an iterate at the powers it was solved for: every
+    node's voltage, the mismatch (`_residual`), the losses; converged = settled and the
+    mismatch below `MISMATCH_REL`."""
+    return _certify(flow, _system(flow.net), _branch_powers(flow.net, load_p_mw, load_q_mvar, der_p_mw, der_q_mvar))
+
+
+def _iterate(
+    net: PhaseNetwork, sys_: _System, powers: _Powers, start: np.ndarray | None, tol: float, max_iter: int
+) -> PhaseIterate:
+    """The iteration on S snapshots from `start` (r, S) (the carried nodes' V, or None:
+    the no-load state; columns that are not finite and non-zero start from it too)."""
+    n_snap = powers[0].shape[1]
+    vbase_load = net.load_branches.vbase_v[:, None]
+    m = len(sys_.k)
+    dense = sys_.z_nk is not None
     rows = sys_.k if dense else np.arange(net.n_node)  # the nodes the iteration carries
     v = np.repeat(sys_.v_source[rows][:, None], n_snap, axis=1)
-    if warm is not None:
-        v[:, usable] = warm[rows][:, usable]
+    if start is not None:
+        usable = np.isfinite(start).all(axis=0) & (np.abs(start) > 0).any(axis=0)
+        v[:, usable] = start[:, usable]
     at_k = np.arange(m) if dense else sys_.k  # K's rows in v
     iterations = np.zeros(n_snap, dtype=np.int64)
     settled = np.full(n_snap, m == 0)  # nothing voltage-dependent: the no-load state is the answer
@@ -316,7 +467,7 @@ def _solve_fixed(
     with _BLAS.limit(limits=1, user_api="blas"), np.errstate(all="ignore"):
         for it in range(1, max_iter + 1 if m else 1):
             v_k = v_act[at_k]
-            j = injections(v_k, *p_act) + sys_.y_load_kk @ v_k
+            j = sys_.injections(v_k, *p_act, vbase_load) + sys_.y_load_kk @ v_k
             if dense:
                 new = sys_.v_source[sys_.k][:, None] + sys_.z_kk @ j
             else:
@@ -335,17 +486,40 @@ def _solve_fixed(
             if not keep.any():
                 break
             active, v_act = active[keep], new[:, keep]
-            p_act = tuple(x[:, keep] for x in p_act)
+            p_act = (p_act[0][:, keep], p_act[1][:, keep], p_act[2][:, keep])
         else:
             v[:, active] = v_act
-        if dense:  # every node from the converged branch currents: V = A⁻¹·(I_source + P_K·J)
-            j = injections(v, *powers) + sys_.y_load_kk @ v
-            v = sys_.v_source[:, None] + sys_.z_nk @ j
-        given = injections(v[sys_.k], *powers)
-        mismatch = _residual(net, sys_, v, given)
-        losses = _source_kva(net, v).real + (v[sys_.k] * np.conj(given)).real.sum(axis=0) / 1e3
-    converged = settled & (mismatch < MISMATCH_REL)
-    return PhaseFlowResult(net, np.ascontiguousarray(v.T), converged, iterations, mismatch, losses)
+        if dense:  # the currents every node's voltage follows from: V = A⁻¹·(I_source + P_K·J)
+            state = (sys_.injections(v, *powers, vbase_load) + sys_.y_load_kk @ v).T.copy()
+        else:
+            state = np.ascontiguousarray(v.T)
+    return PhaseIterate(net, state, settled, iterations)
+
+
+def _certify(flow: PhaseIterate, sys_: _System, powers: _Powers) -> PhaseFlowResult:
+    """`certify`, in blocks of `_BLOCK` snapshots (each block's node voltages stay in cache
+    through the expansion, the residual and the losses). The voltages are formed node-major
+    (n_node, S), the layout the sparse products want; the result's `v` is its transpose."""
+    net = flow.net
+    n_snap = flow.state.shape[0]
+    vbase_load = net.load_branches.vbase_v[:, None]
+    v = np.empty((net.n_node, n_snap), dtype=complex)
+    mismatch = np.empty(n_snap)
+    losses = np.empty(n_snap)
+    with _BLAS.limit(limits=1, user_api="blas"), np.errstate(all="ignore"):
+        for first in range(0, n_snap, _BLOCK):
+            block = slice(first, first + _BLOCK)
+            if sys_.z_nk is None:
+                vb = np.ascontiguousarray(flow.state[block].T)
+            else:
+                vb = sys_.z_nk @ flow.state[block].T
+                vb += sys_.v_source[:, None]
+            given = sys_.injections(vb[sys_.k], powers[0][:, block], powers[1][:, block], powers[2][:, block], vbase_load)
+            mismatch[block] = _residual(net, sys_, vb, given)
+            losses[block] = _source_kva(net, vb).real + (vb[sys_.k] * np.conj(given)).real.sum(axis=0) / 1e3
+            v[:, block] = vb
+    converged = np.asarray(flow.settled, dtype=bool) & (mismatch < MISMATCH_REL)
+    return PhaseFlowResult(net, v.T, converged, flow.iterations, mismatch, losses)
 
 
 def _source_kva(net: PhaseNetwork, v: np.ndarray) -> np.ndarray:
@@ -365,7 +539,7 @@ def _residual(net: PhaseNetwork, sys_: _System, v: np.ndarray, given: np.ndarray
     carry their round-off — is judged against what round-off leaves there."""
     residual = net.ybus @ v - net.source_current[:, None]
     residual[sys_.k] -= given
-    scale = abs(net.ybus) @ np.abs(v) + np.abs(net.source_current)[:, None]
+    scale = sys_.ybus_abs @ np.abs(v) + np.abs(net.source_current)[:, None]
     scale[sys_.k] += np.abs(given)
     with np.errstate(all="ignore"):
         error = np.abs(residual) / np.where(scale > 0, scale, 1.0)

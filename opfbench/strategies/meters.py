@@ -24,7 +24,7 @@ from scipy.sparse.csgraph import breadth_first_order
 from opfbench.multiphase import GROUND, PhaseNetwork
 from opfbench.network import Network
 from opfbench.powerflow import PowerFlowResult
-from opfbench.powerflow.multiphase import PhaseFlowResult
+from opfbench.powerflow.multiphase import PhaseFlowResult, PhaseIterate
 
 
 class _Readings(ABC):
@@ -180,15 +180,16 @@ class PhaseMeters(_Readings):
         )
         return cls(net, branch, valid, rows, np.array(nodes, dtype=int), gather, _upstream_bus(net)[net.der_bus])
 
-    def outflow(self, pf: PhaseFlowResult) -> np.ndarray:
+    def outflow(self, pf: PhaseFlowResult | PhaseIterate) -> np.ndarray:
         """(S, n_der, m) complex MVA leaving each DER's bus on its phases towards each
-        neighbour (P + jQ); 0 in padding and where the flow did not converge."""
+        neighbour (P + jQ); 0 in padding and where the flow did not converge (an iterate:
+        where its iteration did not)."""
         v = np.atleast_2d(pf.v)
         current = self.rows @ v.T  # (R, S) A into the elements
         s = v.T[self.node] * np.conj(current) / 1e6
         n_der, m = self.valid.shape
         out = np.asarray(self.gather @ s).T.reshape(v.shape[0], n_der, m)
-        conv = np.atleast_1d(pf.converged)[:, None, None]
+        conv = np.atleast_1d(pf.converged if isinstance(pf, PhaseFlowResult) else pf.settled)[:, None, None]
         return np.where(self.valid & conv, out, 0.0)
 
     @property

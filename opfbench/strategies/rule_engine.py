@@ -34,6 +34,12 @@ iteration settles both together, P_{n+1} = P_n + α_n·(P_wanted − P_n) with t
 factors, from P_0 = P^C; the residual and `tol_q_mvar` then bound the change still asked
 of either (MVAr or MW), and the result carries the curtailed power.
 
+On a three-phase feeder a step is the power flow's iterate (`grids.PhaseGrid`): only the
+nodes loads and DER touch are solved, every node's voltage is formed only where the
+settling check needs it, and each snapshot's last step — the one its figures come from —
+is certified by its mismatch; a step whose iteration does not converge stops the snapshot
+as a diverged flow does.
+
 Statuses beyond "ok": "pf-diverged" (a flow did not converge: no figures), "not-settled",
 "rule-non-finite" (the rule gave NaN or inf for some DER: no setpoint, no figures).
 `StrategyResult.power_flows` counts every flow a snapshot needed, including the one that
@@ -52,7 +58,7 @@ import numpy as np
 from opfbench.capability import check_reserve
 from opfbench.result import NOT_SETTLED, OK, RULE_NON_FINITE, StrategyResult
 from opfbench.scenario import Scenario
-from opfbench.strategies.grids import Flow, RuleGrid, grid_of
+from opfbench.strategies.grids import Flow, RuleGrid, Step, grid_of
 from opfbench.strategies.limits import Capability
 from opfbench.strategies.rules import DEFAULT_SETTLING, RESIDUAL, Measurements, Rule, Settling, Targets, targets
 from opfbench.timing import elapsed_ms, now
@@ -83,7 +89,7 @@ class _Plant:
             fixed["load_q_mvar"] = scenario.load_q_at_der_mvar()
         return cls(scenario, grid_of(scenario), net.der_s_mva, net.der_rating_mw, np.asarray(net.der_kinds, dtype=str), fixed)
 
-    def measure(self, reads: frozenset[str], rows: np.ndarray, pf: Flow | None) -> Measurements:
+    def measure(self, reads: frozenset[str], rows: np.ndarray, pf: Step | None) -> Measurements:
         """The measurements of `rows`; `pf` the flow of exactly those rows (closed loop)."""
         every = rows.size == self.scenario.n_snapshots  # all rows in order: no copies
         values = {key: arr if every else arr[rows] for key, arr in self.fixed.items()}
@@ -196,9 +202,9 @@ def _settle(
     scenario, grid = plant.scenario, plant.grid
     n_snap, n_der = scenario.n_snapshots, len(scenario.net.ders)
     every = np.arange(n_snap)
-    first = grid.answer(every, np.zeros((n_snap, n_der)), None, None)  # the no-action state Q_0 = 0
-    v = np.array(first.v)
-    converged = np.array(first.converged, dtype=bool)
+    first = grid.step(every, np.zeros((n_snap, n_der)), None, None)  # the no-action state Q_0 = 0
+    state = np.array(grid.state(first))  # per snapshot, its last step (`RuleGrid`)
+    converged = np.array(grid.stepped(first), dtype=bool)
     q = np.zeros((n_snap, n_der))
     moves_p = rule.curtails or capability.priority != "p"
     available = scenario.der_p_mw
@@ -208,13 +214,12 @@ def _settle(
     status = np.full(n_snap, OK, dtype=object)
     alpha = np.full((n_snap, n_der), float(s.step_factor))
     dv_old = np.full((n_snap, n_der), -1.0)
-    vm_prev = np.full(v.shape, np.nan)
+    before = np.full_like(state, np.nan)  # the state before the last step
     der_prev = np.full((n_snap, n_der), np.nan)
     rows = np.flatnonzero(converged)  # a diverged no-action flow: nothing measured (pf-diverged)
     step = 0
     while rows.size:
-        pf = grid.view(v[rows])
-        vm = grid.node_vm(pf.v)
+        pf = grid.view(state[rows])
         der_vm = grid.der_vm(pf)
         asked = targets(rule, plant.measure(rule.reads, rows, pf), options, rows.size)
         finite = asked.finite
@@ -223,11 +228,13 @@ def _settle(
         if moves_p:
             wanted_p = available[rows] if wanted_p is None else wanted_p
             dq = np.maximum(dq, np.abs(wanted_p - p[rows]).max(axis=1, initial=0.0))
-        dv_bus = np.abs(vm - vm_prev[rows])
-        dv = dv_bus.max(axis=1, initial=0.0) if step else np.zeros(rows.size)
+        calm = np.ones(rows.size, dtype=bool)  # no voltage moved by more than tol_v_pu in the last step
+        if step:  # … asked only where the rule asks for no more change
+            near = np.flatnonzero(finite & (dq <= s.tol_q_mvar))
+            calm[near] = grid.voltages_within(state[rows[near]], before[rows[near]], s.tol_v_pu)
         residual[rows] = dq
         status[rows[~finite]] = RULE_NON_FINITE
-        going = finite & ~((dq <= s.tol_q_mvar) & (dv <= s.tol_v_pu))
+        going = finite & ~((dq <= s.tol_q_mvar) & calm)
         if step == s.max_steps:
             status[rows[going]] = NOT_SETTLED
             break
@@ -242,16 +249,16 @@ def _settle(
         if moves_p:
             assert wanted_p is not None
             p[rows] = p[rows] + alpha[rows] * (wanted_p[going] - p[rows])
-        answer = grid.answer(rows, q[rows], p[rows] if moves_p else None, v[rows])
-        vm_prev[rows] = vm[going]
+        answer = grid.step(rows, q[rows], p[rows] if moves_p else None, state[rows])
+        before[rows] = state[rows]
         der_prev[rows] = der_vm[going]
-        v[rows] = answer.v
+        state[rows] = grid.state(answer)
         flows[rows] += 1
-        ok = np.asarray(answer.converged, dtype=bool)
+        ok = grid.stepped(answer)
         converged[rows] = ok
         rows = rows[ok]  # a diverged flow stops the snapshot: pf-diverged, no figures
         step += 1
-    final = grid.final(v, converged, flows)
+    final = grid.final(state, converged, flows)
     res = StrategyResult.from_setpoints(
         label,
         capability.k,

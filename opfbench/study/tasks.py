@@ -259,8 +259,7 @@ def run_task(inp: TaskInput) -> TaskOutput:
                 fronts.append(frontier_rows(t.case, t.k, mode, time, inp.step_h, front))
             cut = {(s, n): _curtailed(r) for s, results in by_source.items() for n, r in results.items() if curtails(n)}
             rows = np.flatnonzero(np.logical_or.reduce([*cut.values(), np.zeros(inp.n_steps, dtype=bool)]))
-            cuts = rows.size and front is not None and not plain.three_phase  # three-phase: no optimum that curtails yet
-            cutting = frontier(plain.take(rows), t.k, curtail=True) if cuts else None
+            cutting = frontier(plain.take(rows), t.k, curtail=True) if rows.size and front is not None else None
             if cutting is not None:
                 fronts.append(frontier_rows(t.case, t.k, mode, time[rows], inp.step_h, cutting))
             for source, results in by_source.items():

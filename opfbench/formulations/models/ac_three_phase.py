@@ -33,6 +33,10 @@ Per unit: node voltages v = V / (the node's base, `PhaseNetwork.node_base_v`), p
 - DER: constant-power branches, P fixed (parameter), one Q per DER split equally over
   its phases (the power flow's and the rule engine's convention, OpenDSS's kvar).
 - Regulator and transformer taps fixed where the case settled them (they are in Y).
+- Built with `curtail` (`acopf:curtail=true`, the frontier of the optimum that may
+  curtail): each DER's P is a decision too, in [min(P, 0), P] of the power it has, its Q
+  within the capability at the P it delivers (`problem.PqCapability`: the power-factor
+  pieces and the S̄ circle, scaled by 1 − k), and the objective adds the power curtailed.
 
 Built once per network: the load and DER powers and the Q limits are NLP parameters
 and variable bounds; IPOPT solves cold from the power flow's no-action point or warm from
@@ -48,6 +52,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from opfbench.formulations.model import formulation
+from opfbench.formulations.problem import PqCapability
 from opfbench.formulations.solvers.ipopt_adapter import IpoptNlp, IpoptSolve
 from opfbench.multiphase import GROUND, PhaseNetwork
 from opfbench.multiphase.branches import CONSTANT_I, CONSTANT_PQ, CONSTANT_Z, EXPONENTIAL, Branches
@@ -124,8 +129,8 @@ class ThreePhaseAc:
     der_p_mw, q_limit_mvar, x0=…, start=…)` one snapshot; `initial(v)` the NLP point at
     node voltages v (complex V) with Q = 0 (a cold start from a power flow)."""
 
-    def __init__(self, net: PhaseNetwork, slack_export: bool = True):
-        self.net = net
+    def __init__(self, net: PhaseNetwork, slack_export: bool = True, curtail: bool = False):
+        self.net, self.curtail = net, curtail
         n, n_load, n_der = net.n_node, net.n_load, len(net.ders)
         base = net.node_base_v
         y = sp.diags(base) @ net.ybus @ sp.diags(base) / 1e6  # p.u. on 1 MVA and each node's base
@@ -202,31 +207,37 @@ class ThreePhaseAc:
             rows.append((p_source, np.zeros(1), np.full(1, np.inf)))
         self.n_monitored = len(a)
         self.band_rows = slice(2 * n, 2 * n + len(a))  # where `solve` puts another band
-        nlp = {
-            "x": ca.vertcat(q, e, f),
-            "p": ca.vertcat(p_load, q_load, p_der),
-            "f": losses,
-            "g": ca.vertcat(*(r[0] for r in rows)),
-        }
+        if curtail:  # P a decision in [min(P, 0), P]; the cost adds the power curtailed; Q within the capability at P
+            p_avail = ca.SX.sym("p_avail", n_der)
+            slope, offset, reserve = ca.SX.sym("slope", 2 * n_der), ca.SX.sym("offset", 2 * n_der), ca.SX.sym("share", 1)
+            pq = PqCapability.of(net, 0.0, base_mva=1.0)  # which units have the S̄ circle; slopes and share: parameters
+            rows += [(r.expr, r.lo, r.hi) for r in pq.rows(q, p_der, slope, offset, reserve)]
+            x, params = ca.vertcat(q, p_der, e, f), ca.vertcat(p_load, q_load, p_avail, slope, offset, reserve)
+            cost = losses + KW_PER_MW * ca.sum1(p_avail - p_der)
+        else:
+            x, params, cost = ca.vertcat(q, e, f), ca.vertcat(p_load, q_load, p_der), losses
+        nlp = {"x": x, "p": params, "f": cost, "g": ca.vertcat(*(r[0] for r in rows))}
         self.nlp = IpoptNlp(
-            f"ac3_{net.name}",
+            f"ac3_{net.name}{'_curtail' if curtail else ''}",
             nlp,
             np.concatenate([r[1] for r in rows]),
             np.concatenate([r[2] for r in rows]),
-            slice(0, n_der),
+            slice(0, (2 if curtail else 1) * n_der),
             OPTIONS,
         )
         self.n_der = n_der
 
-    def initial(self, v: np.ndarray) -> np.ndarray:
-        """The NLP point at node voltages `v` (n_node,) complex V, Q = 0."""
+    def initial(self, v: np.ndarray, der_p_mw: np.ndarray | None = None) -> np.ndarray:
+        """The NLP point at node voltages `v` (n_node,) complex V, Q = 0 (and, built with
+        `curtail`, P = `der_p_mw`)."""
         pu = np.asarray(v) / self.net.node_base_v
-        return np.concatenate([np.zeros(self.n_der), pu.real, pu.imag])
+        p = [np.asarray(der_p_mw, dtype=float)] if self.curtail and der_p_mw is not None else []
+        return np.concatenate([np.zeros(self.n_der), *p, pu.real, pu.imag])
 
     def voltages(self, solve: IpoptSolve) -> np.ndarray:
         """(n_node,) complex V of a solve's point."""
         n = self.net.n_node
-        x = solve.x[self.n_der :]
+        x = solve.x[(2 if self.curtail else 1) * self.n_der :]
         return (x[:n] + 1j * x[n:]) * self.net.node_base_v
 
     def solve(
@@ -238,14 +249,29 @@ class ThreePhaseAc:
         x0: np.ndarray | None = None,
         start: IpoptSolve | None = None,
         band: tuple[float, float] | None = None,
+        capability: tuple[PqCapability, np.ndarray] | None = None,
     ) -> IpoptSolve:
         """One snapshot: loads' P and Q (n_load,) at their law's reference, DER P (n_der,),
         usable |Q| (n_der,) MVAr; warm from `start`, else cold from `x0` (`initial`);
-        `band` (low, high) p.u. in place of the feeder's (a widened band: the frontier)."""
-        p = np.concatenate([load_p_mw, load_q_mvar, der_p_mw])
+        `band` (low, high) p.u. in place of the feeder's (a widened band: the frontier).
+        Built with `curtail`: `capability` — the `PqCapability` at the reserve (MW) and its
+        pieces' offsets (n_der, 2) MW (`problem.capability_offsets`) — bounds Q in place
+        of `q_limit_mvar`, P lies in [min(P, 0), P] of `der_p_mw`; the solve's `q_pu`
+        holds Q, then P."""
         big = np.full(2 * self.net.n_node, np.inf)
-        lbx = np.concatenate([-q_limit_mvar, -big])
-        ubx = np.concatenate([q_limit_mvar, big])
+        if self.curtail:
+            if capability is None:
+                raise ValueError("a solve that may curtail needs the capability (PqCapability, offsets)")
+            cap, offset = capability
+            pieces = [cap.slope.T.reshape(-1), offset.T.reshape(-1), [cap.share]]
+            p = np.concatenate([load_p_mw, load_q_mvar, der_p_mw, *pieces])
+            free = np.full(self.n_der, np.inf)
+            lbx = np.concatenate([-free, np.minimum(der_p_mw, 0.0), -big])
+            ubx = np.concatenate([free, der_p_mw, big])
+        else:
+            p = np.concatenate([load_p_mw, load_q_mvar, der_p_mw])
+            lbx = np.concatenate([-q_limit_mvar, -big])
+            ubx = np.concatenate([q_limit_mvar, big])
         if x0 is None and start is None:
             raise ValueError("a cold solve needs a start point x0 (ThreePhaseAc.initial)")
         lbg, ubg = self.nlp.lbg, self.nlp.ubg

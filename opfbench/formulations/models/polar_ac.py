@@ -25,7 +25,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from opfbench.formulations.model import formulation
-from opfbench.formulations.problem import CurtailData, OpfProblem, PqCapability, Row, incidence
+from opfbench.formulations.problem import CurtailData, OpfProblem, PqCapability, incidence
 from opfbench.formulations.solvers.ipopt_adapter import IpoptNlp, IpoptSolve
 from opfbench.network import Network
 
@@ -83,28 +83,9 @@ def _nlp(problem: OpfProblem, sym: type[Sym], curtail: bool = False) -> tuple[di
     else:
         x, cost = ca.vertcat(theta_o, vm_o, q, p_der), losses + ca.sum1(p_avail - p_der)
         params = ca.vertcat(p_fixed, q_fixed, p_avail, slope, offset, share)
-        rows += _capability_rows(problem, q, p_der, slope, offset, share)
+        rows += PqCapability.of(net, 0.0).rows(q, p_der, slope, offset, share)  # slopes and share: parameters
     nlp = {"x": x, "p": params, "f": problem.kw_per_pu * cost, "g": ca.vertcat(*(r.expr for r in rows))}
     return nlp, rows
-
-
-def _capability_rows(problem: OpfProblem, q: Sym, p: Sym, slope: Sym, offset: Sym, share: Sym) -> list[Row]:
-    """|Q| ≤ slope_j·P + offset_j for both pieces j (slope and offset stacked piece by
-    piece), and Q² + (share·P)² ≤ (share·S̄)² for the inverter-coupled units
-    (`problem.PqCapability`)."""
-    net = problem.net
-    n_der = len(net.ders)
-    out = []
-    for j in range(2):
-        reach = slope[j * n_der : (j + 1) * n_der] * p + offset[j * n_der : (j + 1) * n_der]
-        out += [Row(f"Q ≤ piece {j}", q - reach, np.full(n_der, -np.inf), np.zeros(n_der))]
-        out += [Row(f"−Q ≤ piece {j}", -q - reach, np.full(n_der, -np.inf), np.zeros(n_der))]
-    c = np.flatnonzero(np.asarray(net.der_kinds) != "DFIG")
-    if c.size:
-        s_pu = ca.DM(net.der_s_mva[c] / net.base_mva)
-        circle = q[c.tolist()] ** 2 + (share * p[c.tolist()]) ** 2 - (share * s_pu) ** 2
-        out.append(Row("S̄ circle", circle, np.full(c.size, -np.inf), np.zeros(c.size)))
-    return out
 
 
 @formulation(
