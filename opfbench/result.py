@@ -109,12 +109,15 @@ class Reference:
     """Each step's frontier point at a configuration's own compliance (the optimum with the
     voltage band widened just enough to cover the step's excursion,
     `formulations.frontier.reference`), (S,) each: the optimum's cost (kW), its bound
-    (kW), that widening ε (p.u.), and whether it is the optimum's that may curtail."""
+    (kW), that widening ε (p.u.), whether it is the optimum's that may curtail, and what
+    its DER may use (`formulations.frontier.RESERVE`, `FORECAST`, `CAPABILITY`; "" where no
+    frontier bounds the step: setpoints beyond the capability)."""
 
     cost_kw: np.ndarray
     bound_kw: np.ndarray
     eps_pu: np.ndarray
     curtails: np.ndarray
+    limit: np.ndarray
 
 
 @dataclass(eq=False)

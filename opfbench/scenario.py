@@ -12,7 +12,7 @@ capability through `qmax_mvar`, so both forms run every strategy and formulation
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from functools import cached_property
 from typing import TYPE_CHECKING, Generic, TypeVar
 
@@ -48,7 +48,10 @@ class Scenario(Generic[NetT]):
     into P^F clips it explicitly). Per-load P and Q may have either sign (negative = the
     element injects, e.g. SimBench's capacitive load Q). pv_night_q (S,) bool or None:
     snapshots where the solar units have the S-limited "Q at night" capability (night mode
-    "connected-q")."""
+    "connected-q"). q_limit_mvar (S, n_der) MVAr or None: the reactive limit |Q| ≤
+    q_limit_mvar a formulation's DER use instead of (1 − k)·Qmax(P^C) — the capability a
+    rule's setpoints used, which its frontier is computed at (`formulations.frontier`);
+    each within [0, Qmax(P^C)] (the local rules keep their own limits)."""
 
     net: NetT
     load_scale: np.ndarray | None
@@ -57,6 +60,7 @@ class Scenario(Generic[NetT]):
     pv_night_q: np.ndarray | None = None
     load_p_mw: np.ndarray | None = None
     load_q_mvar: np.ndarray | None = None
+    q_limit_mvar: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         _check_net(self.net)
@@ -95,6 +99,12 @@ class Scenario(Generic[NetT]):
             if mask.shape != (n_snap,):
                 raise InputError(f"scenario: pv_night_q must have shape (S,) = ({n_snap},), got {mask.shape}")
             object.__setattr__(self, "pv_night_q", _frozen(mask))
+        if self.q_limit_mvar is not None:
+            limit = _der_array("q_limit_mvar", self.q_limit_mvar, n_snap, n_der)
+            _check_finite("q_limit_mvar", limit)
+            if np.any(limit < 0) or np.any(limit > self.qmax_mvar() * (1 + 1e-9) + 1e-12):
+                raise InputError("scenario: q_limit_mvar must lie within [0, Qmax(P)] MVAr, the DER's capability")
+            object.__setattr__(self, "q_limit_mvar", _frozen(limit))
 
     def _check_loads(self) -> int:
         """Per-load P and Q: both given, (S, n_load), real and finite; returns S."""
@@ -158,6 +168,7 @@ class Scenario(Generic[NetT]):
             and equal(self.der_p_mw, other.der_p_mw)
             and equal(self.der_p_forecast_mw, other.der_p_forecast_mw)
             and equal(night_q(self), night_q(other))
+            and equal(self.q_limit_mvar, other.q_limit_mvar)
         )
 
     def same_rows(self, other: "Scenario") -> np.ndarray:
@@ -183,6 +194,7 @@ class Scenario(Generic[NetT]):
             & equal(self.der_p_mw, other.der_p_mw)
             & equal(self.der_p_forecast_mw, other.der_p_forecast_mw)
             & (night_q(self) == night_q(other))
+            & equal(self.q_limit_mvar, other.q_limit_mvar)
         )
 
     @classmethod
@@ -194,6 +206,8 @@ class Scenario(Generic[NetT]):
             raise InputError("scenario union: every part needs the same network and the same kind of loads")
         if len({s.der_p_forecast_mw is None for s, _ in parts}) > 1:
             raise InputError("scenario union: every part needs a forecast, or none")
+        if any(s.q_limit_mvar is not None for s, _ in parts):
+            raise InputError("scenario union: a part with its own reactive limit (q_limit_mvar) is not shared")
 
         def stacked(name: str) -> np.ndarray | None:
             arrays = [getattr(s, name) for s, _ in parts]
@@ -397,6 +411,7 @@ class Scenario(Generic[NetT]):
             part(self.pv_night_q),
             part(self.load_p_mw),
             part(self.load_q_mvar),
+            part(self.q_limit_mvar),
         )
 
     def without_forecast(self) -> "Scenario":
@@ -407,7 +422,7 @@ class Scenario(Generic[NetT]):
     def with_night_q(self, mask: np.ndarray) -> "Scenario":
         """This scenario with the solar units S-limited (|Q| ≤ √(S̄² − P²), no PF limit) at
         the snapshots where `mask` (S,) is True."""
-        return Scenario(self.net, self.load_scale, self.der_p_mw, self.der_p_forecast_mw, mask, self.load_p_mw, self.load_q_mvar)
+        return replace(self, pv_night_q=mask)
 
     def night_q(self) -> np.ndarray | bool:
         """(S, n_der) where the solar units have the "Q at night" capability, or False
@@ -415,6 +430,11 @@ class Scenario(Generic[NetT]):
         if self.pv_night_q is None or not self.pv_night_q.any():
             return False
         return self.pv_night_q[:, None] & self.net.der_solar[None, :]
+
+    def usable_q_mvar(self, k: float) -> np.ndarray:
+        """(S, n_der) MVAr: the |Q| a formulation's DER may use at reserve k — `q_limit_mvar`
+        where given, else (1 − k)·Qmax(P^C)."""
+        return (1.0 - k) * self.qmax_mvar() if self.q_limit_mvar is None else np.array(self.q_limit_mvar)
 
     def qmax_mvar(self, p_mw: np.ndarray | None = None) -> np.ndarray:
         """(S, n_der) physical Qmax at active power `p_mw` (default P^C), MVAr, with the

@@ -49,7 +49,7 @@ class StepContext:
         if self.reference is not None:
             return self.reference
         nan = np.full(self.res.n_snapshots, np.nan)
-        return Reference(nan, nan, nan, np.zeros(self.res.n_snapshots, dtype=bool))
+        return Reference(nan, nan, nan, np.zeros(self.res.n_snapshots, dtype=bool), np.full(self.res.n_snapshots, ""))
 
 
 Value = Callable[[StepContext], Any]  # one value for every row, or an array of the rows
@@ -284,6 +284,16 @@ STEPS = Table(
             "that curtails",
             lambda c: np.asarray(c.frontier.curtails, dtype=bool),
         ),
+        Column(
+            "frontier_limit",
+            "text",
+            NO_UNIT,
+            "what that frontier's DER may use: `reserve` (1 − k)·Qmax(P), the configuration's own limits; `forecast` "
+            "Algorithm 3's limit of its forecast source, capped at Qmax(P) (where its setpoints used the reserve); "
+            "`capability` Qmax(P), k = 0 (where they exceed that too); empty where a setpoint exceeds Qmax(P) itself "
+            "(no frontier bounds a point no inverter can deliver: `frontier_kw` is NaN)",
+            lambda c: np.asarray(c.frontier.limit, dtype=str),
+        ),
     ),
     extra=Column(
         "<extra>",
@@ -351,6 +361,12 @@ TASK_SUMMARY = Table(
             "steps whose cost (losses + curtailed) lies more than 1e-4 kW below `frontier_kw`",
         ),
         Column("frontier_curtails", "true/false", NO_UNIT, "as in `steps.parquet`"),
+        Column(
+            "reserve_used_steps",
+            "integer",
+            NO_UNIT,
+            "steps whose setpoints used the reserve (`frontier_limit` forecast or capability)",
+        ),
         Column("not_ok_steps", "integer", NO_UNIT, "steps whose status is not ok"),
         Column("not_settled_steps", "integer", NO_UNIT, "steps where a closed-loop rule did not settle"),
         Column("pf_diverged_steps", "integer", NO_UNIT, "steps of status pf-diverged"),
@@ -425,7 +441,20 @@ SUMMARY = Table(
             "its frontier is the optimum's that may curtail (a configuration that curtails: Volt-Watt, reactive "
             "priority, `acopf:curtail=true`)",
         ),
-        Column("frontier_missing_steps", "integer", NO_UNIT, "steps without a frontier optimum at their compliance"),
+        Column(
+            "frontier_missing_steps",
+            "integer",
+            NO_UNIT,
+            "steps without a frontier optimum at their compliance (none at their ε, or setpoints beyond the DER's "
+            "capability: `excursion_steps`)",
+        ),
+        Column(
+            "reserve_used_steps",
+            "integer",
+            NO_UNIT,
+            "steps whose setpoints used the reserve k (within the DER's capability), compared with the frontier at the "
+            "capability they used (`frontier_limit` in `steps.parquet`)",
+        ),
         Column(
             "below_frontier_steps",
             "integer",

@@ -80,6 +80,7 @@ def test_summary_counts_diverged_steps_and_averages_over_the_rest():
             "frontier_kw": [8.0, np.nan, 25.0, np.nan],
             "frontier_bound_kw": [8.0, np.nan, 25.0, np.nan],
             "frontier_curtails": False,
+            "frontier_limit": "reserve",
         }
     )
     key = ("c", "no-action", 0.0, "connected", "off")

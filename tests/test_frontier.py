@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 
 from opfbench.data import paper_day
-from opfbench.formulations.frontier import COVER_PU, EPSILONS, Frontier, excursion, frontier, reference, widened
+from opfbench.formulations.frontier import COVER_PU, EPSILONS, Frontier, Part, excursion, frontier, reference, widened
 from opfbench.formulations.opf_strategies import run_acopf
 from opfbench.io import load_network
 from opfbench.registry.catalog import configuration, run_strategy
@@ -126,13 +126,30 @@ def test_a_reference_takes_the_curtailing_frontier_where_the_rule_curtailed(tigh
     e = np.zeros(scenario.n_snapshots)
     curtailed = np.zeros(scenario.n_snapshots, dtype=bool)
     curtailed[[3, 4]] = True
-    ref = reference(plain, e, cutting, rows, curtailed)
+    ref = reference(plain, e, [(Part(cutting, rows), curtailed)])
     assert ref.curtails.tolist() == curtailed.tolist()
     np.testing.assert_array_equal(ref.cost_kw[[3, 4]], cutting.cost_kw[[1, 2], 0])
     np.testing.assert_array_equal(ref.cost_kw[~curtailed], plain.cost_kw[~curtailed, 0])
     curtailed[0] = True  # a step the curtailing frontier was not computed on
     with pytest.raises(ValueError, match="lacks a step"):
-        reference(plain, e, cutting, rows, curtailed)
+        reference(plain, e, [(Part(cutting, rows), curtailed)])
+
+
+def test_an_optimum_at_a_given_reactive_limit_keeps_it_and_the_limit_stays_within_the_capability(tight):
+    """The frontier at the capability a rule used (`Scenario.q_limit_mvar`, Algorithm 3's
+    limit): the OPF's DER keep the given limit (here half the reserve-free capability, so the
+    optimum loses more than the one at k = 0), and a limit beyond the capability is refused."""
+    from opfbench.errors import InputError
+
+    scenario, front = tight
+    half = replace(scenario, q_limit_mvar=0.5 * scenario.qmax_mvar())
+    res = run_acopf(half, 0.0)
+    assert (np.abs(res.q_mvar) <= half.q_limit_mvar + 1e-9).all()
+    assert (np.abs(res.q_mvar) >= half.q_limit_mvar - 1e-6).any()  # it binds somewhere
+    assert (res.losses_kw >= front.cost_kw[:, -1] - 1e-4).all() and res.losses_kw.sum() > np.nansum(front.cost_kw[:, 0])
+    assert np.array_equal(half.take(np.array([2, 5])).q_limit_mvar, half.q_limit_mvar[[2, 5]])
+    with pytest.raises(InputError, match="q_limit_mvar must lie within"):
+        replace(scenario, q_limit_mvar=1.5 * scenario.qmax_mvar() + 1e-3)
 
 
 def test_a_proven_infeasibility_covers_every_narrower_band_with_the_answer_a_solve_gives():

@@ -88,3 +88,40 @@ def test_a_rule_that_ignores_the_band_ranks_neither_above_the_optimum_nor_above_
     assert holds["share_eq_pct"] > ignores["share_eq_pct"] and ignores["share_eq_pct"] < 100.0
     assert (board["below_frontier_steps"] == 0).all()
     assert (steps.losses_kw + steps.curtailed_kw >= steps.frontier_kw - 1e-4).all()  # never below its frontier point
+
+
+def test_a_rule_that_uses_its_reserve_is_compared_at_the_capability_it_used(tmp_path):
+    """paper33, 05:00–09:00 of the paper day at k = 0.8, forecast off and oracle: LFMA with the
+    oracle forecast (Algorithm 3) sets Q beyond (1 − k)·Qmax(P^C) on the morning ramp, so it
+    loses less than the optimum that keeps the reserve — compared with that optimum its share
+    was above 100 %. It is compared with the optimum at the capability it used (Algorithm 3's
+    limit, capped at Qmax(P^C)) there: share ≤ 100 %, gap ≥ 0, on or above every frontier
+    point. Without `safe` Algorithm 3 sets Q beyond the capability itself (a PV unit at 0 MW
+    at dawn): no frontier bounds those steps, so that row gets no share."""
+    from opfbench import api
+
+    study = api.run_study(
+        strategies=["no-action", "lfma", "lfma:safe=true", "acopf"],
+        ks=[0.8],
+        night_modes=["connected"],
+        forecast=["off", "oracle"],
+        period="2016-06-28T05:00..2016-06-28T09:00",
+        out=tmp_path / "run",
+    )
+    s = study.summary.set_index(["strategy", "forecast"])
+    optimum, safe, loose = s.loc["acopf", "off"], s.loc["lfma:safe=true", "oracle"], s.loc["lfma", "oracle"]
+    # the rule used its reserve: within the capability, below the optimum that keeps the reserve
+    assert safe["reserve_used_steps"] > 30 and safe["excursion_steps"] == 0
+    assert safe["cost_kwh"] < optimum["cost_kwh"] - 0.1  # the old comparison: a share above 100 %
+    assert safe["frontier_missing_steps"] == 0 and safe["below_frontier_steps"] == 0
+    assert 0.0 <= safe["gap_eq_kwh"] and safe["share_eq_pct"] <= 100.0
+    assert safe["frontier_kwh"] < optimum["frontier_kwh"]  # the optimum at the capability it used
+    steps = study.steps(strategy="lfma:safe=true", forecast="oracle")
+    assert set(steps.frontier_limit) == {"reserve", "forecast"}
+    assert (steps.losses_kw + steps.curtailed_kw >= steps.frontier_kw - 1e-4).all()
+    # beyond the capability: no reference, no share
+    assert loose["excursion_steps"] > 0 and loose["frontier_missing_steps"] >= loose["excursion_steps"]
+    assert math.isnan(loose["share_eq_pct"]) and math.isnan(loose["gap_eq_kwh"])
+    # every row: no share above 100 %, no negative gap
+    assert (s.share_eq_pct.dropna() <= 100.0).all() and (s.gap_eq_kwh.dropna() >= 0.0).all()
+    assert (s.below_frontier_steps == 0).all()

@@ -14,7 +14,16 @@
   the paper day's load profile every 15 min) in one call, factorization included (≤ 500
   and ≤ 10 000 ms asked).
 
+<<<<<<< HEAD
+- `ieee123_sdp_compile_ms`: the SDP relaxation (`formulations.three_phase.bound`) on
+  `ieee123` with PV on every second load, built and compiled once (its first solve's own
+  time excluded); `ieee123_sdp_step_ms`: its median per-step solve over `SDP_STEPS`
+  snapshots (≤ 60 000 and ≤ 2000 asked), `ieee123_sdp_optimal` how many ended optimal, and
+  `ieee123_sdp_vs_ac_ratio` = that median / the AC OPF's median per step
+  (`formulations.three_phase.optimum`, IPOPT's own time) on the same snapshots.
+=======
 - the three-phase AC OPF's keys (`ieee123_opf_…`, `eulv_opf_…`): `bench.unbalanced_opf`.
+>>>>>>> main
 
 Each time is the best of `REPEATS` calls (ms). Wall-clock figures: re-take them on a quiet
 machine.
@@ -126,6 +135,37 @@ def run() -> dict:
         "ieee8500_pf_ms": pf_ms,
         "ieee8500_batch96_ms": batch_ms,
         "ieee8500_batch96_converged": int(np.count_nonzero(batch.converged)),
+        **_ieee123_sdp(),
+    }
+
+
+SDP_STEPS = ((0.9, 1.0), (1.0, 0.6), (1.1, 0.3))
+"""(load multiplier, PV irradiance) of the SDP benchmark's snapshots."""
+
+
+def _ieee123_sdp() -> dict:
+    import tempfile
+    from pathlib import Path
+
+    from opfbench.cases.opendss_cases import opendss_copy
+    from opfbench.cases.opendss_pv import case_with_pv
+    from opfbench.formulations.three_phase import bound, optimum
+    from opfbench.multiphase import PhaseNetwork
+
+    with tempfile.TemporaryDirectory() as tmp, opendss_copy("ieee123") as master:
+        case = case_with_pv(Path(tmp), master, "ieee123")
+    assert case.stored is not None and isinstance(case.network, PhaseNetwork)
+    lp, lq, dp, _ = case.stored
+    mult = np.array([s[0] for s in SDP_STEPS])[:, None]
+    sun = np.array([s[1] for s in SDP_STEPS])[:, None]
+    relaxed = bound(case.network, lp * mult, lq * mult, dp * sun, 0.0)
+    exact = optimum(case.network, lp * mult, lq * mult, dp * sun, 0.0)
+    step = float(np.median(relaxed.solve_ms))
+    return {
+        "ieee123_sdp_compile_ms": relaxed.compile_ms,
+        "ieee123_sdp_step_ms": step,
+        "ieee123_sdp_optimal": int(np.count_nonzero(relaxed.status == "optimal")),
+        "ieee123_sdp_vs_ac_ratio": step / float(np.median(exact.solve_ms)),
     }
 
 

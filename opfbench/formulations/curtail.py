@@ -100,6 +100,8 @@ def run_curtailing(
     """The AC OPF that may curtail on every snapshot of `scenario` at reserve k (module
     docstring); `solver="ipopt"` runs IPOPT on every snapshot. The result carries the
     curtailed power; lower_bound_kw bounds losses + curtailed power."""
+    if scenario.q_limit_mvar is not None:  # its capability is a function of the power it delivers (PqCapability)
+        raise ValueError("the AC OPF that may curtail takes no fixed reactive limit (q_limit_mvar)")
     start = now()
     net = scenario.net
     base, n_der = net.base_mva, len(net.ders)

@@ -9,13 +9,32 @@ a lower bound for every operating point whose excursion beyond the band is at mo
 rule's step is compared with the frontier point at the smallest grid ε that covers the
 rule's own excursion at that step (`Frontier.at`): its gap there is never negative, up to
 the optimum being global (certified by the relaxation almost everywhere; IPOPT's local
-optimum elsewhere) and the rule's point lying in the OPF's set (within its capability,
-its active power its own).
+optimum elsewhere) and the rule's point lying in the OPF's set (within the capability the
+OPF's DER may use, below; its active power its own).
 
 With `curtail` the frontier is that of the AC OPF that may curtail (`acopf:curtail=true`:
 objective losses + curtailed power): the reference of a configuration at the steps where
 it curtails (Volt-Watt, reactive priority), whose points lie in its set and not in the
 plain one's (`reference`); at its other steps the plain frontier's point bounds it.
+
+The capability a step used (`Part`, `reference`; the study picks each step's frontier). The
+OPF at reserve k lets every DER use (1 − k)·Qmax(P) at the power P it delivers (limit
+RESERVE). A rule's setpoint may use more: Algorithm 3 (`strategies.limits`) evaluates the
+limit at the forecast P^F too and so eats into the reserve — by design: the reserve k is an
+operator's policy for fault ride-through, which the paper trades for losses where the
+forecast says the capability will be there; the inverter can deliver such a point, for it
+lies within its capability Qmax(P^C). Such a step is compared with the frontier at the
+capability its setpoints used — the OPF whose DER may use Algorithm 3's limit of the rule's
+forecast source, capped at Qmax(P^C) (limit FORECAST, a scenario's `q_limit_mvar`: one
+frontier per forecast source, shared by every rule reading it) —, or, where a setpoint
+exceeds even that (or the rule curtails too), with the frontier at k = 0, the full
+capability (limit CAPABILITY). A setpoint beyond Qmax(P^C) itself (Algorithm 3 without
+`safe`, e.g. Q from a PV unit whose power is still 0 at dawn while the forecast says it
+rises) is one no inverter delivers — it cannot exceed its rating — and lies in no OPF's
+set: no frontier point bounds it, so the step has no reference (NaN: a step without one,
+and the period gets no gap or share at equal compliance; `safe=true` caps the limit at
+Qmax(P^C)). So each step's reference is a lower bound for every operating point a rule
+can reach, at the tightest of these sets that holds it.
 
 The frontier point at ε = 0 is the `acopf` strategy's own answer (passed in where the run
 has it). Widening a band that does not bind changes no optimum: where the ε = 0 optimum
@@ -41,6 +60,7 @@ from __future__ import annotations
 import math
 import threading
 from collections import OrderedDict
+from collections.abc import Sequence
 from dataclasses import dataclass, replace
 from typing import TypeVar
 
@@ -56,6 +76,11 @@ EPSILONS: tuple[float, ...] = (0.0, 0.0025, 0.005, 0.01, 0.02, 0.05, math.inf)
 COVER_PU = 1e-6  # an excursion up to ε + this is covered by ε (the OPF's voltage tolerance)
 MARGIN_PU = 1e-6  # an optimum this far inside every limit does not bind its band
 OPTIMA = (OK, FALLBACK_COLD)  # statuses whose point is a solver's optimum
+RESERVE_MVAR = 1e-7  # a setpoint this far beyond a limit exceeds it (the rule engine's Q tolerance)
+CAPABILITY_MVAR = 1e-9  # a setpoint this far beyond Qmax exceeds the capability (`excursion_steps`' threshold)
+#: What a frontier's DER may use (`Frontier.limit`, module docstring): (1 − k)·Qmax(P), the
+#: reserve kept; a forecast source's Algorithm 3 limit (capped at Qmax(P^C)); Qmax(P) (k = 0).
+RESERVE, FORECAST, CAPABILITY = "reserve", "forecast", "capability"
 _WIDENED = 32  # widened networks kept per process (least recently used dropped)
 _cache: OrderedDict[tuple[Network | PhaseNetwork, float], Network | PhaseNetwork] = OrderedDict()
 NetT = TypeVar("NetT", Network, PhaseNetwork)
@@ -118,6 +143,7 @@ class Frontier:
     status: np.ndarray
     solved: np.ndarray
     curtail: bool = False
+    limit: str = RESERVE
 
     @property
     def n_snapshots(self) -> int:
@@ -143,32 +169,59 @@ class Frontier:
         return cost, bound, np.where(missing, np.nan, self.eps[pick])
 
 
+@dataclass(frozen=True)
+class Part:
+    """A frontier computed on some of a task's steps, `rows` (sorted): the reference of a
+    configuration at those of its steps that lie outside the plain frontier's set (module
+    docstring) — it curtails (`front.curtail`), or its setpoints used its reserve
+    (`front.limit` FORECAST or CAPABILITY)."""
+
+    front: Frontier
+    rows: np.ndarray
+
+    def at(self, excursion_pu: np.ndarray, where: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """`Frontier.at` for the steps `where` (task rows, each among `rows`) at their excursions."""
+        at = np.searchsorted(self.rows, where)
+        if where.size and (at.max() >= self.rows.size or not np.array_equal(self.rows[at], where)):
+            raise ValueError("a partial frontier lacks a step it is the reference of")
+        return self.front.at(excursion_pu, at)
+
+
+def capability(scenario: Scenario, res: StrategyResult) -> np.ndarray:
+    """(S, n_der) MVAr: each DER's capability Qmax at the power it delivered in `res`."""
+    return scenario.qmax_mvar(
+        scenario.der_p_mw if res.curtailed_mw is None else scenario.der_p_mw - np.nan_to_num(res.curtailed_mw)
+    )
+
+
+def within(res: StrategyResult, limit_mvar: np.ndarray, tolerance: float = RESERVE_MVAR) -> np.ndarray:
+    """(S,) bool: every setpoint of `res` within ±`limit_mvar` (S, n_der), up to `tolerance` MVAr."""
+    with np.errstate(invalid="ignore"):
+        return (np.abs(res.q_mvar) <= limit_mvar + tolerance).all(axis=1)
+
+
 def reference(
     plain: Frontier,
     excursion_pu: np.ndarray,
-    cutting: Frontier | None = None,
-    rows: np.ndarray | None = None,
-    curtailed: np.ndarray | None = None,
+    parts: Sequence[tuple[Part, np.ndarray]] = (),
+    unbounded: np.ndarray | None = None,
 ) -> Reference:
-    """The plain frontier's point at each step's excursion (`Frontier.at`), and where the
-    configuration curtailed (`curtailed` (S,) bool) the point of `cutting`, the frontier of
-    the optimum that may curtail computed on the steps `rows` (sorted, holding those) —
-    none (NaN) there without it: the plain optimum bounds no point that curtails."""
-    cost, bound, eps = plain.at(excursion_pu)
+    """Each step's frontier point at its excursion (`Frontier.at`): the plain frontier's, and
+    for each (part, steps) of `parts` — `steps` (S,) bool, a later part winning — the part's
+    point at those steps; NaN (limit "") at the `unbounded` steps (S,) bool: setpoints beyond
+    the capability, which no frontier bounds."""
+    exc = np.asarray(excursion_pu, dtype=float)
+    cost, bound, eps = (a.copy() for a in plain.at(exc))
     curtails = np.zeros(cost.size, dtype=bool)
-    if curtailed is None or not curtailed.any():
-        return Reference(cost, bound, eps, curtails)
-    if cutting is None or rows is None:
-        gone = np.asarray(curtailed, dtype=bool)
-        return Reference(np.where(gone, np.nan, cost), np.where(gone, np.nan, bound), np.where(gone, np.nan, eps), curtails)
-    where = np.flatnonzero(curtailed)
-    at = np.searchsorted(rows, where)
-    if at.max() >= rows.size or not np.array_equal(rows[at], where):
-        raise ValueError("the curtailing frontier lacks a step where the configuration curtailed")
-    c_cost, c_bound, c_eps = cutting.at(np.asarray(excursion_pu, dtype=float)[where], at)
-    cost, bound, eps = cost.copy(), bound.copy(), eps.copy()
-    cost[where], bound[where], eps[where], curtails[where] = c_cost, c_bound, c_eps, True
-    return Reference(cost, bound, eps, curtails)
+    limit = np.full(cost.size, plain.limit, dtype=object)
+    for part, steps in parts:
+        where = np.flatnonzero(steps)
+        if where.size:
+            cost[where], bound[where], eps[where] = part.at(exc[where], where)
+            curtails[where], limit[where] = part.front.curtail, part.front.limit
+    if unbounded is not None and unbounded.any():
+        cost[unbounded], bound[unbounded], eps[unbounded], limit[unbounded] = np.nan, np.nan, np.nan, ""
+    return Reference(cost, bound, eps, curtails, limit)
 
 
 def _cost(res: StrategyResult) -> np.ndarray:
@@ -204,9 +257,11 @@ def frontier(
     at_zero: StrategyResult | None = None,
     eps: tuple[float, ...] = EPSILONS,
     curtail: bool = False,
+    limit: str = RESERVE,
 ) -> Frontier:
     """The frontier of `scenario` at reserve k (module docstring); `at_zero`: the AC OPF's
-    result on the same scenario and k (with the same `curtail`), where the caller has it."""
+    result on the same scenario and k (with the same `curtail`), where the caller has it;
+    `limit` says what the DER may use (recorded; the scenario and k give it)."""
     from opfbench.formulations.opf_strategies import run_acopf
 
     grid = np.asarray(eps, dtype=float)
@@ -247,7 +302,7 @@ def frontier(
         if rows.size:
             part = replace(scenario.take(rows), net=widened(net, grid[j]))
             record(rows, run_acopf(part, k, curtail=curtail), j)
-    return Frontier(grid, cost, bound, exc, status, solved, curtail)
+    return Frontier(grid, cost, bound, exc, status, solved, curtail, limit)
 
 
 def tightened(scenario: Scenario, k: float, margin: float, q_mvar: np.ndarray, ok: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

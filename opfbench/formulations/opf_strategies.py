@@ -30,7 +30,7 @@ SOLVER = Option(
 def check_exact(net: Network | PhaseNetwork) -> None:
     """NetworkError before any work unless the problem is modelled on `net` and an exact
     model and a relaxation serve it (the AC OPF's bound and fast path) — on a three-phase
-    feeder an exact model (no relaxation serves one yet: `three_phase`)."""
+    feeder an exact model (its bound, `sdp3`, is computed apart: `three_phase.bound`)."""
     if isinstance(net, PhaseNetwork):
         model_for("exact", net)
         return

@@ -213,7 +213,8 @@ class SnapshotData:
 
     s_fixed (S, n_bus) complex: every injection the OPF does not decide — fixed
     generators + DER active power − load_scale·load (positive into the grid).
-    q_limit (S, n_der) ≥ 0: usable (1 − k)·Qmax; each DER's Q lies in [−q_limit, q_limit].
+    q_limit (S, n_der) ≥ 0: usable (1 − k)·Qmax, or the scenario's own `q_limit_mvar`;
+    each DER's Q lies in [−q_limit, q_limit].
     """
 
     s_fixed: np.ndarray
@@ -226,13 +227,13 @@ class SnapshotData:
 
 def snapshot_data(scenario: Scenario, k: float) -> SnapshotData:
     """Per-unit inputs of `scenario` with reserve coefficient k (InputError unless one
-    number in [0, 1])."""
+    number in [0, 1]; the scenario's `q_limit_mvar`, where given, is the DER's limit)."""
     k = check_reserve(k)
     net = scenario.net
     check_supported(net)
     zero_q = np.zeros_like(scenario.der_p_mw)
     s_fixed = scenario.injections(zero_q) / net.base_mva
-    q_limit = (1.0 - k) * scenario.qmax_mvar() / net.base_mva  # "Q at night" where the scenario says
+    q_limit = scenario.usable_q_mvar(k) / net.base_mva  # "Q at night" where the scenario says
     return SnapshotData(s_fixed, q_limit)
 
 

@@ -1,11 +1,18 @@
 """The OPF problem on three-phase feeders: its exact model's optimum on every snapshot,
-confirmed by the three-phase power flow — every reported figure is the power flow's. The
-model is the one declared for the feeder's class (`model.model_for("exact", net)`:
-"unbalanced-radial" or "unbalanced-meshed", today `models.ac_three_phase`), built once per
-feeder and thread (`solver_cache.per_thread`, on the feeder a widened band was derived
-from: `PhaseNetwork.origin` — the band is a per-solve input). No relaxation serves
-three-phase feeders yet, so no optimum here is certified by a bound: an accepted point is
-IPOPT's local optimum confirmed by the power flow (`certified_by` stays empty).
+confirmed by the three-phase power flow — every reported figure is the power flow's — and
+the relaxation's lower bound that can certify it. The models are the ones declared for the
+feeder's class (`model.model_for(role, net)`: "unbalanced-radial" or "unbalanced-meshed";
+today `models.ac_three_phase` exact on both, `models.sdp_three_phase` the relaxation on
+radial feeders only — a meshed feeder gets no bound, refused with NetworkError). The exact
+model is built once per feeder and thread (`solver_cache.per_thread`, on the feeder a
+widened band was derived from: `PhaseNetwork.origin` — the band is a per-solve input). An
+accepted point is IPOPT's local optimum confirmed by the power flow; the strategies'
+`certified_by` stays empty, and `bound` + `certify` state per snapshot whether the
+relaxation certifies it.
+
+`bound` solves the relaxation per snapshot (compiled once); `certify` compares: a step is
+certified when the optimum's losses are within `CERTIFY_RTOL` (relative) of the bound,
+otherwise its gap is recorded; a step whose relaxation is infeasible is proven infeasible.
 
 Per snapshot (`optimum`): the exact model warm from the previous snapshot's answer, then
 (failure policy "chain") cold from the power flow's no-action point; a point is accepted
@@ -54,6 +61,8 @@ from opfbench.result import (
 from opfbench.scenario import Scenario
 from opfbench.timing import elapsed_ms, now
 
+CERTIFY_RTOL = 1e-6
+"""An optimum within this (relative) of the relaxation's bound is certified."""
 CONFIRM_RTOL = 1e-4
 """A model's point is accepted when the power flow's losses at its setpoints are within this
 (relative) of the model's own: the two model the same feeder (the NLP's own point carries
@@ -231,7 +240,9 @@ def run_phase(
     net = scenario.net
     assert isinstance(net, PhaseNetwork)
     load_p, load_q = scenario.element_loads()
-    limit = (1.0 - check_reserve(k)) * scenario.qmax_mvar()  # "Q at night" where the scenario says
+    if curtail and scenario.q_limit_mvar is not None:  # its capability is a function of the power it delivers
+        raise ValueError("the AC OPF that may curtail takes no fixed reactive limit (q_limit_mvar)")
+    limit = scenario.usable_q_mvar(check_reserve(k))  # "Q at night" where the scenario says
     offsets = capability_offsets(scenario, k, 1.0) if curtail else None
     opt = optimum(
         net,
@@ -316,3 +327,72 @@ def _accepted(
         return False
     cost = flow.losses_kw[0] + 1e3 * float(np.sum(der_p - p))
     return bool(within and abs(cost - solve.objective_kw) <= CONFIRM_RTOL * abs(cost))
+
+
+@dataclass(frozen=True, eq=False)
+class PhaseBound:
+    """The relaxation on S snapshots. Arrays (S,): `bound_kw` (NaN unless solved),
+    `rank_ratio` (the largest second-to-first eigenvalue ratio over its PSD blocks),
+    `rank_one` (every block rank one: `rank_ratio` ≤ the model's threshold), `infeasible`
+    (the solver certified the relaxation, hence the OPF, infeasible), `status` (the
+    solver's), `solve_ms` (per step); `compile_ms` the model's build plus first solve
+    (cvxpy compiles there) less that solve's own time."""
+
+    bound_kw: np.ndarray
+    rank_ratio: np.ndarray
+    rank_one: np.ndarray
+    infeasible: np.ndarray
+    status: np.ndarray
+    solve_ms: np.ndarray
+    compile_ms: float
+
+
+def bound(
+    net: PhaseNetwork,
+    load_p_mw: np.ndarray,
+    load_q_mvar: np.ndarray,
+    der_p_mw: np.ndarray,
+    k: float = 0.0,
+) -> PhaseBound:
+    """The relaxation's bound on S snapshots (arguments as `optimum`); NetworkError where no
+    relaxation serves the feeder (meshed). Checked before any work: k, the model, then
+    shapes and finite values (the power flow's checks, on the first snapshot)."""
+    import time
+
+    check_reserve(k)
+    load_models()
+    spec = model_for("relaxation", net)
+    solve_phase_flow(net, load_p_mw, load_q_mvar, der_p_mw)  # checks shapes and values first
+    load_p, load_q = (np.asarray(x, dtype=float).reshape(-1, net.n_load) for x in (load_p_mw, load_q_mvar))
+    der_p = np.asarray(der_p_mw, dtype=float).reshape(len(load_p), len(net.ders))
+    limit = q_limits(net, der_p, k)
+    start = time.perf_counter()
+    model = spec.build(net, True)
+    solves = []
+    for i in range(len(load_p)):
+        solves.append(model.solve(load_p[i], load_q[i], der_p[i], limit[i]))
+        if i == 0:
+            compile_ms = (time.perf_counter() - start) * 1e3 - solves[0].solve_ms
+    if not solves:
+        compile_ms = (time.perf_counter() - start) * 1e3
+
+    def field(name: str, dtype: type) -> np.ndarray:
+        return np.array([getattr(s, name) for s in solves], dtype=dtype)
+
+    return PhaseBound(
+        field("bound_kw", float),
+        field("rank_ratio", float),
+        field("rank_one", bool),
+        field("infeasible", bool),
+        field("status", object),
+        field("solve_ms", float),
+        compile_ms,
+    )
+
+
+def certify(opt: PhaseOptimum, relaxed: PhaseBound) -> tuple[np.ndarray, np.ndarray]:
+    """(certified, gap) per snapshot: the gap (optimum's losses − bound) / optimum's losses
+    where both exist (NaN elsewhere); certified where that gap is within CERTIFY_RTOL."""
+    with np.errstate(invalid="ignore", divide="ignore"):
+        gap = (opt.losses_kw - relaxed.bound_kw) / np.abs(opt.losses_kw)
+    return np.isfinite(gap) & (np.abs(gap) <= CERTIFY_RTOL), gap

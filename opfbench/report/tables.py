@@ -364,8 +364,9 @@ LEADERBOARD_COLUMNS = [
 SHARES = (
     "Shares: at equal compliance, (E_no-action − C)/(E_no-action − F) with C the configuration's losses plus "
     "curtailed energy and F the AC OPF with the voltage band widened, step by step, just enough to cover the "
-    "configuration's own excursion beyond it (the frontier) — never above 100 %, the gap C − F never below 0, "
-    "where the configuration's point lies in the OPF's set (below-frontier steps count where it does not); "
+    "configuration's own excursion beyond it, and at the capability its setpoints used (the frontier) — never "
+    "above 100 %, the gap C − F never below 0 (up to the optimum being global: below-frontier steps count where "
+    "it is not); a configuration with setpoints beyond the DER's capability (Algorithm 3 without safe) has none; "
     "loss-only, (E_no-action − E)/(E_no-action − E_acopf), which compares with an optimum that holds the band "
     "whatever the configuration does, so a rule that leaves the band can exceed 100 % there."
 )

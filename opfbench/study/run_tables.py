@@ -4,7 +4,9 @@ and the summaries, built from per-task partial sums so that a year never has to 
 memory at once.
 
 Every configuration's step is compared with the frontier (`formulations.frontier`) at the
-smallest grid ε that covers its own excursion beyond the voltage band: its cost (losses
+smallest grid ε that covers its own excursion beyond the voltage band, and at the capability
+its setpoints used (Algorithm 3's, or k = 0, where they used the reserve; none where they
+exceed the DER's capability, which no inverter delivers): its cost (losses
 plus curtailed power) against the optimum as compliant as it — the **gap at equal
 compliance** (≥ 0 where the optimum is global and the point is in the OPF's set) — and,
 over the period, the **share at equal compliance**: the reduction of the cost below no
@@ -19,7 +21,7 @@ import numpy as np
 import pandas as pd
 
 from opfbench.errors import InputError
-from opfbench.formulations.frontier import Frontier
+from opfbench.formulations.frontier import CAPABILITY, FORECAST, Frontier
 from opfbench.multiphase import PhaseNetwork
 from opfbench.registry.catalog import configuration, describe
 from opfbench.registry.references import BASELINE, REFERENCE_OPTIMUM
@@ -46,6 +48,7 @@ VUF_LIMIT_PCT = 2.0  # EN 50160's limit of the voltage unbalance factor, %
 EXCURSION_MVAR = 1e-9  # a step's setpoint exceeds the physical capability beyond this
 BELOW_KW = 1e-4  # a cost this far below its frontier point counts as below it (solver tolerances)
 SHARE_MIN_KWH = 1e-6  # a reduction below this defines no share
+RESERVE_USED = (FORECAST, CAPABILITY)  # the frontier limits of a step whose setpoints used the reserve
 
 
 def extra_columns(labels: tuple[str, ...]) -> tuple[str, ...]:
@@ -177,14 +180,17 @@ def partial_summary(steps: pd.DataFrame) -> pd.DataFrame:
     """Sums, counts and extremes per configuration of one task's rows (combined by
     `summarize`)."""
     measured = steps.losses_kw.notna()  # a converged power flow: the step has a loss and voltage figure
+    cost = steps.losses_kw + steps.curtailed_kw
+    on = (cost < steps.frontier_kw) & (cost >= steps.frontier_kw - BELOW_KW)  # on its frontier point, within tolerances
     s = steps.assign(
         energy=steps.losses_kw * steps.step_h,
         curtailed=steps.curtailed_kw * steps.step_h,
-        front=steps.frontier_kw * steps.step_h,
+        front=steps.frontier_kw.where(~on, cost) * steps.step_h,
         front_missing=steps.frontier_kw.isna().astype(np.int64),
         front_bound=steps.frontier_bound_kw * steps.step_h,
         front_bound_missing=steps.frontier_bound_kw.isna().astype(np.int64),
-        below=(steps.losses_kw + steps.curtailed_kw < steps.frontier_kw - BELOW_KW).astype(np.int64),
+        below=(cost < steps.frontier_kw - BELOW_KW).astype(np.int64),
+        reserve_used=steps.frontier_limit.isin(RESERVE_USED).astype(np.int64),
         measured=measured.astype(np.int64),
         measured_h=steps.step_h.where(measured, 0.0),
         lb_energy=steps.lower_bound_kw * steps.step_h,
@@ -215,6 +221,7 @@ def partial_summary(steps: pd.DataFrame) -> pd.DataFrame:
             "frontier_bound_missing": g.front_bound_missing.sum(),
             "below_frontier_steps": g.below.sum(),
             "frontier_curtails": g.frontier_curtails.max(),
+            "reserve_used_steps": g.reserve_used.sum(),
             "not_ok_steps": g.not_ok.sum(),
             "not_settled_steps": g.not_settled.sum(),
             "pf_diverged_steps": g.pf_diverged.sum(),
@@ -270,9 +277,12 @@ def summarize(partials: list[pd.DataFrame], order: list[tuple]) -> pd.DataFrame:
     max_violation_pu the worst excursion beyond them; max_vuf_pct the worst voltage
     unbalance factor (three-phase feeders), vuf_min the minutes above VUF_LIMIT_PCT; not_settled_steps: steps where a
     closed-loop rule did not settle. At equal compliance (module docstring): frontier_kwh
-    the frontier's optimum at each step's compliance (NaN unless every step has one;
-    frontier_missing_steps count those without), frontier_bound_kwh its certified bound,
-    gap_eq_kwh = cost_kwh − frontier_kwh (gap_eq_pct of frontier_kwh), share_eq_pct =
+    the frontier's optimum at each step's compliance and the capability it used (NaN unless
+    every step has one; frontier_missing_steps count those without — no optimum at their ε,
+    or setpoints beyond the DER's capability —, reserve_used_steps those whose setpoints used
+    the reserve, compared at the capability they used), frontier_bound_kwh its certified bound,
+    gap_eq_kwh = cost_kwh − frontier_kwh (a step's cost within BELOW_KW under its frontier
+    point counts as on it: the solvers' tolerances), gap_eq_pct of frontier_kwh, share_eq_pct =
     100·(no_action_kwh − cost_kwh)/(no_action_kwh − frontier_kwh) where that reduction
     exceeds SHARE_MIN_KWH, below_frontier_steps the steps whose cost lies more than
     BELOW_KW under their frontier point, frontier_curtails whether that frontier is the

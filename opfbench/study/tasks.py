@@ -30,15 +30,28 @@ import pandas as pd
 from threadpoolctl import threadpool_limits
 
 from opfbench.errors import InputError
-from opfbench.formulations.frontier import Frontier, frontier, reference
+from opfbench.formulations.frontier import (
+    CAPABILITY,
+    CAPABILITY_MVAR,
+    FORECAST,
+    RESERVE,
+    Frontier,
+    Part,
+    capability,
+    frontier,
+    reference,
+    within,
+)
 from opfbench.learned.fitted import Fitted
 from opfbench.learned.rules import install
+from opfbench.network import V_LIMIT_MAX_PU
 from opfbench.plugins import PluginSource, ensure, loaded
 from opfbench.registry.catalog import configuration, run_strategy
 from opfbench.registry.options import OptionValue
 from opfbench.registry.references import REFERENCE_OPTIMUM
 from opfbench.result import StrategyResult
 from opfbench.scenario import Scenario
+from opfbench.strategies.limits import reactive_limit
 from opfbench.study.config import StudyConfig
 from opfbench.study.engine import Task, TaskOutput
 from opfbench.study.periods import Period
@@ -195,6 +208,54 @@ def _curtailed(res: StrategyResult) -> np.ndarray:
     return np.nan_to_num(res.curtailed_kw) > 0
 
 
+PartKey = tuple[bool, str, str]  # a partial frontier: (curtail, limit, the forecast source of a FORECAST limit)
+
+
+def _needs(
+    scenarios: dict[tuple[str, str], Scenario], mode: str, configs: list[tuple[str, str, StrategyResult]], k: float
+) -> tuple[dict[PartKey, dict[tuple[str, str], np.ndarray]], dict[tuple[str, str], np.ndarray]]:
+    """Per partial frontier each configuration's (source, name) steps (S,) bool whose
+    reference it is (`formulations.frontier`, the tightest set that holds the step): where
+    it curtailed, the optimum that may curtail at k, or at k = 0 where it used its reserve;
+    where it used its reserve only, the optimum at its forecast source's Algorithm 3 limit
+    (`strategies.limits.reactive_limit`, capped at the capability), else at k = 0; and each
+    configuration's steps whose setpoints exceed the capability, or whose |V| lies beyond the
+    physical limits of the widest frontier point (`network.V_LIMIT_MAX_PU`): no frontier
+    bounds them."""
+    out: dict[PartKey, dict[tuple[str, str], np.ndarray]] = {}
+    unbounded: dict[tuple[str, str], np.ndarray] = {}
+    for source, name, res in configs:
+        scenario = scenarios[mode, source]
+        cap = capability(scenario, res)
+        kept, fits = within(res, (1.0 - k) * cap), within(res, cap, CAPABILITY_MVAR)
+        cut = _curtailed(res) if curtails(name) else np.zeros(res.n_snapshots, dtype=bool)
+        used = ~kept & fits
+        masks = {(True, RESERVE, ""): cut & kept, (True, CAPABILITY, ""): cut & used}
+        if scenario.der_p_forecast_mw is not None:
+            forecast = ~cut & used & within(res, reactive_limit(scenario, k, safe=True))
+            masks[False, FORECAST, source] = forecast
+            used = used & ~forecast
+        masks[False, CAPABILITY, ""] = ~cut & used
+        for key, mask in masks.items():
+            out.setdefault(key, {})[source, name] = mask
+        with np.errstate(invalid="ignore"):  # a |V| beyond the physical limits the widest frontier point keeps
+            wild = ((res.vm < 0.0) | (res.vm > V_LIMIT_MAX_PU)).any(axis=1)
+        unbounded[source, name] = ~fits | wild
+    return out, unbounded
+
+
+def _part(
+    plain: Scenario, scenarios: dict[tuple[str, str], Scenario], mode: str, key: PartKey, rows: np.ndarray, k: float
+) -> Part:
+    """The partial frontier `key` (`_needs`) on the steps `rows` of the task's `plain` scenario."""
+    curtail, limit, source = key
+    sub = plain.take(rows)
+    if limit == FORECAST:  # the OPF's DER at Algorithm 3's limit (capped at the capability) of that forecast source
+        q_limit = reactive_limit(scenarios[mode, source], k, safe=True)[rows]
+        return Part(frontier(replace(sub, q_limit_mvar=q_limit), k, limit=FORECAST), rows)
+    return Part(frontier(sub, k if limit == RESERVE else 0.0, curtail=curtail, limit=limit), rows)
+
+
 def run_task(inp: TaskInput) -> TaskOutput:
     """Run every night mode, forecast source and strategy of the task, the strategies of a
     (night mode, source) on one scenario — a snapshot-wise strategy once on the night modes'
@@ -257,21 +318,23 @@ def run_task(inp: TaskInput) -> TaskOutput:
                 drawn.append((plain, front))
             if front is not None:
                 fronts.append(frontier_rows(t.case, t.k, mode, time, inp.step_h, front))
-            cut = {(s, n): _curtailed(r) for s, results in by_source.items() for n, r in results.items() if curtails(n)}
-            rows = np.flatnonzero(np.logical_or.reduce([*cut.values(), np.zeros(inp.n_steps, dtype=bool)]))
-            cutting = frontier(plain.take(rows), t.k, curtail=True) if rows.size and front is not None else None
-            if cutting is not None:
-                fronts.append(frontier_rows(t.case, t.k, mode, time[rows], inp.step_h, cutting))
-            for source, results in by_source.items():
-                for name, res in results.items():
-                    ref = (
-                        None
-                        if front is None
-                        else reference(front, res.voltage_violation(), cutting, rows, cut.get((source, name)))
-                    )
-                    steps.append(step_rows(t.case, mode, source, time, inp.step_h, night, res, inp.columns, ref))
-                    for table, columns in detail_rows(t.case, mode, source, time, res, inp.detail).items():
-                        detail[table].append(columns)
+            configs = [(source, name, res) for source, results in by_source.items() for name, res in results.items()]
+            needs, unbounded = ({}, {}) if front is None else _needs(scenarios, mode, configs, t.k)
+            parts: dict[PartKey, Part] = {}
+            for key, masks in needs.items():
+                rows = np.flatnonzero(np.logical_or.reduce([*masks.values(), np.zeros(inp.n_steps, dtype=bool)]))
+                if rows.size:
+                    part = parts[key] = _part(plain, scenarios, mode, key, rows, t.k)
+                    if key[1] == RESERVE:  # the optimum that may curtail at k: a frontier of the run (the others are partial)
+                        fronts.append(frontier_rows(t.case, t.k, mode, time[rows], inp.step_h, part.front))
+            for source, name, res in configs:
+                ref = None
+                if front is not None:
+                    which = [(part, needs[kind][source, name]) for kind, part in parts.items() if (source, name) in needs[kind]]
+                    ref = reference(front, res.voltage_violation(), which, unbounded[source, name])
+                steps.append(step_rows(t.case, mode, source, time, inp.step_h, night, res, inp.columns, ref))
+                for table, columns in detail_rows(t.case, mode, source, time, res, inp.detail).items():
+                    detail[table].append(columns)
         table = stack(steps, step_columns(inp.columns), time.tz)
         front_table = stack(fronts, FRONTIER_COLUMNS, time.tz)
     details = {name: stack(parts, DETAIL_COLUMNS[name], time.tz) for name, parts in detail.items()}

@@ -31,7 +31,8 @@ Per unit: node voltages v = V / (the node's base, `PhaseNetwork.node_base_v`), p
   its vmaxpu (model 4's law jumps there; for model 5 it keeps the SDP relaxation's hull
   of u = √w concave — `sdp_three_phase`).
 - DER: constant-power branches, P fixed (parameter), one Q per DER split equally over
-  its phases (the power flow's and the rule engine's convention, OpenDSS's kvar).
+  its phases (the power flow's and the rule engine's convention, OpenDSS's kvar), each
+  branch's voltage at or above `DER_VMIN_PU`.
 - Regulator and transformer taps fixed where the case settled them (they are in Y).
 - Built with `curtail` (`acopf:curtail=true`, the frontier of the optimum that may
   curtail): each DER's P is a decision too, in [min(P, 0), P] of the power it has, its Q
@@ -62,6 +63,11 @@ KW_PER_MW = 1e3
 # IPOPT's gradient-based scaling at its default limit (100) reads the near-zero-impedance
 # switches' rows (admittances of 1e6 p.u. and more) and shrinks every other row: IPOPT then
 # ends in restoration. Rows are scaled only above a gradient of 1e4; the objective is kW.
+DER_VMIN_PU = 0.9
+"""A DER branch's voltage stays at or above this (p.u. of its base): OpenDSS's PVSystem
+default vminpu, below which its law is no longer constant power. Never binding at a
+normal operating point; it bounds a delta unit's current, which the SDP relaxation
+(`sdp_three_phase`) needs to cap that current's lifted square."""
 OPTIONS = {"ipopt.nlp_scaling_max_gradient": 1e4, "ipopt.obj_scaling_factor": 1.0, "ipopt.tol": 1e-8, "ipopt.acceptable_iter": 0}
 
 
@@ -202,6 +208,7 @@ class ThreePhaseAc:
             (band_sq, np.full(len(a), lo**2), np.full(len(a), hi**2)),
             (u[switching.tolist()], net.load_models.vminpu[lb.owner][switching], np.full(switching.size, np.inf)),
             (u[bounded.tolist()], np.full(bounded.size, -np.inf), net.load_models.vmaxpu[lb.owner][bounded]),
+            (ca.DM(ders.c**2) * d2, np.full(db.n, DER_VMIN_PU**2), np.full(db.n, np.inf)),
         ]
         if not slack_export:  # the source may not take power back from the feeder
             rows.append((p_source, np.zeros(1), np.full(1, np.inf)))

@@ -1,0 +1,203 @@
+"""The SDP relaxation of the three-phase OPF (`formulations.models.sdp_three_phase` through
+`formulations.three_phase.bound`): at rank one it is the exact model (an operating point
+lifted into it meets every constraint, with its losses as the objective), so its optimum
+is a lower bound — never above the AC optimum; its rank-one check tells a lifted point
+from a mixture of two; meshed feeders and bad input are refused before any work.
+
+The feeder: `ieee13` with PV on every second load, the band widened to 0.90–1.10 p.u.
+(with the taps held the file settles, its regulator output is above 1.05 p.u. and the
+0.95–1.05 band is infeasible)."""
+
+from __future__ import annotations
+
+import dataclasses
+import shutil
+
+import numpy as np
+import pytest
+
+from opfbench.cases.opendss_cases import opendss_copy
+from opfbench.cases.opendss_pv import case_with_pv
+from opfbench.errors import InputError, NetworkError
+from opfbench.formulations.model import model_for
+from opfbench.formulations.models.ac_three_phase import load_law
+from opfbench.formulations.models.sdp_three_phase import RANK_RATIO, ThreePhaseSdp
+from opfbench.formulations.three_phase import CERTIFY_RTOL, bound, certify, optimum, q_limits
+from opfbench.multiphase import GROUND, Element
+from opfbench.powerflow.multiphase import solve_phase_flow
+
+# (load multiplier, PV irradiance): noon, afternoon, evening peak, night
+SNAPSHOTS = ((0.6, 1.0), (0.9, 0.6), (1.1, 0.3), (1.0, 0.0))
+
+
+@pytest.fixture(scope="module")
+def ieee13(tmp_path_factory):
+    tmp = tmp_path_factory.mktemp("ieee13_pv")
+    with opendss_copy("ieee13") as master:
+        case = case_with_pv(tmp, master, "ieee13")
+    shutil.rmtree(tmp, ignore_errors=True)
+    net = dataclasses.replace(case.network, band=(0.9, 1.1))
+    lp, lq, dp, _ = case.stored
+    mult = np.array([s[0] for s in SNAPSHOTS])[:, None]
+    sun = np.array([s[1] for s in SNAPSHOTS])[:, None]
+    return net, lp * mult, lq * mult, dp * sun
+
+
+@pytest.fixture(scope="module")
+def ieee13_held(ieee13):
+    """The same feeder at its own band (0.95–1.05 p.u.)."""
+    net, lp, lq, dp = ieee13
+    return dataclasses.replace(net, band=(0.95, 1.05)), lp, lq, dp
+
+
+@pytest.fixture(scope="module")
+def model(ieee13):
+    return ThreePhaseSdp(ieee13[0])
+
+
+def _lift(model: ThreePhaseSdp, v: np.ndarray, load_p, load_q, der_p) -> np.ndarray:
+    """The relaxation's unknowns at the operating point with node voltages `v` (V) and
+    Q = 0: each block's Gram matrix ζζᴴ of its coordinates, solved from the voltages and the
+    branch currents."""
+    net = model.net
+    vpu = v / net.node_base_v
+    x = np.zeros(model._gram.size)
+
+    def put(blk: int, zeta: np.ndarray) -> None:
+        g = np.outer(zeta, zeta.conj())
+        re, im, sign = model._gram._index(blk)
+        x[re] = g.real
+        x[im[sign > 0]] = g.imag[sign > 0]
+
+    for br, blk, e_s, e_i in model._coords:
+        vp = np.ones(1, complex) if blk == model._source_block else vpu[br.p]
+        current = np.linalg.solve(br.z, br.c_p @ vp - br.c_s @ vpu[br.s])
+        k = model._gram.sizes[blk]
+        maps = np.vstack([np.eye(k)[: br.p.size], e_s, e_i])
+        target = np.concatenate([vp, vpu[br.s], current])
+        zeta = np.linalg.lstsq(maps, target, rcond=None)[0]
+        assert np.abs(maps @ zeta - target).max() < 1e-9 * np.abs(target).max()
+        put(blk, zeta)
+    exp_p, exp_q, cap = load_law(net)
+    lb, db = net.load_branches, net.der_branches
+    vz = np.append(vpu * net.node_base_v, 0.0)
+    u = np.abs(vz[lb.a] - vz[np.where(lb.b == GROUND, -1, lb.b)]) / lb.vbase_v
+    s_p, s_q = (u**2 * np.minimum(u, cap) ** (e - 2.0) for e in (exp_p, exp_q))  # the power flow's law
+    drawn = lb.share * (load_p[lb.owner] * s_p + 1j * load_q[lb.owner] * s_q) / model.s_base
+    lifted = iter(model._blocks[len(model._coords) :])
+    for br, power in ((lb, drawn), (db, -db.share * der_p[db.owner] / model.s_base)):
+        for j in np.flatnonzero(br.b != GROUND):
+            a, b = br.a[j], br.b[j]
+            put(next(lifted), np.array([vpu[a], vpu[b], np.conj(power[j] / (vpu[a] - vpu[b]))]))
+    for var in model.problem.variables():
+        if var.name() in ("s_p", "s_q"):
+            var.value = s_p if var.name() == "s_p" else s_q
+        elif var.name() == "q":
+            var.value = np.zeros(len(net.ders))
+    model._x.value = x
+    if model._flows is not None:  # an ideal branch carries what its receiving side draws
+        f_p, f_q, through = model._flows
+        for f, balance in ((f_p, model._balance[0]), (f_q, model._balance[1])):
+            f.value = np.zeros(f.size)
+            f.value = np.linalg.lstsq(through.toarray(), -balance.value, rcond=None)[0]
+    return x
+
+
+def test_the_relaxation_serves_radial_feeders_and_refuses_meshed_ones(ieee13):
+    net = ieee13[0]
+    assert model_for("relaxation", net).name == "sdp3"
+    line = next(e for e in net.elements if e.kind == "line" and e.nodes.shape == (2, 3))
+    far = [i for i, name in enumerate(net.bus_names) if name in ("675", "680")]
+    nodes = np.array([[int(np.flatnonzero((net.node_bus == b) & (net.node_phase == p))[0]) for p in (1, 2, 3)] for b in far])
+    loop = Element("Line.loop", "line", tuple(far), nodes, line.yprim)
+    meshed = dataclasses.replace(net, elements=(*net.elements, loop))
+    assert meshed.meshed
+    with pytest.raises(NetworkError, match="no relaxation formulation model serves unbalanced-meshed"):
+        bound(meshed, *ieee13[1:])
+    with pytest.raises(NetworkError, match="needs a radial feeder; this one is meshed"):
+        ThreePhaseSdp(meshed)
+
+
+def test_an_operating_point_lifted_meets_every_constraint_with_its_losses_as_objective(ieee13, model):
+    """The power flow's no-action point, lifted (rank one), is feasible in the relaxation and
+    its objective is the power flow's losses: the relaxation contains the exact model's
+    feasible set with the same objective — the optimum below any AC point."""
+    net, lp, lq, dp = ieee13
+    i = 1
+    flow = solve_phase_flow(net, lp[i : i + 1], lq[i : i + 1], dp[i : i + 1], tol=1e-13, max_iter=500)
+    assert flow.converged[0]
+    assert net.band[0] <= flow.vm[0].min() and flow.vm[0].max() <= net.band[1]
+    model.load_p.value, model.load_q.value, model.der_p.value = lp[i], lq[i], dp[i]
+    model.q_limit.value = q_limits(net, dp[i : i + 1], 0.0)[0]
+    data = (lp[i], lq[i], dp[i], model.q_limit.value)
+    model.current_cap.value, model.kcl_cap.value = model.current_caps(*data), model.kcl_caps(*data)
+    _lift(model, flow.v[0], lp[i], lq[i], dp[i])
+    assert model._flows is not None  # ieee13's switch is an ideal branch
+    # to 1e-7 p.u.: the switch 671–692 is ideal in the relaxation, and the power flow's
+    # voltage drop across its 1e-7 Ω is about 1e-8 p.u.
+    bad = [(str(c)[:80], float(np.max(c.violation()))) for c in model.problem.constraints if np.max(c.violation()) >= 1e-7]
+    assert not bad
+    assert model.problem.objective.value == pytest.approx(flow.losses_kw[0], rel=1e-6)
+    assert model.rank_ratios().max() < 1e-9  # a lifted point is rank one
+
+
+def test_the_rank_one_check_tells_a_mixture_of_two_points(ieee13, model):
+    net, lp, lq, dp = ieee13
+    flows = solve_phase_flow(net, lp[:2], lq[:2], dp[:2], tol=1e-13, max_iter=500)
+    xs = [_lift(model, flows.v[i], lp[i], lq[i], dp[i]) for i in range(2)]
+    assert not np.allclose(xs[0], xs[1])
+    model._x.value = xs[0]
+    assert model.rank_ratios().max() <= RANK_RATIO
+    model._x.value = (xs[0] + xs[1]) / 2
+    assert model.rank_ratios().max() > RANK_RATIO
+
+
+def test_the_relaxation_proves_ieee13_infeasible_with_its_taps_held(ieee13_held):
+    """At the file's band (0.95–1.05) and held taps the regulator's output is above the band:
+    Clarabel certifies the relaxation infeasible — so the exact problem is — and no step
+    gets a bound, a gap or a certificate; the AC OPF finds no optimum either."""
+    net, lp, lq, dp = ieee13_held
+    relaxed = bound(net, lp[1:3], lq[1:3], dp[1:3], 0.0)
+    assert relaxed.infeasible.all() and (relaxed.status == "infeasible").all()
+    assert np.isnan(relaxed.bound_kw).all() and not relaxed.rank_one.any()
+    opt = optimum(net, lp[1:3], lq[1:3], dp[1:3], 0.0)
+    assert np.isnan(opt.losses_kw).all()
+    certified, gap = certify(opt, relaxed)
+    assert not certified.any() and np.isnan(gap).all()
+
+
+@pytest.mark.slow
+def test_the_bound_is_never_above_the_ac_optimum(tmp_path):
+    """ieee123 with PV on every second load at noon (the band binding), afternoon and evening
+    peak: where the relaxation solves, its bound is at most the AC optimum, and a step is
+    certified exactly when the two agree within CERTIFY_RTOL."""
+    with opendss_copy("ieee123") as master:
+        case = case_with_pv(tmp_path, master, "ieee123")
+    lp, lq, dp, _ = case.stored
+    mult, sun = np.array([[0.9], [1.0], [1.1]]), np.array([[1.0], [0.6], [0.3]])
+    net = case.network
+    opt = optimum(net, lp * mult, lq * mult, dp * sun, 0.0)
+    relaxed = bound(net, lp * mult, lq * mult, dp * sun, 0.0)
+    both = np.isfinite(opt.losses_kw) & np.isfinite(relaxed.bound_kw)
+    assert both.sum() >= 2, (opt.status, relaxed.status)
+    assert (relaxed.bound_kw[both] <= opt.losses_kw[both] * (1 + CERTIFY_RTOL)).all()
+    assert (relaxed.bound_kw[both] > 0.9 * opt.losses_kw[both]).all()
+    certified, gap = certify(opt, relaxed)
+    assert (certified == (np.abs(gap) <= CERTIFY_RTOL)).all() and not certified[~both].any()
+    assert relaxed.compile_ms > 0 and (relaxed.solve_ms > 0).all()
+
+
+@pytest.mark.parametrize(
+    ("change", "message"),
+    [("k", "reserve coefficient"), ("nan", "load P contains NaN"), ("shape", "DER P must have shape")],
+)
+def test_bad_input_is_one_message_before_any_work(ieee13, change, message):
+    net, lp, lq, dp = ieee13
+    lp, lq, dp = lp[:1].copy(), lq[:1], dp[:1]
+    k = 1.5 if change == "k" else 0.0
+    if change == "nan":
+        lp[0, 3] = np.nan
+    if change == "shape":
+        dp = dp[:, :-1]
+    with pytest.raises(InputError, match=message):
+        bound(net, lp, lq, dp, k)
