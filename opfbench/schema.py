@@ -313,7 +313,13 @@ DER_Q = Table(
         *_keys("steps.parquet"),
         Column("time", "time", NO_UNIT, "the step's start"),
         Column("der", "text", NO_UNIT, "the DER's name, unique in its case (the source's element name, else `KIND-BUS`)"),
-        Column("bus", "integer", NO_UNIT, "the DER's bus (the case's bus number; several DER may share one)"),
+        Column(
+            "bus",
+            "integer",
+            NO_UNIT,
+            "the DER's bus (the case's bus number; on a three-phase feeder the bus's position in the feeder's bus list, "
+            "its OpenDSS name being in the DER's name; several DER may share one)",
+        ),
         Column("kind", "text", NO_UNIT, "the DER's kind (PV, DFIG, inverter)"),
         Column("q_mvar", "number", "MVAr", "its reactive setpoint (positive = injected)"),
         Column("curtailed_mw", "number", "MW", "the active power it had available and did not deliver"),

@@ -12,7 +12,7 @@ import json
 import numpy as np
 import pytest
 
-from opfbench.cases.opendss_cases import opendss_copy
+from opfbench.cases.opendss_cases import opendss_copy, opendss_master
 from opfbench.cli import main
 from opfbench.io import load_case
 from opfbench.multiphase import GROUND, PhaseNetwork
@@ -122,7 +122,7 @@ def test_snapshot_json_keys_q_by_der_name(capsys):
         (["snapshot", "eulv?der=nowhere.1:inverter:0.004", "--strategy", "llma"], "no such bus"),
         (["snapshot", "ieee13?der=611.1:inverter:0.05", "--strategy", "llma"], "phase 1"),
         (["snapshot", "ieee13?der=611.4:inverter:0.05", "--strategy", "llma"], "phases 1, 2, 3"),
-        (["snapshot", "ieee13", "--strategy", "volt-var"], "no DER"),
+        (["snapshot", f"opendss:{opendss_master('ieee13')}", "--strategy", "volt-var"], "no DER"),
     ],
 )
 def test_bad_der_on_a_feeder_exits_2(capsys, argv, expected):
@@ -201,3 +201,64 @@ def test_run_eulv_on_its_own_load_shapes_with_vuf_columns(tmp_path):
         net, load_p[None], (load_p * net.load_q_mvar / net.load_p_mw)[None], (pv_pu * net.der_rating_mw)[None]
     )
     assert row.losses_kw == pytest.approx(flow.losses_kw[0], rel=1e-9)
+    # the report's unbalance section: the VUF table and the profile at the worst no-action step
+    page = (out / "report.html").read_text()
+    section = page[page.index('id="unbalance"') :]
+    assert "Worst VUF" in section and "profile-0" in section and "phase 3" in section
+    from opfbench.report.profiles import worst_step
+
+    worst = worst_step(steps, "eulv")
+    base = steps[steps.strategy == "no-action"]
+    assert worst in set(base.time) and worst.strftime("%Y-%m-%d %H:%M") in section
+    deviation = np.fmax(base.vmax_pu - 1, 1 - base.vmin_pu)
+    assert deviation[base.time == worst].iloc[0] == deviation.max()
+
+
+def test_a_users_own_feeder_in_one_command_as_the_readme_gives_it(tmp_path):
+    """The README's own-feeder command, taken from the README and run on a copy of the
+    shipped ieee13 master (a shorter period, no frontier: the rules alone): every rule runs on the listed DER, named
+    `BUS.PHASES`, and the run writes its tables and report."""
+    import shlex
+    from pathlib import Path
+
+    import pandas as pd
+
+    readme = (Path(__file__).resolve().parents[1] / "README.md").read_text()
+    line = next(l for l in readme.splitlines() if "opfbench run --case opendss:my/Master.dss --der" in l)
+    argv = shlex.split(line[line.index("opfbench run") : line.rindex("`")])[1:]
+    out = tmp_path / "mine"
+    with opendss_copy("ieee13") as master:
+        argv = [str(master) if a == "opendss:my/Master.dss" else a for a in argv]
+        argv = [f"opendss:{a}" if a == str(master) else a for a in argv]
+        extra = ["--period", "2016-06-28T12:00..2016-06-28T12:02", "--k", "0", "--night-modes", "connected", "--no-frontier"]
+        assert main([*argv, *extra, "--forecast", "off", "--workers", "1", "--quiet", "--out", str(out)]) == 0
+    steps = pd.read_parquet(out / "steps.parquet")
+    strategies = argv[argv.index("--strategies") + 1 :]
+    assert sorted(steps.strategy.unique()) == sorted(strategies) and len(steps) == 2 * len(strategies)
+    assert (steps.status == "ok").all() and (out / "report.html").is_file()
+    der = pd.read_parquet(out / "der_q.parquet")
+    buses = [item.split(":")[0] for item in argv[argv.index("--der") + 1].split(",")]
+    assert set(der.der) == {b if "." in b else f"{b}.1.2.3" for b in buses}  # a bus without phases: all of ieee13's three
+
+
+@pytest.mark.parametrize(("name", "meter"), [("ieee13", "Line.650632"), ("ieee123", "Line.L115")])
+def test_bus_distance_is_opendss_own(name, meter):
+    """The profile's x axis: each bus's distance from the source equals OpenDSS's own
+    (`Bus.Distance` from an energy meter at the feeder head) within 0.5 %."""
+    import opendssdirect as dss
+
+    net = load_case(name).network
+    assert isinstance(net, PhaseNetwork)
+    dist, upstream = net.bus_distance
+    with opendss_copy(name) as master:
+        dss.Text.Command(f'compile "{master}"')
+        dss.Text.Command(f"new energymeter.head element={meter} terminal=1")
+        dss.Solution.Solve()
+        theirs = {}
+        for bus in dss.Circuit.AllBusNames():
+            dss.Circuit.SetActiveBus(bus)
+            theirs[bus.lower()] = dss.Bus.Distance()
+    zone = [i for i, b in enumerate(net.bus_names) if theirs[b] > 0]
+    assert len(zone) > 10
+    assert dist[zone] == pytest.approx([theirs[net.bus_names[i]] for i in zone], rel=5e-3)
+    assert upstream[net.source.bus] == -1 and (upstream[zone] >= 0).all()

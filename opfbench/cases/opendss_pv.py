@@ -1,38 +1,105 @@
-"""Single-phase PV added to a three-phase OpenDSS feeder as PVSystems of a master file of
-its own, so that opfbench and OpenDSS read the same DER (the three-phase OPF's tests and
-its table, `docs/unbalanced_opf_table.py`).
+"""PV on three-phase OpenDSS feeders: the one placement mechanism — a rule that puts a PV
+unit beside chosen load elements — used two ways: as opfbench DER (`Placement`s, placed by
+`opfbench.io.opendss.place_ders`: the shipped feeders' own rules, `SHIPPED_PLACEMENTS`) and
+as OpenDSS PVSystems of a master file of its own (`pv_lines`, `with_pv`, `case_with_pv`),
+so that opfbench and OpenDSS read the same DER (the three-phase OPF's tests and its table,
+`docs/unbalanced_opf_table.py`).
 
-The placement: on every `every`-th load in the file's load order (the first, the
-`every`+1-th, …), one PVSystem on that load's first phase branch (phase to ground or
-neutral; on a delta load its phase pair), rated P̄ = `kw` kW or, without it, `share` × the
-load's nominal kW, S̄ = P̄/0.90 (VDE-AR-N 4105's cos φ 0.90 at full output), irradiance 1
-and fixed kvar 0 (a snapshot's P and Q are set per snapshot)."""
+The rule (`pv_on_loads`): one single-phase unit beside each chosen load, on that load's
+first phase branch — phase to the bus's neutral (or ground) for a wye load, between its
+phase pair for a delta one — rated P̄ = `kw` kW or, without it, `share` × the load's
+nominal kW, S̄ = P̄/0.90 (VDE-AR-N 4105's cos φ 0.90 at full output). Chosen: every
+`every`-th load in the file's load order (the first, the `every`+1-th, …), or — with
+`fraction` — that share of the single-phase loads (the houses), drawn at random with the
+given seed and kept in file order."""
 
 from __future__ import annotations
 
+from collections.abc import Callable
+from dataclasses import dataclass
 from pathlib import Path
+
+import numpy as np
 
 from opfbench.io import load_case
 from opfbench.io.case import Case
+from opfbench.io.opendss import Placement
 from opfbench.multiphase import GROUND, PhaseNetwork
+
+PV_PF = 0.90
+
+
+def pv_on_loads(
+    net: PhaseNetwork,
+    every: int = 2,
+    share: float = 1.0,
+    kw: float | None = None,
+    fraction: float | None = None,
+    seed: int = 0,
+) -> tuple[Placement, ...]:
+    """The PV of the rule (module docstring) on `net`'s loads."""
+    lb = net.load_branches
+    if fraction is None:
+        chosen = np.arange(0, net.n_load, every)
+    else:
+        single = np.flatnonzero(np.bincount(lb.owner, minlength=net.n_load) == 1)
+        pick = np.random.default_rng(seed).choice(single, size=round(fraction * len(single)), replace=False)
+        chosen = np.sort(pick)
+    out = []
+    for load in chosen.tolist():
+        br = int(np.flatnonzero(lb.owner == load)[0])
+        a, b = int(lb.a[br]), int(lb.b[br])
+        delta = b != GROUND and net.node_phase[b] <= 3
+        phases = (int(net.node_phase[a]), int(net.node_phase[b])) if delta else (int(net.node_phase[a]),)
+        rated = (share * float(net.load_p_mw[load])) if kw is None else kw / 1e3
+        out.append(Placement(net.bus_names[net.node_bus[a]], phases, rated, rated / PV_PF, delta=delta, load=load))
+    return tuple(out)
+
+
+@dataclass(frozen=True)
+class PlacementRule:
+    """A shipped feeder's DER placement rule: what it says (the case listing and docs) and
+    the placements it makes on the feeder's network."""
+
+    text: str
+    place: Callable[[PhaseNetwork], tuple[Placement, ...]]
+
+
+_HALF_EVERY_SECOND = PlacementRule(
+    "single-phase PV beside every second load (file order), on its first phase (pair), P̄ = 0.5 × the load's kW, S̄ = P̄/0.90",
+    lambda net: pv_on_loads(net, every=2, share=0.5),
+)
+SHIPPED_PLACEMENTS: dict[str, PlacementRule] = {
+    "eulv": PlacementRule(
+        "single-phase PV at every second house (LOAD1, LOAD3, …) on the house's phase, P̄ = 4 kW, S̄ = P̄/0.90",
+        lambda net: pv_on_loads(net, every=2, kw=4.0),
+    ),
+    "ckt24": PlacementRule(
+        "single-phase PV beside 25 % of the single-phase (residential) loads, drawn with seed 24, P̄ = the load's kW "
+        "(its peak: the shapes are normalized), S̄ = P̄/0.90",
+        lambda net: pv_on_loads(net, share=1.0, fraction=0.25, seed=24),
+    ),
+    **dict.fromkeys(("ieee13", "ieee34", "ieee37", "ieee123", "ieee8500", "ckt5", "ckt7"), _HALF_EVERY_SECOND),
+}
+"""The DER of each shipped feeder (none has PVSystems of its own), applied when no der= is
+given; the rule's text is in the case listing."""
 
 
 def pv_lines(net: PhaseNetwork, every: int = 2, share: float = 1.0, kw: float | None = None) -> list[str]:
-    """The OpenDSS `new pvsystem…` commands of the placement (module docstring)."""
-    lb = net.load_branches
+    """The OpenDSS `new pvsystem…` commands of the rule `pv_on_loads(net, every, share,
+    kw)`: PVSystem.pvN beside load N (1-based), irradiance 1 and fixed kvar 0 (a
+    snapshot's P and Q are set per snapshot)."""
     out = []
-    for load in range(0, net.n_load, every):
-        br = int((lb.owner == load).argmax())
-        a, b = int(lb.a[br]), int(lb.b[br])
-        bus = net.bus_names[net.node_bus[a]]
-        rated = float(share * net.load_p_mw[load] * 1e3) if kw is None else float(kw)
-        kv = float(lb.vbase_v[br]) / 1e3
-        if b == GROUND or net.node_phase[b] > 3:
-            where = f"bus1={bus}.{net.node_phase[a]} kv={kv!r}"
-        else:
-            where = f"bus1={bus}.{net.node_phase[a]}.{net.node_phase[b]} conn=delta kv={kv!r}"
+    for place in pv_on_loads(net, every, share, kw):
+        assert place.load is not None
+        bus = net.bus_names.index(place.bus)
+        nodes = ".".join(map(str, place.phases))
+        kv = float(net.bus_kv_ln[bus] * (np.sqrt(3.0) if place.delta else 1.0))
+        conn = " conn=delta" if place.delta else ""
+        rated = place.rating_mw * 1e3
         out.append(
-            f"new pvsystem.pv{load + 1} phases=1 {where} pmpp={rated!r} kva={rated / 0.9!r} irradiance=1 kvar=0 vminpu=0.5 vmaxpu=1.5"
+            f"new pvsystem.pv{place.load + 1} phases=1 bus1={place.bus}.{nodes}{conn} kv={kv!r} pmpp={rated!r} "
+            f"kva={place.s_mva * 1e3!r} irradiance=1 kvar=0 vminpu=0.5 vmaxpu=1.5"
         )
     return out
 

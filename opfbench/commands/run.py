@@ -142,6 +142,13 @@ def register(sub: argparse._SubParsersAction) -> None:
         help="also write the long tables of per-DER Q and per-bus V (default: per-DER Q only, and only "
         "for periods of ≤ 2 days: the report plots it)",
     )
+    p.add_argument(
+        "--frontier",
+        action=argparse.BooleanOptionalAction,
+        default=True,
+        help="solve the optimum's frontier the rules are compared with at equal compliance (default); "
+        "--no-frontier: the rules alone (loss-only figures), e.g. on a feeder too large for the three-phase OPF",
+    )
     add_execution_options(p)
     p.add_argument(
         "--price",
@@ -185,6 +192,7 @@ def run(args: argparse.Namespace) -> int:
         chunk=args.chunk,
         detail=args.detail,
         acopf_solver=args.acopf_solver,
+        frontier=args.frontier,
         forecast_dir=str(args.forecast_dir),
         price_per_kwh=args.price,
         currency=args.currency,

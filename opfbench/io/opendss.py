@@ -611,11 +611,18 @@ class _Reader:
 
 
 SHIPPED_SERIES = {
-    "eulv": ("2016-06-28", "Europe/Berlin", "eulv's own 1-min load shapes (Daily_1min_100profiles) on the paper day")
+    "eulv": ("2016-06-28", "Europe/Berlin", "eulv's own 1-min load shapes (Daily_1min_100profiles) on the paper day"),
+    "ckt24": (
+        "2016-01-01",
+        "Europe/Berlin",
+        "ckt24's own 8760-h load shapes (LS_PhaseA/B/C, LS_ThreePhase, Other_Bus_Load) from 2016-01-01 00:00 local time",
+    ),
 }
 """The shipped feeders whose loads follow the file's own shapes in a study: the shapes'
-first point at local midnight of the date, in the zone (eulv: the paper day,
-`opfbench.data.PAPER_DAY` and `PAPER_DAY_TZ`), and the series' source."""
+first point at local midnight of the date, in the zone, and the series' source. eulv: the
+paper day (`opfbench.data.PAPER_DAY` and `PAPER_DAY_TZ`); ckt24: its year of hourly
+shapes on 2016 (the year of the PV profile) in the PV's own zone, so that load and PV
+share one local clock (the shapes end on 2016-12-30, 2016 having 8784 hours)."""
 
 
 def shape_series(circuit: OpenDssCircuit, start: str, tz: str, source: str) -> CaseSeries:
@@ -684,7 +691,9 @@ def opendss_case(spec: CaseSpec, path: Path | None, name: str | None) -> Case:
 @dataclass(frozen=True)
 class Placement:
     """A DER placed on a three-phase feeder: the bus (OpenDSS name), its phases (() = every
-    phase of the bus), rated P̄ (MW), S̄ (MVA), kind and primary energy."""
+    phase of the bus), rated P̄ (MW), S̄ (MVA), kind and primary energy; `delta` a unit
+    between its two phases (phase to phase) rather than from each phase to the neutral;
+    `load` the load element it was placed beside (a placement rule on loads), if any."""
 
     bus: str
     phases: tuple[int, ...]
@@ -692,12 +701,15 @@ class Placement:
     s_mva: float
     kind: str = "inverter"
     energy: str = "solar"
+    delta: bool = False
+    load: int | None = None
 
 
 def place_ders(net: PhaseNetwork, placements: tuple[Placement, ...], what: str) -> PhaseNetwork:
     """`net` with the DER `placements` (a feeder without DER of its own): each a wye unit
     from its phases to the bus's neutral (its lowest neutral node; ground where the bus has
-    none), single-phase on one phase, its P and Q split equally over several; named
+    none), single-phase on one phase, its P and Q split equally over several — or, `delta`,
+    one unit between its two phases (base: the bus's phase-to-phase voltage); named
     `BUS.PHASES` (e.g. `675.1.2.3`; `-2`, `-3`, … for further units on the same phases). InputError naming `what` for a bus or phase that does
     not exist."""
     if net.ders:
@@ -731,6 +743,15 @@ def place_ders(net: PhaseNetwork, placements: tuple[Placement, ...], what: str) 
             name = f"{stem}-{n}"  # a further unit on the same bus and phases
         ders.append(DER(bus, place.kind, place.rating_mw, place.s_mva, place.energy, name))  # type: ignore[arg-type]
         names.append(name)
+        if place.delta:
+            if len(phases) != 2:
+                raise InputError(f"{what}: a phase-to-phase DER at bus {place.bus!r} needs two phases, got {len(phases)}")
+            owner.append(index)
+            a.append(nodes[phases[0]])
+            b_end.append(nodes[phases[1]])
+            base.append(net.bus_kv_ln[bus] * 1e3 * np.sqrt(3.0))
+            share.append(1.0)
+            continue
         for p in phases:
             owner.append(index)
             a.append(nodes[p])
@@ -741,30 +762,12 @@ def place_ders(net: PhaseNetwork, placements: tuple[Placement, ...], what: str) 
     return replace(net, ders=tuple(ders), der_names=tuple(names), der_branches=branches)
 
 
-EULV_PV_MW = 0.004
-EULV_PV_PF = 0.90
-
-
-def eulv_placement(net: PhaseNetwork) -> tuple[Placement, ...]:
-    """The shipped `eulv` feeder's PV: a single-phase unit at every second house in the
-    file's load order (LOAD1, LOAD3, …) on the house's own phase, P̄ = 4 kW, S̄ = P̄/0.90."""
-    lb = net.load_branches
-    out = []
-    for index in range(0, net.n_load, 2):
-        node = int(lb.a[np.flatnonzero(lb.owner == index)[0]])
-        bus = net.bus_names[net.node_bus[node]]
-        out.append(Placement(bus, (int(net.node_phase[node]),), EULV_PV_MW, EULV_PV_MW / EULV_PV_PF))
-    return tuple(out)
-
-
-SHIPPED_PLACEMENTS = {"eulv": eulv_placement}
-"""The placement rule of each shipped feeder that has one (applied when no der= is given)."""
-
-
 def with_ders(case: Case, spec: CaseSpec, der_pf: float) -> Case:
     """A three-phase `case` with the DER of the spec's `der=` list (DerEntry with phases;
     generic inverters S̄ = P̄/`der_pf`, PV and DFIG S̄ = P̄), or — without one — its shipped
-    placement rule (`SHIPPED_PLACEMENTS`); the stored point has the placed DER at P = Q = 0."""
+    placement rule (`opfbench.cases.opendss_pv.SHIPPED_PLACEMENTS`); the stored point has
+    the placed DER at P = Q = 0."""
+    from opfbench.cases.opendss_pv import SHIPPED_PLACEMENTS
     from opfbench.io.spec import parse_der_list
 
     net = case.network
@@ -777,7 +780,7 @@ def with_ders(case: Case, spec: CaseSpec, der_pf: float) -> Case:
             for e in parse_der_list(spec.der, spec.text, phased=True)
         )
     elif spec.source in SHIPPED_PLACEMENTS and not net.ders:
-        placements = SHIPPED_PLACEMENTS[spec.source](net)
+        placements = SHIPPED_PLACEMENTS[spec.source].place(net)
     else:
         return case
     placed = place_ders(net, placements, f"case {spec.text!r}")
@@ -785,5 +788,6 @@ def with_ders(case: Case, spec: CaseSpec, der_pf: float) -> Case:
     if stored is not None:
         zeros = np.zeros(len(placed.ders))
         stored = (stored[0], stored[1], zeros, zeros)
-    note = f"{len(placed.ders)} DER placed ({'der=' if spec.der is not None else 'the shipped placement rule'})"
+    rule = "der=" if spec.der is not None else f"the shipped placement rule: {SHIPPED_PLACEMENTS[spec.source].text}"
+    note = f"{len(placed.ders)} DER placed ({rule})"
     return replace(case, network=placed, stored=stored, notes=tuple(n for n in case.notes if n != NO_DER_NOTE) + (note,))

@@ -467,6 +467,28 @@ class PhaseNetwork(DerFleet):
         return (_frozen(a, int), _frozen(b, int), _frozen(base, float), tuple(names))
 
     @cached_property
+    def bus_distance(self) -> tuple[np.ndarray, np.ndarray]:
+        """(distance_km, upstream) per bus: the length of the shortest path from the
+        source's bus along the elements joining buses (lines at their length, a line
+        without a length unit and any other element at 0 km), and the bus before it on that
+        path (−1 for the source's bus and for a bus no path reaches, whose distance is NaN)
+        — the x axis of a voltage profile (OpenDSS's `plot profile`)."""
+        from scipy.sparse.csgraph import dijkstra
+
+        length = {line.element: line.length_km for line in self.lines}
+        edges: dict[tuple[int, int], float] = {}  # parallel elements: the shortest
+        for i, e in enumerate(self.elements):
+            if len(set(e.buses)) == 2:
+                km = length.get(i, 0.0)
+                key = (min(e.buses), max(e.buses))
+                edges[key] = min(edges.get(key, np.inf), km if np.isfinite(km) and km > 0 else 1e-9)  # 0 would be no edge
+        f, t = (np.array([k[j] for k in edges], dtype=int) for j in (0, 1))
+        graph = sp.csr_matrix((list(edges.values()), (f, t)), shape=(self.n_bus, self.n_bus))
+        dist, pred = dijkstra(graph, directed=False, indices=self.source.bus, return_predecessors=True)
+        dist = np.where(np.isfinite(dist), dist, np.nan)
+        return _frozen(dist), _frozen(np.where(pred < 0, -1, pred), int)
+
+    @cached_property
     def three_phase_nodes(self) -> np.ndarray:
         """(n, 3) the phase nodes 1, 2, 3 of every bus that has all three (VUF)."""
         nodes: dict[int, dict[int, int]] = {}

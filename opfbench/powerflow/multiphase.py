@@ -338,9 +338,15 @@ def solve_phase_flow(
     Z or I: its power at the base voltage), each DER's P and Q (S, n_der) MW/MVAr
     generated (default 0); `v0` (S, n_node) complex V an optional warm start (rows that
     are not finite and non-zero start from the no-load state)."""
+    load_p = np.atleast_2d(np.asarray(load_p_mw, dtype=float))
+    n_snap = load_p.shape[0]
+    load_p = _powers("load P", load_p, n_snap, net.n_load)
+    load_q = _powers("load Q", load_q_mvar, n_snap, net.n_load)
+    der_p = _powers("DER P", der_p_mw, n_snap, len(net.ders))
+    der_q = _powers("DER Q", der_q_mvar, n_snap, len(net.ders))
     if net.tap_control and net.regulators:
-        return _solve_controlled(net, load_p_mw, load_q_mvar, der_p_mw, der_q_mvar, v0, tol, max_iter)
-    return _solve_fixed(net, load_p_mw, load_q_mvar, der_p_mw, der_q_mvar, v0, tol, max_iter)
+        return _solve_controlled(net, load_p, load_q, der_p, der_q, v0, tol, max_iter)
+    return _solve_fixed(net, load_p, load_q, der_p, der_q, v0, tol, max_iter)
 
 
 @lru_cache(maxsize=64)
@@ -348,15 +354,11 @@ def _tapped(net: PhaseNetwork, positions: tuple[int, ...]) -> PhaseNetwork:
     return net.with_tap_positions(positions)
 
 
-def _solve_controlled(net, load_p_mw, load_q_mvar, der_p_mw, der_q_mvar, v0, tol, max_iter) -> PhaseFlowResult:
-    """`solve_phase_flow` with the regulators' control loop (module docstring)."""
+def _solve_controlled(net, load_p, load_q, der_p, der_q, v0, tol, max_iter) -> PhaseFlowResult:
+    """`solve_phase_flow` with the regulators' control loop (module docstring), on
+    checked arrays (S, n)."""
     regs = net.regulators
-    load_p = np.atleast_2d(np.asarray(load_p_mw, dtype=float))
     n_snap = load_p.shape[0]
-    load_p = _powers("load P", load_p, n_snap, net.n_load)
-    load_q = _powers("load Q", load_q_mvar, n_snap, net.n_load)
-    der_p = _powers("DER P", der_p_mw, n_snap, len(net.ders))
-    der_q = _powers("DER Q", der_q_mvar, n_snap, len(net.ders))
     state = ControlState.start(regs, n_snap)
     v = np.zeros((n_snap, net.n_node), dtype=complex) if v0 is None else np.array(v0, dtype=complex).reshape(n_snap, net.n_node)
     converged = np.zeros(n_snap, dtype=bool)
@@ -391,16 +393,16 @@ def _solve_controlled(net, load_p_mw, load_q_mvar, der_p_mw, der_q_mvar, v0, tol
 
 def _solve_fixed(
     net: PhaseNetwork,
-    load_p_mw: np.ndarray,
-    load_q_mvar: np.ndarray,
-    der_p_mw: np.ndarray | None,
-    der_q_mvar: np.ndarray | None,
+    load_p: np.ndarray,
+    load_q: np.ndarray,
+    der_p: np.ndarray,
+    der_q: np.ndarray,
     v0: np.ndarray | None,
     tol: float,
     max_iter: int,
 ) -> PhaseFlowResult:
-    """`solve_phase_flow` at the taps the network's elements have."""
-    powers = _branch_powers(net, load_p_mw, load_q_mvar, der_p_mw, der_q_mvar)
+    """`solve_phase_flow` at the taps the network's elements have (arrays as `solve_phase_flow` checked them)."""
+    powers = _branch_powers(net, load_p, load_q, der_p, der_q)
     sys_ = _system(net)
     start = None
     if v0 is not None:

@@ -21,6 +21,7 @@ from plotly.subplots import make_subplots
 
 from opfbench.registry.references import BASELINE
 from opfbench.report.inputs import TRACE_BUS
+from opfbench.report.profiles import Profile
 from opfbench.report.tables import REFERENCE_NIGHT, order
 
 MAX_POINTS = 1440
@@ -554,3 +555,32 @@ def how_close(table: pd.DataFrame, name: str = "") -> list[Plot]:
             height=460,
         )
     ]
+
+
+_PHASE_COLORS = {1: "#000000", 2: "#d62728", 3: "#1f77b4"}  # OpenDSS's plot profile: phase A black, B red, C blue
+
+
+def voltage_profile(profile: Profile, index: int) -> Plot:
+    """A three-phase feeder's |V| against distance from the source, one line per phase
+    (each segment from a bus's upstream bus to it), the band dashed (`report.profiles`)."""
+    fig = _figure()
+    for phase, (xs, ys) in profile.segments.items():
+        if xs:
+            fig.add_scatter(
+                x=xs,
+                y=ys,
+                mode="lines+markers",
+                name=f"phase {phase}",
+                line=dict(color=_PHASE_COLORS[phase], width=1),
+                marker=dict(size=3),
+            )
+    for v in profile.band:
+        fig.add_hline(y=v, line=dict(color="#b00", dash="dash", width=1))
+    when = profile.time.strftime("%Y-%m-%d %H:%M")
+    return plot_json(
+        f"profile-{index}",
+        f"{profile.case}: voltage profile at the worst-voltage step ({when}, no action; |V| {profile.vmin:.4f}–{profile.vmax:.4f} p.u.)",
+        fig,
+        "distance from the source (km)",
+        "|V| (p.u. of the node's base)",
+    )

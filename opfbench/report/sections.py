@@ -501,6 +501,51 @@ def voltage(inputs: Inputs) -> Section:
     return sec
 
 
+VUF_LIMIT_PCT = 2.0  # EN 50160: the 10-min VUF stays below 2 % (95 % of a week)
+
+
+def unbalance(inputs: Inputs) -> Section:
+    """What unbalance adds on three-phase feeders: the voltage unbalance factor per
+    configuration and each feeder's per-phase voltage profile at its worst step."""
+    sec = Section(
+        "unbalance",
+        "Unbalanced feeders: voltage profile and unbalance",
+        f"On three-phase feeders every DER acts on its own phase voltage. The voltage unbalance factor VUF = "
+        f"|V₂|/|V₁| (negative- over positive-sequence voltage) at every bus with three phases, worst per "
+        f"configuration, and the minutes of steps whose worst VUF exceeds EN 50160's {VUF_LIMIT_PCT:g} %; then each "
+        "feeder's voltage along it, phase by phase, at its worst-voltage step (OpenDSS's plot profile).",
+    )
+    if inputs.summary is None:
+        return sec.add(*_missing(inputs, "summary.csv"))
+    summary = inputs.summary
+    three = summary[summary["max_vuf_pct"].notna()] if "max_vuf_pct" in summary.columns else summary.iloc[:0]
+    if three.empty:
+        return sec.add(Block("note", text="No three-phase feeder in this run (balanced cases have no unbalance)."))
+    keys = [c for c in ("case", "strategy", "k", "night_mode", "forecast") if c in three.columns]
+    cols = keys + [c for c in ("max_vuf_pct", "vuf_min", "vmin_pu", "vmax_pu", "voltage_violation_steps") if c in three.columns]
+    worst = three.sort_values("max_vuf_pct", ascending=False)[cols]
+    above = int((three["vuf_min"] > 0).sum()) if "vuf_min" in three.columns else 0
+    sec.add(
+        Block(
+            "note",
+            text=f"Worst VUF {worst['max_vuf_pct'].iloc[0]:.3f} % ({worst['case'].iloc[0]}, {worst['strategy'].iloc[0]}); "
+            f"{above} of {len(three)} configurations spend minutes above {VUF_LIMIT_PCT:g} %.",
+        )
+    )
+    sec.add(table(worst, "Voltage unbalance per configuration (worst first)"))
+    if inputs.steps is None or inputs.manifest is None:
+        return sec.add(*_missing(inputs, "steps.parquet", "manifest.json"))
+    from opfbench.report.profiles import profile
+
+    for i, case in enumerate(sorted(three["case"].astype(str).unique())):
+        found = profile(inputs.manifest, inputs.steps, case)
+        if found is None:
+            sec.add(Block("note", text=f"{case}: no converged no-action step to draw its profile at."))
+        else:
+            sec.blocks += _plots([plots.voltage_profile(found, i)])
+    return sec
+
+
 def forecasting(inputs: Inputs) -> Section:
     source = inputs.forecast_dir
     sec = Section(
@@ -572,6 +617,7 @@ SECTIONS: tuple[tuple[str, str, Builder], ...] = (
     ("night", "Night hours", _unpriced(night)),
     ("gap", "Optimality gap", _unpriced(gap)),
     ("voltage", "Voltage compliance", _unpriced(voltage)),
+    ("unbalance", "Unbalanced feeders: voltage profile and unbalance", _unpriced(unbalance)),
     ("forecasting", "Forecasting", _unpriced(forecasting)),
     ("fault", "Fault ride-through", _unpriced(fault)),
 )

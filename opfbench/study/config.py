@@ -102,6 +102,10 @@ class StudyConfig:
     workers, month otherwise), fixed by the config and never by the number of workers. `detail`: also write the long
     tables of per-DER Q and per-bus V (None: per-DER Q alone for periods of ≤ 2 days, which
     the report plots; a tuple: those of `DETAIL_TABLES`); `detail_tables` the names resolved from it (`with_period`). Price fields only label the report.
+    `frontier` False: the run solves no optimum for the frontier (the rules alone, e.g. on a
+    feeder too large for the three-phase OPF in the time at hand): its summary has the
+    loss-only columns and no figure at equal compliance; at its default (True) the config
+    is the one without it (manifest and digest).
     `acopf_solver`: "auto" (the SOCP certifies the AC optimum where it can, IPOPT solves the
     rest) or "ipopt" (IPOPT on every step: the solver's own outcomes, as the paper asks) —
     the run-level setting of every option that declares it (`registry.Option.setting`).
@@ -126,6 +130,7 @@ class StudyConfig:
     detail: bool | None | tuple[str, ...] = None
     detail_tables: tuple[str, ...] = ()
     acopf_solver: str = "auto"
+    frontier: bool = True
     forecast_dir: str = "reports/forecast"
     price_per_kwh: float = DEFAULT_PRICE_PER_KWH
     currency: str = DEFAULT_CURRENCY
@@ -199,6 +204,8 @@ class StudyConfig:
         out = asdict(self)
         out.pop("notes")
         out["fitted"] = [f.as_dict() for f in self.fitted]
+        if out["frontier"]:
+            out.pop("frontier")  # the default: the config as it was before the option
         return {key: list(v) if isinstance(v, tuple) else v for key, v in out.items()}
 
     def digest(self) -> str:

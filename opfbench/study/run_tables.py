@@ -22,6 +22,7 @@ import pandas as pd
 
 from opfbench.errors import InputError
 from opfbench.formulations.frontier import CAPABILITY, FORECAST, Frontier
+from opfbench.multiphase import PhaseNetwork
 from opfbench.registry.catalog import configuration, describe
 from opfbench.registry.references import BASELINE, REFERENCE_OPTIMUM
 from opfbench.result import NOT_SETTLED, OK, PF_DIVERGED, RULE_NON_FINITE, Reference, StrategyResult
@@ -133,7 +134,7 @@ def detail_rows(
         return label | {
             "time": np.repeat(time.asi8, n_der),
             "der": np.tile(np.asarray(net.der_names, dtype=str), n),
-            "bus": np.tile(net.bus_ids[net.der_bus], n).astype(np.int64),
+            "bus": np.tile(net.der_bus if isinstance(net, PhaseNetwork) else net.bus_ids[net.der_bus], n).astype(np.int64),
             "kind": np.tile(np.asarray(net.der_kinds, dtype=str), n),
             "q_mvar": res.q_mvar.reshape(-1),
             "curtailed_mw": curtailed,

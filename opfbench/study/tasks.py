@@ -133,6 +133,7 @@ class TaskInput:
     columns: tuple[str, ...] = ()
     plugins: tuple[PluginSource, ...] = ()
     fitted: tuple[Fitted, ...] = ()
+    frontier: bool = True  # StudyConfig.frontier
 
 
 def plan_tasks(config: StudyConfig, period: Period, data_sha256: dict[str, str]) -> list[RunTask]:
@@ -183,6 +184,7 @@ def task_input(task: RunTask, config: StudyConfig, period: Period) -> TaskInput:
         extra_columns(config.strategies),
         loaded(config.plugins),
         tuple(f for f in config.fitted if f.case == task.case),
+        config.frontier,
     )
 
 
@@ -311,7 +313,7 @@ def run_task(inp: TaskInput) -> TaskOutput:
                     ran.append((scenario, results))
             plain = scenario_of(mode, "off")
             front = next((f for earlier, f in drawn if earlier.same_data(plain)), None)
-            if front is None:
+            if front is None and inp.frontier:
                 front = frontier(plain, t.k, at_zero=by_source.get("off", {}).get(REFERENCE_OPTIMUM))
                 drawn.append((plain, front))
             if front is not None:

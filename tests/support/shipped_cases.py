@@ -16,16 +16,18 @@ SHIPPED = {
     "feeder10k": (9999, 9998, 9998, 1515, 3.715, 2.3, False),
 }
 
-# The shipped unbalanced feeders (OpenDSS): buses, nodes, load elements, DER — as OpenDSS
-# counts them (`Circuit.NumBuses`, `Circuit.NumNodes`, `Loads.Count`) for the shipped files.
+# The shipped unbalanced feeders (OpenDSS): buses, nodes, load elements — as OpenDSS counts
+# them (`Circuit.NumBuses`, `Circuit.NumNodes`, `Loads.Count`) for the shipped files — and
+# the PV units of each feeder's placement rule (`opfbench.cases.opendss_pv`: every second
+# load, 25 % of ckt24's 3638 single-phase loads).
 UNBALANCED = {
-    "ieee13": (16, 41, 15, 0),
-    "ieee34": (37, 95, 68, 0),
-    "ieee37": (39, 117, 30, 0),
-    "ieee123": (132, 278, 91, 0),
+    "ieee13": (16, 41, 15, 8),
+    "ieee34": (37, 95, 68, 34),
+    "ieee37": (39, 117, 30, 15),
+    "ieee123": (132, 278, 91, 46),
     "eulv": (907, 2721, 55, 28),
-    "ieee8500": (4876, 8531, 1177, 0),
-    "ckt5": (2998, 3437, 1379, 0),
-    "ckt7": (1255, 2452, 906, 0),
-    "ckt24": (6058, 7522, 3891, 0),
+    "ieee8500": (4876, 8531, 1177, 589),
+    "ckt5": (2998, 3437, 1379, 690),
+    "ckt7": (1255, 2452, 906, 453),
+    "ckt24": (6058, 7522, 3891, 910),
 }
