@@ -53,6 +53,7 @@ FROM_NO_ACTION = "no-action"  # Q = 0
 # ----- which solver proved the point the AC optimum (SolverRecord.certified_by; "" = none) ----
 CERTIFIED_BY_SOCP = "socp"  # AC-feasible and within the relaxation's bound (the fast path)
 CERTIFIED_BY_IPOPT = "ipopt"  # IPOPT converged to it
+CERTIFIED_BY_SDP = "sdp3"  # a three-phase optimum within the SDP relaxation's bound (`formulations.three_phase`)
 
 
 @dataclass(frozen=True, eq=False)

@@ -19,10 +19,23 @@ import pytest
 from opfbench.cases.opendss_cases import opendss_copy
 from opfbench.cases.opendss_pv import case_with_pv
 from opfbench.errors import InputError, NetworkError
+from opfbench.formulations import three_phase
 from opfbench.formulations.model import model_for
 from opfbench.formulations.models.ac_three_phase import load_law
 from opfbench.formulations.models.sdp_three_phase import RANK_RATIO, ThreePhaseSdp
-from opfbench.formulations.three_phase import CERTIFY_RTOL, bound, certify, optimum, q_limits
+from opfbench.formulations.three_phase import (
+    BOUND_SAMPLE,
+    CERTIFY_RTOL,
+    NO_RELAXATION,
+    NOT_SAMPLED,
+    PhaseBound,
+    bound,
+    bound_sample,
+    certify,
+    optimum,
+    q_limits,
+    step_bounds,
+)
 from opfbench.multiphase import GROUND, Element
 from opfbench.powerflow.multiphase import solve_phase_flow
 
@@ -103,15 +116,21 @@ def _lift(model: ThreePhaseSdp, v: np.ndarray, load_p, load_q, der_p) -> np.ndar
     return x
 
 
-def test_the_relaxation_serves_radial_feeders_and_refuses_meshed_ones(ieee13):
-    net = ieee13[0]
-    assert model_for("relaxation", net).name == "sdp3"
+def _meshed(net):
+    """`net` with a three-phase line closing a loop between buses 675 and 680."""
     line = next(e for e in net.elements if e.kind == "line" and e.nodes.shape == (2, 3))
     far = [i for i, name in enumerate(net.bus_names) if name in ("675", "680")]
     nodes = np.array([[int(np.flatnonzero((net.node_bus == b) & (net.node_phase == p))[0]) for p in (1, 2, 3)] for b in far])
     loop = Element("Line.loop", "line", tuple(far), nodes, line.yprim)
     meshed = dataclasses.replace(net, elements=(*net.elements, loop))
     assert meshed.meshed
+    return meshed
+
+
+def test_the_relaxation_serves_radial_feeders_and_refuses_meshed_ones(ieee13):
+    net = ieee13[0]
+    assert model_for("relaxation", net).name == "sdp3"
+    meshed = _meshed(net)
     with pytest.raises(NetworkError, match="no relaxation formulation model serves unbalanced-meshed"):
         bound(meshed, *ieee13[1:])
     with pytest.raises(NetworkError, match="needs a radial feeder; this one is meshed"):
@@ -164,6 +183,49 @@ def test_the_relaxation_proves_ieee13_infeasible_with_its_taps_held(ieee13_held)
     assert np.isnan(opt.losses_kw).all()
     certified, gap = certify(opt, relaxed)
     assert not certified.any() and np.isnan(gap).all()
+
+
+def test_a_run_bounds_a_stated_sample_and_certifies_only_within_the_tolerance(ieee13, monkeypatch):
+    """`run_phase`'s side (`step_bounds`): the relaxation on `bound_sample`'s steps only (the
+    others `NOT_SAMPLED`, no bound, never certified); a step certified exactly where its
+    point meets the band and its losses are within CERTIFY_RTOL of the bound, the relative
+    gap recorded otherwise; a meshed feeder: no bound, said so. The bound here is a stand-in
+    that returns chosen fractions of the AC optimum (the relaxation's own validity:
+    `test_the_bound_is_never_above_the_ac_optimum`)."""
+    assert bound_sample(BOUND_SAMPLE).tolist() == list(range(BOUND_SAMPLE))
+    day = bound_sample(1440)
+    assert len(day) == BOUND_SAMPLE and day[0] == 0 and day[-1] == 1439 and (np.diff(day) > 0).all()
+    net, lp, lq, dp = ieee13
+    opt = optimum(net, lp, lq, dp, 0.0)
+    feasible = np.isfinite(opt.losses_kw)
+    assert feasible.all(), opt.status
+    factor = np.array([1 - 0.5 * CERTIFY_RTOL, 1.0, 1.0, 1 - 1e-4])
+    asked = []
+
+    def stand_in(net_, load_p, load_q, der_p, k, *, q_limit_mvar):
+        rows = [int(np.flatnonzero((lp == row).all(axis=1))[0]) for row in load_p]
+        asked.append(rows)
+        m = len(rows)
+        status = np.full(m, "optimal", dtype=object)
+        return PhaseBound(
+            opt.losses_kw[rows] * factor[rows], np.zeros(m), np.ones(m, bool), np.zeros(m, bool), status, np.ones(m), 1.0
+        )
+
+    monkeypatch.setattr(three_phase, "bound", stand_in)
+    monkeypatch.setattr(three_phase, "BOUND_SAMPLE", 2)
+    limit = q_limits(net, dp, 0.0)
+    certified, rec = step_bounds(net, lp, lq, dp, limit, 0.0, opt, feasible)
+    assert asked == [[0, 3]]  # the first and the last of four steps
+    assert certified.tolist() == [True, False, False, False]
+    assert rec["sdp_status"].tolist() == ["optimal", NOT_SAMPLED, NOT_SAMPLED, "optimal"]
+    np.testing.assert_allclose(rec["optimality_gap"][[0, 3]], [0.5 * CERTIFY_RTOL, 1e-4], rtol=1e-6)
+    assert np.isnan(rec["relaxation_bound_kw"][[1, 2]]).all() and np.isnan(rec["optimality_gap"][[1, 2]]).all()
+    # a step whose reported point leaves the band is not certified, and has no gap
+    certified, rec = step_bounds(net, lp, lq, dp, limit, 0.0, opt, np.array([False, True, True, True]))
+    assert not certified.any() and np.isnan(rec["optimality_gap"][0]) and rec["relaxation_bound_kw"][0] > 0
+    asked.clear()
+    certified, rec = step_bounds(_meshed(net), lp, lq, dp, limit, 0.0, opt, feasible)
+    assert not asked and not certified.any() and (rec["sdp_status"] == NO_RELAXATION).all()
 
 
 @pytest.mark.slow

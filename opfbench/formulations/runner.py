@@ -54,11 +54,12 @@ def run_model(
 ) -> StrategyResult:
     """`model` on every snapshot of `scenario` with reserve k (module docstring), the result
     named `name` (default: the model's); `fallback` and `solver` apply to an exact model —
-    on a three-phase feeder `three_phase.run_phase` (no relaxation there yet: IPOPT on
-    every snapshot, whatever `solver` says)."""
+    on a three-phase feeder `three_phase.run_phase`: IPOPT on every snapshot, and with
+    `solver` "auto" the relaxation's bound on a sample of them (`three_phase.BOUND_SAMPLE`),
+    which certifies the optimum where it closes the gap; "ipopt": no bound."""
     if scenario.three_phase and model.role == "exact":
         check_option("AC OPF solver", solver, ACOPF_SOLVERS)
-        return run_phase(model, scenario, k, name=name, slack_export=slack_export, fallback=fallback)
+        return run_phase(model, scenario, k, name=name, slack_export=slack_export, fallback=fallback, bounded=solver == "auto")
     if model.role == "exact":
         return run_exact(model, scenario, k, name=name, slack_export=slack_export, fallback=fallback, solver=solver)
     return run_batch(model, scenario, k, name=name, slack_export=slack_export)

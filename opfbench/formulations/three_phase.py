@@ -6,9 +6,10 @@ today `models.ac_three_phase` exact on both, `models.sdp_three_phase` the relaxa
 radial feeders only — a meshed feeder gets no bound, refused with NetworkError). The exact
 model is built once per feeder and thread (`solver_cache.per_thread`, on the feeder a
 widened band was derived from: `PhaseNetwork.origin` — the band is a per-solve input). An
-accepted point is IPOPT's local optimum confirmed by the power flow; the strategies'
-`certified_by` stays empty, and `bound` + `certify` state per snapshot whether the
-relaxation certifies it.
+accepted point is IPOPT's local optimum confirmed by the power flow; `bound` + `certify`
+state per snapshot whether the relaxation certifies it, and `run_phase` records that in
+the strategy's `certified_by` and lower bound as on balanced feeders (on a stated sample
+of a long run's steps: `BOUND_SAMPLE`).
 
 `bound` solves the relaxation per snapshot (compiled once); `certify` compares: a step is
 certified when the optimum's losses are within `CERTIFY_RTOL` (relative) of the bound,
@@ -38,6 +39,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from opfbench.capability import check_reserve, qmax
+from opfbench.errors import NetworkError
 from opfbench.formulations.acopf_options import FALLBACKS, Fallback, check_option
 from opfbench.formulations.evaluation import solver_record
 from opfbench.formulations.model import built, load_models, model_for
@@ -48,6 +50,7 @@ from opfbench.multiphase import PhaseNetwork
 from opfbench.powerflow.multiphase import PhaseFlowResult, solve_phase_flow
 from opfbench.registry.specs import ModelSpec
 from opfbench.result import (
+    CERTIFIED_BY_SDP,
     FALLBACK_COLD,
     FALLBACK_NO_ACTION,
     FROM_COLD,
@@ -75,6 +78,13 @@ CURTAIL_SNAP_MW = 1e-6
 its power (IPOPT's barrier stops short of the bound P ≤ P_avail by its tolerance; 1 W is
 no curtailment)."""
 PROVEN_NO_Q = "no Q to give: the power flow's point is the only one"  # solver_status of such a snapshot
+BOUND_SAMPLE = 24
+"""At most this many steps of a run get the relaxation's bound (`run_phase`): every step of
+a run up to that length, else this many spread evenly over it, first and last included —
+the SDP takes seconds a step where IPOPT takes milliseconds. The other steps record
+`NOT_SAMPLED`, no bound, and are never certified."""
+NOT_SAMPLED = "not in the bound's sample"  # sdp_status of a step `run_phase` does not bound
+NO_RELAXATION = "no relaxation serves this feeder"  # sdp_status on a meshed feeder
 
 
 @dataclass(frozen=True, eq=False)
@@ -228,14 +238,23 @@ def run_phase(
     slack_export: bool = True,
     fallback: Fallback = "chain",
     curtail: bool = False,
+    bounded: bool = False,
 ) -> StrategyResult:
     """The exact model on every snapshot of a three-phase `scenario` (module docstring), the
     result named `name` (default: the model's); with `curtail` the one that may curtail
     (the result carries the power curtailed). The solver record: objective_kw (the
-    model's cost where accepted: losses, plus the power curtailed), solver_status (IPOPT's per attempt; `PROVEN_NO_Q` where
-    no DER has Q), fallback, certified_by "" (nothing certifies a three-phase point yet),
-    iterations and solve_ms (IPOPT's, summed over attempts); extra: warm_start,
-    ac_feasible (the reported point meets the band), slack_export. No lower bound."""
+    model's cost where accepted: losses, plus the power curtailed), solver_status (IPOPT's
+    per attempt; `PROVEN_NO_Q` where no DER has Q), fallback, certified_by
+    (`CERTIFIED_BY_SDP` where the step is certified, else ""), iterations and solve_ms
+    (IPOPT's, summed over attempts); extra: warm_start, ac_feasible (the reported point
+    meets the band), slack_export.
+
+    `bounded` (and not `curtail`: the relaxation bounds the losses alone): the relaxation's
+    bound on `bound_sample`'s steps (`step_bounds`) — lower_bound_kw where the reported
+    point meets the band, certified as on balanced feeders where the point's losses are
+    within CERTIFY_RTOL of it; extra relaxation_bound_kw, sdp_status (the solver's,
+    `NOT_SAMPLED` or `NO_RELAXATION`), sdp_rank_ratio, sdp_ms and optimality_gap (the
+    relative gap to the bound, NaN where either is missing). Unbounded: no lower bound."""
     begin = now()
     net = scenario.net
     assert isinstance(net, PhaseNetwork)
@@ -258,24 +277,29 @@ def run_phase(
     answered = (opt.status == OK) | (opt.status == FALLBACK_COLD)
     source = np.where(opt.status == FALLBACK_COLD, FROM_COLD, np.where(answered, FROM_SOLVER, FROM_NO_ACTION))
     source = np.where(opt.solver_status == PROVEN_NO_Q, np.where(opt.status == OK, FROM_SOLVER, FROM_NO_ACTION), source)
+    lo, hi = net.band
+    flow = opt.flow
+    with np.errstate(invalid="ignore"):
+        feasible = flow.converged & (flow.vm.min(axis=1) >= lo - BAND_TOL) & (flow.vm.max(axis=1) <= hi + BAND_TOL)
+    n = scenario.n_snapshots
+    certified, bounds = np.zeros(n, dtype=bool), dict[str, np.ndarray]()
+    if bounded and not curtail:
+        certified, bounds = step_bounds(net, load_p, load_q, scenario.der_p_mw, limit, k, opt, feasible)
     rows = [
         {
             "objective_kw": float(opt.objective_kw[i]),
             "solver_status": str(opt.solver_status[i]),
             "fallback": str(source[i]),
-            "certified_by": "",
+            "certified_by": CERTIFIED_BY_SDP if certified[i] else "",
             "solve_ms": float(opt.solve_ms[i]),
             "iterations": int(opt.iterations[i]),
             "warm_start": bool(opt.warm[i]),
         }
-        for i in range(scenario.n_snapshots)
+        for i in range(n)
     ]
     record, extra = solver_record(model, rows)
-    lo, hi = net.band
-    flow = opt.flow
-    with np.errstate(invalid="ignore"):
-        feasible = flow.converged & (flow.vm.min(axis=1) >= lo - BAND_TOL) & (flow.vm.max(axis=1) <= hi + BAND_TOL)
-    full: dict[str, object] = {**extra, "ac_feasible": feasible, "slack_export": bool(slack_export)}
+    full: dict[str, object] = {**extra, **bounds, "ac_feasible": feasible, "slack_export": bool(slack_export)}
+    lower = np.where(feasible, bounds["relaxation_bound_kw"], np.nan) if bounds else None
     return StrategyResult.from_setpoints(
         name or model.name,
         k,
@@ -288,7 +312,56 @@ def run_phase(
         solver=record,
         extra=full,
         p_mw=opt.p_mw,
+        lower_bound_kw=lower,
     )
+
+
+def bound_sample(n: int) -> np.ndarray:
+    """The steps `run_phase` bounds among n (`BOUND_SAMPLE`), ascending."""
+    if n <= BOUND_SAMPLE:
+        return np.arange(n)
+    return np.unique(np.linspace(0, n - 1, BOUND_SAMPLE).round().astype(int))
+
+
+def step_bounds(
+    net: PhaseNetwork,
+    load_p: np.ndarray,
+    load_q: np.ndarray,
+    der_p: np.ndarray,
+    limit: np.ndarray,
+    k: float,
+    opt: PhaseOptimum,
+    feasible: np.ndarray,
+) -> tuple[np.ndarray, dict[str, np.ndarray]]:
+    """(certified, per-step arrays) for `run_phase`: the relaxation on `bound_sample`'s
+    steps of S snapshots (loads (S, n_load), DER P and usable |Q| (S, n_der)), the steps
+    certified where the reported point meets the band (`feasible`) and its losses are
+    within CERTIFY_RTOL of the bound (`certify`); arrays relaxation_bound_kw,
+    sdp_status, sdp_rank_ratio, sdp_ms, optimality_gap (S,) as `run_phase` says."""
+    n = len(load_p)
+    status = np.full(n, NOT_SAMPLED, dtype=object)
+    try:
+        model_for("relaxation", net)
+    except NetworkError:
+        status[:] = NO_RELAXATION
+        rows = np.zeros(0, dtype=int)
+    else:
+        rows = bound_sample(n)
+    nan, no = np.full(n, np.nan), np.zeros(n, dtype=bool)
+    relaxed = PhaseBound(nan, nan.copy(), no, no.copy(), status, np.zeros(n), 0.0)
+    if rows.size:
+        part = bound(net, load_p[rows], load_q[rows], der_p[rows], k, q_limit_mvar=limit[rows])
+        for name in ("bound_kw", "rank_ratio", "rank_one", "infeasible", "status", "solve_ms"):
+            getattr(relaxed, name)[rows] = getattr(part, name)
+    certified, gap = certify(opt, relaxed)
+    certified &= feasible
+    return certified, {
+        "relaxation_bound_kw": relaxed.bound_kw,
+        "sdp_status": relaxed.status,
+        "sdp_rank_ratio": relaxed.rank_ratio,
+        "sdp_ms": relaxed.solve_ms,
+        "optimality_gap": np.where(feasible, gap, np.nan),
+    }
 
 
 def _setpoints(solve, der_p: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -336,7 +409,8 @@ class PhaseBound:
     `rank_one` (every block rank one: `rank_ratio` ≤ the model's threshold), `infeasible`
     (the solver certified the relaxation, hence the OPF, infeasible), `status` (the
     solver's), `solve_ms` (per step); `compile_ms` the model's build plus first solve
-    (cvxpy compiles there) less that solve's own time."""
+    (cvxpy compiles there) less that solve's own time (about 0 where this thread had built
+    the model for this feeder already: it is kept, `model.built`)."""
 
     bound_kw: np.ndarray
     rank_ratio: np.ndarray
@@ -353,10 +427,13 @@ def bound(
     load_q_mvar: np.ndarray,
     der_p_mw: np.ndarray,
     k: float = 0.0,
+    *,
+    q_limit_mvar: np.ndarray | None = None,
 ) -> PhaseBound:
-    """The relaxation's bound on S snapshots (arguments as `optimum`); NetworkError where no
-    relaxation serves the feeder (meshed). Checked before any work: k, the model, then
-    shapes and finite values (the power flow's checks, on the first snapshot)."""
+    """The relaxation's bound on S snapshots (arguments as `optimum`, `q_limit_mvar` the
+    usable |Q| where the caller has it); NetworkError where no relaxation serves the feeder
+    (meshed). Checked before any work: k, the model, then shapes and finite values (the
+    power flow's checks, on the first snapshot)."""
     import time
 
     check_reserve(k)
@@ -365,9 +442,9 @@ def bound(
     solve_phase_flow(net, load_p_mw, load_q_mvar, der_p_mw)  # checks shapes and values first
     load_p, load_q = (np.asarray(x, dtype=float).reshape(-1, net.n_load) for x in (load_p_mw, load_q_mvar))
     der_p = np.asarray(der_p_mw, dtype=float).reshape(len(load_p), len(net.ders))
-    limit = q_limits(net, der_p, k)
+    limit = q_limits(net, der_p, k) if q_limit_mvar is None else np.asarray(q_limit_mvar, dtype=float).reshape(der_p.shape)
     start = time.perf_counter()
-    model = spec.build(net, True)
+    model = built(spec, net, True)
     solves = []
     for i in range(len(load_p)):
         solves.append(model.solve(load_p[i], load_q[i], der_p[i], limit[i]))

@@ -118,6 +118,8 @@ STEP_KINDS = _kinds(
         "certified_by",
         "fallback",
         "solver_status",
+        "lower_bound_kw",
+        "max_vuf_pct",
     ),
 )
 """The columns of steps.parquet the report uses, and their kinds."""
