@@ -11,6 +11,7 @@ import pytest
 
 from opfbench.cases.opendss_cases import opendss_copy
 from opfbench.io import load_case
+from opfbench.io.opendss import read_opendss, shape_series
 from opfbench.multiphase import PhaseNetwork
 from opfbench.powerflow.multiphase import solve_phase_flow
 from tests.support.opendss_feeders import UNBALANCED_ALL, UNBALANCED_SMALL, bus_vuf, held_taps, line_impedance_ohm, solve
@@ -25,13 +26,15 @@ def _network(name: str) -> tuple[PhaseNetwork, tuple]:
     return case.network, case.stored
 
 
-def _agrees(net: PhaseNetwork, ours, theirs) -> None:
-    assert theirs.converged and bool(ours.converged[0])
+def _agrees(net: PhaseNetwork, ours, theirs, row: int = 0) -> tuple[float, float]:
+    """Snapshot `row` of our flow against OpenDSS's; returns (max |ΔV| p.u., relative loss error)."""
+    assert theirs.converged and bool(ours.converged[row])
     assert theirs.node_names == list(net.node_names)
-    dv = np.abs(ours.v[0] - theirs.v) / net.node_base_v
+    dv = np.abs(ours.v[row] - theirs.v) / net.node_base_v
     worst = int(dv.argmax())
     assert dv.max() < V_TOL_PU, f"{net.name}: |ΔV| {dv.max():.2e} p.u. at {net.node_names[worst]}"
-    assert ours.losses_kw[0] == pytest.approx(theirs.losses_kw, rel=LOSS_REL)
+    assert ours.losses_kw[row] == pytest.approx(theirs.losses_kw, rel=LOSS_REL)
+    return float(dv.max()), abs(ours.losses_kw[row] / theirs.losses_kw - 1.0)
 
 
 def _own_snapshot(name: str) -> None:
@@ -53,17 +56,62 @@ def test_the_large_feeders_own_snapshot_is_opendss(name):
     _own_snapshot(name)
 
 
-@pytest.mark.parametrize(("name", "load_mult"), [("ieee13", 0.4), ("ieee13", 1.35), ("ieee123", 1.6), ("ieee37", 0.7)])
-def test_other_load_levels_with_the_taps_held(name, load_mult):
-    """Loads scaled (OpenDSS's loadmult): the models' switches to impedance below vminpu
-    and above vmaxpu, constant Z and I and the CVR exponents all take part."""
+def _other_load_level(name: str, load_mult: float) -> None:
     net, _ = _network(name)
-    ours = solve_phase_flow(net, net.load_p_mw[None] * load_mult, net.load_q_mvar[None] * load_mult)
+    ours = solve_phase_flow(net, *net.loads_at(load_mult))
     with opendss_copy(name) as master:
         theirs = solve(master, f"set loadmult={load_mult!r}", *held_taps(net), controls=False)
     _agrees(net, ours, theirs)
     if load_mult > 1.3:  # the case the switch to impedance matters for
         assert (ours.node_vm_pu[0][net.load_branches.a] < 0.95).any()
+
+
+@pytest.mark.parametrize(("name", "load_mult"), [("ieee13", 0.4), ("ieee13", 1.35), ("ieee123", 1.6), ("ieee37", 0.7)])
+def test_other_load_levels_with_the_taps_held(name, load_mult):
+    """Loads scaled (OpenDSS's loadmult): the models' switches to impedance below vminpu
+    and above vmaxpu, constant Z and I and the CVR exponents all take part."""
+    _other_load_level(name, load_mult)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("load_mult", [0.3, 0.9, 1.4])
+def test_ieee8500_at_other_load_levels_keeps_its_fixed_loads(load_mult):
+    """ieee8500's 24 loads of `status=fixed` stay at their nominal under OpenDSS's
+    loadmult (read as `load_fixed`; scaling them too put |V| 1e-2 p.u. off at 0.9)."""
+    assert _network("ieee8500")[0].load_fixed.sum() == 24
+    _other_load_level("ieee8500", load_mult)
+
+
+def test_loads_of_status_fixed_or_exempt_keep_their_nominal(tmp_path):
+    """A load of status fixed or exempt stays at its nominal under a load multiplier
+    (OpenDSS's `Load.SetNominalLoad`); the others follow it — as OpenDSS solves it."""
+    with opendss_copy("ieee13") as master:
+        file = tmp_path / "fixed.dss"
+        file.write_text(f'redirect "{master}"\nedit load.671 status=fixed\nedit load.692 status=exempt\n')
+        net = load_case(f"opendss:{file}").network
+        assert isinstance(net, PhaseNetwork)
+        assert [net.load_names[i] for i in np.flatnonzero(net.load_fixed)] == ["Load.671", "Load.692"]
+        p, q = net.loads_at(np.array([0.5, 1.0]))
+        assert p[0] == pytest.approx(np.where(net.load_fixed, 1.0, 0.5) * net.load_p_mw)
+        assert q[1] == pytest.approx(net.load_q_mvar)
+        ours = solve_phase_flow(net, p[:1], q[:1])
+        theirs = solve(file, "set loadmult=0.5", *held_taps(net), controls=False)
+    _agrees(net, ours, theirs)
+
+
+def test_a_fixed_load_keeps_its_nominal_on_its_shape(tmp_path):
+    """On a feeder's own shapes (`shape_series`) a load of status fixed stays at its
+    nominal; one of status exempt still follows its shape (OpenDSS's time modes)."""
+    with opendss_copy("eulv") as master:
+        file = tmp_path / "fixed.dss"
+        file.write_text(f'redirect "{master}"\nedit load.load1 status=fixed\nedit load.load2 status=exempt\n')
+        circuit = read_opendss(file)
+    series = shape_series(circuit, "2016-06-28", "Europe/Berlin", "test")
+    load_p, load_q, _ = series.rows(series.index[[300, 700]])
+    assert load_p[:, 0] == pytest.approx([circuit.load_p_mw[0]] * 2) and load_q[:, 0] == pytest.approx(
+        [circuit.load_q_mvar[0]] * 2
+    )
+    assert load_p[:, 1] == pytest.approx(circuit.shapes[circuit.load_shapes[1]].p[[300, 700]] * circuit.load_p_mw[1])
 
 
 DER_LINES = (

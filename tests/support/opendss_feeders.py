@@ -45,14 +45,59 @@ def solve(master: Path, *commands: str, controls: bool = True) -> DssSnapshot:
     if not controls:
         dss.Text.Command("set controlmode=off")
     dss.Solution.Solve()
-    names = [n.lower() for n in dss.Circuit.AllNodeNames()]
+    return _snapshot()
+
+
+def _snapshot() -> DssSnapshot:
     return DssSnapshot(
-        names,
+        [n.lower() for n in dss.Circuit.AllNodeNames()],
         np.asarray(dss.Circuit.AllBusVolts()).view(complex),
         np.asarray(dss.Circuit.AllBusMagPu()),
         float(dss.Circuit.Losses()[0]) / 1e3,
         bool(dss.Solution.Converged()),
     )
+
+
+def solve_time_step(master: Path, pv_lines: list[str], load_mult: float | None = None, hour: float | None = None) -> DssSnapshot:
+    """OpenDSS at one time-series step of a shipped feeder with DER at fixed output: the
+    file's snapshot solved (control loop on: taps and capacitors settle where opfbench's
+    reader finds them), then held (RegControls and CapControls disabled), the PVSystems
+    `pv_lines` added, and one solution — in snapshot mode at `load_mult` (the loads ×
+    a load profile's value), or in yearly mode at `hour` (each load on its own yearly
+    shape: OpenDSS reads a fixed-interval shape's point k (1-based) at hour k × interval)."""
+    dss.Basic.AllowChangeDir(False)
+    run = dss.Text.Command
+    run("clear")
+    run(f'compile "{master}"')
+    run(f"set mode=snapshot tolerance={TOLERANCE!r} maxiterations=200")
+    dss.Solution.Solve()
+    assert dss.Solution.Converged()
+    run("batchedit regcontrol..* enabled=no")
+    run("batchedit capcontrol..* enabled=no")
+    for line in pv_lines:
+        run(line)
+    if hour is None:
+        run(f"set loadmult={load_mult!r}")
+    else:
+        start = hour * 3600.0 - 60.0  # a time mode moves the clock one step (here 1 min) before it solves
+        run("set mode=yearly number=1 stepsize=60s")
+        dss.Solution.Hour(int(start // 3600))
+        dss.Solution.Seconds(start % 3600)
+    run(f"set tolerance={TOLERANCE!r} maxiterations=200")
+    dss.Solution.Solve()
+    if hour is not None:
+        assert abs(dss.Solution.DblHour() - hour) < 1e-9, (dss.Solution.DblHour(), hour)
+    return _snapshot()
+
+
+def pv_output() -> np.ndarray:
+    """(n_pv, 2) every PVSystem's kW and kvar generated at the last solution (circuit order)."""
+    out = []
+    for name in dss.PVsystems.AllNames():
+        dss.Circuit.SetActiveElement(f"pvsystem.{name}")
+        powers = np.asarray(dss.CktElement.Powers())
+        out.append((-powers[0::2].sum(), -powers[1::2].sum()))
+    return np.array(out).reshape(-1, 2)
 
 
 def bus_vuf(bus: str) -> float:
