@@ -1,20 +1,34 @@
 """The three-phase power flow against OpenDSS (`tests/support/opendss_feeders.py`: the
 shipped master compiled and solved by OpenDSS alone at tolerance 1e-10): every node's |V|
-within 1e-6 p.u. and the losses within 1e-4 relative — at the file's own snapshot (the
-small feeders by default, every shipped feeder under `-m slow`), at other load levels with
-the regulator taps held, and with PVSystems and Generators of a file of its own."""
+within 1e-6 p.u. and the losses within 1e-4 relative — at the file's own snapshot and at
+three time-series steps with the feeder's DER at fixed output (the small feeders by
+default, every shipped feeder under `-m slow`), at other load levels with the regulator
+taps held (loads of status fixed or exempt at their nominal), and with PVSystems and
+Generators of a file of its own."""
 
 from __future__ import annotations
 
 import numpy as np
+import pandas as pd
 import pytest
 
 from opfbench.cases.opendss_cases import opendss_copy
+from opfbench.cases.opendss_pv import pvsystem_lines
+from opfbench.data import paper_day
 from opfbench.io import load_case
 from opfbench.io.opendss import read_opendss, shape_series
 from opfbench.multiphase import PhaseNetwork
 from opfbench.powerflow.multiphase import solve_phase_flow
-from tests.support.opendss_feeders import UNBALANCED_ALL, UNBALANCED_SMALL, bus_vuf, held_taps, line_impedance_ohm, solve
+from tests.support.opendss_feeders import (
+    UNBALANCED_ALL,
+    UNBALANCED_SMALL,
+    bus_vuf,
+    held_taps,
+    line_impedance_ohm,
+    pv_output,
+    solve,
+    solve_time_step,
+)
 
 V_TOL_PU = 1e-6
 LOSS_REL = 1e-4
@@ -112,6 +126,77 @@ def test_a_fixed_load_keeps_its_nominal_on_its_shape(tmp_path):
         [circuit.load_q_mvar[0]] * 2
     )
     assert load_p[:, 1] == pytest.approx(circuit.shapes[circuit.load_shapes[1]].p[[300, 700]] * circuit.load_p_mw[1])
+
+
+STEPS = ("03:00", "11:00", "13:00")
+"""Three time-series steps (local time): night (no PV, light load), near the paper day's
+load peak (10:45), high PV."""
+SHAPED = {"eulv": ("2016-06-28", STEPS), "ckt24": ("2016-07-15", ("03:00", "14:00", "19:00"))}
+"""The day and steps of the feeders on their own load shapes (eulv: the paper day; ckt24:
+a summer day of its year, night, high PV, evening peak)."""
+SEVERAL_POINTS = {"ckt24": ("03:00", "19:00")}
+"""Steps at which the feeder has more than one operating point. ckt24's CVR loads (model 4)
+switch to an impedance above vmaxpu = 1.05 with a jump — OpenDSS's own load model: P·u^0.8
+just below, P·u²/1.05² just above —, so where their voltages reach 1.05 p.u. two states
+solve the same equations: OpenDSS's iteration lands on one, ours from the no-load start
+on another (up to 3e-3 p.u. apart on this day, every hour whose |V| passes 1.05). There
+ours starts from OpenDSS's state; agreeing to 1e-6 then says that state is one of ours."""
+
+
+def _time_steps(name: str) -> dict[str, tuple[float, float]]:
+    """The shipped feeder `name` with its DER (its placement rule, `pv_on_loads`) at three
+    time-series steps against OpenDSS with the same PVSystems at fixed output: loads on
+    the paper day's load profile (OpenDSS's loadmult) — or on the feeder's own shapes
+    (OpenDSS's yearly mode at that step) —, PV P at the paper day's PV profile at the same
+    clock time, Q ±0.2 S̄ (alternating: absorbing, injecting). Ours: one batched flow
+    (from OpenDSS's state at `SEVERAL_POINTS`). Returns each step's (max |ΔV| p.u.,
+    relative loss error)."""
+    case = load_case(name)
+    net = case.network
+    assert isinstance(net, PhaseNetwork) and net.ders
+    day = paper_day()
+    date, steps = SHAPED.get(name, ("", STEPS))
+    at = [day.index[(day.index.hour == int(t[:2])) & (day.index.minute == int(t[3:]))][0] for t in steps]
+    der_p = day.loc[at, "pv"].to_numpy()[:, None] * net.der_rating_mw
+    der_q = np.tile(0.2 * net.der_s_mva * (-1.0) ** (np.arange(len(net.ders)) + 1), (len(steps), 1))
+    if case.series is None:
+        load = day.loc[at, "load"].to_numpy()
+        load_p, load_q = net.loads_at(load)
+        when = [{"load_mult": float(x)} for x in load]
+    else:
+        series = case.series
+        times = pd.DatetimeIndex([pd.Timestamp(f"{date} {t}").tz_localize(series.index.tz) for t in steps])
+        load_p, load_q, _ = series.rows(times)
+        points = series.index.get_indexer(times)
+        assert (points >= 0).all()
+        when = [
+            {"hour": float((k + 1) * series.step / pd.Timedelta(hours=1))} for k in points
+        ]  # OpenDSS: point k+1 at (k+1)·step
+    ours = solve_phase_flow(net, load_p, load_q, der_p, der_q)
+    out = {}
+    with opendss_copy(name) as master:
+        for s, (t, kw) in enumerate(zip(steps, when, strict=True)):
+            theirs = solve_time_step(master, pvsystem_lines(net, der_p[s], der_q[s]), **kw)
+            assert pv_output() == pytest.approx(np.column_stack([der_p[s], der_q[s]]) * 1e3, abs=1e-6)  # the DER as given
+            if t in SEVERAL_POINTS.get(name, ()):
+                row = np.s_[s : s + 1]
+                started = solve_phase_flow(net, load_p[row], load_q[row], der_p[row], der_q[row], v0=theirs.v[None])
+                out[t] = _agrees(net, started, theirs)
+            else:
+                out[t] = _agrees(net, ours, theirs, s)
+    assert der_p[0].max() == 0 and der_p.max() > 0  # a night step, and PV output
+    return out
+
+
+@pytest.mark.parametrize("name", UNBALANCED_SMALL)
+def test_time_series_steps_with_der_are_opendss(name):
+    _time_steps(name)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("name", [n for n in UNBALANCED_ALL if n not in UNBALANCED_SMALL])
+def test_time_series_steps_with_der_on_the_other_feeders_are_opendss(name):
+    _time_steps(name)
 
 
 DER_LINES = (
