@@ -58,13 +58,10 @@ def _snapshot() -> DssSnapshot:
     )
 
 
-def solve_time_step(master: Path, pv_lines: list[str], load_mult: float | None = None, hour: float | None = None) -> DssSnapshot:
-    """OpenDSS at one time-series step of a shipped feeder with DER at fixed output: the
-    file's snapshot solved (control loop on: taps and capacitors settle where opfbench's
-    reader finds them), then held (RegControls and CapControls disabled), the PVSystems
-    `pv_lines` added, and one solution — in snapshot mode at `load_mult` (the loads ×
-    a load profile's value), or in yearly mode at `hour` (each load on its own yearly
-    shape: OpenDSS reads a fixed-interval shape's point k (1-based) at hour k × interval)."""
+def _settled_and_held(master: Path):
+    """Compile `master` and solve its snapshot with the control loop on (regulator taps and
+    capacitors settle, as opfbench's reader finds them), then hold them (RegControls and
+    CapControls disabled); returns OpenDSS's command function."""
     dss.Basic.AllowChangeDir(False)
     run = dss.Text.Command
     run("clear")
@@ -74,6 +71,15 @@ def solve_time_step(master: Path, pv_lines: list[str], load_mult: float | None =
     assert dss.Solution.Converged()
     run("batchedit regcontrol..* enabled=no")
     run("batchedit capcontrol..* enabled=no")
+    return run
+
+
+def solve_time_step(master: Path, pv_lines: list[str], load_mult: float | None = None, hour: float | None = None) -> DssSnapshot:
+    """OpenDSS at one time-series step of a shipped feeder with DER at fixed output: the
+    file's snapshot settled and held (`_settled_and_held`), the PVSystems `pv_lines` added, and one solution — in snapshot mode at `load_mult` (the loads ×
+    a load profile's value), or in yearly mode at `hour` (each load on its own yearly
+    shape: OpenDSS reads a fixed-interval shape's point k (1-based) at hour k × interval)."""
+    run = _settled_and_held(master)
     for line in pv_lines:
         run(line)
     if hour is None:
@@ -153,14 +159,7 @@ def volt_var(
     voltage as the curve's reference), curve `curve_v` → `curve_q[i]` in p.u. of its
     kvarMax (= |Q| limit: kvarmax is its last entry), flat beyond the ends."""
     far = (0.5, 1.5)
-    dss.Basic.AllowChangeDir(False)
-    run = dss.Text.Command
-    run("clear")
-    run(f'compile "{master}"')
-    run(f"set mode=snapshot tolerance={TOLERANCE!r} maxiterations=200")
-    dss.Solution.Solve()
-    run("batchedit regcontrol..* enabled=no")
-    run("batchedit capcontrol..* enabled=no")
+    run = _settled_and_held(master)
     run(f"set loadmult={load_mult!r}")
     for i, ((bus1, kv, kva, pmpp, p_kw), (q_pu, kvar_max)) in enumerate(zip(units, curve_q, strict=True)):
         phases = len(bus1.split(".")) - 2
