@@ -119,7 +119,6 @@ STEP_KINDS = _kinds(
         "fallback",
         "solver_status",
         "lower_bound_kw",
-        "max_vuf_pct",
     ),
 )
 """The columns of steps.parquet the report uses, and their kinds."""

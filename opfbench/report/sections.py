@@ -306,7 +306,7 @@ def convergence(inputs: Inputs) -> Section:
                 " On a three-phase feeder IPOPT solves every step and, under 'auto', the SDP relaxation (sdp3) bounds every "
                 "step of a short run and an evenly spread sample of a long one ('steps with a bound' counts them): a step is "
                 "certified (by sdp3) where the optimum's losses lie within 1e-6 of that bound; the steps outside the sample are not."
-                if "steps with a bound" in conv
+                if inputs.summary is not None and "max_vuf_pct" in inputs.summary and inputs.summary["max_vuf_pct"].notna().any()
                 else ""
             ),
         )

@@ -22,7 +22,6 @@ from opfbench.result import (
     CERTIFIED_BY_IPOPT,
     CERTIFIED_BY_SDP,
     CERTIFIED_BY_SOCP,
-    MAX_VUF,
     PF_DIVERGED,
     RULE_NON_FINITE,
     STATUSES,
@@ -127,8 +126,8 @@ def formulation_steps(steps: pd.DataFrame, kinds: Kinds) -> pd.DataFrame:
 
 def convergence(steps: pd.DataFrame, kinds: Kinds) -> pd.DataFrame:
     """Per case × formulation × k: steps with each status (count and share %); for an
-    exact model's, the ok steps certified by the relaxation or by IPOPT — and where the run
-    has a three-phase feeder, by its SDP relaxation, and the steps with a bound."""
+    exact model's, the ok steps certified by the relaxation or by IPOPT (or on a three-phase
+    feeder by its SDP relaxation, where it certified one) and the steps with a lower bound."""
     sub = formulation_steps(steps, kinds)
     if sub.empty:
         return pd.DataFrame()
@@ -145,15 +144,14 @@ def convergence(steps: pd.DataFrame, kinds: Kinds) -> pd.DataFrame:
     out["not ok %"] = 100.0 * (total - counts["ok"]) / total
     ac = ~sub["strategy"].astype(str).isin(kinds.inexact)  # who certified the AC OPF's ok steps
     inexact = out.index.get_level_values("strategy").isin(kinds.inexact)
-    three_phase = (sub["certified_by"] == CERTIFIED_BY_SDP).any() or (MAX_VUF in sub and sub[MAX_VUF].notna().any())
-    for solver in (CERTIFIED_BY_SOCP, CERTIFIED_BY_IPOPT) + ((CERTIFIED_BY_SDP,) if three_phase else ()):
+    sdp = (sub["certified_by"] == CERTIFIED_BY_SDP).any()  # a three-phase run's: shown where it certified a step
+    for solver in (CERTIFIED_BY_SOCP, CERTIFIED_BY_IPOPT) + ((CERTIFIED_BY_SDP,) if sdp else ()):
         picked = sub[ac & (sub["status"] == "ok") & (sub["certified_by"] == solver)]
         out[f"ok, certified by {solver}"] = (
             picked.groupby(["case", "strategy", "k"]).size().reindex(out.index, fill_value=0).where(~inexact).astype("Int64")
         )
-    if three_phase:  # the SDP bounds a sample of a long run's steps (`three_phase.BOUND_SAMPLE`): say how many
-        bounded = sub[ac].groupby(["case", "strategy", "k"])["lower_bound_kw"].count()
-        out["steps with a bound"] = bounded.reindex(out.index, fill_value=0).where(~inexact).astype("Int64")
+    bounded = sub[ac].groupby(["case", "strategy", "k"])["lower_bound_kw"].count()  # a sample of a long three-phase run's
+    out["steps with a bound"] = bounded.reindex(out.index, fill_value=0).where(~inexact).astype("Int64")
     return order(out.reset_index())
 
 
