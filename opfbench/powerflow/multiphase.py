@@ -29,7 +29,11 @@ A snapshot has converged when its largest node-voltage update is below `tol` p.u
 node's base voltage and the equations hold at the result: at every node the current
 mismatch |Y·V − I_source − I_branches(V)| is below `MISMATCH_REL` of the currents that
 meet there (`_residual`). One that has not after `max_iter` iterations is reported not
-converged (its voltages are no operating point and carry no figure).
+converged (its voltages are no operating point and carry no figure). Dense, the mismatch
+is formed per snapshot on K alone: at every other node Y equals A, so the mismatch there
+of V = A⁻¹·I_source + Z_NK·J is, for every J, the residual of the solves that formed
+A⁻¹·I_source and Z_NK — certified once per network (`_linear_error`) and part of every
+snapshot's mismatch.
 
 The two halves are separate calls: `iterate_phase_flow` runs the iteration and keeps a
 `PhaseIterate` (the currents J on K when dense, every node's voltage when sparse), from
@@ -156,6 +160,9 @@ class _System:
     law: BranchLaw  # the load branches' current law
     ybus_abs: sp.csc_matrix  # |Y| entrywise (the residual's scale)
     z_abs_pu: np.ndarray | None  # (n_node, m) |Z_NK| / each node's base voltage (`voltages_within`)
+    near: np.ndarray  # K and the nodes Y joins to K: what the residual on K reads
+    y_k_near: sp.csr_matrix  # (m, len(near)) Y's rows K on those nodes
+    linear_error: float  # dense: the solves' backward error (`_linear_error`), every other node's mismatch
 
     def injections(
         self, v_k: np.ndarray, p_br: np.ndarray, q_br: np.ndarray, s_der: np.ndarray, vbase_load: np.ndarray
@@ -178,10 +185,10 @@ def _system(net: PhaseNetwork) -> _System:
     pos = np.full(net.n_node, m)
     pos[k] = np.arange(m)
     pos_g = np.append(pos, m)  # GROUND (−1) → the zero row m
+    y_rows = net.ybus.tocsr()[k]
+    near = np.union1d(k, y_rows.indices).astype(np.int64)
 
-    y_branch = (net.load_p_mw[lb.owner] - 1j * net.load_q_mvar[lb.owner]) * 1e6 * lb.share / lb.vbase_v**2
-    c_load = lb.incidence(net.n_node)
-    y_load = (c_load @ sp.diags(y_branch) @ c_load.T).tocsc()
+    y_load = _load_admittance(net)
     lu = factorize(net.ybus + y_load)
     v_source = lu.solve(np.asarray(net.source_current, dtype=complex))
     z_nk = None
@@ -209,7 +216,35 @@ def _system(net: PhaseNetwork) -> _System:
         net.load_models.branch_law(lb.owner),
         abs(net.ybus).tocsc(),
         None if z_nk is None else np.abs(z_nk) / net.node_base_v[:, None],
+        near,
+        y_rows[:, near].tocsr(),
+        np.inf if z_nk is None else _linear_error(net, v_source, z_nk, k),
     )
+
+
+def _load_admittance(net: PhaseNetwork) -> sp.csc_matrix:
+    """(n_node, n_node) Y_L: the load branches' nominal admittances (module docstring)."""
+    lb = net.load_branches
+    y_branch = (net.load_p_mw[lb.owner] - 1j * net.load_q_mvar[lb.owner]) * 1e6 * lb.share / lb.vbase_v**2
+    c_load = lb.incidence(net.n_node)
+    return (c_load @ sp.diags(y_branch) @ c_load.T).tocsc()
+
+
+def _linear_error(net: PhaseNetwork, v_source: np.ndarray, z_nk: np.ndarray, k: np.ndarray) -> float:
+    """The componentwise backward error of the solves every node's voltage is formed
+    from: max |A·x − e| / (|A|·|x| + |e|) over the columns x = A⁻¹·I_source (e = I_source)
+    and x = (A⁻¹)_{:,k} (e the unit vector at k), at every node. Where no branch is (N∖K)
+    Y equals A there, so the nodal mismatch of V = A⁻¹·I_source + Z_NK·J is, for any J,
+    the combination of these columns' residuals there: it is certified once per network."""
+    a = net.ybus + _load_admittance(net)
+    x = np.column_stack([v_source, z_nk])
+    e = np.zeros_like(x)
+    e[:, 0] = net.source_current
+    e[k, np.arange(1, len(k) + 1)] = 1.0
+    scale = abs(a) @ np.abs(x) + np.abs(e)
+    with np.errstate(all="ignore"):
+        error = np.abs(a @ x - e) / np.where(scale > 0, scale, 1.0)
+    return float(error.max(initial=0.0)) if np.isfinite(error).all() else np.inf
 
 
 @dataclass(frozen=True, eq=False)
@@ -497,9 +532,30 @@ def _iterate(
 
 
 def _certify(flow: PhaseIterate, sys_: _System, powers: _Powers) -> PhaseFlowResult:
-    """`certify`, in blocks of `_BLOCK` snapshots (each block's node voltages stay in cache
-    through the expansion, the residual and the losses). The voltages are formed node-major
-    (n_node, S), the layout the sparse products want; the result's `v` is its transpose."""
+    """`certify`. Dense: every node's voltage V = A⁻¹·I_source + Z_NK·J in one product
+    (S, n_node); the mismatch on K from Y's rows K (the nodes they join), every other
+    node's being the network's `linear_error` (`_linear_error`). Sparse: the iterate's
+    voltages, the mismatch at every node (`_certify_every_node`)."""
+    if sys_.z_nk is None:
+        return _certify_every_node(flow, sys_, powers)
+    net = flow.net
+    with _BLAS.limit(limits=1, user_api="blas"), np.errstate(all="ignore"):
+        v = flow.state @ sys_.z_nk.T
+        v += sys_.v_source
+        nodes_major = v.T
+        given = sys_.injections(nodes_major[sys_.k], *powers, net.load_branches.vbase_v[:, None])
+        at_k = _residual(sys_.y_k_near, nodes_major[sys_.near], net.source_current[sys_.k], given, slice(None))
+        losses = _source_kva(net, nodes_major).real + (nodes_major[sys_.k] * np.conj(given)).real.sum(axis=0) / 1e3
+    mismatch = np.maximum(at_k, sys_.linear_error)
+    converged = np.asarray(flow.settled, dtype=bool) & (mismatch < MISMATCH_REL)
+    return PhaseFlowResult(net, v, converged, flow.iterations, mismatch, losses)
+
+
+def _certify_every_node(flow: PhaseIterate, sys_: _System, powers: _Powers) -> PhaseFlowResult:
+    """`certify` of the sparse iteration (its state is every node's V), in blocks of
+    `_BLOCK` snapshots (each block's node voltages stay in cache through the residual and
+    the losses), node-major (n_node, S), the layout the sparse products want; the
+    result's `v` is its transpose."""
     net = flow.net
     n_snap = flow.state.shape[0]
     vbase_load = net.load_branches.vbase_v[:, None]
@@ -509,13 +565,9 @@ def _certify(flow: PhaseIterate, sys_: _System, powers: _Powers) -> PhaseFlowRes
     with _BLAS.limit(limits=1, user_api="blas"), np.errstate(all="ignore"):
         for first in range(0, n_snap, _BLOCK):
             block = slice(first, first + _BLOCK)
-            if sys_.z_nk is None:
-                vb = np.ascontiguousarray(flow.state[block].T)
-            else:
-                vb = sys_.z_nk @ flow.state[block].T
-                vb += sys_.v_source[:, None]
+            vb = np.ascontiguousarray(flow.state[block].T)
             given = sys_.injections(vb[sys_.k], powers[0][:, block], powers[1][:, block], powers[2][:, block], vbase_load)
-            mismatch[block] = _residual(net, sys_, vb, given)
+            mismatch[block] = _residual(net.ybus, vb, net.source_current, given, sys_.k, sys_.ybus_abs)
             losses[block] = _source_kva(net, vb).real + (vb[sys_.k] * np.conj(given)).real.sum(axis=0) / 1e3
             v[:, block] = vb
     converged = np.asarray(flow.settled, dtype=bool) & (mismatch < MISMATCH_REL)
@@ -531,16 +583,20 @@ def _source_kva(net: PhaseNetwork, v: np.ndarray) -> np.ndarray:
     return (at * np.conj(current)).sum(axis=0) / 1e3
 
 
-def _residual(net: PhaseNetwork, sys_: _System, v: np.ndarray, given: np.ndarray) -> np.ndarray:
-    """(S,) the componentwise backward error of the network equations at V: the largest
-    nodal current mismatch |Y·V − I_source − I_branches| relative to the currents that meet
-    at the node (|Y|·|V| + |I_source| + |I_branches|). Scale-free, so a node joined by a
-    near-zero impedance switch — whose currents are large differences of large terms and
-    carry their round-off — is judged against what round-off leaves there."""
-    residual = net.ybus @ v - net.source_current[:, None]
-    residual[sys_.k] -= given
-    scale = sys_.ybus_abs @ np.abs(v) + np.abs(net.source_current)[:, None]
-    scale[sys_.k] += np.abs(given)
+def _residual(
+    y: sp.spmatrix, v: np.ndarray, source: np.ndarray, given: np.ndarray, at: np.ndarray | slice, y_abs: sp.spmatrix | None = None
+) -> np.ndarray:
+    """(S,) the componentwise backward error of the network equations on Y's rows `y`
+    (their columns' voltages v (·, S)): the largest nodal current mismatch
+    |Y·V − I_source − I_branches| relative to the currents that meet at the node
+    (|Y|·|V| + |I_source| + |I_branches|), the branch currents `given` injected at the
+    rows `at`. Scale-free, so a node joined by a near-zero impedance switch — whose
+    currents are large differences of large terms and carry their round-off — is judged
+    against what round-off leaves there."""
+    residual = y @ v - source[:, None]
+    residual[at] -= given
+    scale = (abs(y) if y_abs is None else y_abs) @ np.abs(v) + np.abs(source)[:, None]
+    scale[at] += np.abs(given)
     with np.errstate(all="ignore"):
         error = np.abs(residual) / np.where(scale > 0, scale, 1.0)
     return np.where(np.isfinite(error).all(axis=0), error.max(axis=0, initial=0.0), np.inf)
