@@ -28,7 +28,7 @@ def _every_node(net: PhaseNetwork, v: np.ndarray, powers: tuple[np.ndarray, ...]
     """(S, n_node) the relative nodal mismatch at every node of voltages v (S, n_node)."""
     sys_ = multiphase._system(net)
     branch = multiphase._branch_powers(net, *powers)
-    given = sys_.injections(v.T[sys_.k], *branch, net.load_branches.vbase_v[:, None])
+    given = sys_.injections(v.T[sys_.k], *branch)
     residual = net.ybus @ v.T - net.source_current[:, None]
     residual[sys_.k] -= given
     scale = abs(net.ybus) @ np.abs(v.T) + np.abs(net.source_current)[:, None]

@@ -51,11 +51,12 @@ from typing import Any, Self
 
 import numpy as np
 import scipy.sparse as sp
+from numba import njit
 from threadpoolctl import ThreadpoolController
 
 from opfbench.errors import InputError
 from opfbench.multiphase import GROUND, PhaseNetwork
-from opfbench.multiphase.branches import BranchLaw
+from opfbench.multiphase.branches import BranchLaw, drawn
 from opfbench.multiphase.regulators import ControlState, act, control_voltage, sample
 from opfbench.powerflow.common import MAX_SWEEP_ITER, SWEEP_TOLERANCE
 from opfbench.powerflow.sparse import factorize
@@ -154,8 +155,7 @@ class _System:
     load_b: np.ndarray
     der_a: np.ndarray
     der_b: np.ndarray
-    load_inject: sp.csr_matrix  # (m, n_load_branch): branch current (a → b) → node injections
-    der_inject: sp.csr_matrix  # (m, n_der_branch)
+    vbase_load: np.ndarray  # (n_load_branch,) the load branches' base voltages
     base_k: np.ndarray  # (m, 1) node base voltages on K
     law: BranchLaw  # the load branches' current law
     ybus_abs: sp.csc_matrix  # |Y| entrywise (the residual's scale)
@@ -164,16 +164,86 @@ class _System:
     y_k_near: sp.csr_matrix  # (m, len(near)) Y's rows K on those nodes
     linear_error: float  # dense: the solves' backward error (`_linear_error`), every other node's mismatch
 
-    def injections(
-        self, v_k: np.ndarray, p_br: np.ndarray, q_br: np.ndarray, s_der: np.ndarray, vbase_load: np.ndarray
-    ) -> np.ndarray:
+    def injections(self, v_k: np.ndarray, p_br: np.ndarray, q_br: np.ndarray, s_der: np.ndarray) -> np.ndarray:
         """(m, S') branch currents injected into the nodes K at their voltages v_k (m, S'),
         for the branch powers of those S' snapshots (`_branch_powers`)."""
-        vx = np.concatenate([v_k, np.zeros((1, v_k.shape[1]), dtype=complex)])
-        drawn = self.law.current(vx[self.load_a] - vx[self.load_b], p_br, q_br, vbase_load)
-        with np.errstate(all="ignore"):
-            given = np.conj(s_der / (vx[self.der_a] - vx[self.der_b]))
-        return self.load_inject @ drawn + self.der_inject @ given
+        return self._currents(v_k, p_br, q_br, s_der, _NO_ROWS)
+
+    def iteration_currents(self, v_k: np.ndarray, p_br: np.ndarray, q_br: np.ndarray, s_der: np.ndarray) -> np.ndarray:
+        """(m, S') the currents J the iteration injects at K: the branches' (`injections`)
+        and the load admittances' Y_L·V."""
+        return self._currents(v_k, p_br, q_br, s_der, self.y_load_kk)
+
+    def _currents(self, v_k, p_br, q_br, s_der, y: sp.csr_matrix) -> np.ndarray:
+        out = np.empty(v_k.shape, dtype=complex)
+        _branch_currents(
+            np.ascontiguousarray(v_k),
+            (
+                self.load_a,
+                self.load_b,
+                np.ascontiguousarray(p_br),
+                np.ascontiguousarray(q_br),
+                self.vbase_load,
+                *self.law.constants,
+            ),
+            (self.der_a, self.der_b, np.ascontiguousarray(s_der)),
+            (y.indptr if y.shape[0] else np.zeros(len(v_k) + 1, dtype=y.indptr.dtype), y.indices, y.data),
+            out,
+        )
+        return out
+
+
+_NO_ROWS = sp.csr_matrix((0, 0), dtype=complex)
+
+
+@njit(cache=True, error_model="numpy")
+def _branch_currents(v_k, loads, ders, y, out) -> None:
+    """out (m, S) ← Y·v_k (CSR `y`: indptr, indices, data; none when indptr is all zero)
+    plus the currents the load branches draw (`branches.drawn`, taken out of node a and
+    into node b) and the DER branches inject (I = conj(S/V)), at the voltages v_k (m, S)
+    of K; branch ends are positions in K, m meaning ground."""
+    m, n = v_k.shape
+    indptr, indices, data = y
+    for r in range(m):
+        for s in range(n):
+            out[r, s] = 0.0
+        for t in range(indptr[r], indptr[r + 1]):
+            for s in range(n):
+                out[r, s] += data[t] * v_k[indices[t], s]
+    a_load, b_load, p, q, vbase, h_p, h_q, switches, vmin, vmax, vlow, at_vmin, above_div = loads
+    for i in range(a_load.size):
+        a, b = a_load[i], b_load[i]
+        for s in range(n):
+            across = v_k[a, s] - v_k[b, s] if b < m else v_k[a, s]
+            current = drawn(
+                across,
+                p[i, s],
+                q[i, s],
+                vbase[i],
+                h_p[i],
+                h_q[i],
+                switches[i],
+                vmin[i],
+                vmax[i],
+                vlow[i],
+                at_vmin[i],
+                above_div[i],
+            )
+            out[a, s] -= current
+            if b < m:
+                out[b, s] += current
+    a_der, b_der, s_der = ders
+    for i in range(a_der.size):
+        a, b = a_der[i], b_der[i]
+        for s in range(n):
+            across = v_k[a, s] - v_k[b, s] if b < m else v_k[a, s]
+            re, im = across.real, across.imag
+            sr, si = s_der[i, s].real, s_der[i, s].imag
+            per_mag2 = 1.0 / (re * re + im * im)
+            given = complex((sr * re + si * im) * per_mag2, (sr * im - si * re) * per_mag2)  # conj(S/V)
+            out[a, s] += given
+            if b < m:
+                out[b, s] -= given
 
 
 @lru_cache(maxsize=8)
@@ -210,8 +280,7 @@ def _system(net: PhaseNetwork) -> _System:
         pos_g[lb.b],
         pos_g[db.a],
         pos_g[db.b],
-        lb.incidence(net.n_node)[k].tocsr() * -1.0,
-        db.incidence(net.n_node)[k].tocsr(),
+        np.ascontiguousarray(lb.vbase_v),
         net.node_base_v[k][:, None],
         net.load_models.branch_law(lb.owner),
         abs(net.ybus).tocsc(),
@@ -486,7 +555,6 @@ def _iterate(
     """The iteration on S snapshots from `start` (r, S) (the carried nodes' V, or None:
     the no-load state; columns that are not finite and non-zero start from it too)."""
     n_snap = powers[0].shape[1]
-    vbase_load = net.load_branches.vbase_v[:, None]
     m = len(sys_.k)
     dense = sys_.z_nk is not None
     rows = sys_.k if dense else np.arange(net.n_node)  # the nodes the iteration carries
@@ -499,17 +567,21 @@ def _iterate(
     settled = np.full(n_snap, m == 0)  # nothing voltage-dependent: the no-load state is the answer
     active = np.arange(n_snap)
     v_act, p_act = v, powers
+    v_source_k = sys_.v_source[sys_.k][:, None]
+    per_base = 1.0 / sys_.base_k[:, 0]
     with _BLAS.limit(limits=1, user_api="blas"), np.errstate(all="ignore"):
         for it in range(1, max_iter + 1 if m else 1):
-            v_k = v_act[at_k]
-            j = sys_.injections(v_k, *p_act, vbase_load) + sys_.y_load_kk @ v_k
+            v_k = v_act if dense else v_act[at_k]
+            j = sys_.iteration_currents(v_k, *p_act)
             if dense:
-                new = sys_.v_source[sys_.k][:, None] + sys_.z_kk @ j
+                new = sys_.z_kk @ j
+                new += v_source_k
+                step = _largest_change(new, v_k, per_base)
             else:
                 rhs = np.zeros((net.n_node, j.shape[1]), dtype=complex, order="F")
                 rhs[sys_.k] = j
                 new = sys_.v_source[:, None] + sys_.lu.solve(rhs)
-            step = (np.abs(new[at_k] - v_k) / sys_.base_k).max(axis=0)
+                step = _largest_change(np.ascontiguousarray(new[at_k]), v_k, per_base)
             iterations[active] = it
             done = step < tol
             settled[active[done]] = True
@@ -525,30 +597,44 @@ def _iterate(
         else:
             v[:, active] = v_act
         if dense:  # the currents every node's voltage follows from: V = A⁻¹·(I_source + P_K·J)
-            state = (sys_.injections(v, *powers, vbase_load) + sys_.y_load_kk @ v).T.copy()
+            state = sys_.iteration_currents(v, *powers).T.copy()
         else:
             state = np.ascontiguousarray(v.T)
     return PhaseIterate(net, state, settled, iterations)
 
 
+@njit(cache=True, error_model="numpy")
+def _largest_change(new: np.ndarray, old: np.ndarray, per_base: np.ndarray) -> np.ndarray:
+    """(S,) the largest |new − old| (m, S) of a column, in p.u. of each row's base
+    (per_base = 1/base); NaN where some is NaN."""
+    m, n = new.shape
+    out = np.zeros(n)
+    for i in range(m):
+        for s in range(n):
+            d = new[i, s] - old[i, s]
+            moved = np.sqrt(d.real * d.real + d.imag * d.imag) * per_base[i]
+            if moved > out[s] or moved != moved:
+                out[s] = moved
+    return out
+
+
 def _certify(flow: PhaseIterate, sys_: _System, powers: _Powers) -> PhaseFlowResult:
-    """`certify`. Dense: every node's voltage V = A⁻¹·I_source + Z_NK·J in one product
-    (S, n_node); the mismatch on K from Y's rows K (the nodes they join), every other
+    """`certify`. Dense: every node's voltage V = A⁻¹·I_source + Z_NK·J in one product,
+    node-major (n_node, S) (the result's `v` is its transpose); the mismatch on K from Y's rows K (the nodes they join), every other
     node's being the network's `linear_error` (`_linear_error`). Sparse: the iterate's
     voltages, the mismatch at every node (`_certify_every_node`)."""
     if sys_.z_nk is None:
         return _certify_every_node(flow, sys_, powers)
     net = flow.net
     with _BLAS.limit(limits=1, user_api="blas"), np.errstate(all="ignore"):
-        v = flow.state @ sys_.z_nk.T
-        v += sys_.v_source
-        nodes_major = v.T
-        given = sys_.injections(nodes_major[sys_.k], *powers, net.load_branches.vbase_v[:, None])
+        nodes_major = sys_.z_nk @ flow.state.T
+        nodes_major += sys_.v_source[:, None]
+        given = sys_.injections(nodes_major[sys_.k], *powers)
         at_k = _residual(sys_.y_k_near, nodes_major[sys_.near], net.source_current[sys_.k], given, slice(None))
         losses = _source_kva(net, nodes_major).real + (nodes_major[sys_.k] * np.conj(given)).real.sum(axis=0) / 1e3
     mismatch = np.maximum(at_k, sys_.linear_error)
     converged = np.asarray(flow.settled, dtype=bool) & (mismatch < MISMATCH_REL)
-    return PhaseFlowResult(net, v, converged, flow.iterations, mismatch, losses)
+    return PhaseFlowResult(net, nodes_major.T, converged, flow.iterations, mismatch, losses)
 
 
 def _certify_every_node(flow: PhaseIterate, sys_: _System, powers: _Powers) -> PhaseFlowResult:
@@ -558,7 +644,6 @@ def _certify_every_node(flow: PhaseIterate, sys_: _System, powers: _Powers) -> P
     result's `v` is its transpose."""
     net = flow.net
     n_snap = flow.state.shape[0]
-    vbase_load = net.load_branches.vbase_v[:, None]
     v = np.empty((net.n_node, n_snap), dtype=complex)
     mismatch = np.empty(n_snap)
     losses = np.empty(n_snap)
@@ -566,7 +651,7 @@ def _certify_every_node(flow: PhaseIterate, sys_: _System, powers: _Powers) -> P
         for first in range(0, n_snap, _BLOCK):
             block = slice(first, first + _BLOCK)
             vb = np.ascontiguousarray(flow.state[block].T)
-            given = sys_.injections(vb[sys_.k], powers[0][:, block], powers[1][:, block], powers[2][:, block], vbase_load)
+            given = sys_.injections(vb[sys_.k], powers[0][:, block], powers[1][:, block], powers[2][:, block])
             mismatch[block] = _residual(net.ybus, vb, net.source_current, given, sys_.k, sys_.ybus_abs)
             losses[block] = _source_kva(net, vb).real + (vb[sys_.k] * np.conj(given)).real.sum(axis=0) / 1e3
             v[:, block] = vb
