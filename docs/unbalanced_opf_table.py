@@ -30,6 +30,7 @@ from opfbench.cases.opendss_cases import opendss_copy
 from opfbench.cases.opendss_pv import case_with_pv
 from opfbench.data.profiles import paper_day
 from opfbench.formulations.three_phase import bound, certify, optimum
+from opfbench.multiphase import PhaseNetwork
 from opfbench.powerflow.multiphase import solve_phase_flow
 
 PLACEMENT = {"ieee13": {}, "ieee37": {}, "ieee123": {}, "eulv": {"kw": 4.0}}
@@ -39,16 +40,23 @@ def _counts(labels: list[str]) -> str:
     return ", ".join(f"{s} {n}" for s, n in sorted(Counter(labels).items()))
 
 
-def feeder(name: str, steps: int) -> tuple[str, list[str]]:
-    """The feeder's summary row and its per-step rows."""
+def snapshots(name: str, steps: int) -> tuple[PhaseNetwork, np.ndarray, np.ndarray, np.ndarray, list[str], np.ndarray, np.ndarray]:
+    """The feeder with its PV; its loads' P and Q and its PV's P (steps, n) MW/MVAr at
+    `steps` times evenly over the paper day; those times ("HH:MM"), and the day's load and
+    PV profile values there (p.u.)."""
     day = paper_day()
     take = np.linspace(0, len(day) - 1, steps).round().astype(int)
     load, pv = day["load"].to_numpy()[take], day["pv"].to_numpy()[take]
     with tempfile.TemporaryDirectory() as tmp, opendss_copy(name) as master:
         case = case_with_pv(Path(tmp), master, name, **PLACEMENT[name])
-    net = case.network
     lp, lq, dp, _ = case.stored
-    lp, lq, dp = lp * load[:, None], lq * load[:, None], dp * pv[:, None]
+    times = [day.index[t].strftime("%H:%M") for t in take]
+    return case.network, lp * load[:, None], lq * load[:, None], dp * pv[:, None], times, load, pv
+
+
+def feeder(name: str, steps: int) -> tuple[str, list[str]]:
+    """The feeder's summary row and its per-step rows."""
+    net, lp, lq, dp, times, load, pv = snapshots(name, steps)
     opt = optimum(net, lp, lq, dp, 0.0)
     start = time.perf_counter()
     relaxed = bound(net, lp, lq, dp, 0.0)
@@ -69,9 +77,9 @@ def feeder(name: str, steps: int) -> tuple[str, list[str]]:
         f"{share} | {relaxed.compile_ms / 1e3:.1f} | {np.median(relaxed.solve_ms) / 1e3:.2f} | {wall:.0f} |"
     )
     rows = [
-        f"| {name} | {day.index[t].strftime('%H:%M')} | {load[i]:.3f} | {pv[i]:.3f} | {ac_labels[i]} | {opt.losses_kw[i]:.4f} | "
+        f"| {name} | {t} | {load[i]:.3f} | {pv[i]:.3f} | {ac_labels[i]} | {opt.losses_kw[i]:.4f} | "
         f"{relaxed.status[i]} | {relaxed.bound_kw[i]:.4f} | {gap[i]:.2e} | {relaxed.rank_ratio[i]:.1e} | {'yes' if certified[i] else 'no'} |"
-        for i, t in enumerate(take)
+        for i, t in enumerate(times)
     ]
     return summary, rows
 

@@ -21,7 +21,6 @@ from opfbench.cases.opendss_pv import case_with_pv
 from opfbench.errors import InputError, NetworkError
 from opfbench.formulations import three_phase
 from opfbench.formulations.model import model_for
-from opfbench.formulations.models.ac_three_phase import load_law
 from opfbench.formulations.models.sdp_three_phase import RANK_RATIO, ThreePhaseSdp
 from opfbench.formulations.three_phase import (
     BOUND_SAMPLE,
@@ -36,7 +35,7 @@ from opfbench.formulations.three_phase import (
     q_limits,
     step_bounds,
 )
-from opfbench.multiphase import GROUND, Element
+from opfbench.multiphase import Element
 from opfbench.powerflow.multiphase import solve_phase_flow
 
 # (load multiplier, PV irradiance): noon, afternoon, evening peak, night
@@ -66,54 +65,6 @@ def ieee13_held(ieee13):
 @pytest.fixture(scope="module")
 def model(ieee13):
     return ThreePhaseSdp(ieee13[0])
-
-
-def _lift(model: ThreePhaseSdp, v: np.ndarray, load_p, load_q, der_p) -> np.ndarray:
-    """The relaxation's unknowns at the operating point with node voltages `v` (V) and
-    Q = 0: each block's Gram matrix ζζᴴ of its coordinates, solved from the voltages and the
-    branch currents."""
-    net = model.net
-    vpu = v / net.node_base_v
-    x = np.zeros(model._gram.size)
-
-    def put(blk: int, zeta: np.ndarray) -> None:
-        g = np.outer(zeta, zeta.conj())
-        re, im, sign = model._gram._index(blk)
-        x[re] = g.real
-        x[im[sign > 0]] = g.imag[sign > 0]
-
-    for br, blk, e_s, e_i in model._coords:
-        vp = np.ones(1, complex) if blk == model._source_block else vpu[br.p]
-        current = np.linalg.solve(br.z, br.c_p @ vp - br.c_s @ vpu[br.s])
-        k = model._gram.sizes[blk]
-        maps = np.vstack([np.eye(k)[: br.p.size], e_s, e_i])
-        target = np.concatenate([vp, vpu[br.s], current])
-        zeta = np.linalg.lstsq(maps, target, rcond=None)[0]
-        assert np.abs(maps @ zeta - target).max() < 1e-9 * np.abs(target).max()
-        put(blk, zeta)
-    exp_p, exp_q, cap = load_law(net)
-    lb, db = net.load_branches, net.der_branches
-    vz = np.append(vpu * net.node_base_v, 0.0)
-    u = np.abs(vz[lb.a] - vz[np.where(lb.b == GROUND, -1, lb.b)]) / lb.vbase_v
-    s_p, s_q = (u**2 * np.minimum(u, cap) ** (e - 2.0) for e in (exp_p, exp_q))  # the power flow's law
-    drawn = lb.share * (load_p[lb.owner] * s_p + 1j * load_q[lb.owner] * s_q) / model.s_base
-    lifted = iter(model._blocks[len(model._coords) :])
-    for br, power in ((lb, drawn), (db, -db.share * der_p[db.owner] / model.s_base)):
-        for j in np.flatnonzero(br.b != GROUND):
-            a, b = br.a[j], br.b[j]
-            put(next(lifted), np.array([vpu[a], vpu[b], np.conj(power[j] / (vpu[a] - vpu[b]))]))
-    for var in model.problem.variables():
-        if var.name() in ("s_p", "s_q"):
-            var.value = s_p if var.name() == "s_p" else s_q
-        elif var.name() == "q":
-            var.value = np.zeros(len(net.ders))
-    model._x.value = x
-    if model._flows is not None:  # an ideal branch carries what its receiving side draws
-        f_p, f_q, through = model._flows
-        for f, balance in ((f_p, model._balance[0]), (f_q, model._balance[1])):
-            f.value = np.zeros(f.size)
-            f.value = np.linalg.lstsq(through.toarray(), -balance.value, rcond=None)[0]
-    return x
 
 
 def _meshed(net):
@@ -146,11 +97,7 @@ def test_an_operating_point_lifted_meets_every_constraint_with_its_losses_as_obj
     flow = solve_phase_flow(net, lp[i : i + 1], lq[i : i + 1], dp[i : i + 1], tol=1e-13, max_iter=500)
     assert flow.converged[0]
     assert net.band[0] <= flow.vm[0].min() and flow.vm[0].max() <= net.band[1]
-    model.load_p.value, model.load_q.value, model.der_p.value = lp[i], lq[i], dp[i]
-    model.q_limit.value = q_limits(net, dp[i : i + 1], 0.0)[0]
-    data = (lp[i], lq[i], dp[i], model.q_limit.value)
-    model.current_cap.value, model.kcl_cap.value = model.current_caps(*data), model.kcl_caps(*data)
-    _lift(model, flow.v[0], lp[i], lq[i], dp[i])
+    model.lift(flow.v[0], lp[i], lq[i], dp[i], q_limits(net, dp[i : i + 1], 0.0)[0], np.zeros(len(net.ders)))
     assert model._flows is not None  # ieee13's switch is an ideal branch
     # to 1e-7 p.u.: the switch 671–692 is ideal in the relaxation, and the power flow's
     # voltage drop across its 1e-7 Ω is about 1e-8 p.u.
@@ -163,7 +110,10 @@ def test_an_operating_point_lifted_meets_every_constraint_with_its_losses_as_obj
 def test_the_rank_one_check_tells_a_mixture_of_two_points(ieee13, model):
     net, lp, lq, dp = ieee13
     flows = solve_phase_flow(net, lp[:2], lq[:2], dp[:2], tol=1e-13, max_iter=500)
-    xs = [_lift(model, flows.v[i], lp[i], lq[i], dp[i]) for i in range(2)]
+    xs = []
+    for i in range(2):
+        model.lift(flows.v[i], lp[i], lq[i], dp[i], q_limits(net, dp[i : i + 1], 0.0)[0], np.zeros(len(net.ders)))
+        xs.append(model._x.value.copy())
     assert not np.allclose(xs[0], xs[1])
     model._x.value = xs[0]
     assert model.rank_ratios().max() <= RANK_RATIO
@@ -237,9 +187,10 @@ def test_the_bound_is_never_above_the_ac_optimum(tmp_path):
         case = case_with_pv(tmp_path, master, "ieee123")
     lp, lq, dp, _ = case.stored
     mult, sun = np.array([[0.9], [1.0], [1.1]]), np.array([[1.0], [0.6], [0.3]])
+    lp, lq, dp = lp * mult, lq * mult, dp * sun
     net = case.network
-    opt = optimum(net, lp * mult, lq * mult, dp * sun, 0.0)
-    relaxed = bound(net, lp * mult, lq * mult, dp * sun, 0.0)
+    opt = optimum(net, lp, lq, dp, 0.0)
+    relaxed = bound(net, lp, lq, dp, 0.0)
     both = np.isfinite(opt.losses_kw) & np.isfinite(relaxed.bound_kw)
     assert both.sum() >= 2, (opt.status, relaxed.status)
     assert (relaxed.bound_kw[both] <= opt.losses_kw[both] * (1 + CERTIFY_RTOL)).all()
@@ -247,6 +198,18 @@ def test_the_bound_is_never_above_the_ac_optimum(tmp_path):
     certified, gap = certify(opt, relaxed)
     assert (certified == (np.abs(gap) <= CERTIFY_RTOL)).all() and not certified[~both].any()
     assert relaxed.compile_ms > 0 and (relaxed.solve_ms > 0).all()
+    # the AC optimum lifted (rank one): feasible in the relaxation, its objective the power
+    # flow's losses less the ideal switches' (below 2e-5 of them) — the same function
+    model = ThreePhaseSdp(net)
+    limit = q_limits(net, dp, 0.0)
+    for i in np.flatnonzero(np.isfinite(opt.objective_kw)):
+        model.lift(opt.flow.v[i], lp[i], lq[i], dp[i], limit[i], opt.q_mvar[i])
+        assert max(float(np.max(c.violation())) for c in model.problem.constraints) < 1e-5
+        lifted = model.problem.objective.value
+        assert opt.losses_kw[i] * (1 - 2e-5) <= lifted <= opt.losses_kw[i] * (1 + 1e-9)
+        assert model.rank_ratios().max() < 1e-9
+        if both[i]:
+            assert relaxed.bound_kw[i] <= lifted * (1 + CERTIFY_RTOL)
 
 
 @pytest.mark.parametrize(

@@ -65,8 +65,11 @@ second to its first eigenvalue above `RANK_RATIO`); the hulls of voltage-depende
 (tight only at the ends of their range); delta branches, whose lifted current may split the
 branch's power between its two nodes unlike any voltage (Alsaleh et al.); and, at a
 regulator, the fixed tap (the bound is on the problem with taps held, as the exact model).
-A floating delta winding's common mode (ieee37, ieee123's xfm1) is fixed only by tiny
-shunts, so its blocks read as rank two while the losses do not depend on it.
+A floating delta winding's common mode is fixed only by tiny shunts, so an interior-point
+solution inflates it and its block reads as rank two while nothing depends on it: the
+rank check leaves it out where nothing downstream is referenced to ground (ieee123's xfm1,
+`rank_ratios`); on ieee37 the whole feeder floats (its lines' charging to ground fixes
+the common mode) and it is kept.
 
 Only an "optimal" status gives a bound; "optimal_inaccurate" (Clarabel's AlmostSolved) and
 solver errors give none, and "infeasible" proves the exact problem infeasible (its
@@ -89,7 +92,7 @@ import scipy.sparse as sp
 
 from opfbench.errors import NetworkError
 from opfbench.formulations.model import formulation
-from opfbench.formulations.models.ac_three_phase import DER_VMIN_PU
+from opfbench.formulations.models.ac_three_phase import DER_VMIN_PU, load_law
 from opfbench.multiphase import GROUND, PhaseNetwork
 from opfbench.multiphase.branches import CONSTANT_I, CONSTANT_PQ, CONSTANT_Z, EXPONENTIAL
 
@@ -329,6 +332,12 @@ class ThreePhaseSdp:
             np.zeros((len(src.nodes),) * 2),
         )
         ordered = [source, *branches]
+        # nodes whose voltage to ground matters: a wye load or DER there, a band to ground, a branch leaving it
+        mon_a, mon_b, _, _ = net.monitored
+        lb_, db_ = net.load_branches, net.der_branches
+        grounded = {int(n) for br_ in (lb_, db_) for n in br_.a[br_.b == GROUND]} | {int(n) for n in mon_a[mon_b == GROUND]}
+        grounded |= {int(n) for br_ in branches for n in br_.p}
+        self._physical: dict[int, np.ndarray] = {}  # block → its coordinates that are not a gauge
         self._p_source: list = []
         self._coords: list[tuple[_Branch, int, np.ndarray, np.ndarray]] = []
         self._ideal: list[_Branch] = []
@@ -346,7 +355,9 @@ class ThreePhaseSdp:
                 self._ideal.append(br)
                 shunts += [(br.p, br.y_p), (br.s, br.y_s)]
                 continue
-            b, e_s, e_i = self._coordinates(br, gram)
+            b, e_s, e_i, free = self._coordinates(br, gram)
+            if free and not (set(br.s.tolist()) & grounded):  # a floating winding's common mode: a gauge
+                self._physical[b] = np.arange(gram.sizes[b] - free)
             blocks.append(b)
             self._coords.append((br, b, e_s, e_i))
             k = gram.sizes[b]
@@ -489,9 +500,11 @@ class ThreePhaseSdp:
 
     # ----- the lifted model ------------------------------------------------------------
     @staticmethod
-    def _coordinates(br: _Branch, gram: _Gram) -> tuple[int, np.ndarray, np.ndarray]:
-        """The branch's block and the maps from its coordinates ζ to the receiving voltages
-        (E_s) and the currents (E_I) (module docstring)."""
+    def _coordinates(br: _Branch, gram: _Gram) -> tuple[int, np.ndarray, np.ndarray, int]:
+        """The branch's block, the maps from its coordinates ζ to the receiving voltages
+        (E_s) and the currents (E_I) (module docstring), and how many of ζ's last
+        coordinates are receiving voltages the relation leaves free (a delta winding's
+        common mode)."""
         m, n_p = br.z.shape[0], br.p.size
         left = _null(br.c_s.T)  # ℓ with ℓᵀ·C_s = 0: the relation's own constraints
         lz = left.T @ br.z
@@ -502,7 +515,7 @@ class ThreePhaseSdp:
         r, g = free_i.shape[1], free_s.shape[1]
         e_i = np.hstack([fixed_i, free_i, np.zeros((m, g))])
         e_s = np.hstack([pinv @ (br.c_p - br.z @ fixed_i), -pinv @ br.z @ free_i, free_s])
-        return gram.add(n_p + r + g), e_s, e_i
+        return gram.add(n_p + r + g), e_s, e_i, g
 
     def _build(self, drawn: dict[int, list], eq_rows: list, eq_rhs: list) -> None:
         net, gram = self.net, self._gram
@@ -815,7 +828,10 @@ class ThreePhaseSdp:
         current block L is in no objective term (the Thevenin losses are excluded, as in the
         exact model) and only capped (`_kcl_caps`), so an interior-point solution inflates
         it within the cap; only Z·(L − I·Iᴴ)·Zᴴ reaches the source bus's voltages — its norm
-        relative to theirs."""
+        relative to theirs. A floating winding's common mode (`_coordinates`' free receiving
+        voltage, at a bus with no wye load or DER, no band to ground and no branch leaving
+        it: ieee123's xfm1) is left out of its block: it changes nothing but the draw of the
+        winding's anti-float shunts (1e-8 p.u.), and an interior-point solution inflates it."""
         x = self._x.value
         if x is None:
             raise RuntimeError("rank_ratios needs a solution")
@@ -828,13 +844,15 @@ class ThreePhaseSdp:
                 excess = self._z_source @ (g[1:, 1:] - np.outer(cur, cur.conj())) @ self._z_source.conj().T
                 out.append(float(np.linalg.norm(excess, 2) / np.linalg.norm(e_s @ g @ e_s.conj().T, 2)))
                 continue
+            if blk in self._physical:  # the common mode of a floating winding changes nothing: left out
+                keep = self._physical[blk]
+                g = g[np.ix_(keep, keep)]
             eig = np.linalg.eigvalsh(g)[::-1]
             out.append(float(eig[1] / max(eig[0], 1e-300)) if eig.size > 1 else 0.0)
         return np.array(out)
 
-    def solve(self, load_p_mw: np.ndarray, load_q_mvar: np.ndarray, der_p_mw: np.ndarray, q_limit_mvar: np.ndarray) -> BoundSolve:
-        """One snapshot's bound: loads' P and Q (n_load,) at their law's reference, DER P and
-        usable |Q| (n_der,), MW/MVAr."""
+    def _snapshot(self, load_p_mw: np.ndarray, load_q_mvar: np.ndarray, der_p_mw: np.ndarray, q_limit_mvar: np.ndarray) -> None:
+        """The parameters at one snapshot (`solve`'s arguments), the caps derived from them."""
         self.load_p.value = np.asarray(load_p_mw, dtype=float)
         self.load_q.value = np.asarray(load_q_mvar, dtype=float)
         self.der_p.value = np.asarray(der_p_mw, dtype=float)
@@ -842,6 +860,68 @@ class ThreePhaseSdp:
         data = (self.load_p.value, self.load_q.value, self.der_p.value, self.q_limit.value)
         self.current_cap.value = self.current_caps(*data)
         self.kcl_cap.value = self.kcl_caps(*data)
+
+    def lift(
+        self,
+        v: np.ndarray,
+        load_p_mw: np.ndarray,
+        load_q_mvar: np.ndarray,
+        der_p_mw: np.ndarray,
+        q_limit_mvar: np.ndarray,
+        q_mvar: np.ndarray,
+    ) -> None:
+        """Set the snapshot (`solve`'s arguments) and the relaxation's unknowns to the
+        operating point with node voltages `v` (n_node,) V and DER Q `q_mvar` (n_der,): each
+        block the Gram matrix ζζᴴ of its coordinates (solved from the voltages and the
+        branch currents), the load factors at the power flow's law, the ideal branches'
+        flows from the balance. A rank-one point: `problem.objective.value` is then its
+        losses less what the ideal branches dissipate (module docstring), every constraint
+        met where the point is the power flow's and within the band."""
+        self._snapshot(load_p_mw, load_q_mvar, der_p_mw, q_limit_mvar)
+        net, gram = self.net, self._gram
+        vpu = np.asarray(v) / net.node_base_v
+        x = np.zeros(gram.size)
+
+        def put(blk: int, zeta: np.ndarray) -> None:
+            re, im, sign = gram._index(blk)
+            g = np.outer(zeta, zeta.conj())
+            x[re] = g.real
+            x[im[sign > 0]] = g.imag[sign > 0]
+
+        for br, blk, e_s, e_i in self._coords:
+            vp = np.ones(1, complex) if blk == self._source_block else vpu[br.p]
+            current = np.linalg.solve(br.z, br.c_p @ vp - br.c_s @ vpu[br.s])
+            maps = np.vstack([np.eye(gram.sizes[blk])[: br.p.size], e_s, e_i])
+            put(blk, np.linalg.lstsq(maps, np.concatenate([vp, vpu[br.s], current]), rcond=None)[0])
+        exp_p, exp_q, cap = load_law(net)
+        lb, db = net.load_branches, net.der_branches
+        vz = np.append(vpu * net.node_base_v, 0.0)
+        u = np.abs(vz[lb.a] - vz[np.where(lb.b == GROUND, -1, lb.b)]) / lb.vbase_v
+        s_p, s_q = (u**2 * np.minimum(u, cap) ** (e - 2.0) for e in (exp_p, exp_q))  # the power flow's law
+        p_load, q_load = np.asarray(load_p_mw, dtype=float), np.asarray(load_q_mvar, dtype=float)
+        drawn = lb.share * (p_load[lb.owner] * s_p + 1j * q_load[lb.owner] * s_q) / self.s_base
+        q = np.asarray(q_mvar, dtype=float)
+        injected = db.share * (np.asarray(der_p_mw, dtype=float)[db.owner] + 1j * q[db.owner]) / self.s_base
+        lifted = iter(self._blocks[len(self._coords) :])
+        for ends, power in ((lb, drawn), (db, -injected)):
+            for j in np.flatnonzero(ends.b != GROUND):
+                a, b = ends.a[j], ends.b[j]
+                put(next(lifted), np.array([vpu[a], vpu[b], np.conj(power[j] / (vpu[a] - vpu[b]))]))
+        for var in self.problem.variables():
+            values = {"s_p": s_p, "s_q": s_q, "q": q}
+            if var.name() in values:
+                var.value = values[var.name()]
+        self._x.value = x
+        if self._flows is not None:  # an ideal branch carries what its receiving side draws
+            f_p, f_q, through = self._flows
+            for f, balance in ((f_p, self._balance[0]), (f_q, self._balance[1])):
+                f.value = np.zeros(f.size)
+                f.value = np.linalg.lstsq(through.toarray(), -balance.value, rcond=None)[0]
+
+    def solve(self, load_p_mw: np.ndarray, load_q_mvar: np.ndarray, der_p_mw: np.ndarray, q_limit_mvar: np.ndarray) -> BoundSolve:
+        """One snapshot's bound: loads' P and Q (n_load,) at their law's reference, DER P and
+        usable |Q| (n_der,), MW/MVAr."""
+        self._snapshot(load_p_mw, load_q_mvar, der_p_mw, q_limit_mvar)
         start = time.perf_counter()
         for options in CLARABEL_ATTEMPTS:
             try:
