@@ -73,7 +73,7 @@ MISMATCH_REL = 1e-8
 MAX_CONTROL_ITER = 100
 """Rounds of solve-and-move a snapshot's regulators get to settle (`taps=control`)."""
 _CHUNK = 256  # columns per sparse solve when forming Z_KK (memory: n_node × _CHUNK)
-_BLOCK = 64  # snapshots per block when certifying (`_certify`)
+_BLOCK_BYTES = 2**22  # node voltages per block when certifying every node (`_certify_every_node`): 4 MB
 _ROUND_OFF_PU = 1e-12  # far above the round-off between two ways of forming a node's |V| (p.u.)
 _BLAS = ThreadpoolController().select(user_api="blas")
 
@@ -619,7 +619,7 @@ def _iterate(
             if keep.all():
                 v_act = new
                 continue
-            v[:, active] = new
+            v[:, active[~keep]] = new[:, ~keep]
             if not keep.any():
                 break
             active, v_act = active[keep], new[:, keep]
@@ -669,17 +669,18 @@ def _certify(flow: PhaseIterate, sys_: _System, powers: _Powers) -> PhaseFlowRes
 
 def _certify_every_node(flow: PhaseIterate, sys_: _System, powers: _Powers) -> PhaseFlowResult:
     """`certify` of the sparse iteration (its state is every node's V), in blocks of
-    `_BLOCK` snapshots (each block's node voltages stay in cache through the residual and
-    the losses), node-major (n_node, S), the layout the sparse products want; the
-    result's `v` is its transpose."""
+    snapshots whose node voltages take `_BLOCK_BYTES` (they stay in cache through the
+    residual and the losses), node-major (n_node, S), the layout the sparse products want;
+    the result's `v` is its transpose."""
     net = flow.net
     n_snap = flow.state.shape[0]
+    size = max(1, _BLOCK_BYTES // (16 * net.n_node))
     v = np.empty((net.n_node, n_snap), dtype=complex)
     mismatch = np.empty(n_snap)
     losses = np.empty(n_snap)
     with _one_blas_thread(), np.errstate(all="ignore"):
-        for first in range(0, n_snap, _BLOCK):
-            block = slice(first, first + _BLOCK)
+        for first in range(0, n_snap, size):
+            block = slice(first, first + size)
             vb = np.ascontiguousarray(flow.state[block].T)
             given = sys_.injections(vb[sys_.k], powers[0][:, block], powers[1][:, block], powers[2][:, block])
             mismatch[block] = _residual(net.ybus, vb, net.source_current, given, sys_.k, sys_.ybus_abs)
