@@ -380,7 +380,7 @@ def voltages_within(net: PhaseNetwork, state: np.ndarray, before: np.ndarray, to
         if sys_.z_kk is not None and sys_.z_nk is not None and rows.size:
             at_k = sys_.z_kk @ np.concatenate([state, before]).T
             at_k += sys_.v_source[sys_.k][:, None]
-            moved_k = _largest_magnitude_change(at_k[:, : len(rows)], at_k[:, len(rows) :], 1.0 / sys_.base_k[:, 0])
+            moved_k = _largest_change(at_k[:, : len(rows)], at_k[:, len(rows) :], 1.0 / sys_.base_k[:, 0], True)
             rows = np.flatnonzero(moved_k <= tol + _ROUND_OFF_PU)
             every = sys_.z_nk @ np.concatenate([state[rows], before[rows]]).T
             every += sys_.v_source[:, None]
@@ -388,23 +388,8 @@ def voltages_within(net: PhaseNetwork, state: np.ndarray, before: np.ndarray, to
         else:
             now, then = state.T, before.T
     if rows.size:
-        within[rows] = _largest_magnitude_change(now, then, 1.0 / net.node_base_v) <= tol
+        within[rows] = _largest_change(now, then, 1.0 / net.node_base_v, True) <= tol
     return within
-
-
-@njit(cache=True, error_model="numpy")
-def _largest_magnitude_change(new: np.ndarray, old: np.ndarray, per_base: np.ndarray) -> np.ndarray:
-    """(S,) the largest ||new| − |old|| (m, S) of a column, in p.u. of each row's base
-    (per_base = 1/base); NaN where some is NaN."""
-    m, n = new.shape
-    out = np.zeros(n)
-    for i in range(m):
-        for s in range(n):
-            a, b = new[i, s], old[i, s]
-            moved = abs(np.sqrt(a.real * a.real + a.imag * a.imag) - np.sqrt(b.real * b.real + b.imag * b.imag)) * per_base[i]
-            if moved > out[s] or moved != moved:
-                out[s] = moved
-    return out
 
 
 def _measured(net: PhaseNetwork, magnitude: np.ndarray) -> np.ndarray:
@@ -606,12 +591,12 @@ def _iterate(
             if dense:
                 new = sys_.z_kk @ j
                 new += v_source_k
-                step = _largest_change(new, v_k, per_base)
+                step = _largest_change(new, v_k, per_base, False)
             else:
                 rhs = np.zeros((net.n_node, j.shape[1]), dtype=complex, order="F")
                 rhs[sys_.k] = j
                 new = sys_.v_source[:, None] + sys_.lu.solve(rhs)
-                step = _largest_change(np.ascontiguousarray(new[at_k]), v_k, per_base)
+                step = _largest_change(np.ascontiguousarray(new[at_k]), v_k, per_base, False)
             iterations[active] = it
             done = step < tol
             settled[active[done]] = True
@@ -634,15 +619,19 @@ def _iterate(
 
 
 @njit(cache=True, error_model="numpy")
-def _largest_change(new: np.ndarray, old: np.ndarray, per_base: np.ndarray) -> np.ndarray:
-    """(S,) the largest |new − old| (m, S) of a column, in p.u. of each row's base
-    (per_base = 1/base); NaN where some is NaN."""
+def _largest_change(new: np.ndarray, old: np.ndarray, per_base: np.ndarray, magnitudes: bool) -> np.ndarray:
+    """(S,) the largest |new − old| (m, S) of a column — with `magnitudes` the largest
+    ||new| − |old|| — in p.u. of each row's base (per_base = 1/base); NaN where some is NaN."""
     m, n = new.shape
     out = np.zeros(n)
     for i in range(m):
         for s in range(n):
-            d = new[i, s] - old[i, s]
-            moved = np.sqrt(d.real * d.real + d.imag * d.imag) * per_base[i]
+            a, b = new[i, s], old[i, s]
+            if magnitudes:
+                moved = abs(np.sqrt(a.real * a.real + a.imag * a.imag) - np.sqrt(b.real * b.real + b.imag * b.imag))
+            else:
+                moved = np.sqrt((a.real - b.real) ** 2 + (a.imag - b.imag) ** 2)
+            moved *= per_base[i]
             if moved > out[s] or moved != moved:
                 out[s] = moved
     return out
