@@ -58,7 +58,7 @@ from threadpoolctl import ThreadpoolController
 
 from opfbench.errors import InputError
 from opfbench.multiphase import GROUND, PhaseNetwork
-from opfbench.multiphase.branches import BranchLaw, drawn
+from opfbench.multiphase.branches import BranchLaw, branch_currents
 from opfbench.multiphase.regulators import ControlState, act, control_voltage, sample
 from opfbench.powerflow.common import MAX_SWEEP_ITER, SWEEP_TOLERANCE
 from opfbench.powerflow.sparse import factorize
@@ -193,7 +193,7 @@ class _System:
 
     def _currents(self, v_k, p_br, q_br, s_der, y: sp.csr_matrix) -> np.ndarray:
         out = np.empty(v_k.shape, dtype=complex)
-        _branch_currents(
+        branch_currents(
             np.ascontiguousarray(v_k),
             (
                 self.load_a,
@@ -211,56 +211,6 @@ class _System:
 
 
 _NO_ROWS = sp.csr_matrix((0, 0), dtype=complex)
-
-
-@njit(cache=True, error_model="numpy")
-def _branch_currents(v_k, loads, ders, y, out) -> None:
-    """out (m, S) ← Y·v_k (CSR `y`: indptr, indices, data; none when indptr is all zero)
-    plus the currents the load branches draw (`branches.drawn`, taken out of node a and
-    into node b) and the DER branches inject (I = conj(S/V)), at the voltages v_k (m, S)
-    of K; branch ends are positions in K, m meaning ground."""
-    m, n = v_k.shape
-    indptr, indices, data = y
-    for r in range(m):
-        for s in range(n):
-            out[r, s] = 0.0
-        for t in range(indptr[r], indptr[r + 1]):
-            for s in range(n):
-                out[r, s] += data[t] * v_k[indices[t], s]
-    a_load, b_load, p, q, vbase, h_p, h_q, switches, vmin, vmax, vlow, at_vmin, above_div = loads
-    for i in range(a_load.size):
-        a, b = a_load[i], b_load[i]
-        for s in range(n):
-            across = v_k[a, s] - v_k[b, s] if b < m else v_k[a, s]
-            current = drawn(
-                across,
-                p[i, s],
-                q[i, s],
-                vbase[i],
-                h_p[i],
-                h_q[i],
-                switches[i],
-                vmin[i],
-                vmax[i],
-                vlow[i],
-                at_vmin[i],
-                above_div[i],
-            )
-            out[a, s] -= current
-            if b < m:
-                out[b, s] += current
-    a_der, b_der, s_der = ders
-    for i in range(a_der.size):
-        a, b = a_der[i], b_der[i]
-        for s in range(n):
-            across = v_k[a, s] - v_k[b, s] if b < m else v_k[a, s]
-            re, im = across.real, across.imag
-            sr, si = s_der[i, s].real, s_der[i, s].imag
-            per_mag2 = 1.0 / (re * re + im * im)
-            given = complex((sr * re + si * im) * per_mag2, (sr * im - si * re) * per_mag2)  # conj(S/V)
-            out[a, s] += given
-            if b < m:
-                out[b, s] -= given
 
 
 @lru_cache(maxsize=8)
