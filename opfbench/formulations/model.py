@@ -31,7 +31,7 @@ from __future__ import annotations
 import functools
 import importlib
 import pkgutil
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from typing import TYPE_CHECKING, Any, Protocol, TypeVar
 
 import numpy as np
@@ -90,9 +90,12 @@ def formulation(
     networks: tuple[str, ...] = SUPPORTS,
     serves_problem: bool = False,
     preference: int = 0,
+    columns: Mapping[str, str] | None = None,
 ) -> Callable[[M], M]:
     """Register the decorated model class (`cls(net, slack_export)`) as the formulation
-    model `name` (module docstring); InputError for a name taken or not valid."""
+    model `name` (module docstring), with the extra per-step `columns` its strategy's
+    results carry (name → meaning, `StrategySpec.columns`); InputError for a name taken or
+    not valid."""
 
     def decorate(cls: M) -> M:
         source = source_of(cls.__module__)
@@ -107,8 +110,9 @@ def formulation(
                     options=(SLACK_EXPORT,),
                     role=role,
                     supports=networks,
-                    network_check=check_supported,
+                    network_check=_check_network,
                     snapshot_wise=role != "exact",  # a batch model solves each snapshot from its data alone
+                    columns=dict(columns or {}),
                     source=source,
                     module=cls.__module__,
                 )
@@ -116,6 +120,15 @@ def formulation(
         return cls
 
     return decorate
+
+
+def _check_network(net: Network | PhaseNetwork) -> None:
+    """The OPF problem's checks of a balanced network (`problem.check_supported`); a
+    three-phase feeder's class is checked by `supports`, the rest by the model's build."""
+    from opfbench.multiphase import PhaseNetwork
+
+    if not isinstance(net, PhaseNetwork):
+        check_supported(net)
 
 
 def _own_runner(name: str) -> Callable[..., StrategyResult]:
