@@ -11,6 +11,7 @@ from __future__ import annotations
 import dataclasses
 
 import numpy as np
+import pandas as pd
 import pytest
 
 from opfbench.cases.opendss_cases import opendss_copy
@@ -24,6 +25,7 @@ from opfbench.multiphase import Element
 from opfbench.powerflow.multiphase import solve_phase_flow
 from opfbench.registry.catalog import run_strategy
 from opfbench.registry.specs import MODELS, STRATEGIES
+from opfbench.report.tables import Kinds, solver_stats
 from opfbench.result import INFEASIBLE, OK
 from opfbench.scenario import Scenario
 
@@ -129,3 +131,21 @@ def test_it_registers_through_the_seam_and_refuses_a_meshed_feeder(ieee13, capsy
         spec.check_network(meshed)
     with pytest.raises(NetworkError, match="LinDist3Flow linearizes the branch flow of a radial feeder; this one is meshed"):
         LinDist3Flow(meshed)
+
+
+def test_the_report_shows_its_largest_voltage_error_beside_its_solver_figures():
+    """`report.tables.solver_stats`: a formulation whose steps carry `vm_error_pu` gets its
+    largest error; one without it (acopf) none."""
+    steps = pd.DataFrame(
+        {
+            "case": "eulv",
+            "strategy": ["lindist3flow"] * 3 + ["acopf"] * 3,
+            "iterations": [7, 9, 8, 15, 14, 16],
+            "solver_ms": [5.0, 6.0, 7.0, 300.0, 310.0, 320.0],
+            "vm_error_pu": [1e-3, 4e-3, 2e-3, np.nan, np.nan, np.nan],
+        }
+    )
+    kinds = Kinds(formulations=frozenset({"lindist3flow", "acopf"}), inexact=frozenset({"lindist3flow"}))
+    table = solver_stats(steps, kinds).set_index("strategy")
+    assert table.loc["lindist3flow", "max |V| error p.u."] == 4e-3
+    assert np.isnan(table.loc["acopf", "max |V| error p.u."])
