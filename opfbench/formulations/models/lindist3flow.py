@@ -38,12 +38,17 @@ Re{Iᴴ·Z·I} at the linear model's currents — the three-phase counterpart of
 whose lossless balance exports (the loads' reference power below the DER's).
 
 The problem is built once per feeder: Y is factorized once, the sensitivities of the
-monitored voltages and of the losses to each DER's Q are constant, and the loads, the
-DER's P and the Q limits enter as cvxpy Parameters (the band's offsets, the loss
-estimate's linear term, the limits); Clarabel solves it. Its setpoints are evaluated by
-the three-phase power flow like every formulation's (`three_phase.run_phase_batch`); its
-objective is the estimate the report sets against their AC losses, and `predict` the
-voltages it expects, which the runner compares with the power flow's (`vm_error_pu`).
+monitored voltages and of the losses to each DER's Q are constant, and the data enter as
+cvxpy Parameters of a program compiled once (`_Program`; Clarabel solves it). Of the band's
+rows (one per monitored voltage: 2721 on eulv) only a few can bind, so the program holds a
+working set of them in parameter slots: the rows that Q within its limits can push out of
+the band (the others never bind), starting from those already out at Q = 0, adding the
+rows the answer violates until none is (a program with twice the slots is compiled when the
+set outgrows it) — the answer of the full program, from the snapshot's data alone. Its
+setpoints are evaluated by the three-phase power flow like every formulation's
+(`three_phase.run_phase_batch`); its objective is the estimate the report sets against
+their AC losses, and `predict` the voltages it expects, which the runner compares with the
+power flow's (`vm_error_pu`).
 
 Units: MW, MVAr (Q positive = injected), kW for losses, p.u. voltages.
 """
@@ -156,7 +161,6 @@ class LinDist3Flow:
         self._w_q = 2.0 * (np.conj(self.m0)[:, None] * (mon @ b_q)).real  # ∂|m|²/∂q (n_monitored, n_der)
         self._factor = factor
         self._programs: dict[int, _Program] = {}
-        self._working = np.zeros(0, dtype=int)  # the last snapshot's working set of band rows
 
     # ----- the linear model -----------------------------------------------------------
     def _voltage(self, load_p_mw: np.ndarray, load_q_mvar: np.ndarray, der_p_mw: np.ndarray) -> np.ndarray:
@@ -189,7 +193,7 @@ class LinDist3Flow:
         reach = np.abs(self._w_q) @ limit  # how far Q can move each row
         candidate = (offset + reach > hi - BAND_TOL) | (offset - reach < lo + BAND_TOL)  # the others never bind
         worst = np.maximum(offset - hi, lo - offset)  # at Q = 0
-        working = np.union1d(self._working[candidate[self._working]], np.flatnonzero(candidate & (worst > -BAND_TOL)))
+        working = np.flatnonzero(candidate & (worst > -BAND_TOL))  # from the snapshot's data alone
         status, q, value, iterations = "", None, np.nan, 0
         for _ in range(MAX_ROUNDS):
             program = self._program(working.size)
@@ -208,7 +212,6 @@ class LinDist3Flow:
         ms = (time.perf_counter() - start) * 1e3
         if q is None or status != cp.OPTIMAL:
             return LinearSolve(None, np.nan, status, False, status == cp.INFEASIBLE, ms, iterations)
-        self._working = working
         constant = KW_PER_MW * float(np.real(np.vdot(c, hc)))
         return LinearSolve(q, value + constant, status, True, False, ms, iterations)
 
