@@ -305,10 +305,13 @@ class Scenario(Generic[NetT]):
         return isinstance(self.net, PhaseNetwork)
 
     def element_loads(self) -> tuple[np.ndarray, np.ndarray]:
-        """(load P (S, n_load) MW, load Q (S, n_load) MVAr) of every load element."""
+        """(load P (S, n_load) MW, load Q (S, n_load) MVAr) of every load element (a
+        three-phase feeder's loads that keep their nominal keep it: `PhaseNetwork.loads_at`)."""
         if self.load_scale is None:
             assert self.load_p_mw is not None and self.load_q_mvar is not None
             return self.load_p_mw, self.load_q_mvar
+        if isinstance(self.net, PhaseNetwork):
+            return self.net.loads_at(self.load_scale)
         return self.load_scale[:, None] * self.net.load_p_mw[None, :], self.load_scale[:, None] * self.net.load_q_mvar[None, :]
 
     def flow(self, der_q_mvar: np.ndarray, der_p_mw: np.ndarray | None = None) -> PowerFlowResult | PhaseFlowResult:

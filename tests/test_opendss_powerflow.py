@@ -1,19 +1,34 @@
 """The three-phase power flow against OpenDSS (`tests/support/opendss_feeders.py`: the
 shipped master compiled and solved by OpenDSS alone at tolerance 1e-10): every node's |V|
-within 1e-6 p.u. and the losses within 1e-4 relative — at the file's own snapshot (the
-small feeders by default, every shipped feeder under `-m slow`), at other load levels with
-the regulator taps held, and with PVSystems and Generators of a file of its own."""
+within 1e-6 p.u. and the losses within 1e-4 relative — at the file's own snapshot and at
+three time-series steps with the feeder's DER at fixed output (the small feeders by
+default, every shipped feeder under `-m slow`), at other load levels with the regulator
+taps held (loads of status fixed or exempt at their nominal), and with PVSystems and
+Generators of a file of its own."""
 
 from __future__ import annotations
 
 import numpy as np
+import pandas as pd
 import pytest
 
 from opfbench.cases.opendss_cases import opendss_copy
+from opfbench.cases.opendss_pv import pvsystem_lines
+from opfbench.data import paper_day
 from opfbench.io import load_case
+from opfbench.io.opendss import read_opendss, shape_series
 from opfbench.multiphase import PhaseNetwork
 from opfbench.powerflow.multiphase import solve_phase_flow
-from tests.support.opendss_feeders import UNBALANCED_ALL, UNBALANCED_SMALL, bus_vuf, held_taps, line_impedance_ohm, solve
+from tests.support.opendss_feeders import (
+    UNBALANCED_ALL,
+    UNBALANCED_SMALL,
+    bus_vuf,
+    held_taps,
+    line_impedance_ohm,
+    pv_output,
+    solve,
+    solve_time_step,
+)
 
 V_TOL_PU = 1e-6
 LOSS_REL = 1e-4
@@ -25,13 +40,15 @@ def _network(name: str) -> tuple[PhaseNetwork, tuple]:
     return case.network, case.stored
 
 
-def _agrees(net: PhaseNetwork, ours, theirs) -> None:
-    assert theirs.converged and bool(ours.converged[0])
+def _agrees(net: PhaseNetwork, ours, theirs, row: int = 0) -> tuple[float, float]:
+    """Snapshot `row` of our flow against OpenDSS's; returns (max |ΔV| p.u., relative loss error)."""
+    assert theirs.converged and bool(ours.converged[row])
     assert theirs.node_names == list(net.node_names)
-    dv = np.abs(ours.v[0] - theirs.v) / net.node_base_v
+    dv = np.abs(ours.v[row] - theirs.v) / net.node_base_v
     worst = int(dv.argmax())
     assert dv.max() < V_TOL_PU, f"{net.name}: |ΔV| {dv.max():.2e} p.u. at {net.node_names[worst]}"
-    assert ours.losses_kw[0] == pytest.approx(theirs.losses_kw, rel=LOSS_REL)
+    assert ours.losses_kw[row] == pytest.approx(theirs.losses_kw, rel=LOSS_REL)
+    return float(dv.max()), abs(ours.losses_kw[row] / theirs.losses_kw - 1.0)
 
 
 def _own_snapshot(name: str) -> None:
@@ -53,17 +70,133 @@ def test_the_large_feeders_own_snapshot_is_opendss(name):
     _own_snapshot(name)
 
 
-@pytest.mark.parametrize(("name", "load_mult"), [("ieee13", 0.4), ("ieee13", 1.35), ("ieee123", 1.6), ("ieee37", 0.7)])
-def test_other_load_levels_with_the_taps_held(name, load_mult):
-    """Loads scaled (OpenDSS's loadmult): the models' switches to impedance below vminpu
-    and above vmaxpu, constant Z and I and the CVR exponents all take part."""
+def _other_load_level(name: str, load_mult: float) -> None:
     net, _ = _network(name)
-    ours = solve_phase_flow(net, net.load_p_mw[None] * load_mult, net.load_q_mvar[None] * load_mult)
+    ours = solve_phase_flow(net, *net.loads_at(load_mult))
     with opendss_copy(name) as master:
         theirs = solve(master, f"set loadmult={load_mult!r}", *held_taps(net), controls=False)
     _agrees(net, ours, theirs)
     if load_mult > 1.3:  # the case the switch to impedance matters for
         assert (ours.node_vm_pu[0][net.load_branches.a] < 0.95).any()
+
+
+@pytest.mark.parametrize(("name", "load_mult"), [("ieee13", 0.4), ("ieee13", 1.35), ("ieee123", 1.6), ("ieee37", 0.7)])
+def test_other_load_levels_with_the_taps_held(name, load_mult):
+    """Loads scaled (OpenDSS's loadmult): the models' switches to impedance below vminpu
+    and above vmaxpu, constant Z and I and the CVR exponents all take part."""
+    _other_load_level(name, load_mult)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("load_mult", [0.3, 0.9, 1.4])
+def test_ieee8500_at_other_load_levels_keeps_its_fixed_loads(load_mult):
+    """ieee8500's 24 loads of `status=fixed` stay at their nominal under OpenDSS's
+    loadmult (read as `load_fixed`; scaling them too put |V| 1e-2 p.u. off at 0.9)."""
+    assert _network("ieee8500")[0].load_fixed.sum() == 24
+    _other_load_level("ieee8500", load_mult)
+
+
+def test_loads_of_status_fixed_or_exempt_keep_their_nominal(tmp_path):
+    """A load of status fixed or exempt stays at its nominal under a load multiplier
+    (OpenDSS's `Load.SetNominalLoad`); the others follow it — as OpenDSS solves it."""
+    with opendss_copy("ieee13") as master:
+        file = tmp_path / "fixed.dss"
+        file.write_text(f'redirect "{master}"\nedit load.671 status=fixed\nedit load.692 status=exempt\n')
+        net = load_case(f"opendss:{file}").network
+        assert isinstance(net, PhaseNetwork)
+        assert [net.load_names[i] for i in np.flatnonzero(net.load_fixed)] == ["Load.671", "Load.692"]
+        p, q = net.loads_at(np.array([0.5, 1.0]))
+        assert p[0] == pytest.approx(np.where(net.load_fixed, 1.0, 0.5) * net.load_p_mw)
+        assert q[1] == pytest.approx(net.load_q_mvar)
+        ours = solve_phase_flow(net, p[:1], q[:1])
+        theirs = solve(file, "set loadmult=0.5", *held_taps(net), controls=False)
+    _agrees(net, ours, theirs)
+
+
+def test_a_fixed_load_keeps_its_nominal_on_its_shape(tmp_path):
+    """On a feeder's own shapes (`shape_series`) a load of status fixed stays at its
+    nominal; one of status exempt still follows its shape (OpenDSS's time modes)."""
+    with opendss_copy("eulv") as master:
+        file = tmp_path / "fixed.dss"
+        file.write_text(f'redirect "{master}"\nedit load.load1 status=fixed\nedit load.load2 status=exempt\n')
+        circuit = read_opendss(file)
+    series = shape_series(circuit, "2016-06-28", "Europe/Berlin", "test")
+    load_p, load_q, _ = series.rows(series.index[[300, 700]])
+    assert load_p[:, 0] == pytest.approx([circuit.load_p_mw[0]] * 2) and load_q[:, 0] == pytest.approx(
+        [circuit.load_q_mvar[0]] * 2
+    )
+    assert load_p[:, 1] == pytest.approx(circuit.shapes[circuit.load_shapes[1]].p[[300, 700]] * circuit.load_p_mw[1])
+
+
+STEPS = ("03:00", "11:00", "13:00")
+"""Three time-series steps (local time): night (no PV, light load), near the paper day's
+load peak (10:45), high PV."""
+SHAPED = {"eulv": ("2016-06-28", STEPS), "ckt24": ("2016-07-15", ("03:00", "14:00", "19:00"))}
+"""The day and steps of the feeders on their own load shapes (eulv: the paper day; ckt24:
+a summer day of its year, night, high PV, evening peak)."""
+SEVERAL_POINTS = {"ckt24": ("03:00", "19:00")}
+"""Steps at which the feeder has more than one operating point. ckt24's CVR loads (model 4)
+switch to an impedance above vmaxpu = 1.05 with a jump — OpenDSS's own load model: P·u^0.8
+just below, P·u²/1.05² just above —, so where their voltages reach 1.05 p.u. two states
+solve the same equations: OpenDSS's iteration lands on one, ours from the no-load start
+on another (up to 3e-3 p.u. apart on this day, every hour whose |V| passes 1.05). There
+ours starts from OpenDSS's state; agreeing to 1e-6 then says that state is one of ours."""
+
+
+def _time_steps(name: str) -> dict[str, tuple[float, float]]:
+    """The shipped feeder `name` with its DER (its placement rule, `pv_on_loads`) at three
+    time-series steps against OpenDSS with the same PVSystems at fixed output: loads on
+    the paper day's load profile (OpenDSS's loadmult) — or on the feeder's own shapes
+    (OpenDSS's yearly mode at that step) —, PV P at the paper day's PV profile at the same
+    clock time, Q ±0.2 S̄ (alternating: absorbing, injecting). Ours: one batched flow
+    (from OpenDSS's state at `SEVERAL_POINTS`). Returns each step's (max |ΔV| p.u.,
+    relative loss error)."""
+    case = load_case(name)
+    net = case.network
+    assert isinstance(net, PhaseNetwork) and net.ders
+    day = paper_day()
+    date, steps = SHAPED.get(name, ("", STEPS))
+    at = [day.index[(day.index.hour == int(t[:2])) & (day.index.minute == int(t[3:]))][0] for t in steps]
+    der_p = day.loc[at, "pv"].to_numpy()[:, None] * net.der_rating_mw
+    der_q = np.tile(0.2 * net.der_s_mva * (-1.0) ** (np.arange(len(net.ders)) + 1), (len(steps), 1))
+    if case.series is None:
+        load = day.loc[at, "load"].to_numpy()
+        load_p, load_q = net.loads_at(load)
+        when = [{"load_mult": float(x)} for x in load]
+    else:
+        series = case.series
+        times = pd.DatetimeIndex([pd.Timestamp(f"{date} {t}").tz_localize(series.index.tz) for t in steps])
+        load_p, load_q, _ = series.rows(times)
+        points = series.index.get_indexer(times)
+        assert (points >= 0).all()
+        when = [
+            {"hour": float((k + 1) * series.step / pd.Timedelta(hours=1))} for k in points
+        ]  # OpenDSS: point k+1 at (k+1)·step
+    ours = solve_phase_flow(net, load_p, load_q, der_p, der_q)
+    out = {}
+    with opendss_copy(name) as master:
+        for s, (t, kw) in enumerate(zip(steps, when, strict=True)):
+            theirs = solve_time_step(master, pvsystem_lines(net, der_p[s], der_q[s]), **kw)
+            assert pv_output() == pytest.approx(np.column_stack([der_p[s], der_q[s]]) * 1e3, abs=1e-6)  # the DER as given
+            if t in SEVERAL_POINTS.get(name, ()):
+                row = np.s_[s : s + 1]
+                started = solve_phase_flow(net, load_p[row], load_q[row], der_p[row], der_q[row], v0=theirs.v[None])
+                out[t] = _agrees(net, started, theirs)
+            else:
+                out[t] = _agrees(net, ours, theirs, s)
+    assert der_p[0].max() == 0 and der_p.max() > 0  # a night step, and PV output
+    return out
+
+
+@pytest.mark.parametrize("name", UNBALANCED_SMALL)
+def test_time_series_steps_with_der_are_opendss(name):
+    _time_steps(name)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("name", [n for n in UNBALANCED_ALL if n not in UNBALANCED_SMALL])
+def test_time_series_steps_with_der_on_the_other_feeders_are_opendss(name):
+    _time_steps(name)
 
 
 DER_LINES = (

@@ -12,8 +12,7 @@
 - `ieee8500_pf_ms`: one snapshot of the 8500-node feeder (its own loads), the factorization
   included (a fresh network object), and `ieee8500_batch96_ms`: 96 snapshots (the loads ×
   the paper day's load profile every 15 min) in one call, factorization included (≤ 500
-  and ≤ 10 000 ms asked).
-
+  and ≤ 10 000 ms asked);
 - `ieee123_sdp_compile_ms`: the SDP relaxation (`formulations.three_phase.bound`) on
   `ieee123` with PV on every second load, built and compiled once (its first solve's own
   time excluded); `ieee123_sdp_step_ms`: its median per-step solve over `SDP_STEPS`

@@ -1,7 +1,8 @@
 """PV on three-phase OpenDSS feeders: the one placement mechanism — a rule that puts a PV
 unit beside chosen load elements — used two ways: as opfbench DER (`Placement`s, placed by
 `opfbench.io.opendss.place_ders`: the shipped feeders' own rules, `SHIPPED_PLACEMENTS`) and
-as OpenDSS PVSystems of a master file of its own (`pv_lines`, `with_pv`, `case_with_pv`),
+as OpenDSS PVSystems of a master file of its own (`pv_lines`, `with_pv`, `case_with_pv`;
+any network's DER: `pvsystem_lines`),
 so that opfbench and OpenDSS read the same DER (the three-phase OPF's tests and its table,
 `docs/unbalanced_opf_table.py`).
 
@@ -16,15 +17,15 @@ given seed and kept in file order."""
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
 
 from opfbench.io import load_case
 from opfbench.io.case import Case
-from opfbench.io.opendss import Placement
-from opfbench.multiphase import GROUND, PhaseNetwork
+from opfbench.io.opendss import Placement, place_ders
+from opfbench.multiphase import GROUND, Branches, PhaseNetwork
 
 PV_PF = 0.90
 
@@ -85,23 +86,47 @@ SHIPPED_PLACEMENTS: dict[str, PlacementRule] = {
 given; the rule's text is in the case listing."""
 
 
-def pv_lines(net: PhaseNetwork, every: int = 2, share: float = 1.0, kw: float | None = None) -> list[str]:
-    """The OpenDSS `new pvsystem…` commands of the rule `pv_on_loads(net, every, share,
-    kw)`: PVSystem.pvN beside load N (1-based), irradiance 1 and fixed kvar 0 (a
-    snapshot's P and Q are set per snapshot)."""
+def pvsystem_lines(
+    net: PhaseNetwork, p_mw: np.ndarray | None = None, q_mvar: np.ndarray | None = None, names: list[str] | None = None
+) -> list[str]:
+    """The OpenDSS `new pvsystem…` commands of `net`'s DER, each on the nodes of its
+    branches: a wye unit from its phases to its neutral (`bus.1.4`; ground: `bus.1`), kV
+    its phase-to-neutral base for one phase, phase-to-phase for more; a unit between two
+    phases `conn=delta` (`bus.1.2`). Pmpp = P̄, kVA = S̄, fixed output `p_mw`, `q_mvar`
+    (n_der,) MW/MVAr (default P̄ and 0) as irradiance P/P̄ and kvar, constant power
+    (vminpu 0.5, vmaxpu 1.5), no cut-in; named `names` (default pv1, pv2, … in DER order)."""
+    db = net.der_branches
+    n = len(net.ders)
+    p = np.asarray(net.der_rating_mw if p_mw is None else p_mw, dtype=float)
+    q = np.zeros(n) if q_mvar is None else np.asarray(q_mvar, dtype=float)
     out = []
-    for place in pv_on_loads(net, every, share, kw):
-        assert place.load is not None
-        bus = net.bus_names.index(place.bus)
-        nodes = ".".join(map(str, place.phases))
-        kv = float(net.bus_kv_ln[bus] * (np.sqrt(3.0) if place.delta else 1.0))
-        conn = " conn=delta" if place.delta else ""
-        rated = place.rating_mw * 1e3
+    for d, der in enumerate(net.ders):
+        rows = np.flatnonzero(db.owner == d)
+        a, b = db.a[rows], db.b[rows]
+        phase = [int(net.node_phase[i]) for i in a]
+        other = int(b[0])
+        delta = len(rows) == 1 and other != GROUND and int(net.node_phase[other]) <= 3
+        if len(set(b.tolist())) != 1:
+            raise ValueError(f"{net.der_names[d]}: a unit's branches must share their neutral")
+        nodes = phase + ([] if other == GROUND else [int(net.node_phase[other])])
+        kv = db.vbase_v[rows[0]] / 1e3 * (np.sqrt(3.0) if len(rows) > 1 else 1.0)
+        name = f"pv{d + 1}" if names is None else names[d]
         out.append(
-            f"new pvsystem.pv{place.load + 1} phases=1 bus1={place.bus}.{nodes}{conn} kv={kv!r} pmpp={rated!r} "
-            f"kva={place.s_mva * 1e3!r} irradiance=1 kvar=0 vminpu=0.5 vmaxpu=1.5"
+            f"new pvsystem.{name} phases={len(rows)} bus1={net.bus_names[der.bus]}.{'.'.join(map(str, nodes))}"
+            f"{' conn=delta' if delta else ''} kv={float(kv)!r} pmpp={der.rating_mw * 1e3!r} kva={der.s_rated_mva * 1e3!r} "
+            f"irradiance={float(p[d] / der.rating_mw)!r} kvar={float(q[d] * 1e3)!r} %cutin=0 %cutout=0 vminpu=0.5 vmaxpu=1.5"
         )
     return out
+
+
+def pv_lines(net: PhaseNetwork, every: int = 2, share: float = 1.0, kw: float | None = None) -> list[str]:
+    """The OpenDSS `new pvsystem…` commands (`pvsystem_lines`) of the rule
+    `pv_on_loads(net, every, share, kw)` on `net` without its DER: PVSystem.pvN beside
+    load N (1-based), irradiance 1 and fixed kvar 0 (a snapshot's P and Q are set per
+    snapshot)."""
+    places = pv_on_loads(net, every, share, kw)
+    bare = replace(net, ders=(), der_names=(), der_branches=Branches.empty())
+    return pvsystem_lines(place_ders(bare, places, net.name), names=[f"pv{(place.load or 0) + 1}" for place in places])
 
 
 def with_pv(folder: Path, master: Path, net: PhaseNetwork, every: int = 2, share: float = 1.0, kw: float | None = None) -> Path:

@@ -1,7 +1,8 @@
 """`opfbench pf CASE`: one AC power flow. A case that stores its elements' operating point
 (a pandapower net, a SimBench grid, an OpenDSS feeder's own snapshot) is solved as stored
 — loads and generator outputs as in the source — unless --load-scale/--der-scale are given
-(then loads × scale and DER at scale × rating, DER Q = 0, as for every other case);
+(then loads × scale and DER at scale × rating, DER Q = 0, as for every other case; an
+OpenDSS load of status fixed or exempt keeps its nominal, as under OpenDSS's loadmult);
 `--time` takes a step of the case's own profiles (local time).
 
 A three-phase feeder (`opendss:` and the shipped OpenDSS feeders) is solved by the
@@ -142,7 +143,7 @@ def _three_phase(args: argparse.Namespace, case: Case, net: PhaseNetwork) -> int
     else:
         load_scale = DEFAULT_LOAD_SCALE if args.load_scale is None else args.load_scale
         der_scale = DEFAULT_DER_SCALE if args.der_scale is None else args.der_scale
-        load_p, load_q = net.load_p_mw * load_scale, net.load_q_mvar * load_scale
+        load_p, load_q = (x[0] for x in net.loads_at(load_scale))
         der_p, der_q = np.array([d.rating_mw for d in net.ders]) * der_scale, np.zeros(len(net.ders))
         point = "scaled"
     res = solve_phase_flow(net, load_p[None], load_q[None], der_p[None], der_q[None])

@@ -15,7 +15,10 @@ element:
   primitive admittance;
 - loads: branches with their nominal power (the admittance OpenDSS builds for them,
   × base voltage²: OpenDSS's own nominal, allocation factors and load multiplier
-  included) and their model (1, 2, 4, 5 with `vminpu`, `vmaxpu`, `vlowpu`, CVR factors);
+  included), their model (1, 2, 4, 5 with `vminpu`, `vmaxpu`, `vlowpu`, CVR factors) and
+  their `status`: a `fixed` load stays at its nominal under any load multiplier and load
+  shape, an `exempt` one under any load multiplier (`PhaseNetwork.load_fixed`; OpenDSS's
+  `Load.SetNominalLoad`); its shape still moves an exempt load (`shape_series`);
 - PVSystem and Generator elements: DER (`PVSystem.x`, `Generator.x`), rated P̄ = Pmpp or
   kW, S̄ = kVA, their snapshot output as the case's stored operating point.
 
@@ -73,6 +76,7 @@ _IGNORED = {
     "recloser": "protection",
 }
 _READ = {"vsource", "load", "pvsystem", "generator"} | set(_PD_KINDS)
+VARIABLE, FIXED, EXEMPT = 0, 1, 2  # OpenDSS's Load.status (`Loads.Status`): what load multipliers and shapes move
 _LENGTH_KM = {1: 1.609344, 2: 0.3048, 3: 1.0, 4: 1e-3, 5: 3.048e-4, 6: 2.54e-5, 7: 1e-5, 8: 1e-6}  # OpenDSS LineUnits
 _lock = threading.Lock()
 
@@ -90,7 +94,9 @@ class LoadShape:
 @dataclass(frozen=True, eq=False)
 class OpenDssCircuit:
     """What `read_opendss` returns: the network and the snapshot the file defines —
-    per load P and Q (MW, MVAr), per DER P and Q (MW, MVAr, generated) — and notes."""
+    per load P and Q (MW, MVAr), per DER P and Q (MW, MVAr, generated) — and notes; per
+    load its shape's name ('' for none) and its OpenDSS status (VARIABLE, FIXED, EXEMPT),
+    and the shapes."""
 
     network: PhaseNetwork
     load_p_mw: np.ndarray
@@ -100,6 +106,7 @@ class OpenDssCircuit:
     notes: tuple[str, ...]
     load_shapes: tuple[str, ...] = ()
     shapes: dict[str, LoadShape] = field(default_factory=dict)
+    load_status: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=int))
 
 
 def _dss():
@@ -194,7 +201,7 @@ class _Reader:
             kv[i] = dss.Bus.kVBase()
         elements, lines, transformers = self._elements()
         source = self._source()
-        load_names, load_bus, load_p, load_q, models, load_br = self._loads()
+        load_names, load_bus, load_p, load_q, models, load_br, load_status = self._loads()
         ders, der_names, der_br, der_p, der_q = self._ders()
         frequency = float(dss.Solution.Frequency())
         band, band_name = EN_50160 if abs(frequency - 50.0) < 1e-9 else ANSI_RANGE_A
@@ -223,9 +230,10 @@ class _Reader:
             band_name,
             regulators,
             self.tap_control,
+            load_status != VARIABLE,
         )
         shapes = self._shapes()
-        return OpenDssCircuit(net, load_p, load_q, der_p, der_q, tuple(self.notes), tuple(self.load_shape), shapes)
+        return OpenDssCircuit(net, load_p, load_q, der_p, der_q, tuple(self.notes), tuple(self.load_shape), shapes, load_status)
 
     def _shapes(self) -> dict[str, LoadShape]:
         """The load shapes the loads follow (their yearly shape, else their daily one)."""
@@ -511,7 +519,7 @@ class _Reader:
         dss = self.dss
         loads = dss.Loads
         names, bus, p, q = [], [], [], []
-        model, vmin, vmax, vlow, cvr_p, cvr_q = [], [], [], [], [], []
+        model, vmin, vmax, vlow, cvr_p, cvr_q, status = [], [], [], [], [], [], []
         owner, a, b, base, share = [], [], [], [], []
         for _ in _each(loads):
             el = dss.CktElement
@@ -548,6 +556,7 @@ class _Reader:
                 vlow.append(float(dss.Text.Result()))
                 cvr_p.append(loads.CVRwatts())
                 cvr_q.append(loads.CVRvars())
+                status.append(int(loads.Status()))
                 self.load_shape.append((loads.Yearly() or loads.Daily()).lower())
                 for br in branches:
                     owner.append(index)
@@ -563,6 +572,7 @@ class _Reader:
             np.array(q, dtype=float),
             models,
             Branches(owner, a, b, base, share, len(names)),
+            np.array(status, dtype=int),
         )
 
     def _ders(self):
@@ -627,24 +637,29 @@ share one local clock (the shapes end on 2016-12-30, 2016 having 8784 hours)."""
 
 def shape_series(circuit: OpenDssCircuit, start: str, tz: str, source: str) -> CaseSeries:
     """Every load on its own shape (its nominal P and Q × the shape's multipliers) from
-    `start` in zone `tz`; the DER have no series of their own (a study runs them on the
-    period's PV and wind profiles). CaseFormatError for a load without a shape or shapes
-    of different lengths or steps."""
+    `start` in zone `tz` — a load of status `fixed` at its nominal throughout, as OpenDSS
+    keeps it; the DER have no series of their own (a study runs them on the period's PV
+    and wind profiles). CaseFormatError for a load without a shape or shapes of different
+    lengths or steps."""
     names = sorted(circuit.shapes)
-    if "" in circuit.load_shapes or not names:
+    fixed = circuit.load_status == FIXED
+    if any(shape == "" and not still for shape, still in zip(circuit.load_shapes, fixed.tolist(), strict=True)) or not names:
         raise CaseFormatError(f"{source}: every load needs a yearly or daily load shape")
     shapes = [circuit.shapes[n] for n in names]
     if len({(len(sh.p), sh.interval_h) for sh in shapes}) != 1:
         raise CaseFormatError(f"{source}: the loads' shapes differ in length or step")
     n, step = len(shapes[0].p), shapes[0].interval_h
     index = pd.date_range(pd.Timestamp(start).tz_localize(tz), periods=n, freq=pd.Timedelta(hours=step))
-    col = np.array([names.index(name) for name in circuit.load_shapes], dtype=int)
+    col = np.array(
+        [len(names) if still else names.index(name) for name, still in zip(circuit.load_shapes, fixed.tolist(), strict=True)]
+    )
+    ones = np.ones((n, 1))  # the column of the fixed loads
     return CaseSeries(
         index,
-        np.column_stack([sh.p for sh in shapes]),
+        np.column_stack([*(sh.p for sh in shapes), ones]),
         col,
         circuit.load_p_mw,
-        np.column_stack([sh.q for sh in shapes]),
+        np.column_stack([*(sh.q for sh in shapes), ones]),
         col,
         circuit.load_q_mvar,
         np.zeros((n, 1)),

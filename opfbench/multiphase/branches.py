@@ -23,6 +23,7 @@ from dataclasses import dataclass
 
 import numpy as np
 import scipy.sparse as sp
+from numba import njit
 
 GROUND = -1
 """Node index of ground (OpenDSS's node 0): a branch to ground has b = GROUND."""
@@ -111,27 +112,27 @@ class LoadModels:
         return cls(np.zeros(0, int), z, z, z, z, z)
 
     def branch_law(self, owner: np.ndarray) -> "BranchLaw":
-        """The per-branch constants of the current function (`BranchLaw.current`)."""
+        """The per-branch constants of the current function (`BranchLaw`, `drawn`)."""
         model = self.model[owner]
         exp_p = np.select([model == CONSTANT_PQ, model == CONSTANT_Z, model == CONSTANT_I], [0.0, 2.0, 1.0], self.cvr_p[owner])
         exp_q = np.select([model == CONSTANT_PQ, model == CONSTANT_Z, model == CONSTANT_I], [0.0, 2.0, 1.0], self.cvr_q[owner])
         vmin, vmax, vlow = self.vminpu[owner], self.vmaxpu[owner], self.vlowpu[owner]
         constant_i = model == CONSTANT_I
         return BranchLaw(
-            exp_p[:, None] - 1.0,
-            exp_q[:, None] - 1.0,
-            (model != CONSTANT_Z)[:, None],
-            vmin[:, None],
-            vmax[:, None],
-            vlow[:, None],
-            np.where(constant_i, 1.0, 1.0 / np.where(vmin > 0, vmin, 1.0))[:, None],
-            np.where(constant_i, vmax, vmax**2)[:, None],
+            exp_p - 1.0,
+            exp_q - 1.0,
+            model != CONSTANT_Z,
+            vmin,
+            vmax,
+            vlow,
+            np.where(constant_i, 1.0, 1.0 / np.where(vmin > 0, vmin, 1.0)),
+            np.where(constant_i, vmax, vmax**2),
         )
 
 
 @dataclass(frozen=True, eq=False)
 class BranchLaw:
-    """Per-branch constants (columns of shape (n_branch, 1)) of `current`: in-band
+    """Per-branch constants (n_branch,) of the load branches' current (`drawn`): in-band
     exponents of u for the P and Q parts of the current (law exponent − 1), whether the
     branch switches to impedances outside [vminpu, vmaxpu], the limits, the current factor
     at vminpu and the divisor of u above vmaxpu."""
@@ -145,40 +146,65 @@ class BranchLaw:
     at_vmin: np.ndarray
     above_div: np.ndarray
 
-    def current(self, v_branch: np.ndarray, p_w: np.ndarray, q_var: np.ndarray, vbase_v: np.ndarray) -> np.ndarray:
-        """(n_branch, S) complex A drawn from node a into node b at branch voltages
-        `v_branch` (n_branch, S) complex V, for branch powers p_w, q_var (n_branch, S) at
-        their law's reference (u = 1) and base voltages `vbase_v` (n_branch, 1):
-
-            I = (P·h_P(u) − j·Q·h_Q(u))·e^{jθ}/V_base,   u = |V|/V_base, θ = arg V,
-
-        h = u^(exponent − 1) in band, and the impedance switches of `LoadModels` outside."""
-        with np.errstate(divide="ignore", invalid="ignore"):
-            mag = np.abs(v_branch)
-            u = mag / vbase_v
-            unit = np.where(mag > 0, v_branch / mag, 1.0)
-            h_p = _power(u, self.h_p)
-            h_q = _power(u, self.h_q)
-            if self.switches.any():
-                low = self.switches & (u <= self.vlow)
-                ramp = self.switches & ~low & (u <= self.vmin)
-                high = self.switches & (u > self.vmax)
-                band = ~(low | ramp | high)
-                if not band.all():
-                    slope = (self.at_vmin - self.vlow) / np.where(self.vmin > self.vlow, self.vmin - self.vlow, 1.0)
-                    outside = np.select([low, ramp, high], [u, self.vlow + slope * (u - self.vlow), u / self.above_div], 0.0)
-                    h_p = np.where(band, h_p, outside)
-                    h_q = np.where(band, h_q, outside)
-        return (p_w * h_p - 1j * (q_var * h_q)) * unit / vbase_v
+    @property
+    def constants(self) -> tuple[np.ndarray, ...]:
+        """The constants in `drawn`'s order (after the branch's voltage, powers and base)."""
+        return (self.h_p, self.h_q, self.switches, self.vmin, self.vmax, self.vlow, self.at_vmin, self.above_div)
 
 
-def _power(u: np.ndarray, exponent: np.ndarray) -> np.ndarray:
-    """u**exponent, exponents (n_branch, 1); one exponent shared by every branch that is
-    −1, 0 or 1 (constant power, current or impedance) as a reciprocal, ones or u."""
-    if exponent.size and np.all(exponent == exponent.flat[0]):
-        shared = float(exponent.flat[0])
-        if shared == -1.0:
-            return 1.0 / u
-        if shared in (0.0, 1.0):
-            return np.ones_like(u) if shared == 0.0 else u
-    return np.power(u, exponent)
+@njit(cache=True, error_model="numpy")
+def drawn(
+    v: complex,
+    p_w: float,
+    q_var: float,
+    vbase_v: float,
+    h_p: float,
+    h_q: float,
+    switches: bool,
+    vmin: float,
+    vmax: float,
+    vlow: float,
+    at_vmin: float,
+    above_div: float,
+) -> complex:
+    """The current (complex A) a load branch draws from node a into node b at the voltage
+    `v` across it (complex V), for its powers p_w, q_var (W, var) at its law's reference
+    (u = 1), its base voltage and its law's constants (`BranchLaw`):
+
+        I = (P·h_P(u) − j·Q·h_Q(u))·e^{jθ}/V_base,   u = |V|/V_base, θ = arg V,
+
+    h = u^(exponent − 1) in band, and the impedance switches of `LoadModels` outside."""
+    re, im = v.real, v.imag
+    mag = np.sqrt(re * re + im * im)
+    per_base = 1.0 / vbase_v
+    u = mag * per_base
+    if mag > 0:
+        per_mag = 1.0 / mag
+        re, im = re * per_mag, im * per_mag
+    else:
+        per_mag = np.inf
+        re, im = 1.0, 0.0
+    hp = _power(u, h_p, vbase_v * per_mag)
+    hq = _power(u, h_q, vbase_v * per_mag)
+    if switches:
+        if u <= vlow:
+            hp = hq = u
+        elif u <= vmin:
+            hp = hq = vlow + (at_vmin - vlow) / (vmin - vlow if vmin > vlow else 1.0) * (u - vlow)
+        elif u > vmax:
+            hp = hq = u / above_div
+    a, b = p_w * hp * per_base, -q_var * hq * per_base
+    return complex(a * re - b * im, a * im + b * re)
+
+
+@njit(cache=True, error_model="numpy")
+def _power(u: float, exponent: float, per_u: float) -> float:
+    """u**exponent (per_u = 1/u); the exponents of constant power, current and impedance
+    (−1, 0, 1) as 1/u, one or u."""
+    if exponent == -1.0:
+        return per_u
+    if exponent == 0.0:
+        return 1.0
+    if exponent == 1.0:
+        return u
+    return u**exponent

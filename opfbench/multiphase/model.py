@@ -26,6 +26,8 @@ linearised model needs):
 - `load_branches`, `load_models` and the nominal powers `load_p_mw`/`load_q_mvar` of each
   load element (`opfbench.multiphase.branches`: wye, delta, split-phase; OpenDSS models
   1, 2, 4, 5 with their switches to impedance); loads are not in the admittance matrix.
+  `load_fixed`: the loads a load multiplier leaves at their nominal (OpenDSS `status=fixed`
+  or `exempt`; `loads_at`).
 - `ders` and `der_branches`: DER as constant-power branches the same way.
 - `band`: the case's voltage band (p.u.) and the voltages it applies to (`monitored`):
   phase-to-neutral at the phase nodes of buses whose section (buses joined by lines) has a
@@ -147,7 +149,7 @@ class PhaseNetwork(DerFleet):
     """An unbalanced feeder at node level (see the module docstring). Buses: `bus_names`
     (lower case, OpenDSS's), `bus_kv_ln` (n_bus,) phase-to-neutral base kV. Nodes:
     `node_bus`, `node_phase` (n_node,). Loads: `load_names` (OpenDSS's `Load.x`), `load_bus`,
-    nominal `load_p_mw`, `load_q_mvar` (n_load,), `load_models`, `load_branches`. DER:
+    nominal `load_p_mw`, `load_q_mvar` (n_load,), `load_models`, `load_branches`, `load_fixed`. DER:
     `ders` (`DER.bus` a bus index), `der_names`, `der_branches`. `band` (low, high) p.u. and
     `band_name` (the standard it is from). `regulators` (read with `?taps=control`): the
     RegControls with their transformers' admittance at every tap position; `tap_control`
@@ -182,8 +184,11 @@ class PhaseNetwork(DerFleet):
     band_name: str = "ANSI C84.1 Range A"
     regulators: tuple[Regulator, ...] = ()
     tap_control: bool = False
+    load_fixed: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=bool))
 
     def __post_init__(self) -> None:
+        if np.size(self.load_fixed) == 0:
+            object.__setattr__(self, "load_fixed", np.zeros(len(self.load_names), dtype=bool))
         for name, dtype in (
             ("bus_kv_ln", float),
             ("node_bus", int),
@@ -191,6 +196,7 @@ class PhaseNetwork(DerFleet):
             ("load_bus", int),
             ("load_p_mw", float),
             ("load_q_mvar", float),
+            ("load_fixed", bool),
         ):
             object.__setattr__(self, name, _frozen(getattr(self, name), dtype))
         self._check()
@@ -208,7 +214,7 @@ class PhaseNetwork(DerFleet):
         if n_node and (self.node_bus.min() < 0 or self.node_bus.max() >= n_bus):
             self._refuse("node_bus refers to a bus outside the bus list")
         n_load = len(self.load_names)
-        for name in ("load_bus", "load_p_mw", "load_q_mvar"):
+        for name in ("load_bus", "load_p_mw", "load_q_mvar", "load_fixed"):
             if getattr(self, name).shape != (n_load,):
                 self._refuse(f"{name} has shape {getattr(self, name).shape}, expected ({n_load},) like load_names")
         if self.load_branches.n_owner != n_load or len(self.load_models.model) != n_load:
@@ -275,6 +281,13 @@ class PhaseNetwork(DerFleet):
     @property
     def n_load(self) -> int:
         return len(self.load_names)
+
+    def loads_at(self, scale: np.ndarray | float) -> tuple[np.ndarray, np.ndarray]:
+        """(P (S, n_load) MW, Q (S, n_load) MVAr) of every load element at the load
+        multiplier `scale` (S,) — OpenDSS's `loadmult`, or a load profile that acts as one:
+        each load's nominal × the multiplier, a `load_fixed` one at its nominal."""
+        mult = np.where(self.load_fixed[None, :], 1.0, np.atleast_1d(np.asarray(scale, dtype=float))[:, None])
+        return mult * self.load_p_mw[None, :], mult * self.load_q_mvar[None, :]
 
     @cached_property
     def node_names(self) -> tuple[str, ...]:

@@ -29,7 +29,11 @@ A snapshot has converged when its largest node-voltage update is below `tol` p.u
 node's base voltage and the equations hold at the result: at every node the current
 mismatch |Y·V − I_source − I_branches(V)| is below `MISMATCH_REL` of the currents that
 meet there (`_residual`). One that has not after `max_iter` iterations is reported not
-converged (its voltages are no operating point and carry no figure).
+converged (its voltages are no operating point and carry no figure). Dense, the mismatch
+is formed per snapshot on K alone: at every other node Y equals A, so the mismatch there
+of V = A⁻¹·I_source + Z_NK·J is, for every J, the residual of the solves that formed
+A⁻¹·I_source and Z_NK — certified once per network (`_linear_error`) and part of every
+snapshot's mismatch.
 
 The two halves are separate calls: `iterate_phase_flow` runs the iteration and keeps a
 `PhaseIterate` (the currents J on K when dense, every node's voltage when sparse), from
@@ -41,17 +45,20 @@ flow that gives its figures.
 
 from __future__ import annotations
 
+from collections.abc import Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass, replace
 from functools import cached_property, lru_cache
 from typing import Any, Self
 
 import numpy as np
 import scipy.sparse as sp
+from numba import njit
 from threadpoolctl import ThreadpoolController
 
 from opfbench.errors import InputError
 from opfbench.multiphase import GROUND, PhaseNetwork
-from opfbench.multiphase.branches import BranchLaw
+from opfbench.multiphase.branches import BranchLaw, drawn
 from opfbench.multiphase.regulators import ControlState, act, control_voltage, sample
 from opfbench.powerflow.common import MAX_SWEEP_ITER, SWEEP_TOLERANCE
 from opfbench.powerflow.sparse import factorize
@@ -68,7 +75,23 @@ MAX_CONTROL_ITER = 100
 _CHUNK = 256  # columns per sparse solve when forming Z_KK (memory: n_node × _CHUNK)
 _BLOCK = 64  # snapshots per block when certifying (`_certify`)
 _ROUND_OFF_PU = 1e-12  # far above the round-off between two ways of forming a node's |V| (p.u.)
-_BLAS = ThreadpoolController()
+_BLAS = ThreadpoolController().select(user_api="blas")
+
+
+@contextmanager
+def _one_blas_thread() -> Iterator[None]:
+    """BLAS on one thread inside: the products here are small and many, and threads cost
+    more than they give on a shared machine. Sets and restores only libraries not already
+    on one thread (threadpoolctl's `limit` queries every library on each call: ~0.1 ms,
+    hundreds of times in a closed loop)."""
+    changed = [(lib, lib.num_threads) for lib in _BLAS.lib_controllers if lib.num_threads != 1]
+    for lib, _ in changed:
+        lib.set_num_threads(1)
+    try:
+        yield
+    finally:
+        for lib, threads in changed:
+            lib.set_num_threads(threads)
 
 
 @dataclass(frozen=True, eq=False)
@@ -150,23 +173,94 @@ class _System:
     load_b: np.ndarray
     der_a: np.ndarray
     der_b: np.ndarray
-    load_inject: sp.csr_matrix  # (m, n_load_branch): branch current (a → b) → node injections
-    der_inject: sp.csr_matrix  # (m, n_der_branch)
+    vbase_load: np.ndarray  # (n_load_branch,) the load branches' base voltages
     base_k: np.ndarray  # (m, 1) node base voltages on K
     law: BranchLaw  # the load branches' current law
     ybus_abs: sp.csc_matrix  # |Y| entrywise (the residual's scale)
-    z_abs_pu: np.ndarray | None  # (n_node, m) |Z_NK| / each node's base voltage (`voltages_within`)
+    near: np.ndarray  # K and the nodes Y joins to K: what the residual on K reads
+    y_k_near: sp.csr_matrix  # (m, len(near)) Y's rows K on those nodes
+    linear_error: float  # dense: the solves' backward error (`_linear_error`), every other node's mismatch
 
-    def injections(
-        self, v_k: np.ndarray, p_br: np.ndarray, q_br: np.ndarray, s_der: np.ndarray, vbase_load: np.ndarray
-    ) -> np.ndarray:
+    def injections(self, v_k: np.ndarray, p_br: np.ndarray, q_br: np.ndarray, s_der: np.ndarray) -> np.ndarray:
         """(m, S') branch currents injected into the nodes K at their voltages v_k (m, S'),
         for the branch powers of those S' snapshots (`_branch_powers`)."""
-        vx = np.concatenate([v_k, np.zeros((1, v_k.shape[1]), dtype=complex)])
-        drawn = self.law.current(vx[self.load_a] - vx[self.load_b], p_br, q_br, vbase_load)
-        with np.errstate(all="ignore"):
-            given = np.conj(s_der / (vx[self.der_a] - vx[self.der_b]))
-        return self.load_inject @ drawn + self.der_inject @ given
+        return self._currents(v_k, p_br, q_br, s_der, _NO_ROWS)
+
+    def iteration_currents(self, v_k: np.ndarray, p_br: np.ndarray, q_br: np.ndarray, s_der: np.ndarray) -> np.ndarray:
+        """(m, S') the currents J the iteration injects at K: the branches' (`injections`)
+        and the load admittances' Y_L·V."""
+        return self._currents(v_k, p_br, q_br, s_der, self.y_load_kk)
+
+    def _currents(self, v_k, p_br, q_br, s_der, y: sp.csr_matrix) -> np.ndarray:
+        out = np.empty(v_k.shape, dtype=complex)
+        _branch_currents(
+            np.ascontiguousarray(v_k),
+            (
+                self.load_a,
+                self.load_b,
+                np.ascontiguousarray(p_br),
+                np.ascontiguousarray(q_br),
+                self.vbase_load,
+                *self.law.constants,
+            ),
+            (self.der_a, self.der_b, np.ascontiguousarray(s_der)),
+            (y.indptr if y.shape[0] else np.zeros(len(v_k) + 1, dtype=y.indptr.dtype), y.indices, y.data),
+            out,
+        )
+        return out
+
+
+_NO_ROWS = sp.csr_matrix((0, 0), dtype=complex)
+
+
+@njit(cache=True, error_model="numpy")
+def _branch_currents(v_k, loads, ders, y, out) -> None:
+    """out (m, S) ← Y·v_k (CSR `y`: indptr, indices, data; none when indptr is all zero)
+    plus the currents the load branches draw (`branches.drawn`, taken out of node a and
+    into node b) and the DER branches inject (I = conj(S/V)), at the voltages v_k (m, S)
+    of K; branch ends are positions in K, m meaning ground."""
+    m, n = v_k.shape
+    indptr, indices, data = y
+    for r in range(m):
+        for s in range(n):
+            out[r, s] = 0.0
+        for t in range(indptr[r], indptr[r + 1]):
+            for s in range(n):
+                out[r, s] += data[t] * v_k[indices[t], s]
+    a_load, b_load, p, q, vbase, h_p, h_q, switches, vmin, vmax, vlow, at_vmin, above_div = loads
+    for i in range(a_load.size):
+        a, b = a_load[i], b_load[i]
+        for s in range(n):
+            across = v_k[a, s] - v_k[b, s] if b < m else v_k[a, s]
+            current = drawn(
+                across,
+                p[i, s],
+                q[i, s],
+                vbase[i],
+                h_p[i],
+                h_q[i],
+                switches[i],
+                vmin[i],
+                vmax[i],
+                vlow[i],
+                at_vmin[i],
+                above_div[i],
+            )
+            out[a, s] -= current
+            if b < m:
+                out[b, s] += current
+    a_der, b_der, s_der = ders
+    for i in range(a_der.size):
+        a, b = a_der[i], b_der[i]
+        for s in range(n):
+            across = v_k[a, s] - v_k[b, s] if b < m else v_k[a, s]
+            re, im = across.real, across.imag
+            sr, si = s_der[i, s].real, s_der[i, s].imag
+            per_mag2 = 1.0 / (re * re + im * im)
+            given = complex((sr * re + si * im) * per_mag2, (sr * im - si * re) * per_mag2)  # conj(S/V)
+            out[a, s] += given
+            if b < m:
+                out[b, s] -= given
 
 
 @lru_cache(maxsize=8)
@@ -178,10 +272,10 @@ def _system(net: PhaseNetwork) -> _System:
     pos = np.full(net.n_node, m)
     pos[k] = np.arange(m)
     pos_g = np.append(pos, m)  # GROUND (−1) → the zero row m
+    y_rows = net.ybus.tocsr()[k]
+    near = np.union1d(k, y_rows.indices).astype(np.int64)
 
-    y_branch = (net.load_p_mw[lb.owner] - 1j * net.load_q_mvar[lb.owner]) * 1e6 * lb.share / lb.vbase_v**2
-    c_load = lb.incidence(net.n_node)
-    y_load = (c_load @ sp.diags(y_branch) @ c_load.T).tocsc()
+    y_load = _load_admittance(net)
     lu = factorize(net.ybus + y_load)
     v_source = lu.solve(np.asarray(net.source_current, dtype=complex))
     z_nk = None
@@ -203,13 +297,39 @@ def _system(net: PhaseNetwork) -> _System:
         pos_g[lb.b],
         pos_g[db.a],
         pos_g[db.b],
-        lb.incidence(net.n_node)[k].tocsr() * -1.0,
-        db.incidence(net.n_node)[k].tocsr(),
+        np.ascontiguousarray(lb.vbase_v),
         net.node_base_v[k][:, None],
         net.load_models.branch_law(lb.owner),
         abs(net.ybus).tocsc(),
-        None if z_nk is None else np.abs(z_nk) / net.node_base_v[:, None],
+        near,
+        y_rows[:, near].tocsr(),
+        np.inf if z_nk is None else _linear_error(net, v_source, z_nk, k),
     )
+
+
+def _load_admittance(net: PhaseNetwork) -> sp.csc_matrix:
+    """(n_node, n_node) Y_L: the load branches' nominal admittances (module docstring)."""
+    lb = net.load_branches
+    y_branch = (net.load_p_mw[lb.owner] - 1j * net.load_q_mvar[lb.owner]) * 1e6 * lb.share / lb.vbase_v**2
+    c_load = lb.incidence(net.n_node)
+    return (c_load @ sp.diags(y_branch) @ c_load.T).tocsc()
+
+
+def _linear_error(net: PhaseNetwork, v_source: np.ndarray, z_nk: np.ndarray, k: np.ndarray) -> float:
+    """The componentwise backward error of the solves every node's voltage is formed
+    from: max |A·x − e| / (|A|·|x| + |e|) over the columns x = A⁻¹·I_source (e = I_source)
+    and x = (A⁻¹)_{:,k} (e the unit vector at k), at every node. Where no branch is (N∖K)
+    Y equals A there, so the nodal mismatch of V = A⁻¹·I_source + Z_NK·J is, for any J,
+    the combination of these columns' residuals there: it is certified once per network."""
+    a = net.ybus + _load_admittance(net)
+    x = np.column_stack([v_source, z_nk])
+    e = np.zeros_like(x)
+    e[:, 0] = net.source_current
+    e[k, np.arange(1, len(k) + 1)] = 1.0
+    scale = abs(a) @ np.abs(x) + np.abs(e)
+    with np.errstate(all="ignore"):
+        error = np.abs(a @ x - e) / np.where(scale > 0, scale, 1.0)
+    return float(error.max(initial=0.0)) if np.isfinite(error).all() else np.inf
 
 
 @dataclass(frozen=True, eq=False)
@@ -231,7 +351,7 @@ class PhaseIterate:
         sys_ = _system(self.net)
         if sys_.z_nk is None:
             return self.state
-        with _BLAS.limit(limits=1, user_api="blas"):
+        with _one_blas_thread():
             return sys_.v_source + self.state @ sys_.z_nk.T
 
     @cached_property
@@ -242,7 +362,7 @@ class PhaseIterate:
         if sys_.z_kk is None:
             v_k = self.state[:, sys_.k]
         else:
-            with _BLAS.limit(limits=1, user_api="blas"):
+            with _one_blas_thread():
                 v_k = sys_.v_source[sys_.k] + self.state @ sys_.z_kk.T
         vx = np.concatenate([v_k, np.zeros((v_k.shape[0], 1), dtype=complex)], axis=1)
         return _measured(self.net, np.abs(vx[:, sys_.der_a] - vx[:, sys_.der_b]))
@@ -251,26 +371,40 @@ class PhaseIterate:
 def voltages_within(net: PhaseNetwork, state: np.ndarray, before: np.ndarray, tol: float) -> np.ndarray:
     """(S',) whether no node's |V| (p.u. of its base) moved by more than `tol` from the
     iterate states `before` to `state` (S', r). Dense, first from the nodes K alone (Z_KK):
-    a change above tol (by more than round-off) at one of them decides "no"; then the
-    bound |Δ|V_n|| ≤ |ΔV_n| ≤ Σ_k |Z_nk|·|ΔJ_k| decides "yes" where it is below tol/2;
-    the exact test on every node decides the rest."""
+    a change above tol (by more than round-off) at one of them decides "no"; every node's
+    voltages, both states' in one product, decide the rest."""
     sys_ = _system(net)
     within = np.zeros(state.shape[0], dtype=bool)
-    exact = np.arange(state.shape[0])
-    if sys_.z_kk is not None and sys_.z_abs_pu is not None and exact.size:
-        with _BLAS.limit(limits=1, user_api="blas"):
-            at_k = sys_.v_source[sys_.k] + np.concatenate([state, before]) @ sys_.z_kk.T
-            moved_k = np.abs(np.abs(at_k[: len(state)]) - np.abs(at_k[len(state) :])) / sys_.base_k.T
-            exact = np.flatnonzero(moved_k.max(axis=1, initial=0.0) <= tol + _ROUND_OFF_PU)
-            bound = (np.abs(state[exact] - before[exact]) @ sys_.z_abs_pu.T).max(axis=1, initial=0.0)
-        within[exact] = bound < tol / 2
-        exact = exact[bound >= tol / 2]
-    if exact.size:
-        none = np.zeros(0, dtype=bool)
-        now = np.abs(PhaseIterate(net, state[exact], none, none).v) / net.node_base_v
-        then = np.abs(PhaseIterate(net, before[exact], none, none).v) / net.node_base_v
-        within[exact] = np.abs(now - then).max(axis=1, initial=0.0) <= tol
+    rows = np.arange(state.shape[0])
+    with _one_blas_thread():
+        if sys_.z_kk is not None and sys_.z_nk is not None and rows.size:
+            at_k = sys_.z_kk @ np.concatenate([state, before]).T
+            at_k += sys_.v_source[sys_.k][:, None]
+            moved_k = _largest_magnitude_change(at_k[:, : len(rows)], at_k[:, len(rows) :], 1.0 / sys_.base_k[:, 0])
+            rows = np.flatnonzero(moved_k <= tol + _ROUND_OFF_PU)
+            every = sys_.z_nk @ np.concatenate([state[rows], before[rows]]).T
+            every += sys_.v_source[:, None]
+            now, then = every[:, : len(rows)], every[:, len(rows) :]
+        else:
+            now, then = state.T, before.T
+    if rows.size:
+        within[rows] = _largest_magnitude_change(now, then, 1.0 / net.node_base_v) <= tol
     return within
+
+
+@njit(cache=True, error_model="numpy")
+def _largest_magnitude_change(new: np.ndarray, old: np.ndarray, per_base: np.ndarray) -> np.ndarray:
+    """(S,) the largest ||new| − |old|| (m, S) of a column, in p.u. of each row's base
+    (per_base = 1/base); NaN where some is NaN."""
+    m, n = new.shape
+    out = np.zeros(n)
+    for i in range(m):
+        for s in range(n):
+            a, b = new[i, s], old[i, s]
+            moved = abs(np.sqrt(a.real * a.real + a.imag * a.imag) - np.sqrt(b.real * b.real + b.imag * b.imag)) * per_base[i]
+            if moved > out[s] or moved != moved:
+                out[s] = moved
+    return out
 
 
 def _measured(net: PhaseNetwork, magnitude: np.ndarray) -> np.ndarray:
@@ -431,7 +565,7 @@ def iterate_phase_flow(
     carried = None
     if start is not None:  # the carried nodes' voltages of the earlier iterate
         state = np.asarray(start, dtype=complex)
-        with _BLAS.limit(limits=1, user_api="blas"):
+        with _one_blas_thread():
             carried = (state if sys_.z_kk is None else sys_.v_source[sys_.k] + state @ sys_.z_kk.T).T
     return _iterate(net, sys_, powers, carried, tol, max_iter)
 
@@ -451,7 +585,6 @@ def _iterate(
     """The iteration on S snapshots from `start` (r, S) (the carried nodes' V, or None:
     the no-load state; columns that are not finite and non-zero start from it too)."""
     n_snap = powers[0].shape[1]
-    vbase_load = net.load_branches.vbase_v[:, None]
     m = len(sys_.k)
     dense = sys_.z_nk is not None
     rows = sys_.k if dense else np.arange(net.n_node)  # the nodes the iteration carries
@@ -464,17 +597,21 @@ def _iterate(
     settled = np.full(n_snap, m == 0)  # nothing voltage-dependent: the no-load state is the answer
     active = np.arange(n_snap)
     v_act, p_act = v, powers
-    with _BLAS.limit(limits=1, user_api="blas"), np.errstate(all="ignore"):
+    v_source_k = sys_.v_source[sys_.k][:, None]
+    per_base = 1.0 / sys_.base_k[:, 0]
+    with _one_blas_thread(), np.errstate(all="ignore"):
         for it in range(1, max_iter + 1 if m else 1):
-            v_k = v_act[at_k]
-            j = sys_.injections(v_k, *p_act, vbase_load) + sys_.y_load_kk @ v_k
+            v_k = v_act if dense else v_act[at_k]
+            j = sys_.iteration_currents(v_k, *p_act)
             if dense:
-                new = sys_.v_source[sys_.k][:, None] + sys_.z_kk @ j
+                new = sys_.z_kk @ j
+                new += v_source_k
+                step = _largest_change(new, v_k, per_base)
             else:
                 rhs = np.zeros((net.n_node, j.shape[1]), dtype=complex, order="F")
                 rhs[sys_.k] = j
                 new = sys_.v_source[:, None] + sys_.lu.solve(rhs)
-            step = (np.abs(new[at_k] - v_k) / sys_.base_k).max(axis=0)
+                step = _largest_change(np.ascontiguousarray(new[at_k]), v_k, per_base)
             iterations[active] = it
             done = step < tol
             settled[active[done]] = True
@@ -490,32 +627,62 @@ def _iterate(
         else:
             v[:, active] = v_act
         if dense:  # the currents every node's voltage follows from: V = A⁻¹·(I_source + P_K·J)
-            state = (sys_.injections(v, *powers, vbase_load) + sys_.y_load_kk @ v).T.copy()
+            state = sys_.iteration_currents(v, *powers).T.copy()
         else:
             state = np.ascontiguousarray(v.T)
     return PhaseIterate(net, state, settled, iterations)
 
 
+@njit(cache=True, error_model="numpy")
+def _largest_change(new: np.ndarray, old: np.ndarray, per_base: np.ndarray) -> np.ndarray:
+    """(S,) the largest |new − old| (m, S) of a column, in p.u. of each row's base
+    (per_base = 1/base); NaN where some is NaN."""
+    m, n = new.shape
+    out = np.zeros(n)
+    for i in range(m):
+        for s in range(n):
+            d = new[i, s] - old[i, s]
+            moved = np.sqrt(d.real * d.real + d.imag * d.imag) * per_base[i]
+            if moved > out[s] or moved != moved:
+                out[s] = moved
+    return out
+
+
 def _certify(flow: PhaseIterate, sys_: _System, powers: _Powers) -> PhaseFlowResult:
-    """`certify`, in blocks of `_BLOCK` snapshots (each block's node voltages stay in cache
-    through the expansion, the residual and the losses). The voltages are formed node-major
-    (n_node, S), the layout the sparse products want; the result's `v` is its transpose."""
+    """`certify`. Dense: every node's voltage V = A⁻¹·I_source + Z_NK·J in one product,
+    node-major (n_node, S) (the result's `v` is its transpose); the mismatch on K from Y's rows K (the nodes they join), every other
+    node's being the network's `linear_error` (`_linear_error`). Sparse: the iterate's
+    voltages, the mismatch at every node (`_certify_every_node`)."""
+    if sys_.z_nk is None:
+        return _certify_every_node(flow, sys_, powers)
+    net = flow.net
+    with _one_blas_thread(), np.errstate(all="ignore"):
+        nodes_major = sys_.z_nk @ flow.state.T
+        nodes_major += sys_.v_source[:, None]
+        given = sys_.injections(nodes_major[sys_.k], *powers)
+        at_k = _residual(sys_.y_k_near, nodes_major[sys_.near], net.source_current[sys_.k], given, slice(None))
+        losses = _source_kva(net, nodes_major).real + (nodes_major[sys_.k] * np.conj(given)).real.sum(axis=0) / 1e3
+    mismatch = np.maximum(at_k, sys_.linear_error)
+    converged = np.asarray(flow.settled, dtype=bool) & (mismatch < MISMATCH_REL)
+    return PhaseFlowResult(net, nodes_major.T, converged, flow.iterations, mismatch, losses)
+
+
+def _certify_every_node(flow: PhaseIterate, sys_: _System, powers: _Powers) -> PhaseFlowResult:
+    """`certify` of the sparse iteration (its state is every node's V), in blocks of
+    `_BLOCK` snapshots (each block's node voltages stay in cache through the residual and
+    the losses), node-major (n_node, S), the layout the sparse products want; the
+    result's `v` is its transpose."""
     net = flow.net
     n_snap = flow.state.shape[0]
-    vbase_load = net.load_branches.vbase_v[:, None]
     v = np.empty((net.n_node, n_snap), dtype=complex)
     mismatch = np.empty(n_snap)
     losses = np.empty(n_snap)
-    with _BLAS.limit(limits=1, user_api="blas"), np.errstate(all="ignore"):
+    with _one_blas_thread(), np.errstate(all="ignore"):
         for first in range(0, n_snap, _BLOCK):
             block = slice(first, first + _BLOCK)
-            if sys_.z_nk is None:
-                vb = np.ascontiguousarray(flow.state[block].T)
-            else:
-                vb = sys_.z_nk @ flow.state[block].T
-                vb += sys_.v_source[:, None]
-            given = sys_.injections(vb[sys_.k], powers[0][:, block], powers[1][:, block], powers[2][:, block], vbase_load)
-            mismatch[block] = _residual(net, sys_, vb, given)
+            vb = np.ascontiguousarray(flow.state[block].T)
+            given = sys_.injections(vb[sys_.k], powers[0][:, block], powers[1][:, block], powers[2][:, block])
+            mismatch[block] = _residual(net.ybus, vb, net.source_current, given, sys_.k, sys_.ybus_abs)
             losses[block] = _source_kva(net, vb).real + (vb[sys_.k] * np.conj(given)).real.sum(axis=0) / 1e3
             v[:, block] = vb
     converged = np.asarray(flow.settled, dtype=bool) & (mismatch < MISMATCH_REL)
@@ -531,16 +698,20 @@ def _source_kva(net: PhaseNetwork, v: np.ndarray) -> np.ndarray:
     return (at * np.conj(current)).sum(axis=0) / 1e3
 
 
-def _residual(net: PhaseNetwork, sys_: _System, v: np.ndarray, given: np.ndarray) -> np.ndarray:
-    """(S,) the componentwise backward error of the network equations at V: the largest
-    nodal current mismatch |Y·V − I_source − I_branches| relative to the currents that meet
-    at the node (|Y|·|V| + |I_source| + |I_branches|). Scale-free, so a node joined by a
-    near-zero impedance switch — whose currents are large differences of large terms and
-    carry their round-off — is judged against what round-off leaves there."""
-    residual = net.ybus @ v - net.source_current[:, None]
-    residual[sys_.k] -= given
-    scale = sys_.ybus_abs @ np.abs(v) + np.abs(net.source_current)[:, None]
-    scale[sys_.k] += np.abs(given)
+def _residual(
+    y: sp.spmatrix, v: np.ndarray, source: np.ndarray, given: np.ndarray, at: np.ndarray | slice, y_abs: sp.spmatrix | None = None
+) -> np.ndarray:
+    """(S,) the componentwise backward error of the network equations on Y's rows `y`
+    (their columns' voltages v (·, S)): the largest nodal current mismatch
+    |Y·V − I_source − I_branches| relative to the currents that meet at the node
+    (|Y|·|V| + |I_source| + |I_branches|), the branch currents `given` injected at the
+    rows `at`. Scale-free, so a node joined by a near-zero impedance switch — whose
+    currents are large differences of large terms and carry their round-off — is judged
+    against what round-off leaves there."""
+    residual = y @ v - source[:, None]
+    residual[at] -= given
+    scale = (abs(y) if y_abs is None else y_abs) @ np.abs(v) + np.abs(source)[:, None]
+    scale[at] += np.abs(given)
     with np.errstate(all="ignore"):
         error = np.abs(residual) / np.where(scale > 0, scale, 1.0)
     return np.where(np.isfinite(error).all(axis=0), error.max(axis=0, initial=0.0), np.inf)

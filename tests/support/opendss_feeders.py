@@ -45,14 +45,65 @@ def solve(master: Path, *commands: str, controls: bool = True) -> DssSnapshot:
     if not controls:
         dss.Text.Command("set controlmode=off")
     dss.Solution.Solve()
-    names = [n.lower() for n in dss.Circuit.AllNodeNames()]
+    return _snapshot()
+
+
+def _snapshot() -> DssSnapshot:
     return DssSnapshot(
-        names,
+        [n.lower() for n in dss.Circuit.AllNodeNames()],
         np.asarray(dss.Circuit.AllBusVolts()).view(complex),
         np.asarray(dss.Circuit.AllBusMagPu()),
         float(dss.Circuit.Losses()[0]) / 1e3,
         bool(dss.Solution.Converged()),
     )
+
+
+def _settled_and_held(master: Path):
+    """Compile `master` and solve its snapshot with the control loop on (regulator taps and
+    capacitors settle, as opfbench's reader finds them), then hold them (RegControls and
+    CapControls disabled); returns OpenDSS's command function."""
+    dss.Basic.AllowChangeDir(False)
+    run = dss.Text.Command
+    run("clear")
+    run(f'compile "{master}"')
+    run(f"set mode=snapshot tolerance={TOLERANCE!r} maxiterations=200")
+    dss.Solution.Solve()
+    assert dss.Solution.Converged()
+    run("batchedit regcontrol..* enabled=no")
+    run("batchedit capcontrol..* enabled=no")
+    return run
+
+
+def solve_time_step(master: Path, pv_lines: list[str], load_mult: float | None = None, hour: float | None = None) -> DssSnapshot:
+    """OpenDSS at one time-series step of a shipped feeder with DER at fixed output: the
+    file's snapshot settled and held (`_settled_and_held`), the PVSystems `pv_lines` added, and one solution — in snapshot mode at `load_mult` (the loads ×
+    a load profile's value), or in yearly mode at `hour` (each load on its own yearly
+    shape: OpenDSS reads a fixed-interval shape's point k (1-based) at hour k × interval)."""
+    run = _settled_and_held(master)
+    for line in pv_lines:
+        run(line)
+    if hour is None:
+        run(f"set loadmult={load_mult!r}")
+    else:
+        start = hour * 3600.0 - 60.0  # a time mode moves the clock one step (here 1 min) before it solves
+        run("set mode=yearly number=1 stepsize=60s")
+        dss.Solution.Hour(int(start // 3600))
+        dss.Solution.Seconds(start % 3600)
+    run(f"set tolerance={TOLERANCE!r} maxiterations=200")
+    dss.Solution.Solve()
+    if hour is not None:
+        assert abs(dss.Solution.DblHour() - hour) < 1e-9, (dss.Solution.DblHour(), hour)
+    return _snapshot()
+
+
+def pv_output() -> np.ndarray:
+    """(n_pv, 2) every PVSystem's kW and kvar generated at the last solution (circuit order)."""
+    out = []
+    for name in dss.PVsystems.AllNames():
+        dss.Circuit.SetActiveElement(f"pvsystem.{name}")
+        powers = np.asarray(dss.CktElement.Powers())
+        out.append((-powers[0::2].sum(), -powers[1::2].sum()))
+    return np.array(out).reshape(-1, 2)
 
 
 def bus_vuf(bus: str) -> float:
@@ -108,14 +159,7 @@ def volt_var(
     voltage as the curve's reference), curve `curve_v` → `curve_q[i]` in p.u. of its
     kvarMax (= |Q| limit: kvarmax is its last entry), flat beyond the ends."""
     far = (0.5, 1.5)
-    dss.Basic.AllowChangeDir(False)
-    run = dss.Text.Command
-    run("clear")
-    run(f'compile "{master}"')
-    run(f"set mode=snapshot tolerance={TOLERANCE!r} maxiterations=200")
-    dss.Solution.Solve()
-    run("batchedit regcontrol..* enabled=no")
-    run("batchedit capcontrol..* enabled=no")
+    run = _settled_and_held(master)
     run(f"set loadmult={load_mult!r}")
     for i, ((bus1, kv, kva, pmpp, p_kw), (q_pu, kvar_max)) in enumerate(zip(units, curve_q, strict=True)):
         phases = len(bus1.split(".")) - 2
