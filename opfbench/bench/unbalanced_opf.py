@@ -18,7 +18,11 @@ unbalanced`:
   strategy (its solves and the power flow evaluating them); at the snapshots where both answered, `_loss_gap_pct` the median and
   `_loss_gap_max_pct` the largest of (its AC losses − the optimum's) / the optimum's (%),
   `_vm_error_pu` its linear voltages' largest error against the power flow at its
-  setpoints, `_ok` how many snapshots it answered.
+  setpoints, `_ok` how many snapshots it answered;
+- whether LinDist3Flow's point is a better cold start for IPOPT than the no-action power
+  flow the chain starts from (`…_opf_cold_iterations` / `…_opf_cold_from_lindist3flow_iterations`,
+  medians over every `COLD_EVERY`-th snapshot; `…_ms` IPOPT's own time likewise): from its Q
+  and the power flow's voltages there.
 
 Each figure is the best of `REPEATS` calls. Wall-clock figures: re-take them quietly.
 """
@@ -35,6 +39,7 @@ from opfbench.timing import best_ms
 
 REPEATS = 3
 STEPS = 24
+COLD_EVERY = 4
 
 
 def _per_step(net, load_p: np.ndarray, load_q: np.ndarray, der_p: np.ndarray) -> tuple[float, float, int, np.ndarray]:
@@ -57,6 +62,39 @@ def _per_step(net, load_p: np.ndarray, load_q: np.ndarray, der_p: np.ndarray) ->
     n = load_p.shape[0]
     accepted = np.isin(out.status.astype(str), ("ok", "fallback-cold"))
     return ms / n, min(cpu) / n, int(accepted.sum()), np.where(accepted, out.losses_kw, np.nan)
+
+
+def _cold_starts(prefix: str, net, load_p: np.ndarray, load_q: np.ndarray, der_p: np.ndarray) -> dict:
+    """IPOPT's iterations and time for a cold start of the OPF from the no-action power flow
+    and from LinDist3Flow's point (module docstring), medians over the snapshots taken."""
+    from opfbench.formulations.model import built, load_models, model_for
+    from opfbench.formulations.three_phase import q_limits
+    from opfbench.powerflow.multiphase import solve_phase_flow
+    from opfbench.registry.specs import MODELS
+
+    load_models()
+    exact, linear = built(model_for("exact", net), net), built(MODELS["lindist3flow"], net)
+    limit = q_limits(net, der_p, 0.0)
+    rows: list[tuple[int, float, int, float]] = []
+    for i in range(0, load_p.shape[0], COLD_EVERY):
+        snapshot = (load_p[i], load_q[i], der_p[i])
+        no_action = solve_phase_flow(net, load_p[i : i + 1], load_q[i : i + 1], der_p[i : i + 1])
+        cold = exact.solve(*snapshot, limit[i], x0=exact.initial(no_action.v[0]))
+        answer = linear.solve(*snapshot, limit[i])
+        if not answer.optimal:
+            continue
+        there = solve_phase_flow(net, load_p[i : i + 1], load_q[i : i + 1], der_p[i : i + 1], answer.q_mvar[None])
+        x0 = exact.initial(there.v[0])
+        x0[: len(net.ders)] = answer.q_mvar
+        started = exact.solve(*snapshot, limit[i], x0=x0)
+        rows.append((cold.iterations, cold.solve_ms, started.iterations, started.solve_ms))
+    table = np.array(rows, dtype=float).reshape(-1, 4)
+    return {
+        f"{prefix}_opf_cold_iterations": float(np.median(table[:, 0])),
+        f"{prefix}_opf_cold_ms": float(np.median(table[:, 1])),
+        f"{prefix}_opf_cold_from_lindist3flow_iterations": float(np.median(table[:, 2])),
+        f"{prefix}_opf_cold_from_lindist3flow_ms": float(np.median(table[:, 3])),
+    }
 
 
 def _lindist3flow(
@@ -126,4 +164,6 @@ def run() -> dict:
         "eulv_opf_solved": eulv_solved,
         **_lindist3flow("ieee123", net, load_p, load_q, der_p, step_ms, opf_kw),
         **_lindist3flow("eulv", scenario.net, e_p, e_q, scenario.der_p_mw, eulv_ms, eulv_kw),
+        **_cold_starts("ieee123", net, load_p, load_q, der_p),
+        **_cold_starts("eulv", scenario.net, e_p, e_q, scenario.der_p_mw),
     }

@@ -24,7 +24,7 @@ exact for elements the textbook form handles by special cases:
   load law's reference (constant power at 1 p.u.: constant Z and I loads at their
   nominal power, as LinDist3Flow's constant-power loads) and the DER's P + jQ; the voltage
   change is δV = Y⁻¹·(the currents), a sum over the path to the source of each branch's
-  Z times the current its subtree draws — which per line is the recursion above, and
+  Z times the current its subtree draws — which per line is, to first order, the recursion above, and
   through a transformer its ratio and leakage impedance, delta windings' circulating
   currents included.
 
@@ -55,6 +55,7 @@ Units: MW, MVAr (Q positive = injected), kW for losses, p.u. voltages.
 
 from __future__ import annotations
 
+import functools
 import time
 import warnings
 from dataclasses import dataclass
@@ -63,6 +64,7 @@ import cvxpy as cp
 import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
+from threadpoolctl import ThreadpoolController
 
 from opfbench.errors import NetworkError
 from opfbench.formulations.model import formulation
@@ -93,6 +95,12 @@ class LinearSolve:
     infeasible: bool
     solve_ms: float
     iterations: int
+
+
+@functools.cache
+def _blas() -> ThreadpoolController:
+    """The BLAS libraries' controller, found once (finding them costs milliseconds)."""
+    return ThreadpoolController().select(user_api="blas")
 
 
 def _owner_map(br: Branches, n_owner: int) -> sp.csr_matrix:
@@ -179,7 +187,14 @@ class LinDist3Flow:
         self, load_p_mw: np.ndarray, load_q_mvar: np.ndarray, der_p_mw: np.ndarray, q_limit_mvar: np.ndarray
     ) -> LinearSolve:
         """One snapshot: loads' P and Q (n_load,) at their law's reference, DER P and usable
-        |Q| (n_der,), MW/MVAr."""
+        |Q| (n_der,), MW/MVAr. BLAS on one thread: its products are small, and threads
+        waiting on a shared machine cost more than the work."""
+        with _blas().limit(limits=1):
+            return self._solve(load_p_mw, load_q_mvar, der_p_mw, q_limit_mvar)
+
+    def _solve(
+        self, load_p_mw: np.ndarray, load_q_mvar: np.ndarray, der_p_mw: np.ndarray, q_limit_mvar: np.ndarray
+    ) -> LinearSolve:
         start = time.perf_counter()
         if not self.slack_export and float(np.sum(load_p_mw) - np.sum(der_p_mw)) < 0:
             return LinearSolve(None, np.nan, "infeasible (the slack would export)", False, True, 0.0, 0)
