@@ -31,7 +31,7 @@ from __future__ import annotations
 import functools
 import importlib
 import pkgutil
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Sequence
 from typing import TYPE_CHECKING, Any, Protocol, TypeVar
 
 import numpy as np
@@ -90,12 +90,9 @@ def formulation(
     networks: tuple[str, ...] = SUPPORTS,
     serves_problem: bool = False,
     preference: int = 0,
-    columns: Mapping[str, str] | None = None,
 ) -> Callable[[M], M]:
     """Register the decorated model class (`cls(net, slack_export)`) as the formulation
-    model `name` (module docstring), with the extra per-step `columns` its strategy's
-    results carry (name → meaning, `StrategySpec.columns`); InputError for a name taken or
-    not valid."""
+    model `name` (module docstring); InputError for a name taken or not valid."""
 
     def decorate(cls: M) -> M:
         source = source_of(cls.__module__)
@@ -112,7 +109,6 @@ def formulation(
                     supports=networks,
                     network_check=_check_network,
                     snapshot_wise=role != "exact",  # a batch model solves each snapshot from its data alone
-                    columns=dict(columns or {}),
                     source=source,
                     module=cls.__module__,
                 )

@@ -56,6 +56,7 @@ from opfbench.result import (
     INFEASIBLE,
     OK,
     SOLVER_FAILED,
+    VM_ERROR,
     StrategyResult,
 )
 from opfbench.scenario import Scenario
@@ -326,7 +327,7 @@ def run_phase_batch(
             "certified_by": "",
             "solve_ms": float(s.solve_ms),
             "iterations": int(s.iterations),
-            "vm_error_pu": float(error[i]),
+            VM_ERROR: float(error[i]),
         }
         for i, s in enumerate(solves)
     ]

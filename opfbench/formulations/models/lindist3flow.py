@@ -114,7 +114,6 @@ def _owner_map(br: Branches, n_owner: int) -> sp.csr_matrix:
     networks=("unbalanced-radial",),
     summary="LinDist3Flow (linearized multiphase branch flow, currents at the no-load voltage, losses estimated as "
     "Re VᴴHV at its voltages): fast approximation; its Q evaluated by the three-phase power flow",
-    columns={"vm_error_pu": "largest |predicted − power flow| monitored voltage at its setpoints (p.u.)"},
 )
 class LinDist3Flow:
     """LinDist3Flow on a radial three-phase feeder (module docstring); `solve` one snapshot,
