@@ -139,8 +139,10 @@ SEVERAL_POINTS = {"ckt24": ("03:00", "19:00")}
 switch to an impedance above vmaxpu = 1.05 with a jump — OpenDSS's own load model: P·u^0.8
 just below, P·u²/1.05² just above —, so where their voltages reach 1.05 p.u. two states
 solve the same equations: OpenDSS's iteration lands on one, ours from the no-load start
-on another (up to 3e-3 p.u. apart on this day, every hour whose |V| passes 1.05). There
-ours starts from OpenDSS's state; agreeing to 1e-6 then says that state is one of ours."""
+on another (up to 3e-3 p.u. apart on this day, every hour whose |V| passes 1.05; which one
+follows from the iteration matrix: OpenDSS's holds the loads' admittance at the step's
+level, ours at the nominal — built at the step's level, ours lands on OpenDSS's too).
+There ours starts from OpenDSS's state; agreeing to 1e-6 then says it is one of ours."""
 
 
 def _time_steps(name: str) -> dict[str, tuple[float, float]]:
