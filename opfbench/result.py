@@ -44,6 +44,7 @@ STATUSES = (
 
 
 MAX_VUF = "max_vuf_pct"  # a three-phase feeder's worst voltage unbalance factor |V₂|/|V₁| per snapshot, %
+VM_ERROR = "vm_error_pu"  # an approximation's largest |predicted − power flow| monitored voltage per snapshot, p.u.
 
 # ----- where a formulation's setpoints come from (SolverRecord.fallback) --------------------
 FROM_SOLVER = "none"  # the model's own solution

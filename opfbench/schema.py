@@ -19,7 +19,7 @@ from typing import TYPE_CHECKING, Any, Literal
 
 import numpy as np
 
-from opfbench.result import MAX_VUF, STATUSES, Reference
+from opfbench.result import MAX_VUF, STATUSES, VM_ERROR, Reference
 
 if TYPE_CHECKING:
     from opfbench.result import StrategyResult
@@ -259,6 +259,14 @@ STEPS = Table(
             "the solver's own status text (formulations; `bounds: the slack must export` or `bounds: voltage limits out of "
             "reach` where the interval bounds proved the step infeasible without a solver); empty otherwise",
             _solver("solver_status", str, ""),
+        ),
+        Column(
+            "vm_error_pu",
+            "number",
+            "p.u.",
+            "an approximation's largest error of the voltages it predicts against the power flow's at its setpoints "
+            "(`lindist3flow`); NaN for the other strategies and where it gave no point",
+            lambda c: np.asarray(c.res.extra.get(VM_ERROR, _nan(c)), dtype=float),
         ),
         Column(
             "frontier_kw",

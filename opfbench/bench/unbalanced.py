@@ -18,8 +18,9 @@
   time excluded); `ieee123_sdp_step_ms`: its median per-step solve over `SDP_STEPS`
   snapshots (≤ 60 000 and ≤ 2000 asked), `ieee123_sdp_optimal` how many ended optimal, and
   `ieee123_sdp_vs_ac_ratio` = that median / the AC OPF's median per step
-  (`formulations.three_phase.optimum`, IPOPT's own time) on the same snapshots.
-- the three-phase AC OPF's keys (`ieee123_opf_…`, `eulv_opf_…`): `bench.unbalanced_opf`.
+  (`formulations.three_phase.optimum`, IPOPT's own time) on the same snapshots;
+- the three-phase AC OPF's and LinDist3Flow's keys (`ieee123_opf_…`, `eulv_opf_…`,
+  `…_lindist3flow_…`): `bench.unbalanced_opf`.
 
 Each time is the best of `REPEATS` calls (ms). Wall-clock figures: re-take them on a quiet
 machine.

@@ -10,7 +10,19 @@ unbalanced`:
   CPU time per snapshot (what survives a loaded machine), `…_pf_ms` one snapshot's power
   flow and `…_pf_ratio` the OPF step / that flow;
 - `eulv_opf_step_ms` (and `_cpu_ms`): the same on `eulv` at `STEPS` hourly snapshots of
-  the paper day (≤ 500 ms asked).
+  the paper day (≤ 500 ms asked);
+- LinDist3Flow (`models.lindist3flow`, the `lindist3flow` strategy) on the same snapshots
+  of each feeder (`ieee123_lindist3flow_…`, `eulv_lindist3flow_…`): `_step_ms` its median
+  solve per snapshot (compiled beforehand), `_vs_opf_ratio` = that / the OPF's wall time
+  per snapshot above, `_run_cpu_ms` the process's CPU time per snapshot of the whole
+  strategy (its solves and the power flow evaluating them); at the snapshots where both answered, `_loss_gap_pct` the median and
+  `_loss_gap_max_pct` the largest of (its AC losses − the optimum's) / the optimum's (%),
+  `_vm_error_pu` its linear voltages' largest error against the power flow at its
+  setpoints, `_ok` how many snapshots it answered;
+- whether LinDist3Flow's point is a better cold start for IPOPT than the no-action power
+  flow the chain starts from (`…_opf_cold_iterations` / `…_opf_cold_from_lindist3flow_iterations`,
+  medians over every `COLD_EVERY`-th snapshot; `…_ms` IPOPT's own time likewise): from its Q
+  and the power flow's voltages there.
 
 Each figure is the best of `REPEATS` calls. Wall-clock figures: re-take them quietly.
 """
@@ -27,11 +39,13 @@ from opfbench.timing import best_ms
 
 REPEATS = 3
 STEPS = 24
+COLD_EVERY = 4
 
 
-def _per_step(net, load_p: np.ndarray, load_q: np.ndarray, der_p: np.ndarray) -> tuple[float, float, int]:
+def _per_step(net, load_p: np.ndarray, load_q: np.ndarray, der_p: np.ndarray) -> tuple[float, float, int, np.ndarray]:
     """(wall ms, CPU ms) per snapshot of the OPF over the snapshots (the model built first),
-    and the number of snapshots with an accepted optimum."""
+    the number of snapshots with an accepted optimum, and the losses (kW) there (NaN
+    elsewhere)."""
     from opfbench.formulations.three_phase import optimum
 
     first = optimum(net, load_p[:1], load_q[:1], der_p[:1])  # builds the model (not timed)
@@ -46,7 +60,72 @@ def _per_step(net, load_p: np.ndarray, load_q: np.ndarray, der_p: np.ndarray) ->
 
     ms, out = best_ms(day, REPEATS)
     n = load_p.shape[0]
-    return ms / n, min(cpu) / n, int(np.isin(out.status.astype(str), ("ok", "fallback-cold")).sum())
+    accepted = np.isin(out.status.astype(str), ("ok", "fallback-cold"))
+    return ms / n, min(cpu) / n, int(accepted.sum()), np.where(accepted, out.losses_kw, np.nan)
+
+
+def _cold_starts(prefix: str, net, load_p: np.ndarray, load_q: np.ndarray, der_p: np.ndarray) -> dict:
+    """IPOPT's iterations and time for a cold start of the OPF from the no-action power flow
+    and from LinDist3Flow's point (module docstring), medians over the snapshots taken."""
+    from opfbench.formulations.model import built, load_models, model_for
+    from opfbench.formulations.three_phase import q_limits
+    from opfbench.powerflow.multiphase import solve_phase_flow
+    from opfbench.registry.specs import MODELS
+
+    load_models()
+    exact, linear = built(model_for("exact", net), net), built(MODELS["lindist3flow"], net)
+    limit = q_limits(net, der_p, 0.0)
+    rows: list[tuple[int, float, int, float]] = []
+    for i in range(0, load_p.shape[0], COLD_EVERY):
+        snapshot = (load_p[i], load_q[i], der_p[i])
+        no_action = solve_phase_flow(net, load_p[i : i + 1], load_q[i : i + 1], der_p[i : i + 1])
+        cold = exact.solve(*snapshot, limit[i], x0=exact.initial(no_action.v[0]))
+        answer = linear.solve(*snapshot, limit[i])
+        if not answer.optimal:
+            continue
+        there = solve_phase_flow(net, load_p[i : i + 1], load_q[i : i + 1], der_p[i : i + 1], answer.q_mvar[None])
+        x0 = exact.initial(there.v[0])
+        x0[: len(net.ders)] = answer.q_mvar
+        started = exact.solve(*snapshot, limit[i], x0=x0)
+        rows.append((cold.iterations, cold.solve_ms, started.iterations, started.solve_ms))
+    table = np.array(rows, dtype=float).reshape(-1, 4)
+    return {
+        f"{prefix}_opf_cold_iterations": float(np.median(table[:, 0])),
+        f"{prefix}_opf_cold_ms": float(np.median(table[:, 1])),
+        f"{prefix}_opf_cold_from_lindist3flow_iterations": float(np.median(table[:, 2])),
+        f"{prefix}_opf_cold_from_lindist3flow_ms": float(np.median(table[:, 3])),
+    }
+
+
+def _lindist3flow(
+    prefix: str, net, load_p: np.ndarray, load_q: np.ndarray, der_p: np.ndarray, opf_ms: float, opf_kw: np.ndarray
+) -> dict:
+    """LinDist3Flow's keys (module docstring) on these snapshots, against the OPF's."""
+    from opfbench.registry.catalog import run_strategy
+    from opfbench.scenario import Scenario
+
+    scenario = Scenario.from_series(net, load_p, load_q, der_p)
+    run_strategy("lindist3flow", scenario.take(np.arange(1)), 0.0)  # builds and compiles the model (not timed)
+    runs, cpu = [], []
+    for _ in range(REPEATS):
+        start = time.process_time()
+        runs.append(run_strategy("lindist3flow", scenario, 0.0))
+        cpu.append(1e3 * (time.process_time() - start) / scenario.n_snapshots)
+    res = min(runs, key=lambda r: r.wall_ms)
+    assert res.solver is not None
+    ok = res.status == "ok"
+    both = ok & np.isfinite(opf_kw)
+    gap = 100.0 * (res.losses_kw[both] - opf_kw[both]) / opf_kw[both]
+    step = float(np.median(res.solver.solve_ms))
+    return {
+        f"{prefix}_lindist3flow_step_ms": step,
+        f"{prefix}_lindist3flow_vs_opf_ratio": step / opf_ms,
+        f"{prefix}_lindist3flow_run_cpu_ms": min(cpu),
+        f"{prefix}_lindist3flow_ok": int(ok.sum()),
+        f"{prefix}_lindist3flow_loss_gap_pct": float(np.median(gap)) if gap.size else float("nan"),
+        f"{prefix}_lindist3flow_loss_gap_max_pct": float(gap.max()) if gap.size else float("nan"),
+        f"{prefix}_lindist3flow_vm_error_pu": float(np.nanmax(res.extra["vm_error_pu"])) if ok.any() else float("nan"),
+    }
 
 
 def run() -> dict:
@@ -64,7 +143,7 @@ def run() -> dict:
     mult = 0.9 + 0.2 * np.sin(np.linspace(0.0, np.pi, STEPS))
     sun = np.sin(np.linspace(0.2, np.pi - 0.2, STEPS))
     load_p, load_q, der_p = lp[None] * mult[:, None], lq[None] * mult[:, None], dp[None] * sun[:, None]
-    step_ms, step_cpu, solved = _per_step(net, load_p, load_q, der_p)
+    step_ms, step_cpu, solved, opf_kw = _per_step(net, load_p, load_q, der_p)
     pf_ms, _ = best_ms(lambda: solve_phase_flow(net, load_p[:1], load_q[:1], der_p[:1]), REPEATS)
     period, _ = study_period(("eulv",), ("off",), "paper-day", "20:00-05:00", None)
     hourly = period.profiles.iloc[::60]
@@ -72,7 +151,7 @@ def run() -> dict:
         "eulv", "connected", "off", hourly, period.night[::60], STEPS, period.index[60] - period.index[0], ""
     )
     e_p, e_q = scenario.element_loads()
-    eulv_ms, eulv_cpu, eulv_solved = _per_step(scenario.net, e_p, e_q, scenario.der_p_mw)
+    eulv_ms, eulv_cpu, eulv_solved, eulv_kw = _per_step(scenario.net, e_p, e_q, scenario.der_p_mw)
     return {
         "ieee123_opf_steps": STEPS,
         "ieee123_opf_step_ms": step_ms,
@@ -83,4 +162,8 @@ def run() -> dict:
         "eulv_opf_step_ms": eulv_ms,
         "eulv_opf_step_cpu_ms": eulv_cpu,
         "eulv_opf_solved": eulv_solved,
+        **_lindist3flow("ieee123", net, load_p, load_q, der_p, step_ms, opf_kw),
+        **_lindist3flow("eulv", scenario.net, e_p, e_q, scenario.der_p_mw, eulv_ms, eulv_kw),
+        **_cold_starts("ieee123", net, load_p, load_q, der_p),
+        **_cold_starts("eulv", scenario.net, e_p, e_q, scenario.der_p_mw),
     }

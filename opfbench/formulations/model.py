@@ -107,7 +107,7 @@ def formulation(
                     options=(SLACK_EXPORT,),
                     role=role,
                     supports=networks,
-                    network_check=check_supported,
+                    network_check=_check_network,
                     snapshot_wise=role != "exact",  # a batch model solves each snapshot from its data alone
                     source=source,
                     module=cls.__module__,
@@ -116,6 +116,15 @@ def formulation(
         return cls
 
     return decorate
+
+
+def _check_network(net: Network | PhaseNetwork) -> None:
+    """The OPF problem's checks of a balanced network (`problem.check_supported`); a
+    three-phase feeder's class is checked by `supports`, the rest by the model's build."""
+    from opfbench.multiphase import PhaseNetwork
+
+    if not isinstance(net, PhaseNetwork):
+        check_supported(net)
 
 
 def _own_runner(name: str) -> Callable[..., StrategyResult]:

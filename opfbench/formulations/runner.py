@@ -34,7 +34,7 @@ from opfbench.formulations.model import built, model_for
 from opfbench.formulations.policy import IpoptPolicy, fast_path, merge_flows
 from opfbench.formulations.problem import OpfProblem, snapshot_data
 from opfbench.formulations.solves import model_solves, relaxation_solves
-from opfbench.formulations.three_phase import run_phase
+from opfbench.formulations.three_phase import run_phase, run_phase_batch
 from opfbench.powerflow import solve_pf_batch
 from opfbench.registry.specs import ModelSpec, Role
 from opfbench.result import FROM_NO_ACTION, FROM_SOLVER, INFEASIBLE, OK, SOLVER_FAILED, StrategyResult
@@ -56,10 +56,13 @@ def run_model(
     named `name` (default: the model's); `fallback` and `solver` apply to an exact model —
     on a three-phase feeder `three_phase.run_phase`: IPOPT on every snapshot, and with
     `solver` "auto" the relaxation's bound on a sample of them (`three_phase.BOUND_SAMPLE`),
-    which certifies the optimum where it closes the gap; "ipopt": no bound."""
+    which certifies the optimum where it closes the gap ("ipopt": no bound) — and
+    `three_phase.run_phase_batch` for a model of another role."""
     if scenario.three_phase and model.role == "exact":
         check_option("AC OPF solver", solver, ACOPF_SOLVERS)
         return run_phase(model, scenario, k, name=name, slack_export=slack_export, fallback=fallback, bounded=solver == "auto")
+    if scenario.three_phase:
+        return run_phase_batch(model, scenario, k, name=name, slack_export=slack_export)
     if model.role == "exact":
         return run_exact(model, scenario, k, name=name, slack_export=slack_export, fallback=fallback, solver=solver)
     return run_batch(model, scenario, k, name=name, slack_export=slack_export)

@@ -59,6 +59,7 @@ from opfbench.result import (
     INFEASIBLE,
     OK,
     SOLVER_FAILED,
+    VM_ERROR,
     StrategyResult,
 )
 from opfbench.scenario import Scenario
@@ -362,6 +363,63 @@ def step_bounds(
         "sdp_ms": relaxed.solve_ms,
         "optimality_gap": np.where(feasible, gap, np.nan),
     }
+
+
+def run_phase_batch(
+    model: ModelSpec, scenario: Scenario, k: float, *, name: str = "", slack_export: bool = True
+) -> StrategyResult:
+    """An approximation (or any model with `solve(load P, load Q, DER P, usable |Q|)` per
+    snapshot and `predict` of the monitored voltages: `models.lindist3flow`) on every
+    snapshot of a three-phase `scenario`, its setpoints evaluated by the power flow: status
+    "ok" where it solved, "infeasible" where its program is (then no action, Q = 0),
+    "solver-failed" otherwise (also Q = 0). The solver record: objective_kw (the model's
+    own estimate of the losses), solver_status, fallback, certified_by "" (an estimate
+    certifies nothing), solve_ms, iterations; extra: vm_error_pu (the largest |predicted −
+    power flow| monitored voltage at its setpoints, p.u.; NaN where it did not solve or the
+    flow diverged), ac_feasible (the reported point meets the band), slack_export."""
+    begin = now()
+    net = scenario.net
+    assert isinstance(net, PhaseNetwork)
+    load_p, load_q = scenario.element_loads()
+    limit = scenario.usable_q_mvar(check_reserve(k))
+    der_p = scenario.der_p_mw
+    approx = built(model, net, slack_export)
+    n = scenario.n_snapshots
+    solves = [approx.solve(load_p[i], load_q[i], der_p[i], limit[i]) for i in range(n)]
+    q = np.array([s.q_mvar if s.optimal else np.zeros(len(net.ders)) for s in solves]).reshape(n, len(net.ders))
+    flow = solve_phase_flow(net, load_p, load_q, der_p, q)
+    status = np.array([OK if s.optimal else INFEASIBLE if s.infeasible else SOLVER_FAILED for s in solves], dtype=object)
+    error = np.full(n, np.nan)
+    for i in np.flatnonzero((status == OK) & flow.converged):
+        error[i] = np.abs(approx.predict(load_p[i], load_q[i], der_p[i], q[i]) - flow.vm[i]).max(initial=0.0)
+    rows = [
+        {
+            "objective_kw": float(s.objective_kw),
+            "solver_status": s.status,
+            "fallback": FROM_SOLVER if s.optimal else FROM_NO_ACTION,
+            "certified_by": "",
+            "solve_ms": float(s.solve_ms),
+            "iterations": int(s.iterations),
+            VM_ERROR: float(error[i]),
+        }
+        for i, s in enumerate(solves)
+    ]
+    record, extra = solver_record(model, rows)
+    lo, hi = net.band
+    with np.errstate(invalid="ignore"):
+        feasible = flow.converged & (flow.vm.min(axis=1) >= lo - BAND_TOL) & (flow.vm.max(axis=1) <= hi + BAND_TOL)
+    return StrategyResult.from_setpoints(
+        name or model.name,
+        k,
+        scenario,
+        q,
+        elapsed_ms(begin),
+        power_flows=1,  # its evaluation
+        pf=flow,
+        status=status,
+        solver=record,
+        extra={**extra, "ac_feasible": feasible, "slack_export": bool(slack_export)},
+    )
 
 
 def _setpoints(solve, der_p: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -198,6 +198,47 @@ def drawn(
 
 
 @njit(cache=True, error_model="numpy")
+def drawn_row(
+    v: np.ndarray,
+    p_w: np.ndarray,
+    q_var: np.ndarray,
+    vbase_v: float,
+    h_p: float,
+    h_q: float,
+    switches: bool,
+    vmin: float,
+    vmax: float,
+    vlow: float,
+    at_vmin: float,
+    above_div: float,
+    out: np.ndarray,
+) -> None:
+    """out (S,) ← `drawn` of one branch at its voltages v (S,) and powers p_w, q_var (S,).
+    A constant-power branch (both exponents −1) draws (P − jQ)·V/|V|² in band and, when
+    it switches, (P − jQ)·V/(V_base²·above_div) above vmaxpu — `drawn` there, in one pass
+    without branches that the compiler vectorizes; `drawn` itself below vminpu and for
+    every other law."""
+    constant_power = h_p == -1.0 and h_q == -1.0
+    if constant_power:
+        low, high = (vmin * vbase_v) ** 2, (vmax * vbase_v) ** 2 if switches else np.inf  # the band in |V|²
+        per_above = 1.0 / (vbase_v * vbase_v * above_div)
+        below = 0
+        for s in range(v.size):
+            re, im = v[s].real, v[s].imag
+            mag2 = re * re + im * im
+            inverse = 1.0 / mag2
+            per = per_above if mag2 > high else inverse
+            out[s] = complex((p_w[s] * re + q_var[s] * im) * per, (p_w[s] * im - q_var[s] * re) * per)
+            below += mag2 <= low
+        if not (switches and below):
+            return
+    for s in range(v.size):
+        if constant_power and not v[s].real * v[s].real + v[s].imag * v[s].imag <= low:
+            continue
+        out[s] = drawn(v[s], p_w[s], q_var[s], vbase_v, h_p, h_q, switches, vmin, vmax, vlow, at_vmin, above_div)
+
+
+@njit(cache=True, error_model="numpy")
 def _power(u: float, exponent: float, per_u: float) -> float:
     """u**exponent (per_u = 1/u); the exponents of constant power, current and impedance
     (−1, 0, 1) as 1/u, one or u."""
@@ -208,3 +249,61 @@ def _power(u: float, exponent: float, per_u: float) -> float:
     if exponent == 1.0:
         return u
     return u**exponent
+
+
+@njit(cache=True, error_model="numpy")
+def branch_currents(v_k: np.ndarray, loads: tuple, ders: tuple, y: tuple, out: np.ndarray) -> None:
+    """out (m, S) ← Y·v_k (CSR `y`: indptr, indices, data; none when indptr is all zero)
+    plus the currents the load branches draw (`drawn_row`, taken out of node a and
+    into node b) and the DER branches inject (I = conj(S/V)), at the voltages v_k (m, S)
+    of K; branch ends are positions in K, m meaning ground."""
+    m, n = v_k.shape
+    indptr, indices, data = y
+    for r in range(m):
+        for s in range(n):
+            out[r, s] = 0.0
+        for t in range(indptr[r], indptr[r + 1]):
+            for s in range(n):
+                out[r, s] += data[t] * v_k[indices[t], s]
+    a_load, b_load, p, q, vbase, h_p, h_q, switches, vmin, vmax, vlow, at_vmin, above_div = loads
+    across = np.empty(n, dtype=np.complex128)
+    current = np.empty(n, dtype=np.complex128)
+    for i in range(a_load.size):
+        a, b = a_load[i], b_load[i]
+        for s in range(n):
+            across[s] = v_k[a, s] - v_k[b, s] if b < m else v_k[a, s]
+        drawn_row(
+            across,
+            p[i],
+            q[i],
+            vbase[i],
+            h_p[i],
+            h_q[i],
+            switches[i],
+            vmin[i],
+            vmax[i],
+            vlow[i],
+            at_vmin[i],
+            above_div[i],
+            current,
+        )
+        for s in range(n):
+            out[a, s] -= current[s]
+        if b < m:
+            for s in range(n):
+                out[b, s] += current[s]
+    a_der, b_der, s_der = ders
+    for i in range(a_der.size):
+        a, b = a_der[i], b_der[i]
+        for s in range(n):
+            across[s] = v_k[a, s] - v_k[b, s] if b < m else v_k[a, s]
+        for s in range(n):
+            re, im = across[s].real, across[s].imag
+            sr, si = s_der[i, s].real, s_der[i, s].imag
+            per_mag2 = 1.0 / (re * re + im * im)
+            current[s] = complex((sr * re + si * im) * per_mag2, (sr * im - si * re) * per_mag2)  # conj(S/V)
+        for s in range(n):
+            out[a, s] += current[s]
+        if b < m:
+            for s in range(n):
+                out[b, s] -= current[s]

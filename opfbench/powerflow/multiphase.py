@@ -58,7 +58,7 @@ from threadpoolctl import ThreadpoolController
 
 from opfbench.errors import InputError
 from opfbench.multiphase import GROUND, PhaseNetwork
-from opfbench.multiphase.branches import BranchLaw, drawn
+from opfbench.multiphase.branches import BranchLaw, branch_currents
 from opfbench.multiphase.regulators import ControlState, act, control_voltage, sample
 from opfbench.powerflow.common import MAX_SWEEP_ITER, SWEEP_TOLERANCE
 from opfbench.powerflow.sparse import factorize
@@ -73,7 +73,7 @@ MISMATCH_REL = 1e-8
 MAX_CONTROL_ITER = 100
 """Rounds of solve-and-move a snapshot's regulators get to settle (`taps=control`)."""
 _CHUNK = 256  # columns per sparse solve when forming Z_KK (memory: n_node × _CHUNK)
-_BLOCK = 64  # snapshots per block when certifying (`_certify`)
+_BLOCK_BYTES = 2**22  # node voltages per block when certifying every node (`_certify_every_node`): 4 MB
 _ROUND_OFF_PU = 1e-12  # far above the round-off between two ways of forming a node's |V| (p.u.)
 _BLAS = ThreadpoolController().select(user_api="blas")
 
@@ -193,7 +193,7 @@ class _System:
 
     def _currents(self, v_k, p_br, q_br, s_der, y: sp.csr_matrix) -> np.ndarray:
         out = np.empty(v_k.shape, dtype=complex)
-        _branch_currents(
+        branch_currents(
             np.ascontiguousarray(v_k),
             (
                 self.load_a,
@@ -211,56 +211,6 @@ class _System:
 
 
 _NO_ROWS = sp.csr_matrix((0, 0), dtype=complex)
-
-
-@njit(cache=True, error_model="numpy")
-def _branch_currents(v_k, loads, ders, y, out) -> None:
-    """out (m, S) ← Y·v_k (CSR `y`: indptr, indices, data; none when indptr is all zero)
-    plus the currents the load branches draw (`branches.drawn`, taken out of node a and
-    into node b) and the DER branches inject (I = conj(S/V)), at the voltages v_k (m, S)
-    of K; branch ends are positions in K, m meaning ground."""
-    m, n = v_k.shape
-    indptr, indices, data = y
-    for r in range(m):
-        for s in range(n):
-            out[r, s] = 0.0
-        for t in range(indptr[r], indptr[r + 1]):
-            for s in range(n):
-                out[r, s] += data[t] * v_k[indices[t], s]
-    a_load, b_load, p, q, vbase, h_p, h_q, switches, vmin, vmax, vlow, at_vmin, above_div = loads
-    for i in range(a_load.size):
-        a, b = a_load[i], b_load[i]
-        for s in range(n):
-            across = v_k[a, s] - v_k[b, s] if b < m else v_k[a, s]
-            current = drawn(
-                across,
-                p[i, s],
-                q[i, s],
-                vbase[i],
-                h_p[i],
-                h_q[i],
-                switches[i],
-                vmin[i],
-                vmax[i],
-                vlow[i],
-                at_vmin[i],
-                above_div[i],
-            )
-            out[a, s] -= current
-            if b < m:
-                out[b, s] += current
-    a_der, b_der, s_der = ders
-    for i in range(a_der.size):
-        a, b = a_der[i], b_der[i]
-        for s in range(n):
-            across = v_k[a, s] - v_k[b, s] if b < m else v_k[a, s]
-            re, im = across.real, across.imag
-            sr, si = s_der[i, s].real, s_der[i, s].imag
-            per_mag2 = 1.0 / (re * re + im * im)
-            given = complex((sr * re + si * im) * per_mag2, (sr * im - si * re) * per_mag2)  # conj(S/V)
-            out[a, s] += given
-            if b < m:
-                out[b, s] -= given
 
 
 @lru_cache(maxsize=8)
@@ -380,7 +330,7 @@ def voltages_within(net: PhaseNetwork, state: np.ndarray, before: np.ndarray, to
         if sys_.z_kk is not None and sys_.z_nk is not None and rows.size:
             at_k = sys_.z_kk @ np.concatenate([state, before]).T
             at_k += sys_.v_source[sys_.k][:, None]
-            moved_k = _largest_magnitude_change(at_k[:, : len(rows)], at_k[:, len(rows) :], 1.0 / sys_.base_k[:, 0])
+            moved_k = _largest_change(at_k[:, : len(rows)], at_k[:, len(rows) :], 1.0 / sys_.base_k[:, 0], True)
             rows = np.flatnonzero(moved_k <= tol + _ROUND_OFF_PU)
             every = sys_.z_nk @ np.concatenate([state[rows], before[rows]]).T
             every += sys_.v_source[:, None]
@@ -388,23 +338,8 @@ def voltages_within(net: PhaseNetwork, state: np.ndarray, before: np.ndarray, to
         else:
             now, then = state.T, before.T
     if rows.size:
-        within[rows] = _largest_magnitude_change(now, then, 1.0 / net.node_base_v) <= tol
+        within[rows] = _largest_change(now, then, 1.0 / net.node_base_v, True) <= tol
     return within
-
-
-@njit(cache=True, error_model="numpy")
-def _largest_magnitude_change(new: np.ndarray, old: np.ndarray, per_base: np.ndarray) -> np.ndarray:
-    """(S,) the largest ||new| − |old|| (m, S) of a column, in p.u. of each row's base
-    (per_base = 1/base); NaN where some is NaN."""
-    m, n = new.shape
-    out = np.zeros(n)
-    for i in range(m):
-        for s in range(n):
-            a, b = new[i, s], old[i, s]
-            moved = abs(np.sqrt(a.real * a.real + a.imag * a.imag) - np.sqrt(b.real * b.real + b.imag * b.imag)) * per_base[i]
-            if moved > out[s] or moved != moved:
-                out[s] = moved
-    return out
 
 
 def _measured(net: PhaseNetwork, magnitude: np.ndarray) -> np.ndarray:
@@ -606,12 +541,12 @@ def _iterate(
             if dense:
                 new = sys_.z_kk @ j
                 new += v_source_k
-                step = _largest_change(new, v_k, per_base)
+                step = _largest_change(new, v_k, per_base, False)
             else:
                 rhs = np.zeros((net.n_node, j.shape[1]), dtype=complex, order="F")
                 rhs[sys_.k] = j
                 new = sys_.v_source[:, None] + sys_.lu.solve(rhs)
-                step = _largest_change(np.ascontiguousarray(new[at_k]), v_k, per_base)
+                step = _largest_change(np.ascontiguousarray(new[at_k]), v_k, per_base, False)
             iterations[active] = it
             done = step < tol
             settled[active[done]] = True
@@ -619,7 +554,7 @@ def _iterate(
             if keep.all():
                 v_act = new
                 continue
-            v[:, active] = new
+            v[:, active[~keep]] = new[:, ~keep]
             if not keep.any():
                 break
             active, v_act = active[keep], new[:, keep]
@@ -634,15 +569,19 @@ def _iterate(
 
 
 @njit(cache=True, error_model="numpy")
-def _largest_change(new: np.ndarray, old: np.ndarray, per_base: np.ndarray) -> np.ndarray:
-    """(S,) the largest |new − old| (m, S) of a column, in p.u. of each row's base
-    (per_base = 1/base); NaN where some is NaN."""
+def _largest_change(new: np.ndarray, old: np.ndarray, per_base: np.ndarray, magnitudes: bool) -> np.ndarray:
+    """(S,) the largest |new − old| (m, S) of a column — with `magnitudes` the largest
+    ||new| − |old|| — in p.u. of each row's base (per_base = 1/base); NaN where some is NaN."""
     m, n = new.shape
     out = np.zeros(n)
     for i in range(m):
         for s in range(n):
-            d = new[i, s] - old[i, s]
-            moved = np.sqrt(d.real * d.real + d.imag * d.imag) * per_base[i]
+            a, b = new[i, s], old[i, s]
+            if magnitudes:
+                moved = abs(np.sqrt(a.real * a.real + a.imag * a.imag) - np.sqrt(b.real * b.real + b.imag * b.imag))
+            else:
+                moved = np.sqrt((a.real - b.real) ** 2 + (a.imag - b.imag) ** 2)
+            moved *= per_base[i]
             if moved > out[s] or moved != moved:
                 out[s] = moved
     return out
@@ -669,17 +608,18 @@ def _certify(flow: PhaseIterate, sys_: _System, powers: _Powers) -> PhaseFlowRes
 
 def _certify_every_node(flow: PhaseIterate, sys_: _System, powers: _Powers) -> PhaseFlowResult:
     """`certify` of the sparse iteration (its state is every node's V), in blocks of
-    `_BLOCK` snapshots (each block's node voltages stay in cache through the residual and
-    the losses), node-major (n_node, S), the layout the sparse products want; the
-    result's `v` is its transpose."""
+    snapshots whose node voltages take `_BLOCK_BYTES` (they stay in cache through the
+    residual and the losses), node-major (n_node, S), the layout the sparse products want;
+    the result's `v` is its transpose."""
     net = flow.net
     n_snap = flow.state.shape[0]
+    size = max(1, _BLOCK_BYTES // (16 * net.n_node))
     v = np.empty((net.n_node, n_snap), dtype=complex)
     mismatch = np.empty(n_snap)
     losses = np.empty(n_snap)
     with _one_blas_thread(), np.errstate(all="ignore"):
-        for first in range(0, n_snap, _BLOCK):
-            block = slice(first, first + _BLOCK)
+        for first in range(0, n_snap, size):
+            block = slice(first, first + size)
             vb = np.ascontiguousarray(flow.state[block].T)
             given = sys_.injections(vb[sys_.k], powers[0][:, block], powers[1][:, block], powers[2][:, block])
             mismatch[block] = _residual(net.ybus, vb, net.source_current, given, sys_.k, sys_.ybus_abs)

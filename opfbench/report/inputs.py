@@ -123,6 +123,8 @@ STEP_KINDS = _kinds(
 )
 """The columns of steps.parquet the report uses, and their kinds."""
 STEP_COLUMNS = tuple(STEP_KINDS)
+STEP_OPTIONAL = _kinds(STEPS, ("vm_error_pu",))
+"""Columns of steps.parquet the report uses where present (a folder written before they were declared lacks them)."""
 DER_Q_KINDS = _kinds(DER_Q, (*KEYS, "time", "bus", "kind", "q_mvar"))
 _FAULT_KEYS = _kinds(FAULT, ("case", "fault_bus", "strategy", "k", "forecast", "variant"))
 FAULT_KINDS = _FAULT_KEYS | _kinds(FAULT, ("bus", "recovery_ms", "status", "vmin_pu", "margin_pu", "faulted"))
@@ -359,19 +361,22 @@ def _filtered(
     command: str,
     every_column: bool = False,
     keys: tuple[str, ...] = tuple(_KEYS),
+    optional: dict[str, str] | None = None,
 ) -> pd.DataFrame | None:
     """The rows of a run table matching `filters` (parquet filters: a year's table need not
     fit in memory) with the columns of `kinds` (every column with `every_column`), text as
     arrow strings; None when the file is absent, holds no row or no row matches.
     InputError when it is not a readable parquet file, lacks a column of `kinds` or has it
     of another kind, or a row read has no value in one of the `keys` columns, or a number
-    read is outside its domain (`_check_numbers`)."""
+    read is outside its domain (`_check_numbers`). The `optional` columns are read, and
+    checked, where the file has them."""
     if not _present(path, command):
         return None
     try:
         if pq.ParquetFile(path).metadata.num_rows == 0:
             return None
         schema = pq.read_schema(path)
+        kinds = kinds | {name: kind for name, kind in (optional or {}).items() if name in schema.names}
         for name, kind in kinds.items():
             found = _kind(schema.field(name).type) if name in schema.names else None
             if found != kind and found != NULL:  # a column of nulls only (no row has a value) is any kind
@@ -425,10 +430,10 @@ def _steps(path: Path, summary: pd.DataFrame | None, kinds: Kinds, command: str)
     reference = _reference_filter(summary)
     keys = (*_KEYS, "time", "status")
     if reference is None or summary is None:
-        return _filtered(path, STEP_KINDS, None, command, keys=keys)
+        return _filtered(path, STEP_KINDS, None, command, keys=keys, optional=STEP_OPTIONAL)
     formulations = sorted(kinds.formulations)
     filters = [[("strategy", "in", formulations)], reference] if formulations else [reference]
-    return _filtered(path, STEP_KINDS, filters, command, keys=keys)
+    return _filtered(path, STEP_KINDS, filters, command, keys=keys, optional=STEP_OPTIONAL)
 
 
 def _summary(path: Path, command: str) -> pd.DataFrame | None:
