@@ -28,6 +28,7 @@ LAYERS: tuple[tuple[str, tuple[str, ...]], ...] = (
             "opfbench.parquetio",
             "opfbench.digests",
             "opfbench.exact",
+            "opfbench.threads",
             "opfbench.timing",
             "opfbench.folders",
             "opfbench.state",

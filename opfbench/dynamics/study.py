@@ -19,7 +19,6 @@ from typing import Callable
 import numpy as np
 import pandas as pd
 import pyarrow as pa
-from threadpoolctl import threadpool_limits
 
 from opfbench.capability import PAPER_KS, check_reserve
 from opfbench.digests import digest
@@ -38,6 +37,7 @@ from opfbench.scenario import Scenario
 from opfbench.schema import FAULT, FAULT_TASK, FAULT_TASK_TRACES, TRACES
 from opfbench.study.config import check_something_to_run, strategies_for, unique_grid
 from opfbench.study.engine import SILENT, EngineRun, Reporter, Task, TaskOutput, run_family
+from opfbench.threads import one_blas_thread
 from opfbench.timing import elapsed_ms, now
 
 FAULT_OUTPUTS = ("fault.parquet", "traces.parquet")
@@ -250,7 +250,7 @@ def plan(config: FaultConfig, case: Case) -> FaultFamily:
     net = case.balanced("the fault study (a balanced three-phase RMS model)")
     variants = config.check(net)
     point = operating_point(net, config.load_scale, config.der_scale, config.time, case)
-    with threadpool_limits(1):
+    with one_blas_thread():
         setpoints = _setpoints(config, point)
     sc_off = point.scenario.without_forecast()
     tasks: list[FaultTask] = []
@@ -327,7 +327,7 @@ def simulate_task(job: FaultJob) -> TaskOutput:
     start = now()
     t = job.task
     measures, traces = [], []
-    with threadpool_limits(1):
+    with one_blas_thread():
         model = build_model(job.scenario, np.array(t.q_mvar), t.params, t.emf_pu)
         for bus in t.fault_buses:
             sim = simulate(model, replace(t.fault, bus=bus))

@@ -26,7 +26,6 @@ from functools import lru_cache
 
 import numpy as np
 import scipy.sparse as sp
-from threadpoolctl import ThreadpoolController
 
 from opfbench.network import Network
 from opfbench.powerflow.common import (
@@ -47,6 +46,7 @@ from opfbench.powerflow.fixed_point import fixed_point, max_mismatch
 from opfbench.powerflow.memo import flow_memo
 from opfbench.powerflow.sparse import SparseNewton, SparseZbus
 from opfbench.state import PROCESS
+from opfbench.threads import one_blas_thread
 
 __all__ = [
     "MAX_NR_ITER",
@@ -61,10 +61,6 @@ __all__ = [
     "solve_pf_batch",
     "uses_sparse",
 ]
-
-# The batched mat-muls are small (n_bus² × S); multi-threaded BLAS only adds
-# synchronisation there, and is many times slower when the other core is busy.
-_BLAS = ThreadpoolController()
 
 
 @lru_cache(maxsize=16)
@@ -188,7 +184,7 @@ def _batch(net: Network, s: np.ndarray, v0: np.ndarray | None, tol: float, max_i
     fac = _zbus(net, sparse)
     v = np.empty((n_snap, net.n_bus), dtype=complex)
     v[:, net.slack] = net.v_slack
-    with _BLAS.limit(limits=1, user_api="blas"):
+    with one_blas_thread():
         start = None
         if v0 is not None:
             v0 = np.asarray(v0, dtype=complex).reshape(n_snap, net.n_bus)

@@ -45,8 +45,6 @@ flow that gives its figures.
 
 from __future__ import annotations
 
-from collections.abc import Iterator
-from contextlib import contextmanager
 from dataclasses import dataclass, replace
 from functools import cached_property, lru_cache
 from typing import Any, Self
@@ -54,7 +52,6 @@ from typing import Any, Self
 import numpy as np
 import scipy.sparse as sp
 from numba import njit
-from threadpoolctl import ThreadpoolController
 
 from opfbench.errors import InputError
 from opfbench.multiphase import GROUND, PhaseNetwork
@@ -62,6 +59,7 @@ from opfbench.multiphase.branches import BranchLaw, branch_currents
 from opfbench.multiphase.regulators import ControlState, act, control_voltage, sample
 from opfbench.powerflow.common import MAX_SWEEP_ITER, SWEEP_TOLERANCE
 from opfbench.powerflow.sparse import factorize
+from opfbench.threads import one_blas_thread
 
 DENSE_MAX_NODES = 800
 """Iterate on the reduced dense impedance when at most this many nodes carry branches…"""
@@ -75,23 +73,6 @@ MAX_CONTROL_ITER = 100
 _CHUNK = 256  # columns per sparse solve when forming Z_KK (memory: n_node × _CHUNK)
 _BLOCK_BYTES = 2**22  # node voltages per block when certifying every node (`_certify_every_node`): 4 MB
 _ROUND_OFF_PU = 1e-12  # far above the round-off between two ways of forming a node's |V| (p.u.)
-_BLAS = ThreadpoolController().select(user_api="blas")
-
-
-@contextmanager
-def _one_blas_thread() -> Iterator[None]:
-    """BLAS on one thread inside: the products here are small and many, and threads cost
-    more than they give on a shared machine. Sets and restores only libraries not already
-    on one thread (threadpoolctl's `limit` queries every library on each call: ~0.1 ms,
-    hundreds of times in a closed loop)."""
-    changed = [(lib, lib.num_threads) for lib in _BLAS.lib_controllers if lib.num_threads != 1]
-    for lib, _ in changed:
-        lib.set_num_threads(1)
-    try:
-        yield
-    finally:
-        for lib, threads in changed:
-            lib.set_num_threads(threads)
 
 
 @dataclass(frozen=True, eq=False)
@@ -301,7 +282,7 @@ class PhaseIterate:
         sys_ = _system(self.net)
         if sys_.z_nk is None:
             return self.state
-        with _one_blas_thread():
+        with one_blas_thread():
             return sys_.v_source + self.state @ sys_.z_nk.T
 
     @cached_property
@@ -312,7 +293,7 @@ class PhaseIterate:
         if sys_.z_kk is None:
             v_k = self.state[:, sys_.k]
         else:
-            with _one_blas_thread():
+            with one_blas_thread():
                 v_k = sys_.v_source[sys_.k] + self.state @ sys_.z_kk.T
         vx = np.concatenate([v_k, np.zeros((v_k.shape[0], 1), dtype=complex)], axis=1)
         return _measured(self.net, np.abs(vx[:, sys_.der_a] - vx[:, sys_.der_b]))
@@ -326,7 +307,7 @@ def voltages_within(net: PhaseNetwork, state: np.ndarray, before: np.ndarray, to
     sys_ = _system(net)
     within = np.zeros(state.shape[0], dtype=bool)
     rows = np.arange(state.shape[0])
-    with _one_blas_thread():
+    with one_blas_thread():
         if sys_.z_kk is not None and sys_.z_nk is not None and rows.size:
             at_k = sys_.z_kk @ np.concatenate([state, before]).T
             at_k += sys_.v_source[sys_.k][:, None]
@@ -500,7 +481,7 @@ def iterate_phase_flow(
     carried = None
     if start is not None:  # the carried nodes' voltages of the earlier iterate
         state = np.asarray(start, dtype=complex)
-        with _one_blas_thread():
+        with one_blas_thread():
             carried = (state if sys_.z_kk is None else sys_.v_source[sys_.k] + state @ sys_.z_kk.T).T
     return _iterate(net, sys_, powers, carried, tol, max_iter)
 
@@ -534,7 +515,7 @@ def _iterate(
     v_act, p_act = v, powers
     v_source_k = sys_.v_source[sys_.k][:, None]
     per_base = 1.0 / sys_.base_k[:, 0]
-    with _one_blas_thread(), np.errstate(all="ignore"):
+    with one_blas_thread(), np.errstate(all="ignore"):
         for it in range(1, max_iter + 1 if m else 1):
             v_k = v_act if dense else v_act[at_k]
             j = sys_.iteration_currents(v_k, *p_act)
@@ -595,7 +576,7 @@ def _certify(flow: PhaseIterate, sys_: _System, powers: _Powers) -> PhaseFlowRes
     if sys_.z_nk is None:
         return _certify_every_node(flow, sys_, powers)
     net = flow.net
-    with _one_blas_thread(), np.errstate(all="ignore"):
+    with one_blas_thread(), np.errstate(all="ignore"):
         nodes_major = sys_.z_nk @ flow.state.T
         nodes_major += sys_.v_source[:, None]
         given = sys_.injections(nodes_major[sys_.k], *powers)
@@ -617,7 +598,7 @@ def _certify_every_node(flow: PhaseIterate, sys_: _System, powers: _Powers) -> P
     v = np.empty((net.n_node, n_snap), dtype=complex)
     mismatch = np.empty(n_snap)
     losses = np.empty(n_snap)
-    with _one_blas_thread(), np.errstate(all="ignore"):
+    with one_blas_thread(), np.errstate(all="ignore"):
         for first in range(0, n_snap, size):
             block = slice(first, first + size)
             vb = np.ascontiguousarray(flow.state[block].T)

@@ -55,7 +55,6 @@ Units: MW, MVAr (Q positive = injected), kW for losses, p.u. voltages.
 
 from __future__ import annotations
 
-import functools
 import time
 import warnings
 from dataclasses import dataclass
@@ -64,12 +63,12 @@ import cvxpy as cp
 import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
-from threadpoolctl import ThreadpoolController
 
 from opfbench.errors import NetworkError
 from opfbench.formulations.model import formulation
 from opfbench.formulations.models.ac_three_phase import BranchEnds
 from opfbench.multiphase import GROUND, Branches, PhaseNetwork
+from opfbench.threads import one_blas_thread
 
 KW_PER_MW = 1e3
 SLOTS = 16
@@ -95,12 +94,6 @@ class LinearSolve:
     infeasible: bool
     solve_ms: float
     iterations: int
-
-
-@functools.cache
-def _blas() -> ThreadpoolController:
-    """The BLAS libraries' controller, found once (finding them costs milliseconds)."""
-    return ThreadpoolController().select(user_api="blas")
 
 
 def _owner_map(br: Branches, n_owner: int) -> sp.csr_matrix:
@@ -188,7 +181,7 @@ class LinDist3Flow:
         """One snapshot: loads' P and Q (n_load,) at their law's reference, DER P and usable
         |Q| (n_der,), MW/MVAr. BLAS on one thread: its products are small, and threads
         waiting on a shared machine cost more than the work."""
-        with _blas().limit(limits=1):
+        with one_blas_thread():
             return self._solve(load_p_mw, load_q_mvar, der_p_mw, q_limit_mvar)
 
     def _solve(
