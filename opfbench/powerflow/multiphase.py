@@ -303,9 +303,8 @@ class PhaseIterate:
         """(S, n_der) the voltage each DER measures, p.u. (`PhaseFlowResult.der_vm`), from
         the voltages at K alone."""
         sys_ = _system(self.net)
-        v_k = self.v_k
-        vx = np.concatenate([v_k, np.zeros((v_k.shape[0], 1), dtype=complex)], axis=1)
-        return _measured(self.net, np.abs(vx[:, sys_.der_a] - vx[:, sys_.der_b]))
+        to = np.where(sys_.der_b < len(sys_.k), sys_.der_b, GROUND)  # K's ground position m → GROUND
+        return _measured(self.net, _magnitude_across(self.v_k, sys_.der_a, to))
 
     @property
     def kept(self) -> np.ndarray:
