@@ -75,8 +75,10 @@ Only an "optimal" status gives a bound; "optimal_inaccurate" (Clarabel's AlmostS
 solver errors give none, and "infeasible" proves the exact problem infeasible (its
 Farkas certificate holds for the relaxation, which contains the exact feasible set).
 
-Built once per feeder: loads, DER P and the Q limits are cvxpy Parameters; cvxpy compiles at
-the first solve and re-solves from the compiled form (`solve`).
+Built once per feeder: loads, DER P and the Q limits are cvxpy Parameters; cvxpy compiles
+the problem for Clarabel when it is built (so the build's time holds the compilation and a
+solve only the parameters' update and Clarabel's run) and re-solves from the compiled form
+(`solve`).
 """
 
 from __future__ import annotations
@@ -415,6 +417,9 @@ class ThreePhaseSdp:
         self._leaving = leaving
         self._w_low, self._w_high = self._branch_ranges()
         self._build(drawn, eq_rows, eq_rhs)
+        for parameter in self.problem.parameters():  # compiled once here: the form is the parameters' (DPP)
+            parameter.value = np.zeros(parameter.shape)
+        self.problem.get_problem_data(cp.CLARABEL)
 
     # ----- the network as branches ---------------------------------------------------
     def _branches(self) -> tuple[list[_Branch], list[tuple[np.ndarray, np.ndarray]]]:
