@@ -89,12 +89,13 @@ ALL: tuple[Bench, ...] = (
     Bench(  # the three-phase flow and rules against OpenDSS in the same process (issue 29)
         "unbalanced",
         "unbalanced",
-        (),
+        ("--large",),
         {
             "eulv_day_ms": "eulv_dss_daily_ms",
             "eulv_volt_var_day_ms": "eulv_no_action_day_ms",
             "ieee8500_pf_ms": CALIBRATION,
             "ieee8500_batch96_ms": CALIBRATION,
+            "ieee8500_opf_solve_ms": CALIBRATION,
         },
     ),
 )

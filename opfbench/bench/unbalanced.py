@@ -20,7 +20,10 @@
   `ieee123_sdp_vs_ac_ratio` = that median / the AC OPF's median per step
   (`formulations.three_phase.optimum`, IPOPT's own time) on the same snapshots;
 - the three-phase AC OPF's and LinDist3Flow's keys (`ieee123_opf_…`, `eulv_opf_…`,
-  `…_lindist3flow_…`): `bench.unbalanced_opf`.
+  `…_lindist3flow_…`): `bench.unbalanced_opf`;
+- with `--large` (`python -m opfbench.bench unbalanced --large [--json]`; `bench all`
+  passes it): also one AC OPF solve on `ieee8500` (`ieee8500_opf_…`,
+  `bench.unbalanced_opf.ieee8500`), which takes tens of seconds and so is left out without it.
 
 Each time is the best of `REPEATS` calls (ms). Wall-clock figures: re-take them on a quiet
 machine.
@@ -28,6 +31,7 @@ machine.
 
 from __future__ import annotations
 
+import argparse
 import dataclasses
 
 import numpy as np
@@ -83,7 +87,11 @@ def _dss_daily(case, scenario, pv_pu: np.ndarray) -> tuple[float, np.ndarray]:
     return ms, np.asarray(dss.Circuit.AllBusMagPu())
 
 
-def run() -> dict:
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--large", action="store_true", help="also time one AC OPF solve on ieee8500 (tens of seconds)")
+
+
+def run(args: argparse.Namespace | None = None) -> dict:
     from opfbench.bench import unbalanced_opf
     from opfbench.io import load_case
     from opfbench.multiphase import PhaseNetwork
@@ -133,6 +141,7 @@ def run() -> dict:
         "ieee8500_batch96_ms": batch_ms,
         "ieee8500_batch96_converged": int(np.count_nonzero(batch.converged)),
         **_ieee123_sdp(),
+        **(unbalanced_opf.ieee8500() if args is not None and args.large else {}),
     }
 
 

@@ -75,8 +75,10 @@ Only an "optimal" status gives a bound; "optimal_inaccurate" (Clarabel's AlmostS
 solver errors give none, and "infeasible" proves the exact problem infeasible (its
 Farkas certificate holds for the relaxation, which contains the exact feasible set).
 
-Built once per feeder: loads, DER P and the Q limits are cvxpy Parameters; cvxpy compiles at
-the first solve and re-solves from the compiled form (`solve`).
+Built once per feeder: loads, DER P and the Q limits are cvxpy Parameters; cvxpy compiles
+the problem for Clarabel when it is built (so the build's time holds the compilation and a
+solve only the parameters' update and Clarabel's run) and re-solves from the compiled form
+(`solve`).
 """
 
 from __future__ import annotations
@@ -102,13 +104,17 @@ FIT_RTOL = 1e-7
 """An element's impedance form must reproduce its primitive admittance to this (relative)."""
 KW_PER_MW = 1e3
 CLARABEL_ATTEMPTS: tuple[dict[str, float], ...] = (
-    {},
     {"static_regularization_constant": 1e-7},
+    {"static_regularization_constant": 1e-8},
     {"static_regularization_constant": 1e-6},
 )
 """Clarabel's settings, tried in turn until one ends optimal or infeasible: its static
-regularisation raised from 1e-8, as the lifted blocks' near-zero directions (a
-near-lossless regulator's or transformer's current) can stall its KKT solves."""
+regularisation at 1e-7 first, as the lifted blocks' near-zero directions (a near-lossless
+regulator's or transformer's current) stall its KKT solves at its default 1e-8 (on ieee123
+every step: an "almost solved" or a numerical error after ~20 iterations, as long as the
+solve that follows); then the default, then 1e-6. Each attempt names the constant: cvxpy
+re-uses a cached Clarabel solver (where its settings allow a data update) with the
+previous attempt's settings as the base."""
 Z_IDEAL = 1e-6
 """A line (a switch) whose series impedance is below this (p.u. on `s_base`) is ideal: its
 ends share voltages and it carries each conductor's power unchanged (module docstring)."""
@@ -411,6 +417,9 @@ class ThreePhaseSdp:
         self._leaving = leaving
         self._w_low, self._w_high = self._branch_ranges()
         self._build(drawn, eq_rows, eq_rhs)
+        for parameter in self.problem.parameters():  # compiled once here: the form is the parameters' (DPP)
+            parameter.value = np.zeros(parameter.shape)
+        self.problem.get_problem_data(cp.CLARABEL)
 
     # ----- the network as branches ---------------------------------------------------
     def _branches(self) -> tuple[list[_Branch], list[tuple[np.ndarray, np.ndarray]]]:
