@@ -269,12 +269,14 @@ class PhaseIterate:
     (`certify`): `state` (S, r) what every node's voltage follows from — the currents J
     (S, |K|) that the branches and the load admittances inject at the nodes K (dense), or
     every node's V (S, n_node) (sparse) —, `settled` (S,) the last update was below the
-    tolerance (and finite), `iterations` (S,)."""
+    tolerance (and finite), `iterations` (S,); `at_k` (S, |K|) the voltages at K where
+    they were already formed from `state` (`kept`), else None."""
 
     net: PhaseNetwork
     state: np.ndarray
     settled: np.ndarray
     iterations: np.ndarray
+    at_k: np.ndarray | None = None
 
     @cached_property
     def v(self) -> np.ndarray:
@@ -286,40 +288,63 @@ class PhaseIterate:
             return sys_.v_source + self.state @ sys_.z_nk.T
 
     @cached_property
+    def v_k(self) -> np.ndarray:
+        """(S, |K|) complex V at the nodes K: V_K = (A⁻¹·I_source)_K + Z_KK·J (dense)."""
+        if self.at_k is not None:
+            return self.at_k
+        sys_ = _system(self.net)
+        if sys_.z_kk is None:
+            return self.state[:, sys_.k]
+        with one_blas_thread():
+            return sys_.v_source[sys_.k] + self.state @ sys_.z_kk.T
+
+    @cached_property
     def der_vm(self) -> np.ndarray:
         """(S, n_der) the voltage each DER measures, p.u. (`PhaseFlowResult.der_vm`), from
         the voltages at K alone."""
         sys_ = _system(self.net)
-        if sys_.z_kk is None:
-            v_k = self.state[:, sys_.k]
-        else:
-            with one_blas_thread():
-                v_k = sys_.v_source[sys_.k] + self.state @ sys_.z_kk.T
-        vx = np.concatenate([v_k, np.zeros((v_k.shape[0], 1), dtype=complex)], axis=1)
-        return _measured(self.net, np.abs(vx[:, sys_.der_a] - vx[:, sys_.der_b]))
+        to = np.where(sys_.der_b < len(sys_.k), sys_.der_b, GROUND)  # K's ground position m → GROUND
+        return _measured(self.net, _magnitude_across(self.v_k, sys_.der_a, to))
+
+    @property
+    def kept(self) -> np.ndarray:
+        """(S, r') what a closed loop keeps of each snapshot (`resumed` gives the iterate
+        back): dense, the state and V_K side by side (S, 2·|K|), so that V_K is formed once
+        per iterate; sparse, the state (V_K is among its columns)."""
+        if _system(self.net).z_kk is None:
+            return self.state
+        return np.concatenate([self.state, self.v_k], axis=1)
+
+    @classmethod
+    def resumed(cls, net: PhaseNetwork, kept: np.ndarray, settled: np.ndarray, iterations: np.ndarray) -> "PhaseIterate":
+        """The iterate of snapshots a closed loop kept (`kept`)."""
+        m = len(_system(net).k)
+        if _system(net).z_kk is None:
+            return cls(net, kept, settled, iterations)
+        return cls(net, kept[:, :m], settled, iterations, kept[:, m:])
 
 
-def voltages_within(net: PhaseNetwork, state: np.ndarray, before: np.ndarray, tol: float) -> np.ndarray:
+def voltages_within(now: PhaseIterate, before: PhaseIterate, tol: float) -> np.ndarray:
     """(S',) whether no node's |V| (p.u. of its base) moved by more than `tol` from the
-    iterate states `before` to `state` (S', r). Dense, first from the nodes K alone (Z_KK):
-    a change above tol (by more than round-off) at one of them decides "no"; every node's
-    voltages, both states' in one product, decide the rest."""
+    iterate `before` to `now` (S' snapshots each, of one network). Dense, first from the
+    nodes K alone (their voltages `PhaseIterate.v_k`): a change above tol (by more than
+    round-off) at one of them decides "no"; every node's voltages, both iterates' in one
+    product, decide the rest."""
+    net = now.net
     sys_ = _system(net)
-    within = np.zeros(state.shape[0], dtype=bool)
-    rows = np.arange(state.shape[0])
+    within = np.zeros(now.state.shape[0], dtype=bool)
+    rows = np.arange(now.state.shape[0])
     with one_blas_thread():
         if sys_.z_kk is not None and sys_.z_nk is not None and rows.size:
-            at_k = sys_.z_kk @ np.concatenate([state, before]).T
-            at_k += sys_.v_source[sys_.k][:, None]
-            moved_k = _largest_change(at_k[:, : len(rows)], at_k[:, len(rows) :], 1.0 / sys_.base_k[:, 0], True)
+            moved_k = _largest_change(now.v_k.T, before.v_k.T, 1.0 / sys_.base_k[:, 0], True)
             rows = np.flatnonzero(moved_k <= tol + _ROUND_OFF_PU)
-            every = sys_.z_nk @ np.concatenate([state[rows], before[rows]]).T
+            every = sys_.z_nk @ np.concatenate([now.state[rows], before.state[rows]]).T
             every += sys_.v_source[:, None]
-            now, then = every[:, : len(rows)], every[:, len(rows) :]
+            at_now, at_before = every[:, : len(rows)], every[:, len(rows) :]
         else:
-            now, then = state.T, before.T
+            at_now, at_before = now.state.T, before.state.T
     if rows.size:
-        within[rows] = _largest_change(now, then, 1.0 / net.node_base_v, True) <= tol
+        within[rows] = _largest_change(at_now, at_before, 1.0 / net.node_base_v, True) <= tol
     return within
 
 
@@ -468,21 +493,19 @@ def iterate_phase_flow(
     load_q_mvar: np.ndarray,
     der_p_mw: np.ndarray | None = None,
     der_q_mvar: np.ndarray | None = None,
-    start: np.ndarray | None = None,
+    start: PhaseIterate | None = None,
     tol: float = SWEEP_TOLERANCE,
     max_iter: int = MAX_SWEEP_ITER,
 ) -> PhaseIterate:
     """The iteration of `solve_phase_flow` without its certificate (`certify`), warm
-    started from an earlier `PhaseIterate.state` (S, r) of the same network (`start`)."""
+    started from an earlier iterate of the same S snapshots on the same network (`start`)."""
     if net.tap_control and net.regulators:
         raise ValueError(f"{net.name}: regulators under tap control move inside the solve; iterate with solve_phase_flow")
     powers = _branch_powers(net, load_p_mw, load_q_mvar, der_p_mw, der_q_mvar)
     sys_ = _system(net)
     carried = None
     if start is not None:  # the carried nodes' voltages of the earlier iterate
-        state = np.asarray(start, dtype=complex)
-        with one_blas_thread():
-            carried = (state if sys_.z_kk is None else sys_.v_source[sys_.k] + state @ sys_.z_kk.T).T
+        carried = start.state.T if sys_.z_kk is None else start.v_k.T
     return _iterate(net, sys_, powers, carried, tol, max_iter)
 
 

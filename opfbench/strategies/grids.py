@@ -113,12 +113,19 @@ class PhaseGrid:
     def step(self, rows: np.ndarray, q_mvar: np.ndarray, p_mw: np.ndarray | None, state: np.ndarray | None) -> Step:
         p = self.available[rows] if p_mw is None else p_mw
         self.der_p[rows], self.der_q[rows] = p, q_mvar
-        return iterate_phase_flow(self.net, self.load_p[rows], self.load_q[rows], p, q_mvar, start=state)
+        start = None if state is None else self._resumed(state)
+        return iterate_phase_flow(self.net, self.load_p[rows], self.load_q[rows], p, q_mvar, start=start)
 
     def state(self, flow: Step) -> np.ndarray:
-        """(S', r) what the iterate's node voltages follow from (`PhaseIterate.state`)."""
+        """(S', r') what the loop keeps of the iterate (`PhaseIterate.kept`: what its node
+        voltages follow from, with its voltages at the nodes K)."""
         assert isinstance(flow, PhaseIterate)
-        return flow.state
+        return flow.kept
+
+    def _resumed(self, state: np.ndarray, settled: np.ndarray | None = None, flows: np.ndarray | None = None) -> PhaseIterate:
+        n = state.shape[0]
+        settled = np.ones(n, dtype=bool) if settled is None else settled
+        return PhaseIterate.resumed(self.net, state, settled, np.zeros(n, dtype=np.int64) if flows is None else flows)
 
     def stepped(self, flow: Step) -> np.ndarray:
         """(S',) the iteration converged (the mismatch is certified by `final`)."""
@@ -126,8 +133,7 @@ class PhaseGrid:
         return np.asarray(flow.settled, dtype=bool)
 
     def view(self, state: np.ndarray) -> Step:
-        n = state.shape[0]
-        return PhaseIterate(self.net, state, np.ones(n, dtype=bool), np.zeros(n, dtype=np.int64))
+        return self._resumed(state)
 
     def der_vm(self, flow: Step) -> np.ndarray:
         """(S', n_der) each DER's own phase voltage, p.u. (`PhaseFlowResult.der_vm`)."""
@@ -142,10 +148,10 @@ class PhaseGrid:
     def voltages_within(self, state: np.ndarray, before: np.ndarray, tol: float) -> np.ndarray:
         """(S',) no node's |V| moved by more than `tol` p.u. of its base from `before` to
         `state` (`powerflow.multiphase.voltages_within`)."""
-        return voltages_within(self.net, state, before, tol)
+        return voltages_within(self._resumed(state), self._resumed(before), tol)
 
     def final(self, state: np.ndarray, converged: np.ndarray, flows: np.ndarray) -> PhaseFlowResult:
-        return certify(PhaseIterate(self.net, state, converged, flows), self.load_p, self.load_q, self.der_p, self.der_q)
+        return certify(self._resumed(state, converged, flows), self.load_p, self.load_q, self.der_p, self.der_q)
 
 
 class CertifiedPhaseGrid(PhaseGrid):

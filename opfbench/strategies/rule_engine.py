@@ -180,17 +180,16 @@ def adapt_step_factor(alpha: np.ndarray, dv: np.ndarray, dv_old: np.ndarray) -> 
     """OpenDSS InvControl's `Change_deltaQ_factor`, element-wise: the new step factors from
     this step's and the previous step's voltage changes (dv_old < 0: no previous step)."""
     known = dv_old >= 0
-    down = alpha > 0.2
-    up = alpha < 0.9
-    change = np.select(
-        [
-            known & (dv > 0.8 * dv_old) & down,
-            known & (dv > 0.6 * dv_old) & down,
-            known & (dv < 0.2 * dv_old) & up,
-            known & (dv < 0.4 * dv_old) & up,
-        ],
-        [-0.1, -0.05, 0.1, 0.05],
-        0.0,
+    down = known & (alpha > 0.2)
+    up = known & (alpha < 0.9)
+    change = np.where(
+        down & (dv > 0.8 * dv_old),
+        -0.1,
+        np.where(
+            down & (dv > 0.6 * dv_old),
+            -0.05,
+            np.where(up & (dv < 0.2 * dv_old), 0.1, np.where(up & (dv < 0.4 * dv_old), 0.05, 0.0)),
+        ),
     )
     return alpha + change
 
