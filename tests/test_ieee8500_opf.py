@@ -1,16 +1,19 @@
 """ieee8500's AC OPF snapshot of `bench unbalanced --large` (`bench.unbalanced_opf`): its
 inputs (loads through `loads_at`, the taps the power flow's control settles, held), the
 reason it is the paper day's noon (the band reachable there, out of reach at the PV
-peak), and — slow — the OPF's confirmed optimum there."""
+peak), and — slow — the OPF's confirmed optimum there, by our power flow and by OpenDSS."""
 
 import numpy as np
 import pytest
 
 from opfbench.bench.unbalanced_opf import LARGE_AT, ieee8500, ieee8500_snapshot
-from opfbench.formulations.three_phase import q_limits
+from opfbench.cases.opendss_cases import opendss_copy
+from opfbench.cases.opendss_pv import pvsystem_lines
+from opfbench.formulations.three_phase import optimum, q_limits
 from opfbench.io import load_case
 from opfbench.powerflow.multiphase import solve_phase_flow
 from opfbench.result import OK
+from tests.support.opendss_feeders import set_tap, solve
 
 PV_PEAK = "14:48"  # the paper day's minute of the largest PV output
 
@@ -79,3 +82,31 @@ def test_ieee8500_opf_reaches_a_confirmed_optimum_at_noon():
     assert figures["ieee8500_no_action_vmax_pu"] > hi  # the band binds: the optimum had to act
     assert figures["ieee8500_opf_q_mvar"] < 0  # by absorbing Q
     assert np.isfinite(figures["ieee8500_opf_losses_kw"]) and figures["ieee8500_opf_pf_ratio"] > 1
+
+
+@pytest.mark.slow
+def test_ieee8500_noon_optimum_is_opendss():
+    """The noon optimum's Q put into OpenDSS (fixed kvar on the same PV units, its taps at
+    the held positions, controls off): every node as ours within 1e-6 p.u., the losses
+    within 1e-6 relative, every monitored voltage within the band."""
+    net, load_p, load_q, der_p, load, _, taps = ieee8500_snapshot(LARGE_AT)
+    opt = optimum(net, load_p, load_q, der_p, 0.0)
+    assert opt.status[0] == OK
+    q = opt.q_mvar[0]
+    assert np.all(np.abs(q) <= q_limits(net, der_p, 0.0)[0] + 1e-12)
+    ours = solve_phase_flow(net, load_p, load_q, der_p, q[None])
+    assert ours.losses_kw[0] == pytest.approx(opt.losses_kw[0], rel=1e-12)
+    tap_commands = [
+        set_tap(net.elements[reg.element].name.split(".", 1)[1], reg.tap_winding, float(reg.taps[pos]))
+        for reg, pos in zip(net.regulators, taps, strict=True)
+    ]
+    with opendss_copy("ieee8500") as master:
+        theirs = solve(master, f"set loadmult={load!r}", *tap_commands, *pvsystem_lines(net, der_p[0], q), controls=False)
+    assert theirs.converged and theirs.node_names == list(net.node_names)
+    assert np.max(np.abs(ours.v[0] - theirs.v) / net.node_base_v) < 1e-6
+    assert theirs.losses_kw == pytest.approx(opt.losses_kw[0], rel=1e-6)
+    a, b, base, _ = net.monitored
+    v = np.append(theirs.v, 0.0)  # GROUND (−1) reads the appended 0 V
+    vm = np.abs(v[a] - v[b]) / base
+    lo, hi = net.band
+    assert lo - 1e-6 <= vm.min() and vm.max() <= hi + 1e-6
