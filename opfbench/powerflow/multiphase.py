@@ -430,7 +430,9 @@ def solve_phase_flow(
 
 
 @lru_cache(maxsize=64)
-def _tapped(net: PhaseNetwork, positions: tuple[int, ...]) -> PhaseNetwork:
+def tapped(net: PhaseNetwork, positions: tuple[int, ...]) -> PhaseNetwork:
+    """`net.with_tap_positions(positions)`, one object per (network, positions): what is
+    built for it (a factorization, a compiled OPF) serves every snapshot at those taps."""
     return net.with_tap_positions(positions)
 
 
@@ -453,7 +455,7 @@ def _solve_controlled(net, load_p, load_q, der_p, der_q, v0, tol, max_iter) -> P
         for positions, rows_list in groups.items():
             rows = np.array(rows_list)
             flow = _solve_fixed(
-                _tapped(net, positions), load_p[rows], load_q[rows], der_p[rows], der_q[rows], v[rows], tol, max_iter
+                tapped(net, positions), load_p[rows], load_q[rows], der_p[rows], der_q[rows], v[rows], tol, max_iter
             )
             v[rows], converged[rows], mismatch[rows], losses[rows] = flow.v, flow.converged, flow.mismatch, flow.losses_kw
             iterations[rows] += flow.iterations
