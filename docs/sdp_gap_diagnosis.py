@@ -1,6 +1,6 @@
 """Where the SDP bound loses exactness on a feeder (`python docs/sdp_gap_diagnosis.py
 [--steps N] [CASE]`, Markdown on stdout; default ieee123, the steps of
-`unbalanced_opf_table.py` where the AC optimum exists; its output is in
+`unbalanced_opf_table.py --taps held` where the AC optimum exists; its output is in
 `docs/unbalanced_opf_table.md`).
 
 Per step, the relative gap (AC optimum − bound) / AC optimum of:
@@ -60,7 +60,7 @@ def main() -> None:
     parser.add_argument("case", nargs="?", default="ieee123")
     parser.add_argument("--steps", type=int, default=20)
     args = parser.parse_args()
-    net, lp, lq, dp, times, _, _ = snapshots(args.case, args.steps)
+    net, lp, lq, dp, times, _, _ = snapshots(args.case, args.steps, "held")
     opt = optimum(net, lp, lq, dp, 0.0)
     rows = np.flatnonzero(np.isfinite(opt.objective_kw))
     lm = net.load_models

@@ -6,15 +6,24 @@ Each feeder gets single-phase PV by `opfbench.cases.opendss_pv` (IEEE feeders: o
 second load, P̄ = the load's kW; `eulv`: on every second house, P̄ = 4 kW, as issue 29
 states), loads scaled by the paper day's load profile and PV by its PV profile
 (`opfbench.data.profiles.paper_day`, N steps evenly over the day: night, morning, high PV
-at noon, the evening peak), regulator taps held where the file settles them, k = 0.
+at noon, the evening peak), k = 0. Regulator taps (`--taps`): `control` (the default) — the
+case option `?taps=control`: per snapshot the taps where the no-action power flow's
+controller (OpenDSS's RegControl, static) settles them, held there by the AC OPF, its
+confirming power flow and the relaxation (`formulations.three_phase.tap_groups`); a grid
+engineer's feeder regulates, and with the file's full-load taps held the band is out of
+reach at light load and high PV — or `held`, where OpenDSS settles the file's snapshot.
 
 Per feeder: the AC optimum's statuses (`formulations.three_phase.optimum`), the SDP
 relaxation's (`formulations.three_phase.bound`: "optimal" gives a bound; any other status
 gives none), the AC optimum and the bound summed over the steps where both exist, the
 relative gap (AC − bound) / AC there, the steps whose every PSD block is rank one, the
 certified share (steps where the AC optimum is within 1e-6 of the bound, over the steps
-with an AC optimum), and the SDP's compile and per-step times (wall clock: re-take them on
-a quiet machine). `--detail` adds one row per step."""
+with an AC optimum), under tap control the steps whose controller keeps the no-action
+taps at the optimum's Q (the power flow under control at its setpoints), and the SDP's
+compile (summed over the tap positions: one model each) and per-step times (wall clock:
+re-take them on a quiet machine). An AC optimum is a step with status ok or
+fallback-cold (a fallback to no action is a point, not an optimum: no gap, no
+certificate). `--detail` adds one row per step."""
 
 from __future__ import annotations
 
@@ -32,6 +41,7 @@ from opfbench.data.profiles import paper_day
 from opfbench.formulations.three_phase import bound, certify, optimum
 from opfbench.multiphase import PhaseNetwork
 from opfbench.powerflow.multiphase import solve_phase_flow
+from opfbench.result import FALLBACK_COLD, OK
 
 PLACEMENT = {"ieee13": {}, "ieee37": {}, "ieee123": {}, "eulv": {"kw": 4.0}}
 
@@ -40,23 +50,25 @@ def _counts(labels: list[str]) -> str:
     return ", ".join(f"{s} {n}" for s, n in sorted(Counter(labels).items()))
 
 
-def snapshots(name: str, steps: int) -> tuple[PhaseNetwork, np.ndarray, np.ndarray, np.ndarray, list[str], np.ndarray, np.ndarray]:
-    """The feeder with its PV; its loads' P and Q and its PV's P (steps, n) MW/MVAr at
+def snapshots(
+    name: str, steps: int, taps: str = "control"
+) -> tuple[PhaseNetwork, np.ndarray, np.ndarray, np.ndarray, list[str], np.ndarray, np.ndarray]:
+    """The feeder with its PV and regulator taps `taps` (held or control); its loads' P and Q and its PV's P (steps, n) MW/MVAr at
     `steps` times evenly over the paper day; those times ("HH:MM"), and the day's load and
     PV profile values there (p.u.)."""
     day = paper_day()
     take = np.linspace(0, len(day) - 1, steps).round().astype(int)
     load, pv = day["load"].to_numpy()[take], day["pv"].to_numpy()[take]
     with tempfile.TemporaryDirectory() as tmp, opendss_copy(name) as master:
-        case = case_with_pv(Path(tmp), master, name, **PLACEMENT[name])
+        case = case_with_pv(Path(tmp), master, name, **PLACEMENT[name], taps=taps)
     lp, lq, dp, _ = case.stored
     times = [day.index[t].strftime("%H:%M") for t in take]
     return case.network, lp * load[:, None], lq * load[:, None], dp * pv[:, None], times, load, pv
 
 
-def feeder(name: str, steps: int) -> tuple[str, list[str]]:
+def feeder(name: str, steps: int, taps: str) -> tuple[str, list[str]]:
     """The feeder's summary row and its per-step rows."""
-    net, lp, lq, dp, times, load, pv = snapshots(name, steps)
+    net, lp, lq, dp, times, load, pv = snapshots(name, steps, taps)
     opt = optimum(net, lp, lq, dp, 0.0)
     start = time.perf_counter()
     relaxed = bound(net, lp, lq, dp, 0.0)
@@ -64,9 +76,17 @@ def feeder(name: str, steps: int) -> tuple[str, list[str]]:
     none = solve_phase_flow(net, lp, lq, dp)
     lo, hi = net.band
     outside = ~((none.vm.min(axis=1) >= lo) & (none.vm.max(axis=1) <= hi))
+    has_opt = (opt.status == OK) | (opt.status == FALLBACK_COLD)
     certified, gap = certify(opt, relaxed)
+    certified &= has_opt
+    gap = np.where(has_opt, gap, np.nan)
     both = np.isfinite(gap)
-    has_opt = np.isfinite(opt.losses_kw)
+    kept = np.full(steps, "", dtype=object)
+    if none.tap_positions is not None:  # the controller at the optimum's setpoints: does it keep the taps?
+        at_opt = solve_phase_flow(net, lp, lq, dp, opt.q_mvar)
+        same = at_opt.converged & (at_opt.tap_positions == none.tap_positions).all(axis=1)
+        kept = np.where(has_opt, np.where(same, "yes", "no"), "")
+    taps_kept = f"{(kept == 'yes').sum()}/{has_opt.sum()}" if none.tap_positions is not None else "held"
     ac_labels = [f"{s} (proven)" if p else s for s, p in zip(opt.status.tolist(), opt.proven.tolist(), strict=True)]
     gaps = f"{np.median(gap[both]):.2e} / {gap[both].max():.2e}" if both.any() else "—"
     share = f"{certified.sum()}/{has_opt.sum()}" if has_opt.any() else "0/0"
@@ -74,14 +94,22 @@ def feeder(name: str, steps: int) -> tuple[str, list[str]]:
         f"| {name} | {len(net.ders)} | {steps} | {outside.sum()} | {_counts(ac_labels)} | {_counts(relaxed.status.tolist())} | "
         f"{opt.losses_kw[both].sum():.3f} | {relaxed.bound_kw[both].sum():.3f} | {gaps} | "
         f"{relaxed.rank_one.sum()} (max ratio {np.nanmax(relaxed.rank_ratio) if np.isfinite(relaxed.rank_ratio).any() else float('nan'):.1e}) | "
-        f"{share} | {relaxed.compile_ms / 1e3:.1f} | {np.median(relaxed.solve_ms) / 1e3:.2f} | {wall:.0f} |"
+        f"{share} | {taps_kept} | {relaxed.compile_ms / 1e3:.1f} | {np.median(relaxed.solve_ms) / 1e3:.2f} | {wall:.0f} |"
     )
     rows = [
         f"| {name} | {t} | {load[i]:.3f} | {pv[i]:.3f} | {ac_labels[i]} | {opt.losses_kw[i]:.4f} | "
-        f"{relaxed.status[i]} | {relaxed.bound_kw[i]:.4f} | {gap[i]:.2e} | {relaxed.rank_ratio[i]:.1e} | {'yes' if certified[i] else 'no'} |"
+        f"{relaxed.status[i]} | {relaxed.bound_kw[i]:.4f} | {gap[i]:.2e} | {relaxed.rank_ratio[i]:.1e} | {'yes' if certified[i] else 'no'} | "
+        f"{taps_at(net, none, i)} | {kept[i]} |"
         for i, t in enumerate(times)
     ]
     return summary, rows
+
+
+def taps_at(net: PhaseNetwork, flow, i: int) -> str:
+    """The regulators' taps (p.u.) of snapshot i where the flow's controller settled them."""
+    if flow.tap_positions is None:
+        return "held"
+    return " ".join(f"{reg.taps[p]:.4f}" for reg, p in zip(net.regulators, flow.tap_positions[i].tolist(), strict=True))
 
 
 def main() -> None:
@@ -89,23 +117,25 @@ def main() -> None:
     parser.add_argument("cases", nargs="*", default=list(PLACEMENT))
     parser.add_argument("--steps", type=int, default=24)
     parser.add_argument("--detail", action="store_true", help="one row per step as well")
+    parser.add_argument("--taps", choices=("control", "held"), default="control", help="regulator taps (module docstring)")
     args = parser.parse_args()
     print(
         "| feeder | DER | steps | no action outside the band | AC optimum status (steps) | SDP status (steps) "
         "| Σ AC optimum where both (kW·step) | Σ SDP bound there | gap median / max | rank-one steps "
-        "| certified / with an AC optimum | SDP compile s | median SDP s per step | SDP wall s |"
+        "| certified / with an AC optimum | taps kept at the optimum's Q | SDP compile s | median SDP s per step | SDP wall s |"
     )
-    print("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|")
+    print("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|")
     detail = []
     for name in args.cases:
-        summary, rows = feeder(name, args.steps)
+        summary, rows = feeder(name, args.steps, args.taps)
         print(summary, flush=True)
         detail += rows
     if args.detail:
         print(
-            "\n| feeder | time | load p.u. | PV p.u. | AC status | AC optimum kW | SDP status | SDP bound kW | gap | rank ratio | certified |"
+            "\n| feeder | time | load p.u. | PV p.u. | AC status | AC optimum kW | SDP status | SDP bound kW | gap | rank ratio | certified "
+            "| taps (no action's controller) | kept at the optimum's Q |"
         )
-        print("|---|---|---|---|---|---|---|---|---|---|---|")
+        print("|---|---|---|---|---|---|---|---|---|---|---|---|---|")
         print("\n".join(detail))
 
 

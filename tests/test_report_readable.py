@@ -41,6 +41,11 @@ def test_a_table_keeps_the_data_column_as_the_headings_title():
     assert "<th>case</th>" in html
 
 
+def test_a_voltage_error_in_pu_keeps_its_digits():
+    html = table_html(pd.DataFrame({"strategy": ["lindist3flow"], "max |V| error p.u.": [1.86e-3]}))
+    assert ">0.0019<" in html
+
+
 def _board(violations: float, recovery: float | None) -> pd.DataFrame:
     rows = []
     for k in (0.0, 0.4):

@@ -116,7 +116,7 @@ def test_the_frontier_widens_the_band_of_one_compiled_model(ieee123_pv):
     """The frontier on ieee123 at noon (the band binds) and in the evening (it does not):
     non-increasing in ε, each point within its own widened band, the widened feeders
     derived from this one (`origin`: one compiled model serves every ε), solved again only
-    where the band binds."""
+    where the band binds; its points carry no SDP bound."""
     case, _ = ieee123_pv
     net = case.network
     lp, lq, dp = _snapshots(case, SNAPSHOTS)
@@ -130,6 +130,7 @@ def test_the_frontier_widens_the_band_of_one_compiled_model(ieee123_pv):
     assert wide.origin is net and wide.band == (net.band[0] - 0.02, net.band[1] + 0.02) and wide.ybus is net.ybus
     assert widened(net, math.inf).band == (0.0, V_LIMIT_MAX_PU)
     assert front.excursion_pu[0, 1] > 0  # the optimum at ε = 0.0025 uses its widening
+    assert np.isnan(front.bound_kw).all()  # no SDP a frontier point: seconds a step (eulv: a minute)
 
 
 def test_rules_that_curtail_lie_on_or_above_the_three_phase_frontier_that_may_curtail(ieee123_pv):

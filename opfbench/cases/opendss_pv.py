@@ -136,10 +136,13 @@ def with_pv(folder: Path, master: Path, net: PhaseNetwork, every: int = 2, share
     return file
 
 
-def case_with_pv(folder: Path, master: Path, name: str, every: int = 2, share: float = 1.0, kw: float | None = None) -> Case:
+def case_with_pv(
+    folder: Path, master: Path, name: str, every: int = 2, share: float = 1.0, kw: float | None = None, taps: str = "held"
+) -> Case:
     """The shipped feeder `name` (its master file, e.g. a copy from `opendss_copy`, at
-    `master`) with the PV of `pv_lines`, read by `load_case`."""
+    `master`) with the PV of `pv_lines`, read by `load_case` with the case option
+    `taps=` `taps` (held where OpenDSS settles the file, or control: `opfbench.io.spec`)."""
     base = load_case(name).network
     if not isinstance(base, PhaseNetwork):
         raise TypeError(f"{name} is not a three-phase feeder")
-    return load_case(f"opendss:{with_pv(folder, master, base, every, share, kw)}")
+    return load_case(f"opendss:{with_pv(folder, master, base, every, share, kw)}?taps={taps}")

@@ -49,7 +49,9 @@ bound. Each ε is solved by the
 AC OPF on the network with its band widened (`widened`), its fast path and fallback chain
 included; an answer counts as the optimum where its status is "ok" or "fallback-cold" (a
 solver's optimum), else the step has no optimum at that ε (infeasible, or only a fallback
-point), and its bound where the relaxation was solved.
+point), and its bound where the relaxation was solved. On a three-phase feeder the
+frontier's points carry no bound (NaN): its SDP relaxation costs seconds a step, and the
+leaderboard's own AC OPF rows bound their stated sample (`three_phase.bound_sample`).
 
 Units: kW, p.u.; costs are losses (active power the DER curtail, where a formulation may
 curtail, added).
@@ -66,6 +68,7 @@ from typing import TypeVar
 
 import numpy as np
 
+from opfbench.formulations.acopf_options import AcopfSolver
 from opfbench.multiphase import PhaseNetwork
 from opfbench.network import V_LIMIT_MAX_PU, Network
 from opfbench.result import FALLBACK_COLD, OK, Reference, StrategyResult
@@ -268,6 +271,7 @@ def frontier(
     if grid[0] != 0 or np.any(np.diff(grid) <= 0):
         raise ValueError(f"the frontier's ε grid must start at 0 and increase, got {eps}")
     net = scenario.net
+    solver: AcopfSolver = "ipopt" if scenario.three_phase else "auto"  # module docstring: no SDP
     n, m = scenario.n_snapshots, grid.size
     cost, bound = np.full((n, m), np.nan), np.full((n, m), np.nan)
     exc = np.full((n, m), np.nan)
@@ -289,7 +293,7 @@ def frontier(
             solved[r, j] = j == at
         return e
 
-    zero = at_zero if at_zero is not None else run_acopf(scenario, k, curtail=curtail)
+    zero = at_zero if at_zero is not None else run_acopf(scenario, k, curtail=curtail, solver=solver)
     every = np.arange(n)
     record(every, zero, 0)
     binding = _binds(net, zero)
@@ -301,7 +305,7 @@ def frontier(
         rows = every[binding & (status[:, j] == "")]
         if rows.size:
             part = replace(scenario.take(rows), net=widened(net, grid[j]))
-            record(rows, run_acopf(part, k, curtail=curtail), j)
+            record(rows, run_acopf(part, k, curtail=curtail, solver=solver), j)
     return Frontier(grid, cost, bound, exc, status, solved, curtail, limit)
 
 

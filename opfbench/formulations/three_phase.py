@@ -18,7 +18,9 @@ otherwise its gap is recorded; a step whose relaxation is infeasible is proven i
 Per snapshot (`optimum`): the exact model warm from the previous snapshot's answer, then
 (failure policy "chain") cold from the power flow's no-action point; a point is accepted
 only when IPOPT converged and the power flow at its Q setpoints converges, meets the band
-(`BAND_TOL`) and gives the model's losses within `CONFIRM_RTOL`. Otherwise the snapshot
+(`BAND_TOL`) and gives the model's losses within `CONFIRM_RTOL` — a cold start that
+converged but is not confirmed is solved again to IPOPT's tighter tolerance
+(`ac_three_phase.TIGHT_OPTIONS`; chain only). Otherwise the snapshot
 falls back to no action (Q = 0) where that meets the band (status fallback-no-action),
 else reports `infeasible` (IPOPT detected it: a local verdict) or `solver-failed`. Under
 the paper's policy ("paper") IPOPT runs once (warm where it can). A snapshot where no DER
@@ -34,7 +36,9 @@ Units: MW, MVAr (Q positive = injected), losses in kW.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from collections.abc import Sequence
+from dataclasses import dataclass, fields
+from typing import Any
 
 import numpy as np
 
@@ -46,8 +50,9 @@ from opfbench.formulations.model import built, load_models, model_for
 from opfbench.formulations.models.ac_three_phase import ThreePhaseAc
 from opfbench.formulations.problem import PqCapability, capability_offsets
 from opfbench.formulations.solver_cache import per_thread
+from opfbench.formulations.solvers.ipopt_adapter import IpoptSolve
 from opfbench.multiphase import PhaseNetwork
-from opfbench.powerflow.multiphase import PhaseFlowResult, solve_phase_flow
+from opfbench.powerflow.multiphase import PhaseFlowResult, solve_phase_flow, tapped
 from opfbench.registry.specs import ModelSpec
 from opfbench.result import (
     CERTIFIED_BY_SDP,
@@ -152,6 +157,30 @@ def optimum(
     load_p, load_q = (np.asarray(x, dtype=float).reshape(n, net.n_load) for x in (load_p_mw, load_q_mvar))
     der_p = np.asarray(der_p_mw, dtype=float).reshape(n, n_der)
     limit = q_limits(net, der_p, k) if q_limit_mvar is None else np.asarray(q_limit_mvar, dtype=float).reshape(n, n_der)
+    groups = tap_groups(net, no_action)
+    if groups[0][0] is not net:  # under tap control: each snapshot at its no-action taps, held
+        parts = [
+            (
+                rows,
+                optimum(
+                    held,
+                    load_p[rows],
+                    load_q[rows],
+                    der_p[rows],
+                    k,
+                    q_limit_mvar=limit[rows],
+                    fallback=fallback,
+                    slack_export=slack_export,
+                    curtail_offsets=None if curtail_offsets is None else curtail_offsets[rows],
+                ),
+            )
+            for held, rows in groups
+        ]
+        flows = [(rows, part.flow) for rows, part in parts]
+        flow = PhaseFlowResult(  # the feeder under control, at the taps each snapshot held
+            net, tap_positions=no_action.tap_positions, **_stitched(PhaseFlowResult, n, flows, skip=("net", "tap_positions"))
+        )
+        return PhaseOptimum(**_stitched(PhaseOptimum, n, parts, skip=("flow",)), flow=flow)
     load_models()
     origin = net.origin  # the model is built once for the feeder; the band is the solve's
     curtail = curtail_offsets is not None
@@ -185,17 +214,23 @@ def optimum(
             proven[i] = not in_band[i]
             solver_status[i] = PROVEN_NO_Q
             continue
-        attempts, accepted = [], None
+        attempts: list[IpoptSolve] = []
+        accepted: IpoptSolve | None = None
         snapshot = (load_p[i], load_q[i], der_p[i])
         starts: list[dict] = [{"start": start}] if start is not None else []
         if no_action.converged[i] and (fallback == "chain" or not starts):
             starts.append({"x0": exact.initial(no_action.v[i], der_p[i])})  # cold, from the power flow's point
         cap = (capability, curtail_offsets[i]) if curtail_offsets is not None else None
         for how in starts:
-            attempts.append(exact.solve(*snapshot, limit[i], band=(lo, hi), capability=cap, **how))
-            point = _setpoints(attempts[-1], der_p[i])
-            if _accepted(net, attempts[-1], point, *snapshot, slack_export):
-                accepted = attempts[-1]
+            for tight in (False, True):  # a cold start that converged unconfirmed: again, tighter (chain)
+                if tight and not (fallback == "chain" and "x0" in how and attempts[-1].success):
+                    break
+                attempts.append(exact.solve(*snapshot, limit[i], band=(lo, hi), capability=cap, tight=tight, **how))
+                point = _setpoints(attempts[-1], der_p[i])
+                if _accepted(net, attempts[-1], point, *snapshot, slack_export):
+                    accepted = attempts[-1]
+                    break
+            if accepted is not None:
                 break
         iterations[i] = sum(a.iterations for a in attempts)
         solve_ms[i] = sum(a.solve_ms for a in attempts)
@@ -204,7 +239,7 @@ def optimum(
         if accepted is not None:
             start = accepted
             (q[i], p[i]), objective[i] = point, accepted.objective_kw
-            status[i] = OK if accepted is attempts[0] else FALLBACK_COLD
+            status[i] = FALLBACK_COLD if attempts[0].warm and accepted is not attempts[0] else OK
         elif in_band[i]:
             status[i] = FALLBACK_NO_ACTION
         elif any(a.infeasible for a in attempts):
@@ -497,10 +532,17 @@ def bound(
     check_reserve(k)
     load_models()
     spec = model_for("relaxation", net)
-    solve_phase_flow(net, load_p_mw, load_q_mvar, der_p_mw)  # checks shapes and values first
+    no_action = solve_phase_flow(net, load_p_mw, load_q_mvar, der_p_mw)  # checks shapes and values first
     load_p, load_q = (np.asarray(x, dtype=float).reshape(-1, net.n_load) for x in (load_p_mw, load_q_mvar))
     der_p = np.asarray(der_p_mw, dtype=float).reshape(len(load_p), len(net.ders))
     limit = q_limits(net, der_p, k) if q_limit_mvar is None else np.asarray(q_limit_mvar, dtype=float).reshape(der_p.shape)
+    groups = tap_groups(net, no_action)
+    if groups[0][0] is not net:  # under tap control: each snapshot at its no-action taps, held
+        parts = [
+            (rows, bound(held, load_p[rows], load_q[rows], der_p[rows], k, q_limit_mvar=limit[rows])) for held, rows in groups
+        ]
+        compile_ms = sum(part.compile_ms for _, part in parts)
+        return PhaseBound(**_stitched(PhaseBound, len(load_p), parts, skip=("compile_ms",)), compile_ms=compile_ms)
     start = time.perf_counter()
     model = built(spec, net, True)
     solves = []
@@ -531,3 +573,39 @@ def certify(opt: PhaseOptimum, relaxed: PhaseBound) -> tuple[np.ndarray, np.ndar
     with np.errstate(invalid="ignore", divide="ignore"):
         gap = (opt.losses_kw - relaxed.bound_kw) / np.abs(opt.losses_kw)
     return np.isfinite(gap) & (np.abs(gap) <= CERTIFY_RTOL), gap
+
+
+def tap_groups(net: PhaseNetwork, no_action: PhaseFlowResult) -> list[tuple[PhaseNetwork, np.ndarray]]:
+    """The snapshots of `no_action` (the power flow on `net` with Q = 0) grouped by the
+    regulators' taps the OPF and its relaxation hold: on a feeder under tap control
+    (`?taps=control`) each snapshot's taps where the no-action flow's controller settled
+    them — per group the feeder at those taps, held (`powerflow.multiphase.tapped`, one
+    object per taps: what is built for it serves the group), with `net`'s band — and the
+    snapshots' indices, ascending; otherwise one group, `net` itself at its elements' taps."""
+    if no_action.tap_positions is None:
+        return [(net, np.arange(no_action.n_snapshots))]
+    taps, which = np.unique(no_action.tap_positions, axis=0, return_inverse=True)
+    out = []
+    for group, positions in enumerate(taps):
+        held = tapped(net.origin, tuple(int(t) for t in positions))
+        out.append((held if held.band == net.band else held.with_band(*net.band), np.flatnonzero(which.reshape(-1) == group)))
+    return out
+
+
+def _stitched(kind: type, n: int, parts: Sequence[tuple[np.ndarray, Any]], skip: tuple[str, ...]) -> dict[str, Any]:
+    """The array fields (first axis: snapshots) of the records `parts` ((rows, record)
+    each, of dataclass `kind`) placed at their rows among n; a field None in the records
+    stays None; the fields `skip` are left to the caller."""
+    out: dict[str, Any] = {}
+    for f in fields(kind):
+        if f.name in skip:
+            continue
+        first = getattr(parts[0][1], f.name)
+        if first is None:
+            out[f.name] = None
+            continue
+        whole = np.empty((n, *first.shape[1:]), dtype=first.dtype)
+        for rows, part in parts:
+            whole[rows] = getattr(part, f.name)
+        out[f.name] = whole
+    return out

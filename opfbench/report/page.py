@@ -82,7 +82,7 @@ def _digits(column: str) -> int:
     name = column.lower()
     if "mse" in name:
         return 5
-    if name.endswith("pu") or "share" in name or "mvar" in name or name == "skill":
+    if name.endswith(("pu", "p.u.")) or "share" in name or "mvar" in name or name == "skill":
         return 4 if "share" not in name else 3
     return 2
 
