@@ -83,7 +83,7 @@ def feeder(name: str, steps: int, taps: str, loads: str = "as-is") -> tuple[str,
     """The feeder's summary row and its per-step rows."""
     net, lp, lq, dp, times, load, pv = snapshots(name, steps, taps)
     if loads == "constant-z":
-        net, name = constant_z(net), f"{name} (const-|I| as const-Z)"
+        net, name = constant_z(net), f"{name} (constant-I as constant-Z)"
     opt = optimum(net, lp, lq, dp, 0.0)
     start = time.perf_counter()
     relaxed = bound(net, lp, lq, dp, 0.0)
