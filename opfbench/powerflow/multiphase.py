@@ -375,6 +375,21 @@ def _powers(label: str, values: np.ndarray | None, n_snap: int, n: int) -> np.nd
     return arr
 
 
+def _checked_powers(
+    net: PhaseNetwork, load_p_mw: np.ndarray, load_q_mvar: np.ndarray, der_p_mw: np.ndarray | None, der_q_mvar: np.ndarray | None
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The four power arrays (S, n) of S snapshots — S from the load P's rows, a DER power
+    None as zeros — checked for shape and finite values (`InputError` naming the array)."""
+    load_p = np.atleast_2d(np.asarray(load_p_mw, dtype=float))
+    n_snap = load_p.shape[0]
+    return (
+        _powers("load P", load_p, n_snap, net.n_load),
+        _powers("load Q", load_q_mvar, n_snap, net.n_load),
+        _powers("DER P", der_p_mw, n_snap, len(net.ders)),
+        _powers("DER Q", der_q_mvar, n_snap, len(net.ders)),
+    )
+
+
 _Powers = tuple[np.ndarray, np.ndarray, np.ndarray]
 """The branches' powers (n_branch, S): load P (W) and Q (var) at their law's reference,
 DER complex power generated (W + j var)."""
@@ -383,13 +398,8 @@ DER complex power generated (W + j var)."""
 def _branch_powers(
     net: PhaseNetwork, load_p_mw: np.ndarray, load_q_mvar: np.ndarray, der_p_mw: np.ndarray | None, der_q_mvar: np.ndarray | None
 ) -> _Powers:
-    """The elements' powers (checked: shapes, finite) spread over their branches."""
-    load_p = np.atleast_2d(np.asarray(load_p_mw, dtype=float))
-    n_snap = load_p.shape[0]
-    load_p = _powers("load P", load_p, n_snap, net.n_load)
-    load_q = _powers("load Q", load_q_mvar, n_snap, net.n_load)
-    der_p = _powers("DER P", der_p_mw, n_snap, len(net.ders))
-    der_q = _powers("DER Q", der_q_mvar, n_snap, len(net.ders))
+    """The elements' powers (`_checked_powers`) spread over their branches."""
+    load_p, load_q, der_p, der_q = _checked_powers(net, load_p_mw, load_q_mvar, der_p_mw, der_q_mvar)
     lb, db = net.load_branches, net.der_branches
     return (
         load_p.T[lb.owner] * lb.share[:, None] * 1e6,
@@ -413,12 +423,7 @@ def solve_phase_flow(
     Z or I: its power at the base voltage), each DER's P and Q (S, n_der) MW/MVAr
     generated (default 0); `v0` (S, n_node) complex V an optional warm start (rows that
     are not finite and non-zero start from the no-load state)."""
-    load_p = np.atleast_2d(np.asarray(load_p_mw, dtype=float))
-    n_snap = load_p.shape[0]
-    load_p = _powers("load P", load_p, n_snap, net.n_load)
-    load_q = _powers("load Q", load_q_mvar, n_snap, net.n_load)
-    der_p = _powers("DER P", der_p_mw, n_snap, len(net.ders))
-    der_q = _powers("DER Q", der_q_mvar, n_snap, len(net.ders))
+    load_p, load_q, der_p, der_q = _checked_powers(net, load_p_mw, load_q_mvar, der_p_mw, der_q_mvar)
     if net.tap_control and net.regulators:
         return _solve_controlled(net, load_p, load_q, der_p, der_q, v0, tol, max_iter)
     return _solve_fixed(net, load_p, load_q, der_p, der_q, v0, tol, max_iter)
