@@ -37,6 +37,16 @@ matrix W_i that the parent branch gives (Gan–Low's W_j = W_i − (SZᴴ + ZS�
 S = v_i·Iᴴ, L = I·Iᴴ, generalised to the ratio C_p, C_s). On a radial feeder these
 cliques cover the exact model; a meshed feeder is refused (NetworkError).
 
+Before lifting, every chain bus is eliminated (`ThreePhaseSdp._reduced`): a bus reached by
+one shunt-free line and left by exactly one, on the same nodes and voltage base, with no
+load, DER or shunt element there. Both lines carry the same current, so they are one line
+of impedance Z₁ + Z₂ (the Kron reduction of a node with no injection: exact, losses
+included). Only the band rows of the eliminated nodes (and the current cuts at them) go:
+that loosens the relaxation, so its optimum stays a lower bound on the exact model's, whose
+band holds at every node. A feeder whose lines are mostly such chains (eulv: a bus every
+few metres of cable) keeps a block per load or DER bus and per junction instead of one per
+bus.
+
 Per unit: node voltages on their base (`PhaseNetwork.node_base_v`), powers on `s_base`
 (the feeder's nominal load, ≥ 1 kVA), so line impedances are O(1e-4..1) and powers O(1).
 
@@ -103,11 +113,14 @@ RANK_RATIO = 1e-5
 FIT_RTOL = 1e-7
 """An element's impedance form must reproduce its primitive admittance to this (relative)."""
 KW_PER_MW = 1e3
+_EPS2 = float(np.finfo(float).eps) ** 2
+"""Clarabel's default proportional static regularisation (machine ε²)."""
 CLARABEL_ATTEMPTS: tuple[dict[str, float], ...] = (
-    {"static_regularization_constant": 1e-7, "tol_feas": 1e-8},
-    {"static_regularization_constant": 1e-7, "tol_feas": 1e-7},
-    {"static_regularization_constant": 1e-8, "tol_feas": 1e-8},
-    {"static_regularization_constant": 1e-6, "tol_feas": 1e-8},
+    {"static_regularization_constant": 1e-7, "static_regularization_proportional": _EPS2, "tol_feas": 1e-8},
+    {"static_regularization_constant": 1e-7, "static_regularization_proportional": _EPS2, "tol_feas": 1e-7},
+    {"static_regularization_constant": 1e-8, "static_regularization_proportional": _EPS2, "tol_feas": 1e-8},
+    {"static_regularization_constant": 1e-6, "static_regularization_proportional": _EPS2, "tol_feas": 1e-8},
+    {"static_regularization_constant": 1e-8, "static_regularization_proportional": 1e-12, "tol_feas": 1e-8},
 )
 """Clarabel's settings, tried in turn until one ends optimal or infeasible: its static
 regularisation at 1e-7 first, as the lifted blocks' near-zero directions (a near-lossless
@@ -117,9 +130,12 @@ solve that follows); then its feasibility tolerance at 1e-7 (default 1e-8): with
 near-ideal regulators (XHL 0.01 %) the primal residual stalls at 3e-8 while the dual
 residual is 1e-12 and the duality gap 2e-9 (AlmostSolved) — the bound is the dual
 objective, which a dual-feasible point makes valid, and the gap ties the reported primal
-value to it; then the default, then 1e-6. Each attempt names every setting it changes:
-cvxpy re-uses a cached Clarabel solver (where its settings allow a data update) with the
-previous attempt's settings as the base."""
+value to it; then the default, then 1e-6; last the default constant with a proportional
+part of 1e-12 (Clarabel's default: ε², 5e-32): on eulv, whose rank-one solutions stall
+every other attempt's line search one step from the tolerances (AlmostSolved: the gap),
+it ends optimal where the relaxation is exact (the night). Each attempt names every
+setting it changes: cvxpy re-uses a cached Clarabel solver (where its settings allow a
+data update) with the previous attempt's settings as the base."""
 Z_IDEAL = 1e-6
 """A line (a switch) whose series impedance is below this (p.u. on `s_base`) is ideal: its
 ends share voltages and it carries each conductor's power unchanged (module docstring)."""
@@ -344,7 +360,7 @@ class ThreePhaseSdp:
         )
         ordered = [source, *branches]
         # nodes whose voltage to ground matters: a wye load or DER there, a band to ground, a branch leaving it
-        mon_a, mon_b, _, _ = net.monitored
+        mon_a, mon_b, _ = self._monitored()
         lb_, db_ = net.load_branches, net.der_branches
         grounded = {int(n) for br_ in (lb_, db_) for n in br_.a[br_.b == GROUND]} | {int(n) for n in mon_a[mon_b == GROUND]}
         grounded |= {int(n) for br_ in branches for n in br_.p}
@@ -413,7 +429,7 @@ class ThreePhaseSdp:
                 e_set = np.stack([home[int(j)][1] for j in node_set])
                 add_drawn(n, gram.form(bn, np.outer(en, (y_sh[i] @ e_set).conj())))
                 leaving.setdefault(n, []).append((bn, y_sh[i] @ e_set))
-        missing = [net.node_names[n] for n in range(net.n_node) if n not in home]
+        missing = [net.node_names[n] for n in range(net.n_node) if n not in home and n not in self._eliminated]
         if missing:
             raise NetworkError(f"{net.name}: node(s) {', '.join(missing[:5])} not reached by a branch from the source")
         self._blocks = blocks
@@ -497,7 +513,56 @@ class ThreePhaseSdp:
                             f"{net.name}: {e.name} ({e.kind}) joins two buses; the branch-flow SDP models lines and transformers there"
                         )
                 out.append(_merge(parts))
-        return out, shunts
+        return self._reduced(out, shunts), shunts
+
+    def _reduced(self, branches: list[_Branch], shunts: list[tuple[np.ndarray, np.ndarray]]) -> list[_Branch]:
+        """`branches` (in order from the source) with every chain bus eliminated: a bus
+        reached by a line and left by exactly one line, on the same nodes and voltage base,
+        with no load, DER or shunt element there and no line shunt at it — the two lines
+        carry one current, so they are one line of impedance Z₁ + Z₂ (Kron reduction of a
+        shunt-free node: exact). Its nodes' band rows and current caps go with it, which only
+        loosens the relaxation (module docstring). The eliminated nodes: `self._eliminated`."""
+        net = self.net
+        attached = {int(n) for br in (net.load_branches, net.der_branches) for n in np.concatenate([br.a, br.b])}
+        attached |= {int(n) for nodes, _ in shunts for n in nodes} | {int(n) for n in net.source.nodes} | {GROUND}
+        leaving: dict[int, int] = {}
+        for br in branches:
+            bus = int(net.node_bus[br.p[0]])
+            leaving[bus] = leaving.get(bus, 0) + 1
+        kept: list[_Branch] = []
+        arriving: dict[int, int] = {}  # bus → index in kept of the branch that reaches it
+        eliminated: list[int] = []
+        for br in branches:
+            bus = int(net.node_bus[br.p[0]])
+            parent = kept[arriving[bus]] if bus in arriving else None
+            if (
+                parent is not None
+                and leaving[bus] == 1
+                and _plain_line(parent)
+                and _plain_line(br)
+                and sorted(parent.s.tolist()) == sorted(br.p.tolist())
+                and not attached & set(br.p.tolist())
+            ):
+                order = [int(np.flatnonzero(br.p == n)[0]) for n in parent.s.tolist()]  # br's conductors in parent's order
+                merged = _Branch(
+                    f"{parent.name.split('…')[0]}…{br.name}",
+                    parent.p,
+                    br.s[order],
+                    parent.c_p,
+                    parent.c_s,
+                    parent.z + br.z[np.ix_(order, order)],
+                    parent.y_p,
+                    br.y_s[np.ix_(order, order)],
+                )
+                eliminated += parent.s.tolist()
+                at = arriving.pop(bus)
+                kept[at] = merged
+                arriving[int(net.node_bus[br.s[0]])] = at
+                continue
+            arriving[int(net.node_bus[br.s[0]])] = len(kept)
+            kept.append(br)
+        self._eliminated = frozenset(eliminated)
+        return kept
 
     def _line(self, name: str, nodes: np.ndarray, line) -> _Branch:
         """A line's impedance form (p.u.): identity incidences, Z, half its shunt at each end."""
@@ -626,7 +691,7 @@ class ThreePhaseSdp:
             constraints.append(sp.vstack(cap_rows).tocsr() @ x <= self.current_cap)
         if db.n:
             constraints.append(self._pair_w(db.a, db.b, db.vbase_v) >= DER_VMIN_PU**2)
-        mon_a, mon_b, base_m, _ = net.monitored
+        mon_a, mon_b, base_m = self._monitored()
         lo, hi = net.band
         w_mon = self._pair_w(mon_a, mon_b, base_m)
         constraints += [w_mon >= lo**2, w_mon <= hi**2]
@@ -639,6 +704,12 @@ class ThreePhaseSdp:
         inside = sp.csr_matrix(draw_p.sum(axis=0)) - sum(pad(r) for r in self._p_source)
         losses = KW_PER_MW * s_base * (inside @ x)[0]
         self.problem = cp.Problem(cp.Minimize(losses), constraints)
+
+    def _monitored(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """`net.monitored`'s pairs (a, b, base V) but those on an eliminated node (`_reduced`)."""
+        a, b, base_v, _ = self.net.monitored
+        keep = np.array([int(i) not in self._eliminated and int(j) not in self._eliminated for i, j in zip(a, b, strict=True)])
+        return a[keep], b[keep], base_v[keep]
 
     def _pair_w(self, a: np.ndarray, b: np.ndarray, base_v: np.ndarray) -> cp.Expression:
         """|v_a − v_b|²/base² (b GROUND: |v_a|²) for each pair, linear in the lifted blocks."""
@@ -959,6 +1030,18 @@ def _is_ideal(br: _Branch) -> bool:
     square = br.c_p.shape == br.c_s.shape and br.c_p.shape[0] == br.c_p.shape[1]
     return bool(
         square and np.allclose(br.c_p, np.eye(br.p.size)) and np.allclose(br.c_s, br.c_p) and np.abs(br.z).max() < Z_IDEAL
+    )
+
+
+def _plain_line(br: _Branch) -> bool:
+    """A shunt-free line on equal voltage bases (identity incidences), a chain's link."""
+    eye = np.eye(br.p.size)
+    return bool(
+        br.c_p.shape == br.c_s.shape == eye.shape
+        and np.array_equal(br.c_p, eye)
+        and np.array_equal(br.c_s, eye)
+        and not br.y_p.any()
+        and not br.y_s.any()
     )
 
 
