@@ -20,7 +20,8 @@ Per snapshot (`optimum`): the exact model warm from the previous snapshot's answ
 only when IPOPT converged and the power flow at its Q setpoints converges, meets the band
 (`BAND_TOL`) and gives the model's losses within `CONFIRM_RTOL` — a cold start that
 converged but is not confirmed is solved again to IPOPT's tighter tolerance
-(`ac_three_phase.TIGHT_OPTIONS`; chain only). Otherwise the snapshot
+(`ac_three_phase.TIGHT_OPTIONS`; chain only), and where no attempt is accepted IPOPT runs
+once more cold from the power flow at the last attempt's setpoints (chain only). Otherwise the snapshot
 falls back to no action (Q = 0) where that meets the band (status fallback-no-action),
 else reports `infeasible` (IPOPT detected it: a local verdict) or `solver-failed`. Under
 the paper's policy ("paper") IPOPT runs once (warm where it can). A snapshot where no DER
@@ -232,6 +233,14 @@ def optimum(
                     break
             if accepted is not None:
                 break
+        restart = (
+            _flow_start(net, exact, attempts[-1], snapshot) if accepted is None and fallback == "chain" and attempts else None
+        )
+        if restart is not None:  # cold again, from the power flow at the last attempt's setpoints
+            attempts.append(exact.solve(*snapshot, limit[i], band=(lo, hi), capability=cap, x0=restart))
+            point = _setpoints(attempts[-1], der_p[i])
+            if _accepted(net, attempts[-1], point, *snapshot, slack_export):
+                accepted = attempts[-1]
         iterations[i] = sum(a.iterations for a in attempts)
         solve_ms[i] = sum(a.solve_ms for a in attempts)
         solver_status[i] = " → ".join(a.status for a in attempts)
@@ -466,6 +475,19 @@ def _setpoints(solve, der_p: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         return solve.q_pu, der_p
     p = solve.q_pu[n_der:]
     return solve.q_pu[:n_der], np.where(der_p - p < CURTAIL_SNAP_MW, der_p, p)
+
+
+def _flow_start(net: PhaseNetwork, exact: ThreePhaseAc, solve: IpoptSolve, snapshot: tuple[np.ndarray, ...]) -> np.ndarray | None:
+    """The NLP point of the power flow at `solve`'s setpoints (Q, P: `_setpoints`) on
+    `snapshot` (load P, load Q, DER P), None where they are not finite or it diverges: a
+    start that meets the network's equations where IPOPT's own iterate may not (ieee13's
+    near-ideal regulators: an attempt that ran out of iterations far off them)."""
+    load_p, load_q, der_p = snapshot
+    q, p = _setpoints(solve, der_p)
+    if not (np.all(np.isfinite(q)) and np.all(np.isfinite(p))):
+        return None
+    flow = solve_phase_flow(net, load_p[None], load_q[None], p[None], q[None])
+    return exact.initial(flow.v[0], p, q) if flow.converged[0] else None
 
 
 def _accepted(

@@ -243,12 +243,13 @@ class ThreePhaseAc:
         )
         self.n_der = n_der
 
-    def initial(self, v: np.ndarray, der_p_mw: np.ndarray | None = None) -> np.ndarray:
-        """The NLP point at node voltages `v` (n_node,) complex V, Q = 0 (and, built with
-        `curtail`, P = `der_p_mw`)."""
+    def initial(self, v: np.ndarray, der_p_mw: np.ndarray | None = None, q_mvar: np.ndarray | None = None) -> np.ndarray:
+        """The NLP point at node voltages `v` (n_node,) complex V, Q = `q_mvar` (default 0;
+        and, built with `curtail`, P = `der_p_mw`)."""
         pu = np.asarray(v) / self.net.node_base_v
         p = [np.asarray(der_p_mw, dtype=float)] if self.curtail and der_p_mw is not None else []
-        return np.concatenate([np.zeros(self.n_der), *p, pu.real, pu.imag])
+        q = np.zeros(self.n_der) if q_mvar is None else np.asarray(q_mvar, dtype=float)
+        return np.concatenate([q, *p, pu.real, pu.imag])
 
     def voltages(self, solve: IpoptSolve) -> np.ndarray:
         """(n_node,) complex V of a solve's point."""
