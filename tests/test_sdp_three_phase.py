@@ -154,6 +154,7 @@ def test_a_run_bounds_a_stated_sample_and_certifies_only_within_the_tolerance(ie
     feasible = np.isfinite(opt.losses_kw)
     assert feasible.all(), opt.status
     factor = np.array([1 - 0.5 * CERTIFY_RTOL, 1.0, 1.0, 1 - 1e-4])
+    attained = np.ones(4)  # the relaxation's own point's losses ÷ its value
     asked = []
 
     def stand_in(net_, load_p, load_q, der_p, k, *, q_limit_mvar):
@@ -161,8 +162,9 @@ def test_a_run_bounds_a_stated_sample_and_certifies_only_within_the_tolerance(ie
         asked.append(rows)
         m = len(rows)
         status = np.full(m, "optimal", dtype=object)
+        value = opt.losses_kw[rows] * factor[rows]
         return PhaseBound(
-            opt.losses_kw[rows] * factor[rows], np.zeros(m), np.ones(m, bool), np.zeros(m, bool), status, np.ones(m), 1.0
+            value, np.zeros(m), np.ones(m, bool), np.zeros(m, bool), status, np.ones(m), value * attained[rows], 1.0
         )
 
     monkeypatch.setattr(three_phase, "bound", stand_in)
@@ -174,6 +176,11 @@ def test_a_run_bounds_a_stated_sample_and_certifies_only_within_the_tolerance(ie
     assert rec["sdp_status"].tolist() == ["optimal", NOT_SAMPLED, NOT_SAMPLED, "optimal"]
     np.testing.assert_allclose(rec["optimality_gap"][[0, 3]], [0.5 * CERTIFY_RTOL, 1e-4], rtol=1e-6)
     assert np.isnan(rec["relaxation_bound_kw"][[1, 2]]).all() and np.isnan(rec["optimality_gap"][[1, 2]]).all()
+    # a value its own point does not attain (an inaccurate solve) certifies nothing, even within the gap
+    attained[0] = 1 - 1e-5
+    certified, rec = step_bounds(net, lp, lq, dp, limit, 0.0, opt, feasible)
+    assert not certified.any() and rec["sdp_point_kw"][0] == pytest.approx(rec["relaxation_bound_kw"][0] * (1 - 1e-5))
+    attained[0] = 1.0
     # a step whose reported point leaves the band is not certified, and has no gap
     certified, rec = step_bounds(net, lp, lq, dp, limit, 0.0, opt, np.array([False, True, True, True]))
     assert not certified.any() and np.isnan(rec["optimality_gap"][0]) and rec["relaxation_bound_kw"][0] > 0

@@ -95,6 +95,9 @@ def test_the_bound_at_the_same_taps_contains_the_optimum_and_lies_below_it(ieee1
     solved = relaxed.status == "optimal"
     assert solved.sum() >= 2, relaxed.status
     assert (relaxed.bound_kw[solved] <= result.losses_kw[solved] * (1 + CERTIFY_RTOL)).all()
+    assert (
+        np.isfinite(relaxed.point_kw[solved]).all() and np.isnan(relaxed.point_kw[~solved]).all()
+    )  # its own point, per tap group
     certified, gap = certify(result, relaxed)
     assert (certified == (np.abs(gap) <= CERTIFY_RTOL)).all()
     limit = q_limits(net, dp, 0.0)

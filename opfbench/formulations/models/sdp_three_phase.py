@@ -150,7 +150,8 @@ class BoundSolve:
     """One snapshot's relaxation: `bound_kw` (NaN unless solved), `rank_ratio` (the largest
     second-to-first eigenvalue ratio over the blocks; NaN unless solved), `rank_one`
     (`rank_ratio` ≤ RANK_RATIO), `infeasible` (Clarabel certified the relaxation infeasible:
-    so is the exact problem), `status` (cvxpy's) and `solve_ms` (the call, wall clock)."""
+    so is the exact problem), `status` (cvxpy's), `solve_ms` (the call, wall clock) and
+    `q_mvar` (n_der,) the relaxation's DER Q, MVAr, injected positive (NaN unless solved)."""
 
     bound_kw: float
     rank_ratio: float
@@ -158,6 +159,7 @@ class BoundSolve:
     infeasible: bool
     status: str
     solve_ms: float
+    q_mvar: np.ndarray
 
 
 @dataclass
@@ -634,7 +636,7 @@ class ThreePhaseSdp:
         self.load_q = cp.Parameter(net.n_load, name="load_q")
         self.der_p = cp.Parameter(len(net.ders), name="der_p")
         self.q_limit = cp.Parameter(len(net.ders), nonneg=True, name="q_limit")
-        q = cp.Variable(len(net.ders), name="q")
+        q = self.q = cp.Variable(len(net.ders), name="q")
         constraints: list[cp.Constraint] = [cp.abs(q) <= self.q_limit]
         constraints.append(sp.vstack([pad(r) for r in eq_rows]).tocsr() @ x == np.array(eq_rhs))
         kcl = self._kcl_caps(lifted)
@@ -1024,9 +1026,10 @@ class ThreePhaseSdp:
                 break
         ms = (time.perf_counter() - start) * 1e3
         if status != cp.OPTIMAL:
-            return BoundSolve(np.nan, np.nan, False, status == cp.INFEASIBLE, status, ms)
+            return BoundSolve(np.nan, np.nan, False, status == cp.INFEASIBLE, status, ms, np.full(len(self.net.ders), np.nan))
         ratio = float(self.rank_ratios().max())
-        return BoundSolve(float(self.problem.value), ratio, ratio <= RANK_RATIO, False, status, ms)
+        q = np.array(self.q.value, dtype=float)
+        return BoundSolve(float(self.problem.value), ratio, ratio <= RANK_RATIO, False, status, ms, q)
 
 
 def _is_ideal(br: _Branch) -> bool:
