@@ -30,7 +30,8 @@ gives it) at the paper day's noon (`LARGE_AT`; `ieee8500_snapshot`): loads at th
 load profile there (`PhaseNetwork.loads_at`: the 24 `status=fixed` loads stay at nominal),
 PV at the PV profile's share of its P̄, the regulators' taps where the power flow's
 RegControl emulation (`?taps=control`) settles them at no action and held there in the OPF
-and in every flow that checks it (the issue's "taps fixed at the power flow's"). Why noon
+and in every flow that checks it (`formulations.three_phase.tap_groups`, as the OPF holds
+them on a feeder under tap control: the issue's "taps fixed at the power flow's"). Why noon
 and not the PV peak: the file's own taps are those OpenDSS settles at full load, and held
 at the day's lighter loads they lift the feeder far above the band. With the taps settled
 per snapshot, what stays above 1.05 p.u. is the substation's 12.47 kV bus and the main
@@ -215,6 +216,7 @@ def ieee8500_snapshot(at: str = LARGE_AT):
     regulators' taps held where the no-action power flow with tap control settles them,
     load P (1, n_load) MW, load Q (1, n_load) MVAr, DER P (1, n_der) MW, the load
     multiplier, PV as a share of P̄, the tap positions)."""
+    from opfbench.formulations.three_phase import tap_groups
     from opfbench.io import load_case
     from opfbench.multiphase import PhaseNetwork
     from opfbench.powerflow.multiphase import solve_phase_flow
@@ -227,10 +229,10 @@ def ieee8500_snapshot(at: str = LARGE_AT):
     load, sun = float(profiles["load"].iloc[minute]), float(profiles["pv"].iloc[minute])
     load_p, load_q = net.loads_at(load)
     der_p = sun * net.der_rating_mw[None]
-    settled = solve_phase_flow(net, load_p, load_q, der_p).tap_positions
-    assert settled is not None  # a feeder with regulators under tap control
-    taps = tuple(int(t) for t in settled[0])
-    return net.with_tap_positions(taps), load_p, load_q, der_p, load, sun, taps
+    no_action = solve_phase_flow(net, load_p, load_q, der_p)
+    [(held, _)] = tap_groups(net, no_action)
+    assert no_action.tap_positions is not None  # a feeder with regulators under tap control
+    return held, load_p, load_q, der_p, load, sun, tuple(int(t) for t in no_action.tap_positions[0])
 
 
 def ieee8500() -> dict:
