@@ -106,6 +106,11 @@ def test_the_headline_figure_cuts_a_share_far_below_no_action():
     assert "learned-affine:rounds=3" in figure["data"][0]["x"][1]  # the training period is the run's, said beside
     (uncut,) = plots.how_close(board.assign(train_share_eq_pct=[0.0, -20.0, 95.0], test_share_eq_pct=[0.0, -30.0, 97.0]))
     assert "axis cut" not in uncut.title and "range" not in json.loads(uncut.json)["layout"].get("yaxis", {})
+    layout = json.loads(plot.json)["layout"]  # its long title: wrapped clear of Plotly's toolbar, escaped
+    lines = layout["title"]["text"].split("<br>")
+    assert len(lines) > 1 and max(map(len, lines)) <= plots.TITLE_CHARS and layout["margin"]["t"] > 50
+    assert plots.wrapped_title("a <b> & c " * 12)[0].count("&lt;b&gt;") == 12
+    assert plots.wrapped_title("short") == ("short", 1)
 
 
 def _field_inputs() -> Inputs:

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import json
 import re
+import textwrap
 from dataclasses import dataclass
 from functools import lru_cache
 from html import escape
@@ -27,6 +28,8 @@ from opfbench.report.tables import REFERENCE_NIGHT, order
 MAX_POINTS = 1440
 """Per-step traces are bin-averaged to at most this many points (a day at 1 min)."""
 HEIGHT = 380
+TITLE_CHARS = 90  # a longer title line runs under Plotly's toolbar (top right): wrapped at spaces
+TITLE_LINE_PX = 22  # the top margin each further title line adds
 
 
 @dataclass(frozen=True)
@@ -58,8 +61,17 @@ def _subplots(**options: object) -> go.Figure:
     return make_subplots(figure=_figure(), **options)
 
 
+def wrapped_title(title: str) -> tuple[str, int]:
+    """`title` HTML-escaped with its lines broken at spaces to at most TITLE_CHARS
+    characters (Plotly's `<br>`), and the number of lines."""
+    lines = textwrap.wrap(title, TITLE_CHARS) or [title]
+    return "<br>".join(escape(line) for line in lines), len(lines)
+
+
 def plot_json(pid: str, title: str, fig: go.Figure, xtitle: str, ytitle: str, height: int = HEIGHT) -> Plot:
-    fig.update_layout(height=height, title=escape(title), margin=dict(l=60, r=20, t=50, b=50), legend=dict(orientation="v"))
+    text, lines = wrapped_title(title)
+    top = 50 + TITLE_LINE_PX * (lines - 1)
+    fig.update_layout(height=height + top - 50, title=text, margin=dict(l=60, r=20, t=top, b=50), legend=dict(orientation="v"))
     if xtitle:
         fig.update_xaxes(title_text=xtitle)
     if ytitle:
