@@ -49,7 +49,7 @@ def main() -> None:
         if value is None:
             print(f"| {times[i]} | {ac:.9f} | {solved.status} | — | — | — | — | — | — | — |", flush=True)
             continue
-        q = next(v for v in model.problem.variables() if v.name() == "q").value
+        q = model.q.value
         flow = solve_phase_flow(net, lp[i : i + 1], lq[i : i + 1], dp[i : i + 1], der_q_mvar=q[None], tol=1e-12, max_iter=500)
         w = model._pair_w(lb.a, lb.b, lb.vbase_v).value
         above = 1e3 * lb.share * lp[i][lb.owner] * (model.problem.var_dict["s_p"].value - model._law(w)[0])

@@ -398,8 +398,9 @@ def step_bounds(
     relaxed = PhaseBound(nan, nan.copy(), no, no.copy(), status, np.zeros(n), nan.copy(), 0.0)
     if rows.size:
         part = bound(net, load_p[rows], load_q[rows], der_p[rows], k, q_limit_mvar=limit[rows])
-        for name in ("bound_kw", "rank_ratio", "rank_one", "infeasible", "status", "solve_ms", "point_kw"):
-            getattr(relaxed, name)[rows] = getattr(part, name)
+        for f in fields(PhaseBound):
+            if f.name != "compile_ms":
+                getattr(relaxed, f.name)[rows] = getattr(part, f.name)
     certified, gap = certify(opt, relaxed)
     certified &= feasible
     return certified, {

@@ -128,9 +128,10 @@ regulator's or transformer's current) stall its KKT solves at its default 1e-8 (
 every step: an "almost solved" or a numerical error after ~20 iterations, as long as the
 solve that follows); then its feasibility tolerance at 1e-7 (default 1e-8): with ieee13's
 near-ideal regulators (XHL 0.01 %) the primal residual stalls at 3e-8 while the dual
-residual is 1e-12 and the duality gap 2e-9 (AlmostSolved) — the bound is the dual
-objective, which a dual-feasible point makes valid, and the gap ties the reported primal
-value to it; then the default, then 1e-6; last the default constant with a proportional
+residual is 1e-12 and the duality gap 2e-9 (AlmostSolved) — the bound is the reported
+(primal) value, tied to the dual objective only by that gap, which is why
+`three_phase.certify` takes it only where the relaxation's own point attains it; then the
+default, then 1e-6; last the default constant with a proportional
 part of 1e-12 (Clarabel's default: ε², 5e-32): on eulv, whose rank-one solutions stall
 every other attempt's line search one step from the tolerances (AlmostSolved: the gap),
 it ends optimal where the relaxation is exact (the night) — to Clarabel's accuracy only:
