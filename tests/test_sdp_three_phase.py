@@ -37,8 +37,8 @@ from opfbench.formulations.three_phase import (
     step_bounds,
 )
 from opfbench.multiphase import Element
-from opfbench.result import CERTIFIED_BY_SDP
 from opfbench.powerflow.multiphase import solve_phase_flow
+from opfbench.result import CERTIFIED_BY_SDP
 
 SOLVER_RTOL = 1e-5
 """How far Clarabel's optimal value may sit from the exact one at eulv's night step
