@@ -7,11 +7,15 @@ power flow's losses, with no SDP solved."""
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import pytest
 import scipy.sparse.linalg as sla
 
 from opfbench.api import load_case
+from opfbench.cases.opendss_cases import opendss_copy
+from opfbench.cases.opendss_pv import case_with_pv
 from opfbench.data.profiles import paper_day
 from opfbench.formulations.opf_strategies import run_acopf
 from opfbench.formulations.three_phase import BAND_TOL, UNIQUE
@@ -72,11 +76,11 @@ def test_the_contraction_bounds_the_networks_map_at_night(night):
 
 
 def test_a_loading_it_cannot_prove_is_refused(night):
-    """Forty times the night's load: the factor passes CONTRACTION_MAX (no certificate),
+    """A hundred times the night's load: the factor passes CONTRACTION_MAX (no certificate),
     whatever the power flow finds; a load with no row bounding its voltage from below (the
     band removed from the region by an infinite tolerance) gets none either."""
     net, lp, lq, dp, _ = night
-    heavy = contraction(net, 40 * lp, 40 * lq, dp, dp, BAND_TOL)
+    heavy = contraction(net, 100 * lp, 100 * lq, dp, dp, BAND_TOL)
     assert (heavy >= CONTRACTION_MAX).all(), heavy
     assert np.isinf(contraction(net, lp, lq, dp, dp, np.inf)).all()
 
@@ -92,3 +96,24 @@ def test_a_runs_night_steps_are_certified_without_the_sdp(night):
     assert np.allclose(res.lower_bound_kw, res.losses_kw, rtol=0, atol=0)
     assert (res.extra["sdp_status"] == UNIQUE).all() and (res.extra["sdp_ms"] == 0).all()
     assert (res.extra["contraction"] < CONTRACTION_MAX).all()
+
+
+def test_a_regulated_feeder_with_delta_loads_at_k_1(tmp_path):
+    """ieee13 under tap control (`?taps=control`: delta and constant-|I| loads, regulators)
+    at k = 1 — no decision at any step: each step is checked on the feeder at the taps its
+    power flow settles (`sole_points`), the factor finite; at 40 % load certified, the
+    bound the reported losses; at full load the factor passes CONTRACTION_MAX: not
+    certified by it (the step goes to the relaxation's sample instead)."""
+    with opendss_copy("ieee13") as master:
+        case = case_with_pv(tmp_path, master, "ieee13", taps="control")
+    net = dataclasses.replace(case.network, band=(0.9, 1.1))
+    lp, lq, dp, _ = case.stored
+    mult = np.array([[0.4], [1.0]])
+    scenario = Scenario(net, None, np.tile(dp * 0.5, (2, 1)), load_p_mw=lp * mult, load_q_mvar=lq * mult)
+    res = run_acopf(scenario, 1.0, solver="auto")
+    factor = res.extra["contraction"]
+    assert np.isfinite(factor).all() and (factor > 0).all(), factor
+    unique = res.solver.certified_by == CERTIFIED_BY_UNIQUE
+    assert unique.tolist() == [True, False]  # at full load the factor passes CONTRACTION_MAX: refused
+    assert factor[1] >= CONTRACTION_MAX and res.status[1] == OK
+    assert (res.lower_bound_kw[unique] == res.losses_kw[unique]).all() and res.extra["sdp_status"][1] != UNIQUE
