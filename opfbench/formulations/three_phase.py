@@ -17,10 +17,9 @@ otherwise its gap is recorded; a step whose relaxation is infeasible is proven i
 
 Per snapshot (`optimum`): the exact model warm from the previous snapshot's answer, then
 (failure policy "chain") cold from the power flow's no-action point; a point is accepted
-only when IPOPT converged and the power flow at its Q setpoints converges, meets the band
-(`BAND_TOL`) and gives the model's losses within `CONFIRM_RTOL` — a cold start that
-converged but is not confirmed is solved again to IPOPT's tighter tolerance
-(`ac_three_phase.TIGHT_OPTIONS`; chain only), and where no attempt is accepted IPOPT runs
+only when IPOPT converged (`ac_three_phase.OPTIONS`: to 1e-10, or until the losses stop
+moving) and the power flow at its Q setpoints converges, meets the band (`BAND_TOL`) and
+gives the model's losses within `CONFIRM_RTOL` — where no attempt is accepted IPOPT runs
 once more cold from the power flow at the last attempt's setpoints (chain only). Otherwise the snapshot
 falls back to no action (Q = 0) where that meets the band (status fallback-no-action),
 else reports `infeasible` (IPOPT detected it: a local verdict) or `solver-failed`. Under
@@ -230,15 +229,10 @@ def optimum(
             starts.append({"x0": exact.initial(no_action.v[i], der_p[i])})  # cold, from the power flow's point
         cap = (capability, curtail_offsets[i]) if curtail_offsets is not None else None
         for how in starts:
-            for tight in (False, True):  # a cold start that converged unconfirmed: again, tighter (chain)
-                if tight and not (fallback == "chain" and "x0" in how and attempts[-1].success):
-                    break
-                attempts.append(exact.solve(*snapshot, limit[i], band=(lo, hi), capability=cap, tight=tight, **how))
-                point = _setpoints(attempts[-1], der_p[i])
-                if _accepted(net, attempts[-1], point, *snapshot, slack_export):
-                    accepted = attempts[-1]
-                    break
-            if accepted is not None:
+            attempts.append(exact.solve(*snapshot, limit[i], band=(lo, hi), capability=cap, **how))
+            point = _setpoints(attempts[-1], der_p[i])
+            if _accepted(net, attempts[-1], point, *snapshot, slack_export):
+                accepted = attempts[-1]
                 break
         restart = (
             _flow_start(net, exact, attempts[-1], snapshot) if accepted is None and fallback == "chain" and attempts else None
