@@ -15,7 +15,9 @@ reach at light load and high PV — or `held`, where OpenDSS settles the file's 
 
 Per feeder: the AC optimum's statuses (`formulations.three_phase.optimum`), the SDP
 relaxation's (`formulations.three_phase.bound`: "optimal" gives a bound; any other status
-gives none), the AC optimum and the bound summed over the steps where both exist, the
+gives none; its own point: the power flow at its DER Q, `PhaseBound.point_kw` — an
+operating point where it meets the band, so the AC optimum should not lie above it), the
+AC optimum and the bound summed over the steps where both exist, the
 relative gap (AC − bound) / AC there, the steps whose every PSD block is rank one, the
 certified share (steps where the AC optimum is within 1e-6 of the bound, over the steps
 with an AC optimum), under tap control the steps whose controller keeps the no-action
@@ -113,7 +115,8 @@ def feeder(name: str, steps: int, taps: str, loads: str = "as-is") -> tuple[str,
     )
     rows = [
         f"| {name} | {t} | {load[i]:.3f} | {pv[i]:.3f} | {ac_labels[i]} | {opt.losses_kw[i]:.4f} | "
-        f"{relaxed.status[i]} | {relaxed.bound_kw[i]:.4f} | {gap[i]:.2e} | {relaxed.rank_ratio[i]:.1e} | {'yes' if certified[i] else 'no'} | "
+        f"{relaxed.status[i]} | {relaxed.bound_kw[i]:.4f} | {gap[i]:.2e} | {relaxed.rank_ratio[i]:.1e} | "
+        f"{relaxed.point_kw[i]:.6f} | {(opt.losses_kw[i] - relaxed.point_kw[i]) / opt.losses_kw[i]:.1e} | {'yes' if certified[i] else 'no'} | "
         f"{taps_at(net, none, i)} | {kept[i]} |"
         for i, t in enumerate(times)
     ]
@@ -148,10 +151,10 @@ def main() -> None:
         detail += rows
     if args.detail:
         print(
-            "\n| feeder | time | load p.u. | PV p.u. | AC status | AC optimum kW | SDP status | SDP bound kW | gap | rank ratio | certified "
-            "| taps (no action's controller) | kept at the optimum's Q |"
+            "\n| feeder | time | load p.u. | PV p.u. | AC status | AC optimum kW | SDP status | SDP bound kW | gap | rank ratio "
+            "| SDP's point kW | (AC − point) / AC | certified | taps (no action's controller) | kept at the optimum's Q |"
         )
-        print("|---|---|---|---|---|---|---|---|---|---|---|---|---|")
+        print("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|")
         print("\n".join(detail))
 
 

@@ -49,6 +49,9 @@ def ieee13(tmp_path_factory):
     return control.network, held.network, file, lp * mult, lq * mult, dp * sun, (lp, lq, dp)
 
 
+SUCCEEDED = ("Solve_Succeeded", "Solved_To_Acceptable_Level")  # IPOPT converged
+
+
 def test_each_snapshot_holds_its_controllers_taps_and_opendss_confirms_the_optimum(ieee13):
     net, _, file, lp, lq, dp, _ = ieee13
     no_action = solve_phase_flow(net, lp, lq, dp)
@@ -110,13 +113,14 @@ def test_the_bound_at_the_same_taps_contains_the_optimum_and_lies_below_it(ieee1
             assert model.problem.objective.value == pytest.approx(result.losses_kw[i], rel=1e-5)
 
 
-def test_an_unconfirmed_or_unfinished_cold_attempt_is_solved_again_and_confirmed(ieee13):
+def test_an_unfinished_cold_attempt_is_restarted_and_a_first_one_is_confirmed_to_1e_10(ieee13):
     """ieee13 at the paper day's 08:50 and 11:22 (steps 7 and 9 of 20; PV at 31 % and
-    68 %), each at its controller's taps: at 08:50 IPOPT converges to 1e-8 with its
-    objective 6e-4 off the power flow's losses at its setpoints (the near-ideal regulators)
-    and the tighter re-solve is confirmed; at 11:22 it runs out of iterations far off the
-    network's equations and the restart from the power flow at its setpoints converges and
-    is confirmed. The paper's policy (IPOPT once) finds neither."""
+    68 %), each at its controller's taps. 08:50: IPOPT's first answer is confirmed (to
+    `ac_three_phase.OPTIONS`' 1e-10; at IPOPT's usual 1e-8 the near-ideal regulators left
+    its objective 6e-4 off the power flow's losses at its setpoints, and only a re-solve was
+    confirmed). 11:22: IPOPT runs out of iterations far off the network's equations and the
+    restart from the power flow at its setpoints converges and is confirmed; the paper's
+    policy (IPOPT once) does not find it."""
     net = ieee13[0]
     day = paper_day()
     at = np.linspace(0, len(day) - 1, 20).round().astype(int)[[7, 9]]
@@ -124,9 +128,9 @@ def test_an_unconfirmed_or_unfinished_cold_attempt_is_solved_again_and_confirmed
     lp, lq, dp = (x[None] * f for x, f in zip(ieee13[6], (mult, mult, sun), strict=True))
     chain = optimum(net, lp, lq, dp, 0.0)
     assert (chain.status == OK).all(), chain.solver_status
-    tight, restarted = (s.split(" → ") for s in chain.solver_status)
-    assert tight == ["Solve_Succeeded", "Solved_To_Acceptable_Level"]
-    assert restarted == ["Maximum_Iterations_Exceeded", "Solve_Succeeded"]
-    assert chain.losses_kw == pytest.approx(chain.objective_kw, rel=1e-4)
+    first, restarted = (s.split(" → ") for s in chain.solver_status)
+    assert len(first) == 1 and first[0] in SUCCEEDED
+    assert len(restarted) == 2 and restarted[0] == "Maximum_Iterations_Exceeded" and restarted[1] in SUCCEEDED
+    assert chain.losses_kw == pytest.approx(chain.objective_kw, rel=1e-6)
     paper = optimum(net, lp, lq, dp, 0.0, fallback="paper")
-    assert np.isnan(paper.objective_kw).all()
+    assert paper.objective_kw[0] == pytest.approx(chain.objective_kw[0], rel=1e-9) and np.isnan(paper.objective_kw[1])
