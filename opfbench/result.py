@@ -55,6 +55,7 @@ FROM_NO_ACTION = "no-action"  # Q = 0
 CERTIFIED_BY_SOCP = "socp"  # AC-feasible and within the relaxation's bound (the fast path)
 CERTIFIED_BY_IPOPT = "ipopt"  # IPOPT converged to it
 CERTIFIED_BY_SDP = "sdp3"  # a three-phase optimum within the SDP relaxation's bound (`formulations.three_phase`)
+CERTIFIED_BY_UNIQUE = "unique"  # no decision, and the power flow's point proven the only one (`formulations.unique_point`)
 
 
 @dataclass(frozen=True, eq=False)

@@ -242,7 +242,7 @@ STEPS = Table(
             "certified_by",
             "text",
             NO_UNIT,
-            "socp or ipopt (balanced feeders), sdp3 (three-phase): what certified the point optimal; empty if nothing",
+            "socp or ipopt (balanced feeders), sdp3 or unique (three-phase: the SDP bound, or no decision and the power flow's point proven the only one): what certified the point optimal; empty if nothing",
             _solver("certified_by", str, ""),
         ),
         Column(

@@ -38,6 +38,7 @@ from opfbench.formulations.three_phase import (
 )
 from opfbench.multiphase import Element
 from opfbench.powerflow.multiphase import solve_phase_flow
+from opfbench.result import CERTIFIED_BY_SDP
 
 SOLVER_RTOL = 1e-5
 """How far Clarabel's optimal value may sit from the exact one at eulv's night step
@@ -170,23 +171,23 @@ def test_a_run_bounds_a_stated_sample_and_certifies_only_within_the_tolerance(ie
     monkeypatch.setattr(three_phase, "bound", stand_in)
     monkeypatch.setattr(three_phase, "BOUND_SAMPLE", 2)
     limit = q_limits(net, dp, 0.0)
-    certified, rec = step_bounds(net, lp, lq, dp, limit, 0.0, opt, feasible)
+    by, rec = step_bounds(net, lp, lq, dp, limit, 0.0, opt, feasible)
     assert asked == [[0, 3]]  # the first and the last of four steps
-    assert certified.tolist() == [True, False, False, False]
+    assert by.tolist() == [CERTIFIED_BY_SDP, "", "", ""]  # labels: who certified
     assert rec["sdp_status"].tolist() == ["optimal", NOT_SAMPLED, NOT_SAMPLED, "optimal"]
     np.testing.assert_allclose(rec["optimality_gap"][[0, 3]], [0.5 * CERTIFY_RTOL, 1e-4], rtol=1e-6)
     assert np.isnan(rec["relaxation_bound_kw"][[1, 2]]).all() and np.isnan(rec["optimality_gap"][[1, 2]]).all()
     # a value its own point does not attain (an inaccurate solve) certifies nothing, even within the gap
     attained[0] = 1 - 1e-5
-    certified, rec = step_bounds(net, lp, lq, dp, limit, 0.0, opt, feasible)
-    assert not certified.any() and rec["sdp_point_kw"][0] == pytest.approx(rec["relaxation_bound_kw"][0] * (1 - 1e-5))
+    by, rec = step_bounds(net, lp, lq, dp, limit, 0.0, opt, feasible)
+    assert not by.any() and rec["sdp_point_kw"][0] == pytest.approx(rec["relaxation_bound_kw"][0] * (1 - 1e-5))
     attained[0] = 1.0
     # a step whose reported point leaves the band is not certified, and has no gap
-    certified, rec = step_bounds(net, lp, lq, dp, limit, 0.0, opt, np.array([False, True, True, True]))
-    assert not certified.any() and np.isnan(rec["optimality_gap"][0]) and rec["relaxation_bound_kw"][0] > 0
+    by, rec = step_bounds(net, lp, lq, dp, limit, 0.0, opt, np.array([False, True, True, True]))
+    assert not by.any() and np.isnan(rec["optimality_gap"][0]) and rec["relaxation_bound_kw"][0] > 0
     asked.clear()
-    certified, rec = step_bounds(_meshed(net), lp, lq, dp, limit, 0.0, opt, feasible)
-    assert not asked and not certified.any() and (rec["sdp_status"] == NO_RELAXATION).all()
+    by, rec = step_bounds(_meshed(net), lp, lq, dp, limit, 0.0, opt, feasible)
+    assert not asked and not by.any() and (rec["sdp_status"] == NO_RELAXATION).all()
 
 
 @pytest.mark.slow

@@ -20,7 +20,7 @@ from opfbench.formulations.frontier import EPSILONS
 from opfbench.formulations.three_phase import BOUND_SAMPLE, CERTIFY_RTOL
 from opfbench.report import tables
 from opfbench.report.inputs import load_inputs
-from opfbench.result import CERTIFIED_BY_SDP, FALLBACK_COLD, INFEASIBLE, OK
+from opfbench.result import CERTIFIED_BY_SDP, CERTIFIED_BY_UNIQUE, FALLBACK_COLD, INFEASIBLE, OK
 
 RULES = ("no-action", "llma", "lfma", "volt-var")
 TOL_KW = 1e-6  # kW: the power flow's and IPOPT's round-off on eulv's ~0.1–1 kW of losses
@@ -34,18 +34,23 @@ def _run(out, *more: str) -> tuple[pd.DataFrame, pd.DataFrame, pd.DataFrame]:
 
 
 def _check_bound(steps: pd.DataFrame, summary: pd.DataFrame, bounded: int, sample: int | None = None) -> None:
-    """acopf's rows: `bounded` steps with a bound (or, given the `sample` the relaxation ran
+    """acopf's rows: `bounded` steps with the SDP's bound (or, given the `sample` the relaxation ran
     on, at most that many: a step it did not solve has none), none above the optimum's
-    losses; certified (by sdp3) exactly where the two agree within CERTIFY_RTOL; the
+    losses; certified (by sdp3) exactly where the two agree within CERTIFY_RTOL; a step
+    certified by `unique` (no decision) bounded by its own losses; the
     summary's certified share from those steps, its lower bound energy only where every
     step has one."""
     opt = steps[steps.strategy == "acopf"]
     has = opt.lower_bound_kw.notna()
-    assert (has.sum() <= sample) if sample is not None else (has.sum() == bounded), opt[["time", "status", "lower_bound_kw"]]
+    unique = opt.certified_by == CERTIFIED_BY_UNIQUE  # no decision: the bound is the point's own losses
+    assert (opt.lower_bound_kw[unique] == opt.losses_kw[unique]).all()
+    sdp = has & ~unique
+    assert (sdp.sum() <= sample) if sample is not None else (sdp.sum() == bounded), opt[["time", "status", "lower_bound_kw"]]
     assert (opt.lower_bound_kw[has] <= opt.losses_kw[has] * (1 + CERTIFY_RTOL)).all()
     close = (opt.losses_kw - opt.lower_bound_kw).abs() <= CERTIFY_RTOL * opt.losses_kw.abs()
-    certified = opt.certified_by == CERTIFIED_BY_SDP
-    assert (certified == (has & close)).all() and opt.certified_by.isin(["", CERTIFIED_BY_SDP]).all()
+    by_sdp = opt.certified_by == CERTIFIED_BY_SDP
+    assert (by_sdp == (sdp & close)).all() and opt.certified_by.isin(["", CERTIFIED_BY_SDP, CERTIFIED_BY_UNIQUE]).all()
+    certified = by_sdp | unique
     row = summary.set_index("strategy").loc["acopf"]
     assert row.certified_share == pytest.approx(certified.mean())
     assert np.isnan(row.lower_bound_kwh) if has.sum() < len(opt) else row.lower_bound_kwh > 0

@@ -24,8 +24,10 @@ once more cold from the power flow at the last attempt's setpoints (chain only).
 falls back to no action (Q = 0) where that meets the band (status fallback-no-action),
 else reports `infeasible` (IPOPT detected it: a local verdict) or `solver-failed`. Under
 the paper's policy ("paper") IPOPT runs once (warm where it can). A snapshot where no DER
-has Q to give (night, or k = 1) has one operating point, the power flow's: the optimum
-where it meets the band, proven infeasible where it does not (`proven`).
+has Q to give (night, or k = 1) has no decision: its candidate is the power flow's point,
+the optimum where it meets the band, proven infeasible where it does not (`proven`); that
+no other solution of the network's equations meets the constraints is proven where
+`unique_point` proves it (`step_bounds`, which then certifies the step without the SDP).
 
 `run_phase` is the strategy's side (`acopf` and `acopf-paper` on a three-phase scenario,
 through `runner.run_model`): the setpoints of `optimum` — Q = 0 where there is none, as
@@ -51,11 +53,13 @@ from opfbench.formulations.models.ac_three_phase import ThreePhaseAc
 from opfbench.formulations.problem import PqCapability, capability_offsets
 from opfbench.formulations.solver_cache import per_thread
 from opfbench.formulations.solvers.ipopt_adapter import IpoptSolve
+from opfbench.formulations.unique_point import unique_point
 from opfbench.multiphase import PhaseNetwork
 from opfbench.powerflow.multiphase import PhaseFlowResult, solve_phase_flow, tapped
 from opfbench.registry.specs import ModelSpec
 from opfbench.result import (
     CERTIFIED_BY_SDP,
+    CERTIFIED_BY_UNIQUE,
     FALLBACK_COLD,
     FALLBACK_NO_ACTION,
     FROM_COLD,
@@ -88,7 +92,10 @@ BOUND_SAMPLE = 24
 """At most this many steps of a run get the relaxation's bound (`run_phase`): every step of
 a run up to that length, else this many spread evenly over it, first and last included —
 the SDP takes seconds a step where IPOPT takes milliseconds. The other steps record
-`NOT_SAMPLED`, no bound, and are never certified."""
+`NOT_SAMPLED`, no bound, and are never certified — except the steps without a decision,
+which are all checked by `unique_point` (a matrix product a step) and need no SDP where it
+proves their point."""
+UNIQUE = "no decision: the power flow's point is the only feasible one (unique_point)"  # sdp_status there
 NOT_SAMPLED = "not in the bound's sample"  # sdp_status of a step `run_phase` does not bound
 NO_RELAXATION = "no relaxation serves this feeder"  # sdp_status on a meshed feeder
 
@@ -288,13 +295,17 @@ def run_phase(
     (IPOPT's, summed over attempts); extra: warm_start, ac_feasible (the reported point
     meets the band), slack_export.
 
-    `bounded` (and not `curtail`: the relaxation bounds the losses alone): the relaxation's
-    bound on `bound_sample`'s steps (`step_bounds`) — lower_bound_kw where the reported
-    point meets the band, certified as on balanced feeders where the point's losses are
-    within CERTIFY_RTOL of it; extra relaxation_bound_kw, sdp_status (the solver's,
-    `NOT_SAMPLED` or `NO_RELAXATION`), sdp_rank_ratio, sdp_ms, sdp_point_kw (the losses
-    of the relaxation's own point: `PhaseBound.point_kw`) and optimality_gap (the
-    relative gap to the bound, NaN where either is missing). Unbounded: no lower bound."""
+    `bounded` (and not `curtail`: the relaxation bounds the losses alone): a lower bound
+    (`step_bounds`) — at every step without a decision whose power-flow point is proven the
+    only feasible one (`unique_point`), that point's losses (certified_by
+    `CERTIFIED_BY_UNIQUE`); on `bound_sample`'s other steps the relaxation's bound —
+    lower_bound_kw where the reported point meets the band, certified (`CERTIFIED_BY_SDP`)
+    as on balanced feeders where the point's losses are within CERTIFY_RTOL of it; extra
+    relaxation_bound_kw, sdp_status (the solver's, `UNIQUE`, `NOT_SAMPLED` or
+    `NO_RELAXATION`), sdp_rank_ratio, sdp_ms, sdp_point_kw (the losses of the
+    relaxation's own point: `PhaseBound.point_kw`), contraction (`unique_point`'s factor,
+    NaN where not computed) and optimality_gap (the relative gap to the bound, NaN where
+    either is missing). Unbounded: no lower bound."""
     begin = now()
     net = scenario.net
     assert isinstance(net, PhaseNetwork)
@@ -322,15 +333,15 @@ def run_phase(
     with np.errstate(invalid="ignore"):
         feasible = flow.converged & (flow.vm.min(axis=1) >= lo - BAND_TOL) & (flow.vm.max(axis=1) <= hi + BAND_TOL)
     n = scenario.n_snapshots
-    certified, bounds = np.zeros(n, dtype=bool), dict[str, np.ndarray]()
+    certified_by, bounds = np.full(n, "", dtype=object), dict[str, np.ndarray]()
     if bounded and not curtail:
-        certified, bounds = step_bounds(net, load_p, load_q, scenario.der_p_mw, limit, k, opt, feasible)
+        certified_by, bounds = step_bounds(net, load_p, load_q, scenario.der_p_mw, limit, k, opt, feasible)
     rows = [
         {
             "objective_kw": float(opt.objective_kw[i]),
             "solver_status": str(opt.solver_status[i]),
             "fallback": str(source[i]),
-            "certified_by": CERTIFIED_BY_SDP if certified[i] else "",
+            "certified_by": str(certified_by[i]),
             "solve_ms": float(opt.solve_ms[i]),
             "iterations": int(opt.iterations[i]),
             "warm_start": bool(opt.warm[i]),
@@ -373,14 +384,18 @@ def step_bounds(
     opt: PhaseOptimum,
     feasible: np.ndarray,
 ) -> tuple[np.ndarray, dict[str, np.ndarray]]:
-    """(certified, per-step arrays) for `run_phase`: the relaxation on `bound_sample`'s
-    steps of S snapshots (loads (S, n_load), DER P and usable |Q| (S, n_der)), the steps
-    certified where the reported point meets the band (`feasible`) and its losses are
-    within CERTIFY_RTOL of the bound (`certify`); arrays relaxation_bound_kw,
-    sdp_status, sdp_rank_ratio, sdp_ms, sdp_point_kw, optimality_gap (S,) as `run_phase`
-    says."""
+    """(certified_by, per-step arrays) for `run_phase` on S snapshots (loads (S, n_load),
+    DER P and usable |Q| (S, n_der)): at every step without a decision (no usable Q) whose
+    optimum is the power flow's point, the proof that the point is the only feasible one
+    (`sole_points`) — its losses are then the bound (status `UNIQUE`, certified_by
+    `CERTIFIED_BY_UNIQUE`); the relaxation on `bound_sample`'s other steps, certified
+    (`CERTIFIED_BY_SDP`) where the reported point meets the band (`feasible`) and its
+    losses are within CERTIFY_RTOL of the bound (`certify`); arrays relaxation_bound_kw,
+    sdp_status, sdp_rank_ratio, sdp_ms, sdp_point_kw, contraction, optimality_gap (S,) as
+    `run_phase` says."""
     n = len(load_p)
     status = np.full(n, NOT_SAMPLED, dtype=object)
+    unique, factor = sole_points(net, load_p, load_q, der_p, limit, opt)
     try:
         model_for("relaxation", net)
     except NetworkError:
@@ -388,6 +403,7 @@ def step_bounds(
         rows = np.zeros(0, dtype=int)
     else:
         rows = bound_sample(n)
+        rows = rows[~unique[rows]]
     nan, no = np.full(n, np.nan), np.zeros(n, dtype=bool)
     relaxed = PhaseBound(nan, nan.copy(), no, no.copy(), status, np.zeros(n), nan.copy(), 0.0)
     if rows.size:
@@ -395,16 +411,42 @@ def step_bounds(
         for f in fields(PhaseBound):
             if f.name != "compile_ms":
                 getattr(relaxed, f.name)[rows] = getattr(part, f.name)
+    relaxed.bound_kw[unique] = relaxed.point_kw[unique] = opt.losses_kw[unique]
+    relaxed.status[unique] = UNIQUE
     certified, gap = certify(opt, relaxed)
     certified &= feasible
-    return certified, {
+    certified_by = np.where(certified, np.where(unique, CERTIFIED_BY_UNIQUE, CERTIFIED_BY_SDP), "").astype(object)
+    return certified_by, {
         "relaxation_bound_kw": relaxed.bound_kw,
         "sdp_status": relaxed.status,
         "sdp_rank_ratio": relaxed.rank_ratio,
         "sdp_ms": relaxed.solve_ms,
         "sdp_point_kw": relaxed.point_kw,
+        "contraction": factor,
         "optimality_gap": np.where(feasible, gap, np.nan),
     }
+
+
+def sole_points(
+    net: PhaseNetwork, load_p: np.ndarray, load_q: np.ndarray, der_p: np.ndarray, limit: np.ndarray, opt: PhaseOptimum
+) -> tuple[np.ndarray, np.ndarray]:
+    """(unique, contraction) per snapshot: at the steps where no DER has usable Q and the
+    optimum is the power flow's point (`PROVEN_NO_Q`, status ok), `unique_point` on the
+    feeder at the taps that point holds (`tap_groups`), the region's rows widened by
+    BAND_TOL — unique where that point is the only one the OPF's constraints admit, so
+    its losses are the optimum's value; elsewhere False and NaN."""
+    n = len(load_p)
+    unique, factor = np.zeros(n, dtype=bool), np.full(n, np.nan)
+    sole = np.flatnonzero(~(limit > 0).any(axis=1) & (opt.solver_status == PROVEN_NO_Q) & (opt.status == OK))
+    if not sole.size:
+        return unique, factor
+    zero_q = np.zeros((sole.size, len(net.ders)))
+    no_action = solve_phase_flow(net, load_p[sole], load_q[sole], der_p[sole])
+    for held, at in tap_groups(net, no_action):
+        rows = sole[at]
+        flow = solve_phase_flow(held, load_p[rows], load_q[rows], der_p[rows])
+        unique[rows], factor[rows] = unique_point(held, flow, load_p[rows], load_q[rows], der_p[rows], zero_q[at], BAND_TOL)
+    return unique, factor
 
 
 def run_phase_batch(

@@ -305,7 +305,10 @@ def convergence(inputs: Inputs) -> Section:
             + (
                 " On a three-phase feeder IPOPT solves every step and, under 'auto', the SDP relaxation (sdp3) bounds every "
                 "step of a short run and an evenly spread sample of a long one ('steps with a bound' counts them): a step is "
-                "certified (by sdp3) where the optimum's losses lie within 1e-6 of that bound; the steps outside the sample are not."
+                "certified (by sdp3) where the optimum's losses lie within 1e-6 of that bound; the steps outside the sample are not. "
+                "A step without a decision (no DER with usable Q: the night at k = 0) is bounded and certified at every step "
+                "(by unique) where the power flow's point is proven the only one that meets the constraints: a contraction of "
+                "the network's equations over the band (opfbench.formulations.unique_point); the SDP is not solved there."
                 if inputs.summary is not None and "max_vuf_pct" in inputs.summary and inputs.summary["max_vuf_pct"].notna().any()
                 else ""
             ),

@@ -22,6 +22,7 @@ from opfbench.result import (
     CERTIFIED_BY_IPOPT,
     CERTIFIED_BY_SDP,
     CERTIFIED_BY_SOCP,
+    CERTIFIED_BY_UNIQUE,
     PF_DIVERGED,
     RULE_NON_FINITE,
     STATUSES,
@@ -127,7 +128,8 @@ def formulation_steps(steps: pd.DataFrame, kinds: Kinds) -> pd.DataFrame:
 def convergence(steps: pd.DataFrame, kinds: Kinds) -> pd.DataFrame:
     """Per case × formulation × k: steps with each status (count and share %); for an
     exact model's, the ok steps certified by the relaxation or by IPOPT (or on a three-phase
-    feeder by its SDP relaxation, where it certified one) and the steps with a lower bound."""
+    feeder by its SDP relaxation or, without a decision, by the power flow's point proven
+    the only one — where they certified one) and the steps with a lower bound."""
     sub = formulation_steps(steps, kinds)
     if sub.empty:
         return pd.DataFrame()
@@ -144,8 +146,9 @@ def convergence(steps: pd.DataFrame, kinds: Kinds) -> pd.DataFrame:
     out["not ok %"] = 100.0 * (total - counts["ok"]) / total
     ac = ~sub["strategy"].astype(str).isin(kinds.inexact)  # who certified the AC OPF's ok steps
     inexact = out.index.get_level_values("strategy").isin(kinds.inexact)
-    sdp = (sub["certified_by"] == CERTIFIED_BY_SDP).any()  # a three-phase run's: shown where it certified a step
-    for solver in (CERTIFIED_BY_SOCP, CERTIFIED_BY_IPOPT) + ((CERTIFIED_BY_SDP,) if sdp else ()):
+    shown = (CERTIFIED_BY_SDP, CERTIFIED_BY_UNIQUE)  # a three-phase run's: shown where they certified a step
+    three_phase = tuple(c for c in shown if (sub["certified_by"] == c).any())
+    for solver in (CERTIFIED_BY_SOCP, CERTIFIED_BY_IPOPT) + three_phase:
         picked = sub[ac & (sub["status"] == "ok") & (sub["certified_by"] == solver)]
         out[f"ok, certified by {solver}"] = (
             picked.groupby(["case", "strategy", "k"]).size().reindex(out.index, fill_value=0).where(~inexact).astype("Int64")
