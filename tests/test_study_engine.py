@@ -11,6 +11,7 @@ import pytest
 from opfbench.cli import main
 from opfbench.study import StudyConfig
 from opfbench.study.engine import slug
+from opfbench.study.execution import by_affinity, run_in_process
 from opfbench.study.run_family import prepare
 from tests.support.matpower_texts import TINY_CASE
 
@@ -31,6 +32,31 @@ def test_task_ids_are_injective():
     assert a.label == b.label == "paper33_k0.1_20160628T1000" and (a.k, b.k) == (0.1, 0.1000001)
     assert a.id == f"{slug(a.label)}-{a.digest[:16]}" and a.id != b.id and a.definition()["k"] == 0.1
     assert len({t.id for t in prepare(StudyConfig(ks=(0.1, 0.1000001))).tasks}) == 2 * 4  # k × chunk
+
+
+def test_tasks_of_a_case_and_chunk_share_an_affinity():
+    """A run's tasks of one case and chunk — one per k — have one affinity, and
+    `by_affinity` groups them in the order of their first task: the paper day's 4 chunks
+    × 2 k give 4 groups of the two k's tasks of a chunk."""
+    tasks = prepare(StudyConfig(ks=(0.0, 0.4))).tasks  # (k, chunk) order
+    groups = by_affinity([(task, i) for i, task in enumerate(tasks)])
+    assert [[i for _, i in group] for group in groups] == [[0, 4], [1, 5], [2, 6], [3, 7]]
+    assert all({task.k for task, _ in g} == {0.0, 0.4} and len({task.start for task, _ in g}) == 1 for g in groups)
+
+
+class _Task:
+    def __init__(self, name: str, affinity: str):
+        self.id, self.affinity = name, affinity
+
+
+def test_in_process_runs_tasks_of_one_affinity_back_to_back():
+    """In this process the jobs run group by group (the tasks of one affinity back to back,
+    sharing the process's caches), each saved as it finishes."""
+    jobs = [(_Task(f"t{i}", f"a{i % 2}"), i) for i in range(5)]
+    ran: list[int] = []
+    saved: list[int] = []
+    run_in_process(jobs, lambda i: ran.append(i) or i, saved.append, None)
+    assert ran == saved == [0, 2, 4, 1, 3]
 
 
 def test_k_printed_alike_are_two_configurations(tmp_path, capsys):

@@ -5,7 +5,8 @@ Dask → tables, the same for every family (`opfbench run`'s study, `study.run_f
 A family (`TaskFamily`) says what to run:
 - `tasks`: its pieces of work, each a `Task` with a readable `label` and a `definition()`
   (JSON-ready: everything that decides its rows); the task's id is the label's slug plus
-  a hash of the definition, so two different tasks never share an id (or a checkpoint);
+  a hash of the definition, so two different tasks never share an id (or a checkpoint),
+  and an `affinity`: tasks of one affinity run back to back in one process (`execution`);
 - `manifest()`: its part of the folder's manifest — `config`, `config_digest` (what a
   resume must match) and `data_sha256` (a hash of each input's data: an edited case file
   is refused on resume, never mixed) plus its own fields;
@@ -77,6 +78,13 @@ class Task:
     @property
     def file(self) -> str:
         return f"tasks/{self.id}.parquet"
+
+    @property
+    def affinity(self) -> str:
+        """Tasks of one affinity run one after another in one process (`execution`: they
+        share work through the process's caches, which changes no digit); default: the
+        task alone."""
+        return self.id
 
     def as_dict(self) -> dict:
         """The manifest's entry: id, label, file, sha256 and the definition."""

@@ -3,6 +3,11 @@ worker processes (`workers=N`, one thread each) or on an existing Dask cluster
 (`scheduler` address, checked before any work). Results come back to this process, which
 writes each finished task to the folder as it arrives — workers need no access to it.
 
+Tasks of one affinity (`engine.Task.affinity`, e.g. a run's tasks of one case and chunk,
+one per k) run back to back in one process — in this process they run in that order, on
+Dask as one job, unless there are fewer such groups than workers —, so that they share the
+work the process caches (the formulations' solves by data: sharing changes no digit).
+
 Ctrl-C: CasADi/IPOPT installs its own SIGINT handler while it solves and swallows the
 signal, so in-process work blocks SIGINT in the main thread and waits for it in a watcher
 thread (`signal.sigwait`), which either stops the process at once (the caller's `on_stop`,
@@ -152,6 +157,23 @@ def _sigint_blocked() -> Iterator[None]:
         signal.pthread_sigmask(signal.SIG_SETMASK, previous)
 
 
+Job = tuple[Any, Any]  # (task, its input for the runner)
+
+
+def by_affinity(jobs: list[Job]) -> list[list[Job]]:
+    """The jobs grouped by their task's affinity, groups in the order of their first job,
+    jobs in their order (module docstring)."""
+    groups: dict[str, list[Job]] = {}
+    for task, job in jobs:
+        groups.setdefault(task.affinity, []).append((task, job))
+    return list(groups.values())
+
+
+def run_group(runner: Callable, inputs: list[Any]) -> list[Any]:
+    """`runner` on each of `inputs`, one after another (a Dask job of one affinity)."""
+    return [runner(job) for job in inputs]
+
+
 def run_in_process(jobs: list[tuple[Any, Any]], runner: Callable, save: Save, on_stop: Callable[[], None] | None) -> None:
     """Run the jobs here, one after another. Ctrl-C calls `on_stop` from a watcher thread
     once no task is being written (`on_stop` must end the process, e.g. with os._exit); with
@@ -165,7 +187,7 @@ def run_in_process(jobs: list[tuple[Any, Any]], runner: Callable, save: Save, on
             pressed.set()
 
     with stop_on_ctrl_c(stop):
-        for _, job in jobs:
+        for _, job in (job for group in by_affinity(jobs) for job in group):
             result = runner(job)
             with saving:
                 save(result)
@@ -223,8 +245,12 @@ def run_dask(
                 )
                 client = Client(cluster)
         try:
+            groups = by_affinity(jobs)
+            if len(groups) < (workers if cluster is not None else sum(client.nthreads().values())):
+                groups = [[job] for job in jobs]  # every worker gets work first
             futures = [
-                client.submit(runner, job, pure=False, priority=-i, key=f"task-{task.id}") for i, (task, job) in enumerate(jobs)
+                client.submit(run_group, runner, [job for _, job in group], pure=False, priority=-i, key=f"task-{group[0][0].id}")
+                for i, group in enumerate(groups)
             ]
             finished = as_completed(futures)
             while not finished.is_empty():
@@ -232,7 +258,8 @@ def run_dask(
                     raise KeyboardInterrupt
                 batch = finished.next_batch(block=False)
                 for future in batch:
-                    save(future.result())
+                    for result in future.result():
+                        save(result)
                     future.release()
                 if not batch:
                     pressed.wait(POLL_S)

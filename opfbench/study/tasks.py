@@ -95,6 +95,13 @@ class RunTask(Task):
     def forecasts(self) -> tuple[str, ...]:
         return tuple(source for source, _ in self.runs)
 
+    @property
+    def affinity(self) -> str:
+        """The case and chunk: its tasks (one per k) run back to back in one process, where
+        they share the formulations' solves of the same data (e.g. at night, where a DER
+        without Q at night has the limit 0 whatever k) through the solve cache."""
+        return f"{self.case}|{self.start}|{self.end}"
+
     def definition(self) -> dict:
         fitted = {"fitted": dict(self.fitted)} if self.fitted else {}
         return fitted | {
