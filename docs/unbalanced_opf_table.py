@@ -104,17 +104,16 @@ def feeder(name: str, steps: int, taps: str, loads: str = "as-is") -> tuple[str,
         same = at_opt.converged & (at_opt.tap_positions == none.tap_positions).all(axis=1)
         kept = np.where(has_opt, np.where(same, "yes", "no"), "")
     taps_kept = f"{(kept == 'yes').sum()}/{has_opt.sum()}" if none.tap_positions is not None else "held"
-    ac_labels = [f"{s} (proven)" if p else s for s, p in zip(opt.status.tolist(), opt.proven.tolist(), strict=True)]
     gaps = f"{np.median(gap[both]):.2e} / {gap[both].max():.2e}" if both.any() else "—"
     share = f"{certified.sum()}/{has_opt.sum()}" if has_opt.any() else "0/0"
     summary = (
-        f"| {name} | {len(net.ders)} | {steps} | {outside.sum()} | {_counts(ac_labels)} | {_counts(relaxed.status.tolist())} | "
+        f"| {name} | {len(net.ders)} | {steps} | {outside.sum()} | {_counts(opt.status.tolist())} | {_counts(relaxed.status.tolist())} | "
         f"{opt.losses_kw[both].sum():.3f} | {relaxed.bound_kw[both].sum():.3f} | {gaps} | "
         f"{relaxed.rank_one.sum()} (max ratio {np.nanmax(relaxed.rank_ratio) if np.isfinite(relaxed.rank_ratio).any() else float('nan'):.1e}) | "
         f"{share} | {taps_kept} | {relaxed.compile_ms / 1e3:.1f} | {np.median(relaxed.solve_ms) / 1e3:.2f} | {wall:.0f} |"
     )
     rows = [
-        f"| {name} | {t} | {load[i]:.3f} | {pv[i]:.3f} | {ac_labels[i]} | {opt.losses_kw[i]:.4f} | "
+        f"| {name} | {t} | {load[i]:.3f} | {pv[i]:.3f} | {opt.status[i]} | {opt.losses_kw[i]:.4f} | "
         f"{relaxed.status[i]} | {relaxed.bound_kw[i]:.4f} | {gap[i]:.2e} | {relaxed.rank_ratio[i]:.1e} | "
         f"{relaxed.point_kw[i]:.6f} | {(opt.losses_kw[i] - relaxed.point_kw[i]) / opt.losses_kw[i]:.1e} | {'yes' if certified[i] else 'no'} | "
         f"{taps_at(net, none, i)} | {kept[i]} |"

@@ -21,7 +21,7 @@ from opfbench.formulations.model import built, model_for
 from opfbench.formulations.models.ac_three_phase import OPTIONS
 from opfbench.formulations.opf_strategies import run_acopf
 from opfbench.formulations.solvers.ipopt_adapter import IpoptNlp
-from opfbench.formulations.three_phase import BAND_TOL, CERTIFY_RTOL, optimum, q_limits
+from opfbench.formulations.three_phase import BAND_TOL, CERTIFY_RTOL, NO_Q_TO_GIVE, optimum, q_limits
 from opfbench.multiphase import PhaseNetwork
 from opfbench.network import V_LIMIT_MAX_PU
 from opfbench.powerflow.multiphase import solve_phase_flow
@@ -191,13 +191,14 @@ def test_rules_that_curtail_lie_on_or_above_the_three_phase_frontier_that_may_cu
     np.testing.assert_allclose(optimum_cut.losses_kw + optimum_cut.curtailed_kw, cutting.cost_kw[:, 0], rtol=1e-9)
 
 
-def test_no_q_to_give_and_the_band_left_is_proven_infeasible_with_no_figure(ieee123_pv):
+def test_no_q_to_give_and_the_band_left_is_infeasible_with_no_figure(ieee123_pv):
     """At night (PV at 0: an inverter has no Q) and light load the held taps leave the band:
-    the power flow's point is the only one, so the OPF is infeasible — and gives no losses."""
+    the power flow's point, the only candidate found, is out of it, so the step is
+    infeasible (a local verdict, not called proven) — and gives no losses."""
     case, _ = ieee123_pv
     lp, lq, dp = _snapshots(case, [(0.3, 0.0), (1.0, 0.0)])
     result = optimum(case.network, lp, lq, dp, 0.0)
-    assert result.status[0] == INFEASIBLE and result.proven[0]
+    assert result.status[0] == INFEASIBLE and result.solver_status[0] == NO_Q_TO_GIVE
     assert np.isnan(result.losses_kw[0]) and np.isnan(result.objective_kw[0])
     assert result.status[1] == OK and result.losses_kw[1] == pytest.approx(
         solve_phase_flow(case.network, lp[1:], lq[1:], dp[1:]).losses_kw[0]

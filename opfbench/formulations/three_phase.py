@@ -25,8 +25,9 @@ falls back to no action (Q = 0) where that meets the band (status fallback-no-ac
 else reports `infeasible` (IPOPT detected it: a local verdict) or `solver-failed`. Under
 the paper's policy ("paper") IPOPT runs once (warm where it can). A snapshot where no DER
 has Q to give (night, or k = 1) has no decision: its candidate is the power flow's point,
-the optimum where it meets the band, proven infeasible where it does not (`proven`); that
-no other solution of the network's equations meets the constraints is proven where
+the optimum where it meets the band, `infeasible` where it does not (a local verdict, as
+IPOPT's: another solution of the network's equations might meet the band); that no other
+solution of the network's equations meets the constraints is proven where
 `unique_point` proves it (`step_bounds`, which then certifies the step without the SDP).
 
 `run_phase` is the strategy's side (`acopf` and `acopf-paper` on a three-phase scenario,
@@ -87,7 +88,7 @@ CURTAIL_SNAP_MW = 1e-6
 """MW: a DER the OPF that may curtail leaves less than this short of its power is taken at
 its power (IPOPT's barrier stops short of the bound P ≤ P_avail by its tolerance; 1 W is
 no curtailment)."""
-PROVEN_NO_Q = "no Q to give: the power flow's point is the only one"  # solver_status of such a snapshot
+NO_Q_TO_GIVE = "no Q to give: the power flow's point"  # solver_status of such a snapshot
 BOUND_SAMPLE = 24
 """At most this many steps of a run get the relaxation's bound (`run_phase`): every step of
 a run up to that length, else this many spread evenly over it, first and last included —
@@ -105,7 +106,7 @@ class PhaseOptimum:
     """The OPF on S snapshots. Arrays (S,): `status` (opfbench.result statuses),
     `losses_kw` the power flow's at the reported setpoints (NaN where there is no
     operating point to report), `objective_kw` the exact model's optimum (NaN unless
-    accepted), `proven` (an infeasible snapshot proven so, module docstring),
+    accepted),
     `iterations` and `solve_ms` (IPOPT's, summed over attempts), `vmin`/`vmax` (p.u., the
     monitored voltages; NaN with the losses), `solver_status` (IPOPT's per attempt, joined
     by " → "), `warm` (the first attempt was warm); `q_mvar` (S, n_der) the setpoints (0
@@ -117,7 +118,6 @@ class PhaseOptimum:
     q_mvar: np.ndarray
     losses_kw: np.ndarray
     objective_kw: np.ndarray
-    proven: np.ndarray
     iterations: np.ndarray
     solve_ms: np.ndarray
     vmin: np.ndarray
@@ -206,7 +206,6 @@ def optimum(
     objective = np.full(n, np.nan)
     iterations = np.zeros(n, dtype=int)
     solve_ms = np.zeros(n)
-    proven = np.zeros(n, dtype=bool)
     solver_status = np.full(n, "", dtype=object)
     warm = np.zeros(n, dtype=bool)
     start = None
@@ -215,11 +214,10 @@ def optimum(
         in_band &= no_action.source_kva.real >= 0  # no action is a point only where the source does not take power back
     for i in range(n):
         undecided = not limit[i].any() and not (curtail and (der_p[i] > 0).any())
-        if undecided and no_action.converged[i]:  # no decision: the power flow's point is the only one
+        if undecided and no_action.converged[i]:  # no decision: the power flow's point is the candidate
             status[i] = OK if in_band[i] else INFEASIBLE
             objective[i] = no_action.losses_kw[i] if in_band[i] else np.nan
-            proven[i] = not in_band[i]
-            solver_status[i] = PROVEN_NO_Q
+            solver_status[i] = NO_Q_TO_GIVE
             continue
         attempts: list[IpoptSolve] = []
         accepted: IpoptSolve | None = None
@@ -263,7 +261,6 @@ def optimum(
         q,
         np.where(settled, flow.losses_kw, np.nan),
         objective,
-        proven,
         iterations,
         solve_ms,
         np.where(settled, flow.vm.min(axis=1, initial=np.inf), np.nan),
@@ -290,7 +287,7 @@ def run_phase(
     result named `name` (default: the model's); with `curtail` the one that may curtail
     (the result carries the power curtailed). The solver record: objective_kw (the
     model's cost where accepted: losses, plus the power curtailed), solver_status (IPOPT's
-    per attempt; `PROVEN_NO_Q` where no DER has Q), fallback, certified_by
+    per attempt; `NO_Q_TO_GIVE` where no DER has Q), fallback, certified_by
     (`CERTIFIED_BY_SDP` where the step is certified, else ""), iterations and solve_ms
     (IPOPT's, summed over attempts); extra: warm_start, ac_feasible (the reported point
     meets the band), slack_export.
@@ -327,7 +324,7 @@ def run_phase(
     )
     answered = (opt.status == OK) | (opt.status == FALLBACK_COLD)
     source = np.where(opt.status == FALLBACK_COLD, FROM_COLD, np.where(answered, FROM_SOLVER, FROM_NO_ACTION))
-    source = np.where(opt.solver_status == PROVEN_NO_Q, np.where(opt.status == OK, FROM_SOLVER, FROM_NO_ACTION), source)
+    source = np.where(opt.solver_status == NO_Q_TO_GIVE, np.where(opt.status == OK, FROM_SOLVER, FROM_NO_ACTION), source)
     lo, hi = net.band
     flow = opt.flow
     with np.errstate(invalid="ignore"):
@@ -431,13 +428,13 @@ def sole_points(
     net: PhaseNetwork, load_p: np.ndarray, load_q: np.ndarray, der_p: np.ndarray, limit: np.ndarray, opt: PhaseOptimum
 ) -> tuple[np.ndarray, np.ndarray]:
     """(unique, contraction) per snapshot: at the steps where no DER has usable Q and the
-    optimum is the power flow's point (`PROVEN_NO_Q`, status ok), `unique_point` on the
+    optimum is the power flow's point (`NO_Q_TO_GIVE`, status ok), `unique_point` on the
     feeder at the taps that point holds (`tap_groups`), the region's rows widened by
     BAND_TOL — unique where that point is the only one the OPF's constraints admit, so
     its losses are the optimum's value; elsewhere False and NaN."""
     n = len(load_p)
     unique, factor = np.zeros(n, dtype=bool), np.full(n, np.nan)
-    sole = np.flatnonzero(~(limit > 0).any(axis=1) & (opt.solver_status == PROVEN_NO_Q) & (opt.status == OK))
+    sole = np.flatnonzero(~(limit > 0).any(axis=1) & (opt.solver_status == NO_Q_TO_GIVE) & (opt.status == OK))
     if not sole.size:
         return unique, factor
     zero_q = np.zeros((sole.size, len(net.ders)))
