@@ -19,8 +19,10 @@ gives none; its own point: the power flow at its DER Q, `PhaseBound.point_kw` �
 operating point where it meets the band, so the AC optimum should not lie above it), the
 AC optimum and the bound summed over the steps where both exist, the
 relative gap (AC − bound) / AC there, the steps whose every PSD block is rank one, the
-certified share (steps where the AC optimum is within 1e-6 of the bound, over the steps
-with an AC optimum), under tap control the steps whose controller keeps the no-action
+certified share (steps where the AC optimum is within 1e-6 of the bound, or — at a step
+without a decision — its power-flow point is proven the only feasible one,
+`three_phase.sole_points`, as a run's `certified_by` "unique"; over the steps with an AC
+optimum), under tap control the steps whose controller keeps the no-action
 taps at the optimum's Q (the power flow under control at its setpoints), and the SDP's
 compile (summed over the tap positions: one model each) and per-step times (wall clock:
 re-take them on a quiet machine). An AC optimum is a step with status ok or
@@ -44,7 +46,7 @@ import numpy as np
 from opfbench.cases.opendss_cases import opendss_copy
 from opfbench.cases.opendss_pv import case_with_pv
 from opfbench.data.profiles import paper_day
-from opfbench.formulations.three_phase import bound, certify, optimum
+from opfbench.formulations.three_phase import bound, certify, optimum, q_limits, sole_points
 from opfbench.multiphase import PhaseNetwork
 from opfbench.multiphase.branches import CONSTANT_I, CONSTANT_Z
 from opfbench.powerflow.multiphase import solve_phase_flow
@@ -94,8 +96,9 @@ def feeder(name: str, steps: int, taps: str, loads: str = "as-is") -> tuple[str,
     lo, hi = net.band
     outside = ~((none.vm.min(axis=1) >= lo) & (none.vm.max(axis=1) <= hi))
     has_opt = (opt.status == OK) | (opt.status == FALLBACK_COLD)
-    certified, gap = certify(opt, relaxed)
-    certified &= has_opt
+    by_sdp, gap = certify(opt, relaxed)
+    unique, factor = sole_points(net, lp, lq, dp, q_limits(net, dp, 0.0), opt)
+    certified = (by_sdp | unique) & has_opt
     gap = np.where(has_opt, gap, np.nan)
     both = np.isfinite(gap)
     kept = np.full(steps, "", dtype=object)
@@ -105,7 +108,11 @@ def feeder(name: str, steps: int, taps: str, loads: str = "as-is") -> tuple[str,
         kept = np.where(has_opt, np.where(same, "yes", "no"), "")
     taps_kept = f"{(kept == 'yes').sum()}/{has_opt.sum()}" if none.tap_positions is not None else "held"
     gaps = f"{np.median(gap[both]):.2e} / {gap[both].max():.2e}" if both.any() else "—"
-    share = f"{certified.sum()}/{has_opt.sum()}" if has_opt.any() else "0/0"
+    share = (
+        f"{certified.sum()}/{has_opt.sum()} ({(by_sdp & has_opt).sum()} sdp, {(unique & has_opt).sum()} unique)"
+        if has_opt.any()
+        else "0/0"
+    )
     summary = (
         f"| {name} | {len(net.ders)} | {steps} | {outside.sum()} | {_counts(opt.status.tolist())} | {_counts(relaxed.status.tolist())} | "
         f"{opt.losses_kw[both].sum():.3f} | {relaxed.bound_kw[both].sum():.3f} | {gaps} | "
@@ -115,11 +122,17 @@ def feeder(name: str, steps: int, taps: str, loads: str = "as-is") -> tuple[str,
     rows = [
         f"| {name} | {t} | {load[i]:.3f} | {pv[i]:.3f} | {opt.status[i]} | {opt.losses_kw[i]:.4f} | "
         f"{relaxed.status[i]} | {relaxed.bound_kw[i]:.4f} | {gap[i]:.2e} | {relaxed.rank_ratio[i]:.1e} | "
-        f"{relaxed.point_kw[i]:.6f} | {(opt.losses_kw[i] - relaxed.point_kw[i]) / opt.losses_kw[i]:.1e} | {'yes' if certified[i] else 'no'} | "
+        f"{relaxed.point_kw[i]:.6f} | {(opt.losses_kw[i] - relaxed.point_kw[i]) / opt.losses_kw[i]:.1e} | {_by(by_sdp[i], unique[i], factor[i])} | "
         f"{taps_at(net, none, i)} | {kept[i]} |"
         for i, t in enumerate(times)
     ]
     return summary, rows
+
+
+def _by(by_sdp: bool, unique: bool, factor: float) -> str:
+    """A step's certified column: by which proof, with the contraction factor where one was computed."""
+    label = "yes (sdp)" if by_sdp else "yes (unique)" if unique else "no"
+    return f"{label}, L = {factor:.3f}" if np.isfinite(factor) else label
 
 
 def taps_at(net: PhaseNetwork, flow, i: int) -> str:
