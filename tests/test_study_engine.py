@@ -4,6 +4,7 @@ schema, where and how many workers run (the scheduler checked before any work)."
 import json
 import shutil
 import time
+from dataclasses import replace
 
 import pandas as pd
 import pytest
@@ -11,7 +12,7 @@ import pytest
 from opfbench.cli import main
 from opfbench.study import StudyConfig
 from opfbench.study.engine import slug
-from opfbench.study.execution import by_affinity, run_in_process
+from opfbench.study.execution import by_affinity, costliest_first, run_in_process
 from opfbench.study.run_family import prepare
 from tests.support.matpower_texts import TINY_CASE
 
@@ -34,19 +35,41 @@ def test_task_ids_are_injective():
     assert len({t.id for t in prepare(StudyConfig(ks=(0.1, 0.1000001))).tasks}) == 2 * 4  # k × chunk
 
 
-def test_tasks_of_a_case_and_chunk_share_an_affinity():
+@pytest.fixture(scope="module")
+def paper_day_tasks() -> list:
+    """The paper day's tasks at k 0 and 0.4, in (k, chunk) order."""
+    return prepare(StudyConfig(ks=(0.0, 0.4))).tasks
+
+
+def test_tasks_of_a_case_and_chunk_share_an_affinity(paper_day_tasks):
     """A run's tasks of one case and chunk — one per k — have one affinity, and
     `by_affinity` groups them in the order of their first task: the paper day's 4 chunks
     × 2 k give 4 groups of the two k's tasks of a chunk."""
-    tasks = prepare(StudyConfig(ks=(0.0, 0.4))).tasks  # (k, chunk) order
+    tasks = paper_day_tasks
     groups = by_affinity([(task, i) for i, task in enumerate(tasks)])
     assert [[i for _, i in group] for group in groups] == [[0, 4], [1, 5], [2, 6], [3, 7]]
     assert all({task.k for task, _ in g} == {0.0, 0.4} and len({task.start for task, _ in g}) == 1 for g in groups)
 
 
+def test_a_tasks_cost_is_its_steps_times_its_cases_buses_and_ders(paper_day_tasks, paper33):
+    """A run's task costs its steps × (buses + DERs) of its case; no part of its id."""
+    task = paper_day_tasks[0]
+    steps = len(pd.date_range(task.start, task.end, freq="1min"))
+    assert task.cost == steps * (paper33.n_bus + len(paper33.ders)) == 360 * (33 + len(paper33.ders))
+    assert replace(task, cost=1.0).id == task.id
+
+
+def test_groups_start_costliest_first_ties_in_their_order():
+    """On Dask the groups go by their tasks' total cost, the costliest first; equal ones
+    keep their order."""
+    jobs = [(_Task(f"t{i}", f"a{i % 3}", cost), i) for i, cost in enumerate([1.0, 5.0, 2.0, 2.0, 2.0, 1.0])]
+    groups = costliest_first(by_affinity(jobs))
+    assert [[i for _, i in group] for group in groups] == [[1, 4], [0, 3], [2, 5]]  # totals 7, 3, 3
+
+
 class _Task:
-    def __init__(self, name: str, affinity: str):
-        self.id, self.affinity = name, affinity
+    def __init__(self, name: str, affinity: str, cost: float = 1.0):
+        self.id, self.affinity, self.cost = name, affinity, cost
 
 
 def test_in_process_runs_tasks_of_one_affinity_back_to_back():

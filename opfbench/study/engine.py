@@ -6,7 +6,8 @@ A family (`TaskFamily`) says what to run:
 - `tasks`: its pieces of work, each a `Task` with a readable `label` and a `definition()`
   (JSON-ready: everything that decides its rows); the task's id is the label's slug plus
   a hash of the definition, so two different tasks never share an id (or a checkpoint),
-  and an `affinity`: tasks of one affinity run back to back in one process (`execution`);
+  an `affinity`: tasks of one affinity run in one process (`execution`), and a `cost`
+  (an estimate of its run time: on Dask the costliest groups start first);
 - `manifest()`: its part of the folder's manifest — `config`, `config_digest` (what a
   resume must match) and `data_sha256` (a hash of each input's data: an edited case file
   is refused on resume, never mixed) plus its own fields;
@@ -63,6 +64,7 @@ class Task:
     `<label slug>-<16 hex digits of the digest>`; `file` its checkpoint."""
 
     label: str
+    cost: float = 1.0  # its run time's estimate, in any unit common to the family's tasks (`execution`)
 
     def definition(self) -> dict:
         raise NotImplementedError
@@ -317,7 +319,7 @@ def run_family(
                 assembly.advance()  # the tasks kept from before
                 try:
                     jobs = [(t, family.job(t)) for t in pending]
-                    workers_exited = execution.execute(
+                    worker_peak = execution.execute(
                         jobs, family.runner(), save, run.workers, scheduler, stop if reporter.hard_stop else None
                     )
                 except KeyboardInterrupt:
@@ -328,9 +330,10 @@ def run_family(
                 run.result = assembly.finish()
             finally:
                 assembly.assembler.abort()
-            workers_exited()  # before the manifest records the worker processes' peak memory
             run.wall_s = elapsed_ms(start) / 1e3
-            store.finish_manifest(run.wall_s, run.workers, scheduler, run.task_wall, family.timings(run.wall_s))
+            # the local worker processes' peak memory as they said it: their shutting down is not waited for
+            peak = {} if worker_peak is None else {"worker_peak_rss_mb": worker_peak}
+            store.finish_manifest(run.wall_s, run.workers, scheduler, run.task_wall, family.timings(run.wall_s) | peak)
         return run
     except Exception:
         if made is not None and not finished_tasks(folder):  # refused, or failed before any task finished

@@ -4,9 +4,13 @@ worker processes (`workers=N`, one thread each) or on an existing Dask cluster
 writes each finished task to the folder as it arrives — workers need no access to it.
 
 Tasks of one affinity (`engine.Task.affinity`, e.g. a run's tasks of one case and chunk,
-one per k) run back to back in one process — in this process they run in that order, on
-Dask as one job, unless there are fewer such groups than workers —, so that they share the
-work the process caches (the formulations' solves by data: sharing changes no digit).
+one per k) run in one process — in this process back to back, in their order; on Dask in
+one worker, unless there are fewer such groups than workers —, so that they share the work
+the process caches (the formulations' solves by data: sharing changes no digit). On Dask
+each task is a job of its own whose result is saved as soon as it arrives (a group's next
+task is pinned to the worker that ran the one before: `_Chains`), so a stop after one task
+of a group finished never loses it; the groups start costliest first (`Task.cost`), so that
+the run does not end with one worker idle while the other runs a long group.
 
 Ctrl-C: CasADi/IPOPT installs its own SIGINT handler while it solves and swallows the
 signal, so in-process work blocks SIGINT in the main thread and waits for it in a watcher
@@ -23,6 +27,7 @@ propagates from there, never from inside a library's callback.
 
 from __future__ import annotations
 
+import collections
 import contextlib
 import logging
 import os
@@ -33,11 +38,13 @@ import warnings
 from typing import Any, Callable, Iterator
 
 from opfbench.errors import InputError
+from opfbench.timing import elapsed_ms, now
 
 Save = Callable[[Any], None]
 
 CONNECT_S = 10  # seconds to reach a scheduler
 POLL_S = 0.05  # seconds between looks for finished tasks and Ctrl-C while a cluster works
+LIVENESS_S = 1.0  # seconds between looks for the workers that tasks are pinned to, while results are awaited
 #: SILENT_LOGS: the local cluster logs only what is critical. A task's error reaches this
 #: process through its future; what the workers would log besides is noise here — e.g. a
 #: worker still busy when Ctrl-C shuts the scheduler down logs a traceback ("Failed to
@@ -169,9 +176,18 @@ def by_affinity(jobs: list[Job]) -> list[list[Job]]:
     return list(groups.values())
 
 
-def run_group(runner: Callable, inputs: list[Any]) -> list[Any]:
-    """`runner` on each of `inputs`, one after another (a Dask job of one affinity)."""
-    return [runner(job) for job in inputs]
+def costliest_first(groups: list[list[Job]]) -> list[list[Job]]:
+    """The groups by their tasks' total `cost`, the costliest first (ties in their order):
+    the last to start are short, so no worker idles long while another finishes."""
+    return sorted(groups, key=lambda group: -sum(task.cost for task, _ in group))
+
+
+def run_here(runner: Callable, job: Any) -> tuple[str, Any]:
+    """(the address of the Dask worker running it, `runner(job)`): a group's next task is
+    pinned to that worker (`run_dask`)."""
+    from distributed import get_worker
+
+    return get_worker().address, runner(job)
 
 
 def run_in_process(jobs: list[tuple[Any, Any]], runner: Callable, save: Save, on_stop: Callable[[], None] | None) -> None:
@@ -212,19 +228,99 @@ def _ctrl_c_requests() -> Iterator[threading.Event]:
         signal.signal(signal.SIGINT, previous)
 
 
-def _done() -> None:
-    """Nothing left to wait for."""
+class _Chains:
+    """The groups' tasks on Dask, each task its own job whose result is saved as it
+    arrives. As many groups are under way as the cluster has worker threads, the next (in
+    the given order) starting when one ends, so each worker runs a group's tasks back to
+    back, never another group's task in between: a group's first task goes to the worker
+    that is free; each next one, submitted when the one before finished, is pinned to the
+    worker that ran it — a restriction, not a preference, so the group shares that
+    process's caches. A task pinned to a worker that is gone (it died; a nanny restarts it
+    at another address) is moved to any worker (the liveness check, every LIVENESS_S while
+    such tasks wait)."""
+
+    def __init__(self, client: Any, runner: Callable, groups: list[list[Job]]):
+        from dask.distributed import as_completed
+
+        self.client, self.runner = client, runner
+        self.finished = as_completed()
+        self.waiting = collections.deque(enumerate(groups))  # (order, group) not started yet
+        self.started = 0  # groups under way
+        self.later: dict[Any, tuple[int, list[Job]]] = {}  # future → (its group's priority, the group's next jobs)
+        self.pinned: dict[Any, tuple[str, list[Job]]] = {}  # future → (its worker, its job and the group's next)
+        self.moved = 0
+        self.checked = now()
+        self._start_groups()
+
+    def _start_groups(self) -> None:
+        """Start the next groups while fewer are under way than the cluster has threads."""
+        threads = max(sum(self.client.nthreads().values()), 1)
+        while self.waiting and self.started < threads:
+            i, group = self.waiting.popleft()
+            self._submit(group, -i, None)
+            self.started += 1
+
+    def _submit(self, jobs: list[Job], priority: int, worker: str | None) -> None:
+        (task, job), *later = jobs
+        where: dict[str, Any] = {} if worker is None else {"workers": [worker], "allow_other_workers": False}
+        key = f"task-{task.id}" + (f"-moved{self.moved}" if self.moved else "")
+        future = self.client.submit(run_here, self.runner, job, pure=False, priority=priority, key=key, **where)
+        self.later[future] = (priority, later)
+        if worker is not None:
+            self.pinned[future] = (worker, jobs)
+        self.finished.add(future)
+
+    def running(self) -> bool:
+        return bool(self.later or self.waiting)
+
+    def collect(self, save: Save) -> bool:
+        """Save the results that arrived (each group's next task, or the next group,
+        submitted first); False when none had."""
+        batch = self.finished.next_batch(block=False)
+        for future in batch:
+            if future not in self.later:  # cancelled: moved off a worker that is gone
+                continue
+            worker, result = future.result()
+            priority, later = self.later.pop(future)
+            self.pinned.pop(future, None)
+            future.release()
+            if later:
+                self._submit(later, priority, worker)
+            else:
+                self.started -= 1
+                self._start_groups()
+            save(result)
+        if not batch and self.pinned and elapsed_ms(self.checked) > LIVENESS_S * 1e3:
+            self._move_orphans()
+        return bool(batch)
+
+    def _move_orphans(self) -> None:
+        self.checked = now()
+        alive = set(self.client.nthreads())
+        for future, (worker, jobs) in list(self.pinned.items()):
+            if worker not in alive and future.status == "pending":
+                priority, _ = self.later.pop(future)
+                del self.pinned[future]
+                future.cancel()
+                self.moved += 1
+                self._submit(jobs, priority, None)
 
 
-def run_dask(
-    jobs: list[tuple[Any, Any]], runner: Callable, save: Save, workers: int, scheduler: str | None
-) -> Callable[[], None]:
-    """Run the jobs on Dask. Returns a function that waits until the local cluster (if one
-    was started) has shut down: it shuts down in the background after the last result,
-    while the caller assembles the tables; on an error or Ctrl-C it is shut down before
-    this returns."""
+def _peak_rss_mb() -> float:
+    """This process's peak resident memory (MiB; run in a worker)."""
+    import resource
+
+    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
+
+
+def run_dask(jobs: list[tuple[Any, Any]], runner: Callable, save: Save, workers: int, scheduler: str | None) -> float | None:
+    """Run the jobs on Dask. Returns the largest peak resident memory (MiB) of the local
+    cluster's worker processes, asked of them after the last result (None: no local
+    cluster); the cluster then shuts down in the background, while the caller assembles
+    its tables and writes its report (the process waits for it at its exit). On an error
+    or Ctrl-C it is shut down before this returns."""
     import dask
-    from dask.distributed import Client, LocalCluster, as_completed
+    from dask.distributed import Client, LocalCluster
 
     with _ctrl_c_requests() as pressed:
         if scheduler:
@@ -248,32 +344,22 @@ def run_dask(
             groups = by_affinity(jobs)
             if len(groups) < (workers if cluster is not None else sum(client.nthreads().values())):
                 groups = [[job] for job in jobs]  # every worker gets work first
-            futures = [
-                client.submit(run_group, runner, [job for _, job in group], pure=False, priority=-i, key=f"task-{group[0][0].id}")
-                for i, group in enumerate(groups)
-            ]
-            finished = as_completed(futures)
-            while not finished.is_empty():
+            chains = _Chains(client, runner, costliest_first(groups))
+            while chains.running():
                 if pressed.is_set():
                     raise KeyboardInterrupt
-                batch = finished.next_batch(block=False)
-                for future in batch:
-                    for result in future.result():
-                        save(result)
-                    future.release()
-                if not batch:
+                if not chains.collect(save):
                     pressed.wait(POLL_S)
+            peak = max(client.run(_peak_rss_mb).values()) if cluster is not None else None
         except BaseException:
             client.close()
             if cluster is not None:
                 cluster.close()
             raise
     client.close()
-    if cluster is None:
-        return _done
-    closing = threading.Thread(target=cluster.close, name="local-cluster-close")
-    closing.start()
-    return closing.join
+    if cluster is not None:
+        threading.Thread(target=cluster.close, name="local-cluster-close").start()
+    return peak
 
 
 def execute(
@@ -283,15 +369,14 @@ def execute(
     workers: int,
     scheduler: str | None,
     on_stop: Callable[[], None] | None,
-) -> Callable[[], None]:
+) -> float | None:
     """Run `runner` on each (task, input) of `jobs`, calling `save` with each result (in
     completion order); Ctrl-C in the in-process path: `on_stop` ends the process, or
-    KeyboardInterrupt after the running task (`run_in_process`).
-    Returns a function that waits until every local worker process has exited
-    (`run_dask`)."""
+    KeyboardInterrupt after the running task (`run_in_process`). Returns the local worker
+    processes' peak memory (`run_dask`; None: none ran)."""
     if not jobs:  # every task kept from before: no cluster to start or reach
-        return _done
+        return None
     if scheduler is None and workers <= 1:
         run_in_process(jobs, runner, save, on_stop)
-        return _done
+        return None
     return run_dask(jobs, runner, save, workers, scheduler)

@@ -186,15 +186,16 @@ def prepare(config: StudyConfig) -> RunFamily:
     check_model_forecasts(config.forecast_dir, models, period)  # a missing or incomplete forecast file: here, not in a worker
     running = {label for source in config.forecast for label in config.strategies_for(source)}
     extra_columns(config.strategies)  # a plugin's column that is one of the table's own: refused here
-    data = {}
+    data, sizes = {}, {}
     for case in config.cases:
         loaded = load_case(case)
         data[case] = loaded.data_sha256
         net = loaded.network
+        sizes[case] = net.n_bus + len(net.ders)
         for label in config.strategies:
             if label in running:
                 configuration(label).spec.check_network(net)
-    tasks = plan_tasks(config, period, data)
+    tasks = plan_tasks(config, period, data, sizes)
     _probe_plugins(tasks, config, period)
     return RunFamily(config, period, tasks)
 

@@ -86,7 +86,8 @@ def _git_commit() -> str | None:
 
 def _peak_rss_mb() -> dict:
     """Peak resident memory (MiB) of this process and of the largest finished child
-    process (local Dask workers, once shut down)."""
+    process (a local Dask cluster's workers say theirs before they shut down: the engine
+    passes that figure instead)."""
     import resource
 
     kib = {"peak_rss_mb": resource.RUSAGE_SELF, "worker_peak_rss_mb": resource.RUSAGE_CHILDREN}

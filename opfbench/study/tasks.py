@@ -23,7 +23,7 @@ warm-starts inside it — the same whatever the number of workers.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 import pandas as pd
@@ -90,6 +90,7 @@ class RunTask(Task):
     data_sha256: str
     config_digest: str
     fitted: tuple[tuple[str, str], ...] = ()
+    cost: float = field(default=1.0, compare=False)  # steps × (buses + DERs): no part of its definition
 
     @property
     def forecasts(self) -> tuple[str, ...]:
@@ -143,10 +144,11 @@ class TaskInput:
     frontier: bool = True  # StudyConfig.frontier
 
 
-def plan_tasks(config: StudyConfig, period: Period, data_sha256: dict[str, str]) -> list[RunTask]:
+def plan_tasks(config: StudyConfig, period: Period, data_sha256: dict[str, str], sizes: dict[str, int]) -> list[RunTask]:
     """Every task of the grid, in a fixed order (case, k, chunk), each running every
     forecast source with a strategy to run (only formulations asked: none under a
-    forecast). `data_sha256`: each case's data hash."""
+    forecast). `data_sha256`: each case's data hash; `sizes`: each case's buses + DERs
+    (a task's cost is its steps × its case's size)."""
     tasks = []
     chunks = period.chunks(config.chunk)
     digest = config.digest()
@@ -168,6 +170,7 @@ def plan_tasks(config: StudyConfig, period: Period, data_sha256: dict[str, str])
                         data_sha256[case],
                         digest,
                         tuple((f.label, f.sha256) for f in config.fitted if f.case == case),
+                        float((rows.stop - rows.start) * sizes[case]),
                     )
                 )
     return tasks
