@@ -5,7 +5,7 @@ import pytest
 
 from opfbench.errors import InputError
 from opfbench.io import load_network
-from opfbench.powerflow import bus_injections, solve_pf, solve_pf_batch
+from opfbench.powerflow import PowerFlowResult, bus_injections, solve_pf, solve_pf_batch
 from tests.support.matpower_texts import CASE4_PV
 
 
@@ -162,6 +162,105 @@ def test_a_cold_batched_flow_answers_the_same_input_from_the_memo(paper33):
     small = FlowMemo(limit_bytes=4 * s.nbytes)
     small.put(paper33, "o", np.ascontiguousarray(s), first)
     assert small.get(paper33, "o", np.ascontiguousarray(s)) is None and small.used == 0
+
+
+def test_a_snapshot_solved_before_is_answered_from_the_row_memo(paper33, monkeypatch):
+    """Warm or cold, only the snapshots this thread has not solved from the same injections
+    and start are solved (each distinct one once); the others' answers are those of a
+    fresh solve bit for bit; a changed start, or a warm start where a cold one was solved,
+    is a new snapshot."""
+    import opfbench.powerflow as pf
+    from opfbench.powerflow.memo import forget_flows
+
+    solved: list[int] = []
+    batch = pf._batch
+    monkeypatch.setattr(pf, "_batch", lambda net, s, *rest: solved.append(len(s)) or batch(net, s, *rest))
+    s = np.array([bus_injections(paper33, p, q, ls) for _, ls, p, q in _random_points("paper33", 8, seed=3)])
+    start = solve_pf_batch(paper33, s).v * 1.001
+    forget_flows()
+    solved.clear()
+    solve_pf_batch(paper33, s[:5], v0=start[:5])
+    mixed = [4, 6, 0, 6, 7, 2]  # three known, 6 twice, 7 new
+    got = solve_pf_batch(paper33, s[mixed], v0=start[mixed])
+    assert solved == [5, 2]
+    forget_flows()
+    fresh = solve_pf_batch(paper33, s[mixed], v0=start[mixed])
+    np.testing.assert_array_equal(got.v, fresh.v)
+    np.testing.assert_array_equal(got.iterations, fresh.iterations)
+    np.testing.assert_array_equal(got.converged, fresh.converged)
+    solved.clear()
+    other = start[:2].copy()
+    other[1, 3] *= 1 + 1e-15  # one value of one start moved by an ulp
+    solve_pf_batch(paper33, s[:2], v0=other)
+    solve_pf_batch(paper33, s[:2])  # cold, where warm ones were solved
+    assert solved == [1, 2]
+
+
+def test_snapshots_whose_digests_collide_are_each_solved(paper33, monkeypatch):
+    """A digest is only where a snapshot is looked for: with every snapshot given the same
+    digest, a different snapshot — in a later call or the same batch, a warm start where a
+    cold one was solved — is solved, never served another's answer; the same snapshot again
+    is still not solved twice."""
+    import opfbench.powerflow as pf
+    from opfbench.powerflow.memo import forget_flows
+
+    s = np.array([bus_injections(paper33, p, q, ls) for _, ls, p, q in _random_points("paper33", 4, seed=13)])
+    start = solve_pf_batch(paper33, s).v * 1.001
+    fresh = [solve_pf_batch(paper33, s[i : i + 1]) for i in range(4)]
+    warm = solve_pf_batch(paper33, s[:1], v0=start[:1])
+    assert warm.iterations[0] != fresh[0].iterations[0]  # the start shows in the answer
+    solved: list[int] = []
+    batch = pf._batch
+    monkeypatch.setattr(pf, "_batch", lambda net, s, *rest: solved.append(len(s)) or batch(net, s, *rest))
+    monkeypatch.setattr(pf, "row_digests", lambda s, v0: [bytes(16)] * len(s))
+    forget_flows()
+    got = [solve_pf_batch(paper33, s[:1]), solve_pf_batch(paper33, s[1:2]), solve_pf_batch(paper33, s[[2, 3, 2]])]
+    got_warm = solve_pf_batch(paper33, s[:1], v0=start[:1])
+    assert solved == [1, 1, 2, 1]  # each snapshot solved once: row 2 twice in a batch is one
+    for i, (g, row) in enumerate([(0, 0), (1, 0), (2, 0), (2, 1), (2, 2)]):
+        want = fresh[[0, 1, 2, 3, 2][i]]
+        np.testing.assert_array_equal(got[g].v[row], want.v[0])
+        assert got[g].iterations[row] == want.iterations[0]
+    np.testing.assert_array_equal(got_warm.v, warm.v)
+    np.testing.assert_array_equal(got_warm.iterations, warm.iterations)
+
+
+def test_the_row_memo_keeps_at_most_its_limit():
+    """Batches of answers beyond the memo's limit are dropped oldest first (their snapshots
+    are solved again); a snapshot answered again by a newer batch keeps the newer answer."""
+    from opfbench.powerflow.memo import RowMemo, row_digests
+
+    net = load_network("paper33")
+    s = np.array([bus_injections(net, p, q, ls) for _, ls, p, q in _random_points("paper33", 6, seed=7)]) / net.base_mva
+    answers = solve_pf_batch(net, s * net.base_mva)
+    keys = row_digests(s, None)
+    assert len(set(keys)) == 6 and row_digests(s, s) != keys  # a warm start is part of the snapshot
+    memo = RowMemo(limit_bytes=4 * (answers.v[0].nbytes + s[0].nbytes + 160))  # four single cold snapshots
+    for rows in ([0], [1], [2], [3], [1], [4]):
+        part = PowerFlowResult(net, answers.v[rows], answers.converged[rows], answers.iterations[rows])
+        memo.put(net, "o", [keys[i] for i in rows], s[rows], None, part)
+    assert memo.used <= memo.limit
+    known, v, converged, iterations = memo.find(net, "o", keys, s, None)
+    assert known.tolist() == [
+        False,
+        True,
+        True,
+        True,
+        True,
+        False,
+    ]  # 0 went with the oldest batch (1's first with the next); 5 never came
+    np.testing.assert_array_equal(v[1:5], answers.v[1:5])
+    np.testing.assert_array_equal(iterations[1:5], answers.iterations[1:5])
+    assert not memo.find(net, "other options", keys, s, None)[0].any()
+    assert not memo.find(net, "o", keys, s, s)[0].any()  # the same digests, but not the same snapshots
+    twin = load_network("paper33-meshed")  # another network: its table goes with its last batch
+    memo.put(
+        twin, "o", keys[:1], s[:1], None, PowerFlowResult(twin, answers.v[:1], answers.converged[:1], answers.iterations[:1])
+    )
+    for i in range(4):
+        part = PowerFlowResult(net, answers.v[i : i + 1], answers.converged[:1], answers.iterations[:1])
+        memo.put(net, "o", keys[i : i + 1], s[i : i + 1], None, part)
+    assert (twin, "o") not in memo._tables and not memo.find(twin, "o", keys[:1], s[:1], None)[0].any()
 
 
 @pytest.mark.parametrize("name, sparse", [("paper33", False), ("case69-der", False), ("case141-der", True), ("paper33", True)])
