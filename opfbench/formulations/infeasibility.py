@@ -43,6 +43,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from numba import njit
 
 from opfbench.formulations.models.distflow import RadialBranches
 from opfbench.formulations.problem import SLACK_P_TOLERANCE, VOLTAGE_TOLERANCE, OpfProblem, SnapshotData
@@ -52,18 +53,6 @@ MARGIN = 1e-6  # p.u. (power) and p.u.² (squared voltage) beyond a limit a proo
 # The reasons, as a snapshot's solver_status reads them
 SLACK_MUST_EXPORT = "bounds: the slack must export"
 VOLTAGES_OUT_OF_REACH = "bounds: voltage limits out of reach"
-
-
-def _scaled(coef: np.ndarray | float, lo: np.ndarray, hi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """The interval of coef·y for y in [lo, hi] (elementwise, any sign of coef)."""
-    a, b = coef * lo, coef * hi
-    return np.minimum(a, b), np.maximum(a, b)
-
-
-def _square(lo: np.ndarray, hi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """The interval of y² for y in [lo, hi]."""
-    nearest = np.maximum(np.maximum(lo, -hi), 0.0)
-    return nearest**2, np.maximum(lo**2, hi**2)
 
 
 @dataclass(frozen=True)
@@ -78,64 +67,132 @@ class FlowBounds:
     out_of_reach: np.ndarray
 
 
+@njit(inline="always")
+def _min(a: float, b: float) -> float:
+    """np.minimum of two floats: NaN if either is NaN; of two equal ones (±0) the second."""
+    if a != a or b != b:
+        return a + b
+    return a if a < b else b
+
+
+@njit(inline="always")
+def _max(a: float, b: float) -> float:
+    """np.maximum of two floats (as `_min`)."""
+    if a != a or b != b:
+        return a + b
+    return a if a > b else b
+
+
+@njit(inline="always")
+def _scaled(coef: float, lo: float, hi: float) -> tuple[float, float]:
+    """The interval of coef·y for y in [lo, hi] (any sign of coef)."""
+    a, b = coef * lo, coef * hi
+    return _min(a, b), _max(a, b)
+
+
+@njit(inline="always")
+def _square(lo: float, hi: float) -> tuple[float, float]:
+    """The interval of y² for y in [lo, hi]."""
+    nearest = _max(_max(lo, -hi), 0.0)
+    return nearest * nearest, _max(lo * lo, hi * hi)
+
+
+@njit(cache=True, error_model="numpy")
+def _up(child, parent, r, x, child_scale, g, b, p_fixed, q_fixed, q_der, v_lo, v_hi, drop_lo, drop_hi, l_lo, l_hi, p_hi):
+    """Leaves first, every snapshot (columns): the branches' intervals into drop_lo, drop_hi
+    (r·P + x·Q at the sending end) and l_lo, l_hi (ℓ), each bus's upper bound on the P it
+    sends to its children into p_hi. Per-bus arrays (n_bus, S), per-branch (m, S)."""
+    n_snap = v_lo.shape[1]
+    p_lo, q_lo, q_hi = np.zeros_like(v_lo), np.zeros_like(v_lo), np.zeros_like(v_lo)
+    p_hi[:] = 0.0
+    for k in range(child.size - 1, -1, -1):
+        j, up = child[k], parent[k]
+        for t in range(n_snap):
+            gv_lo, gv_hi = _scaled(g[j], v_lo[j, t], v_hi[j, t])
+            bv_lo, bv_hi = _scaled(b[j], v_lo[j, t], v_hi[j, t])
+            pj_lo = p_lo[j, t] + gv_lo - p_fixed[j, t]
+            pj_hi = p_hi[j, t] + gv_hi - p_fixed[j, t]
+            qj_lo = q_lo[j, t] - bv_hi - q_fixed[j, t] - q_der[j, t]
+            qj_hi = q_hi[j, t] - bv_lo - q_fixed[j, t] + q_der[j, t]
+            pp_lo, pp_hi = _square(pj_lo, pj_hi)
+            qq_lo, qq_hi = _square(qj_lo, qj_hi)
+            w_lo, w_hi = v_lo[j, t] * child_scale[k], v_hi[j, t] * child_scale[k]
+            ll_lo = (pp_lo + qq_lo) / w_hi
+            ll_hi = (pp_hi + qq_hi) / w_lo if pp_hi + qq_hi > 0 else 0.0
+            xl_lo, xl_hi = _scaled(x[k], ll_lo, ll_hi)
+            ps_lo, ps_hi = pj_lo + r[k] * ll_lo, pj_hi + r[k] * ll_hi  # r ≥ 0 (`Network` checks it)
+            qs_lo, qs_hi = qj_lo + xl_lo, qj_hi + xl_hi
+            xq_lo, xq_hi = _scaled(x[k], qs_lo, qs_hi)
+            drop_lo[k, t], drop_hi[k, t] = r[k] * ps_lo + xq_lo, r[k] * ps_hi + xq_hi
+            l_lo[k, t], l_hi[k, t] = ll_lo, ll_hi
+            p_lo[up, t] += ps_lo
+            p_hi[up, t] += ps_hi
+            q_lo[up, t] += qs_lo
+            q_hi[up, t] += qs_hi
+
+
+@njit(cache=True, error_model="numpy")
+def _down(child, parent, z2, parent_scale, child_scale, drop_lo, drop_hi, l_lo, l_hi, lim_lo, lim_hi, v_lo, v_hi, empty):
+    """Parents first: each v's interval from its parent's and its branch's, intersected
+    with the limits in place; `empty` |= the snapshots that got an empty one (beyond MARGIN)."""
+    for k in range(child.size):
+        j, up = child[k], parent[k]
+        for t in range(v_lo.shape[1]):
+            lo = (v_lo[up, t] * parent_scale[k] - 2.0 * drop_hi[k, t] + z2[k] * l_lo[k, t]) / child_scale[k]
+            hi = (v_hi[up, t] * parent_scale[k] - 2.0 * drop_lo[k, t] + z2[k] * l_hi[k, t]) / child_scale[k]
+            empty[t] |= (lo > lim_hi[j] + MARGIN) | (hi < lim_lo[j] - MARGIN)
+            v_lo[j, t] = _max(_min(lo, lim_hi[j]), lim_lo[j])
+            v_hi[j, t] = _min(_max(hi, lim_lo[j]), lim_hi[j])
+
+
 class _Passes:
-    """The up and down passes over one feeder's branches for all snapshots at once; every
-    per-bus array is (n_bus, S), a bus's snapshots contiguous."""
+    """The up and down passes over one feeder's branches for all snapshots at once (compiled:
+    the branches in order, each over every snapshot, the arithmetic numpy's operation for
+    operation); every per-bus array is (n_bus, S), a bus's snapshots contiguous."""
 
     def __init__(self, problem: OpfProblem, data: SnapshotData):
         self.problem, self.br = problem, RadialBranches.of(problem.net)
+        br = self.br
         self.p_fixed = np.ascontiguousarray(data.s_fixed.real.T)
         self.q_fixed = np.ascontiguousarray(data.s_fixed.imag.T)
-        self.q_der = problem.der_at_bus @ data.q_limit.T  # Σ usable |Q| of the DER at each bus
-        self.g = problem.gsh + self.br.conductance  # P drawn by a bus's shunts per p.u.² of v
-        self.b = problem.bsh + self.br.charging  # Q they inject
-        m, s = self.br.child.size, data.n_snapshots
+        self.q_der = np.ascontiguousarray(problem.der_at_bus @ data.q_limit.T)  # Σ usable |Q| of the DER at each bus
+        self.g = problem.gsh + br.conductance  # P drawn by a bus's shunts per p.u.² of v
+        self.b = problem.bsh + br.charging  # Q they inject
+        self.z2 = np.array([br.r[k] ** 2 + br.x[k] ** 2 for k in range(br.child.size)])
+        m, s = br.child.size, data.n_snapshots
         # per branch (rows) and snapshot: the interval of r·P + x·Q at the sending end and of ℓ
         self.drop_lo, self.drop_hi = np.empty((m, s)), np.empty((m, s))
         self.l_lo, self.l_hi = np.empty((m, s)), np.empty((m, s))
 
     def up(self, v_lo: np.ndarray, v_hi: np.ndarray) -> np.ndarray:
         """Leaves first: the branches' intervals (kept for `down`); returns slack_p_hi."""
-        br = self.br
-        p_lo, p_hi = np.zeros_like(v_lo), np.zeros_like(v_lo)  # what a bus sends to its children
-        q_lo, q_hi = np.zeros_like(v_lo), np.zeros_like(v_lo)
-        for k in range(br.child.size - 1, -1, -1):
-            j, parent = br.child[k], br.parent[k]
-            gv_lo, gv_hi = _scaled(self.g[j], v_lo[j], v_hi[j])
-            bv_lo, bv_hi = _scaled(self.b[j], v_lo[j], v_hi[j])
-            pj_lo = p_lo[j] + gv_lo - self.p_fixed[j]
-            pj_hi = p_hi[j] + gv_hi - self.p_fixed[j]
-            qj_lo = q_lo[j] - bv_hi - self.q_fixed[j] - self.q_der[j]
-            qj_hi = q_hi[j] - bv_lo - self.q_fixed[j] + self.q_der[j]
-            (pp_lo, pp_hi), (qq_lo, qq_hi) = _square(pj_lo, pj_hi), _square(qj_lo, qj_hi)
-            w_lo, w_hi = v_lo[j] * br.child_scale[k], v_hi[j] * br.child_scale[k]
-            l_lo = (pp_lo + qq_lo) / w_hi
-            l_hi = np.where(pp_hi + qq_hi > 0, (pp_hi + qq_hi) / w_lo, 0.0)
-            xl_lo, xl_hi = _scaled(br.x[k], l_lo, l_hi)
-            ps_lo, ps_hi = pj_lo + br.r[k] * l_lo, pj_hi + br.r[k] * l_hi  # r ≥ 0 (`Network` checks it)
-            qs_lo, qs_hi = qj_lo + xl_lo, qj_hi + xl_hi
-            xq_lo, xq_hi = _scaled(br.x[k], qs_lo, qs_hi)
-            self.drop_lo[k], self.drop_hi[k] = br.r[k] * ps_lo + xq_lo, br.r[k] * ps_hi + xq_hi
-            self.l_lo[k], self.l_hi[k] = l_lo, l_hi
-            p_lo[parent] += ps_lo
-            p_hi[parent] += ps_hi
-            q_lo[parent] += qs_lo
-            q_hi[parent] += qs_hi
-        slack = self.problem.slack
-        return p_hi[slack] + _scaled(self.g[slack], v_lo[slack], v_hi[slack])[1] - self.p_fixed[slack]
+        br, p_hi = self.br, np.empty_like(v_lo)
+        passes = (self.drop_lo, self.drop_hi, self.l_lo, self.l_hi)
+        _up(
+            br.child,
+            br.parent,
+            br.r,
+            br.x,
+            br.child_scale,
+            self.g,
+            self.b,
+            self.p_fixed,
+            self.q_fixed,
+            self.q_der,
+            v_lo,
+            v_hi,
+            *passes,
+            p_hi,
+        )
+        slack, g = self.problem.slack, self.g[self.problem.slack]
+        return p_hi[slack] + np.maximum(g * v_lo[slack], g * v_hi[slack]) - self.p_fixed[slack]
 
     def down(self, v_lo: np.ndarray, v_hi: np.ndarray, lim_lo: np.ndarray, lim_hi: np.ndarray) -> np.ndarray:
-        """Parents first: each v's interval from its parent's and its branch's, intersected
-        with the limits in place; returns which snapshots got an empty one (beyond MARGIN)."""
+        """Parents first (`_down`); returns which snapshots got an empty interval."""
         br = self.br
         empty = np.zeros(v_lo.shape[1], dtype=bool)
-        for k in range(br.child.size):
-            j, parent, z2 = br.child[k], br.parent[k], br.r[k] ** 2 + br.x[k] ** 2
-            lo = (v_lo[parent] * br.parent_scale[k] - 2 * self.drop_hi[k] + z2 * self.l_lo[k]) / br.child_scale[k]
-            hi = (v_hi[parent] * br.parent_scale[k] - 2 * self.drop_lo[k] + z2 * self.l_hi[k]) / br.child_scale[k]
-            empty |= (lo > lim_hi[j] + MARGIN) | (hi < lim_lo[j] - MARGIN)
-            v_lo[j] = np.maximum(np.minimum(lo, lim_hi[j]), lim_lo[j])
-            v_hi[j] = np.minimum(np.maximum(hi, lim_lo[j]), lim_hi[j])
+        passes = (self.drop_lo, self.drop_hi, self.l_lo, self.l_hi)
+        _down(br.child, br.parent, self.z2, br.parent_scale, br.child_scale, *passes, lim_lo, lim_hi, v_lo, v_hi, empty)
         return empty
 
 
