@@ -79,16 +79,18 @@ def plot_json(pid: str, title: str, fig: go.Figure, xtitle: str, ytitle: str, he
     return Plot(pid, title, script_json(fig.to_json(engine="json")))
 
 
-def _decimate(frame: pd.DataFrame, value: str) -> pd.DataFrame:
-    """Mean of `value` in at most MAX_POINTS equal bins of rows (rows sorted by time); the
-    time as local wall-clock text, which is what plotly.js shows (it ignores zone offsets;
-    formatted once here rather than per element by Plotly, which is slow on long traces)."""
+def _decimate(frame: pd.DataFrame, *values: str) -> pd.DataFrame:
+    """Mean of each of `values` in at most MAX_POINTS equal bins of rows (rows sorted by
+    time); the time as local wall-clock text, which is what plotly.js shows (it ignores
+    zone offsets; formatted once here rather than per element by Plotly, which is slow on
+    long traces)."""
     if len(frame) > MAX_POINTS:
         bins = np.arange(len(frame)) * MAX_POINTS // len(frame)
-        frame = frame.groupby(bins).agg(time=("time", "first"), **{value: (value, "mean")})
+        frame = frame.groupby(bins).agg(time=("time", "first"), **{value: (value, "mean") for value in values})
     time = pd.DatetimeIndex(frame["time"])
     wall_clock = time.tz_localize(None) if time.tz is not None else time
-    return pd.DataFrame({"time": np.datetime_as_string(wall_clock.to_numpy(), unit="s"), value: frame[value].to_numpy()})
+    text = np.datetime_as_string(wall_clock.to_numpy(), unit="s")
+    return pd.DataFrame({"time": text} | {value: frame[value].to_numpy() for value in values})
 
 
 def _reference(frame: pd.DataFrame) -> tuple[pd.DataFrame, float]:
@@ -101,7 +103,12 @@ def _reference(frame: pd.DataFrame) -> tuple[pd.DataFrame, float]:
 
 
 def _cases(frame: pd.DataFrame) -> list[str]:
-    return sorted(frame["case"].astype(str).unique())
+    return sorted(str(case) for case in frame["case"].unique())
+
+
+def _by_strategy(frame: pd.DataFrame) -> dict[str, pd.DataFrame]:
+    """The rows of each strategy of `frame` (in their order), sorted by time."""
+    return {str(name): rows.sort_values("time") for name, rows in frame.groupby("strategy", observed=True, sort=False)}
 
 
 def losses_day(steps: pd.DataFrame) -> list[Plot]:
@@ -109,8 +116,9 @@ def losses_day(steps: pd.DataFrame) -> list[Plot]:
     for i, case in enumerate(_cases(steps)):
         sub, k = _reference(steps[steps["case"] == case])
         fig = _figure()
+        rows = _by_strategy(sub)
         for strategy in order(sub[["strategy"]].drop_duplicates())["strategy"]:
-            d = _decimate(sub[sub["strategy"] == strategy].sort_values("time"), "losses_kw")
+            d = _decimate(rows[strategy], "losses_kw")
             fig.add_scatter(x=d["time"], y=d["losses_kw"], mode="lines", name=escape(strategy))
         out.append(
             plot_json(
@@ -199,21 +207,21 @@ def voltage_envelope(steps: pd.DataFrame, limits: dict[str, tuple[float, float]]
     for i, case in enumerate(_cases(steps)):
         sub, k = _reference(steps[steps["case"] == case])
         fig = _figure()
+        rows = _by_strategy(sub)
         for j, strategy in enumerate(order(sub[["strategy"]].drop_duplicates())["strategy"]):
-            grp = sub[sub["strategy"] == strategy].sort_values("time")
-            lo, hi = _decimate(grp, "vmin_pu"), _decimate(grp, "vmax_pu")
+            env = _decimate(rows[strategy], "vmin_pu", "vmax_pu")
             color = _COLORS[j % len(_COLORS)]
             fig.add_scatter(
-                x=lo["time"],
-                y=lo["vmin_pu"],
+                x=env["time"],
+                y=env["vmin_pu"],
                 mode="lines",
                 name=f"{escape(strategy)} min",
                 line=dict(color=color),
                 legendgroup=escape(strategy),
             )
             fig.add_scatter(
-                x=hi["time"],
-                y=hi["vmax_pu"],
+                x=env["time"],
+                y=env["vmax_pu"],
                 mode="lines",
                 name=f"{escape(strategy)} max",
                 line=dict(color=color, dash="dot"),
