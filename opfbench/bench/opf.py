@@ -35,6 +35,13 @@ own profiles (`bench_mv`), the same per-step costs `mv_socp_step_ms` and `mv_aco
 at every 12th step (`mv_pandapower_runopp_ms`, with its losses checked against our AC
 OPF's at the same steps).
 
+and where the physical limit of a relaxation answer lies (`bench_kkt`, `bench.kkt`) on
+1-MV-rural and 1-LV-rural3 over the same day: the program's size, its KKT matrix's
+nonzeros and fill, the flops of one factorization and of one iteration, Clarabel's
+iterations per answer and CPU µs per iteration (`kkt_*_iteration_us`), against the LDLᵀ
+refactor and two solves of the same matrix that an iteration cannot avoid (`kkt_*_ldl_us`,
+its peer, the regression guard's ratio).
+
 Medians in ms; `ratio_*` = pandapower median / ours. The machine's load average is
 recorded because the timings depend on it.
 """
@@ -62,6 +69,7 @@ from opfbench.timing import elapsed_ms, now
 
 AGREEMENT_KW = 1e-2  # pandapower's and our optimal losses agree when this close
 MV_CASE = "1-MV-rural--0-sw"
+LV_CASE = "1-LV-rural3--0-sw"  # the suite's LV grid with the most costly relaxation answers
 TARGET_MV_STEP_MS = 3.0
 PEER_EVERY = 10  # pandapower runopp on every 10th snapshot of `bench_opf`'s day
 
@@ -292,6 +300,30 @@ def bench_mv(code: str = MV_CASE, k: float = 0.0, repeats: int = 3, peer_every: 
     }
 
 
+def bench_kkt(grids: tuple[tuple[str, str], ...] = (("mv", MV_CASE), ("lv", LV_CASE)), k: float = 0.0) -> dict:
+    """Where the physical limit of a relaxation answer lies (`bench.kkt`), on each grid
+    (tag, SimBench code) over the paper day's date at 15 min of its own profiles: keys
+    `kkt_{tag}_*` (dimensions, KKT nonzeros, fill, flops, Clarabel's iterations and CPU µs
+    per iteration, and the LDLᵀ refactor and two solves of the same KKT matrix, its peer)."""
+    from opfbench.bench.kkt import kkt_figures
+    from opfbench.data import PAPER_DAY
+    from opfbench.data.profiles import PAPER_DAY_TZ
+    from opfbench.formulations.models.conic import data_vector
+
+    out: dict[str, object] = {}
+    for tag, code in grids:
+        case = load_case(f"simbench:{code}")
+        assert case.series is not None
+        index = pd.date_range(PAPER_DAY, periods=96, freq="15min", tz=PAPER_DAY_TZ)
+        day = Scenario.from_series(case.balanced("the KKT benchmark"), *case.series.rows(index))
+        model = build_problem_model("relaxation", day.net)
+        data = snapshot_data(day, k)
+        offsets = model.program.offsets(data_vector(data.s_fixed, data.q_limit))
+        out[f"kkt_{tag}_case"] = code
+        out |= {f"kkt_{tag}_{key}": value for key, value in kkt_figures(model.program, offsets).items()}
+    return out
+
+
 def run() -> dict:
     day = bench_paper_day()
     figures = bench_opf()
@@ -301,6 +333,7 @@ def run() -> dict:
         "ratio_socp_step_vs_pandapower": None if pp_ms is None else pp_ms / day["socp_step_ms"],
     }
     figures |= bench_mv()
+    figures |= bench_kkt()
     figures["loadavg_after"] = [round(x, 2) for x in os.getloadavg()]
     return figures
 
@@ -357,4 +390,18 @@ def print_table(f: dict) -> None:
             f"{f['mv_pandapower_failures']} failures; its setpoints lose {f['mv_pandapower_excess_kw'][0]:.3g} … "
             f"{f['mv_pandapower_excess_kw'][1]:.3g} kW to our AC OPF (its own OPF reports "
             f"{f['mv_pandapower_opf_vs_pf_kw'][0]:.3g} … {f['mv_pandapower_opf_vs_pf_kw'][1]:.3g} kW vs its power flow)"
+        )
+    for tag in ("mv", "lv"):
+        if f"kkt_{tag}_case" not in f:
+            continue
+        g = {key[len(f"kkt_{tag}_") :]: value for key, value in f.items() if key.startswith(f"kkt_{tag}_")}
+        print(
+            f"relaxation on {g['case']}: {g['variables']} variables, {g['rows']} rows ({g['soc_cones']} SOC); KKT dim "
+            f"{g['kkt_dim']}, {g['kkt_nnz']} nonzeros, L {g['ldl_nnz']} (fill {g['fill']:.2f}); "
+            f"{g['iteration_kflop']:.0f} kflop per iteration ({g['factor_kflop']:.0f} the factorization)"
+        )
+        print(
+            f"  Clarabel {g['iterations_median']:.0f} iterations per answer (median), {g['iteration_us']:.0f} µs CPU each, "
+            f"{g['answer_ms_median']:.2f} ms an answer; LDLᵀ refactor + 2 solves {g['ldl_us']:.0f} µs "
+            f"({g['ldl_gflops']:.2f} GFlop/s): an iteration is {g['iteration_over_ldl']:.1f}× its factorization"
         )
