@@ -14,7 +14,10 @@ With `curtail` (a `problem.PqCapability`) the DER's active power is a variable t
 (linear pieces and an S̄ cone), and the objective the losses plus the power curtailed
 (written as losses − ΣP_DER, the data ΣP added to the optimum).
 
-The objective reported is min(primal, dual) objective of Clarabel's solution (kW). Clarabel's
+The objective reported is min(primal, dual) objective of Clarabel's solution (kW): not a
+proof by itself (Clarabel checks its tolerances on its equilibrated program), so
+`tests/test_relaxation_bound.py` holds it against a rigorous dual bound (weak duality with
+the dual residual accounted for) where the screened and full programs disagree. Clarabel's
 "AlmostSolved" (reduced tolerances met) counts as solved and is recorded as such in
 solver_status; a solve that stalls after an in-place data update is retried once on a
 fresh solver (`clarabel_adapter.ParametricConeProgram.solve`), recorded as e.g.

@@ -352,6 +352,16 @@ class ParametricConeProgram:
         """Length of the solution vector x."""
         return self.objective.c.size
 
+    @property
+    def full_a(self) -> sp.csc_matrix:
+        """The full program's A (the data columns moved into b): its rows are the cones' in order."""
+        return self._a
+
+    @property
+    def cone_dims(self):
+        """cvxpy's cone dimensions of the full program (zero, nonneg, soc)."""
+        return self._dims
+
     def offsets(self, thetas: np.ndarray) -> np.ndarray:
         """The constraint offsets b(θ) = b₀ + B·θ, one row per row of `thetas` (S, n_θ): the
         data variables' values concatenated in order."""
