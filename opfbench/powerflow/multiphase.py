@@ -338,13 +338,12 @@ def voltages_within(now: PhaseIterate, before: PhaseIterate, tol: float) -> np.n
         if sys_.z_kk is not None and sys_.z_nk is not None and rows.size:
             moved_k = _largest_change(now.v_k.T, before.v_k.T, 1.0 / sys_.base_k[:, 0], True)
             rows = np.flatnonzero(moved_k <= tol + _ROUND_OFF_PU)
-            every = sys_.z_nk @ np.concatenate([now.state[rows], before.state[rows]]).T
-            every += sys_.v_source[:, None]
-            at_now, at_before = every[:, : len(rows)], every[:, len(rows) :]
+            every = sys_.z_nk @ np.concatenate([now.state[rows], before.state[rows]]).T  # V − A⁻¹·I_source
+            at_now, at_before, shift = every[:, : len(rows)], every[:, len(rows) :], sys_.v_source
         else:
-            at_now, at_before = now.state.T, before.state.T
+            at_now, at_before, shift = now.state.T, before.state.T, None
     if rows.size:
-        within[rows] = _largest_change(at_now, at_before, 1.0 / net.node_base_v, True) <= tol
+        within[rows] = _largest_change(at_now, at_before, 1.0 / net.node_base_v, True, shift) <= tol
     return within
 
 
@@ -534,10 +533,8 @@ def _iterate(
     m = len(sys_.k)
     dense = sys_.z_nk is not None
     rows = sys_.k if dense else np.arange(net.n_node)  # the nodes the iteration carries
-    v = np.repeat(sys_.v_source[rows][:, None], n_snap, axis=1)
-    if start is not None:
-        usable = np.isfinite(start).all(axis=0) & (np.abs(start) > 0).any(axis=0)
-        v[:, usable] = start[:, usable]
+    no_load = sys_.v_source[rows]
+    v = np.repeat(no_load[:, None], n_snap, axis=1) if start is None else _started(no_load, start)
     at_k = np.arange(m) if dense else sys_.k  # K's rows in v
     iterations = np.zeros(n_snap, dtype=np.int64)
     settled = np.full(n_snap, m == 0)  # nothing voltage-dependent: the no-load state is the answer
@@ -579,15 +576,37 @@ def _iterate(
     return PhaseIterate(net, state, settled, iterations)
 
 
+@njit(cache=True)
+def _started(no_load: np.ndarray, start: np.ndarray) -> np.ndarray:
+    """(r, S) the iteration's first voltages: each column of `start` (r, S) that is finite
+    and not all zero, else the no-load state `no_load` (r,)."""
+    r, n = start.shape
+    out = np.empty((r, n), dtype=np.complex128)
+    for s in range(n):
+        usable, nonzero = True, False
+        for i in range(r):
+            z = start[i, s]
+            usable = usable and np.isfinite(z.real) and np.isfinite(z.imag)
+            nonzero = nonzero or z != 0
+        for i in range(r):
+            out[i, s] = start[i, s] if usable and nonzero else no_load[i]
+    return out
+
+
 @njit(cache=True, error_model="numpy")
-def _largest_change(new: np.ndarray, old: np.ndarray, per_base: np.ndarray, magnitudes: bool) -> np.ndarray:
+def _largest_change(
+    new: np.ndarray, old: np.ndarray, per_base: np.ndarray, magnitudes: bool, shift: np.ndarray | None = None
+) -> np.ndarray:
     """(S,) the largest |new − old| (m, S) of a column — with `magnitudes` the largest
-    ||new| − |old|| — in p.u. of each row's base (per_base = 1/base); NaN where some is NaN."""
+    ||new| − |old|| — in p.u. of each row's base (per_base = 1/base); NaN where some is NaN.
+    `shift` (m,) is added to each row of both first (as `+=` would, without forming them)."""
     m, n = new.shape
     out = np.zeros(n)
     for i in range(m):
         for s in range(n):
             a, b = new[i, s], old[i, s]
+            if shift is not None:
+                a, b = a + shift[i], b + shift[i]
             if magnitudes:
                 moved = abs(np.sqrt(a.real * a.real + a.imag * a.imag) - np.sqrt(b.real * b.real + b.imag * b.imag))
             else:
