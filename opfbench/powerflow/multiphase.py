@@ -394,17 +394,36 @@ _Powers = tuple[np.ndarray, np.ndarray, np.ndarray]
 DER complex power generated (W + j var)."""
 
 
-def _branch_powers(
-    net: PhaseNetwork, load_p_mw: np.ndarray, load_q_mvar: np.ndarray, der_p_mw: np.ndarray | None, der_q_mvar: np.ndarray | None
-) -> _Powers:
-    """The elements' powers (`_checked_powers`) spread over their branches."""
-    load_p, load_q, der_p, der_q = _checked_powers(net, load_p_mw, load_q_mvar, der_p_mw, der_q_mvar)
-    lb, db = net.load_branches, net.der_branches
-    return (
-        load_p.T[lb.owner] * lb.share[:, None] * 1e6,
-        load_q.T[lb.owner] * lb.share[:, None] * 1e6,
-        (der_p.T + 1j * der_q.T)[db.owner] * db.share[:, None] * 1e6,
-    )
+@dataclass(frozen=True, eq=False)
+class BranchLoads:
+    """S snapshots' load-element powers spread over the load branches (`branch_loads`):
+    `p` W and `q` var (n_load_branch, S) at their law's reference — spread once for the
+    many flows of a closed loop, each on some of the snapshots (`columns`)."""
+
+    p: np.ndarray
+    q: np.ndarray
+
+    def columns(self, rows: np.ndarray) -> "BranchLoads":
+        """The snapshots `rows`."""
+        return BranchLoads(self.p[:, rows], self.q[:, rows])
+
+
+def branch_loads(net: PhaseNetwork, load_p_mw: np.ndarray, load_q_mvar: np.ndarray) -> BranchLoads:
+    """Each load element's P and Q (S, n_load) MW/MVAr at its law's reference, checked
+    (`_checked_powers`) and spread over its branches."""
+    load_p, load_q, _, _ = _checked_powers(net, load_p_mw, load_q_mvar, None, None)
+    lb = net.load_branches
+    return BranchLoads(load_p.T[lb.owner] * lb.share[:, None] * 1e6, load_q.T[lb.owner] * lb.share[:, None] * 1e6)
+
+
+def _branch_powers(net: PhaseNetwork, loads: BranchLoads, der_p_mw: np.ndarray | None, der_q_mvar: np.ndarray | None) -> _Powers:
+    """The load branches' powers and each DER's P and Q (S, n_der) MW/MVAr generated
+    (None: 0; checked as `_checked_powers` does) spread over its branches."""
+    n_snap = loads.p.shape[1]
+    der_p = _powers("DER P", der_p_mw, n_snap, len(net.ders))
+    der_q = _powers("DER Q", der_q_mvar, n_snap, len(net.ders))
+    db = net.der_branches
+    return loads.p, loads.q, (der_p.T + 1j * der_q.T)[db.owner] * db.share[:, None] * 1e6
 
 
 def solve_phase_flow(
@@ -483,7 +502,7 @@ def _solve_fixed(
     max_iter: int,
 ) -> PhaseFlowResult:
     """`solve_phase_flow` at the taps the network's elements have (arrays as `solve_phase_flow` checked them)."""
-    powers = _branch_powers(net, load_p, load_q, der_p, der_q)
+    powers = _branch_powers(net, branch_loads(net, load_p, load_q), der_p, der_q)
     sys_ = _system(net)
     start = None
     if v0 is not None:
@@ -495,19 +514,19 @@ def _solve_fixed(
 
 def iterate_phase_flow(
     net: PhaseNetwork,
-    load_p_mw: np.ndarray,
-    load_q_mvar: np.ndarray,
+    loads: BranchLoads,
     der_p_mw: np.ndarray | None = None,
     der_q_mvar: np.ndarray | None = None,
     start: PhaseIterate | None = None,
     tol: float = SWEEP_TOLERANCE,
     max_iter: int = MAX_SWEEP_ITER,
 ) -> PhaseIterate:
-    """The iteration of `solve_phase_flow` without its certificate (`certify`), warm
-    started from an earlier iterate of the same S snapshots on the same network (`start`)."""
+    """The iteration of `solve_phase_flow` without its certificate (`certify`) on the
+    loads `loads` of S snapshots (`branch_loads`), warm started from an earlier iterate of
+    the same S snapshots on the same network (`start`)."""
     if net.tap_control and net.regulators:
         raise ValueError(f"{net.name}: regulators under tap control move inside the solve; iterate with solve_phase_flow")
-    powers = _branch_powers(net, load_p_mw, load_q_mvar, der_p_mw, der_q_mvar)
+    powers = _branch_powers(net, loads, der_p_mw, der_q_mvar)
     sys_ = _system(net)
     carried = None
     if start is not None:  # the carried nodes' voltages of the earlier iterate
@@ -516,12 +535,12 @@ def iterate_phase_flow(
 
 
 def certify(
-    flow: PhaseIterate, load_p_mw: np.ndarray, load_q_mvar: np.ndarray, der_p_mw: np.ndarray | None, der_q_mvar: np.ndarray | None
+    flow: PhaseIterate, loads: BranchLoads, der_p_mw: np.ndarray | None, der_q_mvar: np.ndarray | None
 ) -> PhaseFlowResult:
-    """The certified power flow of an iterate at the powers it was solved for: every
-    node's voltage, the mismatch (`_residual`), the losses; converged = settled and the
-    mismatch below `MISMATCH_REL`."""
-    return _certify(flow, _system(flow.net), _branch_powers(flow.net, load_p_mw, load_q_mvar, der_p_mw, der_q_mvar))
+    """The certified power flow of an iterate at the powers it was solved for (the loads
+    `branch_loads`): every node's voltage, the mismatch (`_residual`), the losses;
+    converged = settled and the mismatch below `MISMATCH_REL`."""
+    return _certify(flow, _system(flow.net), _branch_powers(flow.net, loads, der_p_mw, der_q_mvar))
 
 
 def _iterate(
