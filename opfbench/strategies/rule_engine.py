@@ -250,8 +250,9 @@ def _settle(
         if moves_p:
             assert wanted_p is not None
             p[rows] = p[rows] + alpha[rows] * (wanted_p[going] - p[rows])
-        answer = grid.step(rows, q[rows], p[rows] if moves_p else None, state[rows])
-        before[rows] = state[rows]
+        last = state[rows]
+        before[rows] = last
+        answer = grid.step(rows, q[rows], p[rows] if moves_p else None, last)
         der_prev[rows] = der_vm[going]
         state[rows] = grid.state(answer)
         flows[rows] += 1
