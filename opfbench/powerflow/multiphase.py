@@ -405,7 +405,7 @@ class BranchLoads:
 
     def columns(self, rows: np.ndarray) -> "BranchLoads":
         """The snapshots `rows`."""
-        return BranchLoads(self.p[:, rows], self.q[:, rows])
+        return BranchLoads(np.take(self.p, rows, axis=1), np.take(self.q, rows, axis=1))  # row-major, as the kernel reads them
 
 
 def branch_loads(net: PhaseNetwork, load_p_mw: np.ndarray, load_q_mvar: np.ndarray) -> BranchLoads:
@@ -584,8 +584,13 @@ def _iterate(
             v[:, active[~keep]] = new[:, ~keep]
             if not keep.any():
                 break
-            active, v_act = active[keep], new[:, keep]
-            p_act = (p_act[0][:, keep], p_act[1][:, keep], p_act[2][:, keep])
+            active = active[keep]  # compress keeps the columns row-major, as the current kernel reads them (no copy there)
+            v_act = np.compress(keep, new, axis=1)
+            p_act = (
+                np.compress(keep, p_act[0], axis=1),
+                np.compress(keep, p_act[1], axis=1),
+                np.compress(keep, p_act[2], axis=1),
+            )
         else:
             v[:, active] = v_act
         if dense:  # the currents every node's voltage follows from: V = A⁻¹·(I_source + P_K·J)
