@@ -552,8 +552,9 @@ def _iterate(
     m = len(sys_.k)
     dense = sys_.z_nk is not None
     rows = sys_.k if dense else np.arange(net.n_node)  # the nodes the iteration carries
-    no_load = sys_.v_source[rows]
-    v = np.repeat(no_load[:, None], n_snap, axis=1) if start is None else _started(no_load, start)
+    v = np.repeat(sys_.v_source[rows][:, None], n_snap, axis=1)
+    if start is not None:  # the columns that are finite and not all zero (z ≠ 0 ⇔ |z| > 0), in place
+        np.copyto(v, start, where=np.isfinite(start).all(axis=0) & (start != 0).any(axis=0))
     at_k = np.arange(m) if dense else sys_.k  # K's rows in v
     iterations = np.zeros(n_snap, dtype=np.int64)
     settled = np.full(n_snap, m == 0)  # nothing voltage-dependent: the no-load state is the answer
@@ -598,23 +599,6 @@ def _iterate(
         else:
             state = np.ascontiguousarray(v.T)
     return PhaseIterate(net, state, settled, iterations)
-
-
-@njit(cache=True)
-def _started(no_load: np.ndarray, start: np.ndarray) -> np.ndarray:
-    """(r, S) the iteration's first voltages: each column of `start` (r, S) that is finite
-    and not all zero, else the no-load state `no_load` (r,)."""
-    r, n = start.shape
-    out = np.empty((r, n), dtype=np.complex128)
-    for s in range(n):
-        usable, nonzero = True, False
-        for i in range(r):
-            z = start[i, s]
-            usable = usable and np.isfinite(z.real) and np.isfinite(z.imag)
-            nonzero = nonzero or z != 0
-        for i in range(r):
-            out[i, s] = start[i, s] if usable and nonzero else no_load[i]
-    return out
 
 
 @njit(cache=True, error_model="numpy")
