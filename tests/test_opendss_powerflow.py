@@ -289,3 +289,19 @@ def test_a_batch_is_its_snapshots_one_by_one_and_a_warm_start_changes_nothing(na
         assert np.abs(alone.v[0] - batch.v[s]).max() / net.node_base_v.min() < 1e-9
     warm = solve_phase_flow(net, net.load_p_mw * scale, net.load_q_mvar * scale, v0=batch.v)
     assert warm.iterations.max() <= 2 and np.abs(warm.v - batch.v).max() / net.node_base_v.min() < 1e-9
+
+
+def test_a_warm_start_column_not_finite_or_all_zero_starts_from_no_load():
+    """Snapshots whose v0 holds a NaN, an inf or only zeros start from the no-load state —
+    the cold solve's iterations and voltages —, the others from their v0."""
+    net, _ = _network("ieee13")
+    scale = np.array([0.3, 1.0, 1.4, 0.7])[:, None] * np.ones(net.n_load)[None, :]
+    cold = solve_phase_flow(net, net.load_p_mw * scale, net.load_q_mvar * scale)
+    v0 = cold.v.copy()
+    node = int(net.load_branches.a[0])  # a node the iteration carries
+    v0[0, node], v0[1, node], v0[2] = np.nan, np.inf, 0.0
+    warm = solve_phase_flow(net, net.load_p_mw * scale, net.load_q_mvar * scale, v0=v0)
+    assert warm.converged.all()
+    np.testing.assert_array_equal(warm.iterations[:3], cold.iterations[:3])
+    np.testing.assert_allclose(warm.v[:3], cold.v[:3], rtol=1e-12, atol=0)
+    assert warm.iterations[3] < cold.iterations[3]

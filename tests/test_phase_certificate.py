@@ -13,7 +13,7 @@ import numpy as np
 import opfbench.powerflow.multiphase as multiphase
 from opfbench.io import load_case
 from opfbench.multiphase import PhaseNetwork
-from opfbench.powerflow.multiphase import MISMATCH_REL, certify, iterate_phase_flow
+from opfbench.powerflow.multiphase import MISMATCH_REL, branch_loads, certify, iterate_phase_flow
 
 
 def _day(net: PhaseNetwork) -> tuple[np.ndarray, ...]:
@@ -27,7 +27,7 @@ def _day(net: PhaseNetwork) -> tuple[np.ndarray, ...]:
 def _every_node(net: PhaseNetwork, v: np.ndarray, powers: tuple[np.ndarray, ...]) -> np.ndarray:
     """(S, n_node) the relative nodal mismatch at every node of voltages v (S, n_node)."""
     sys_ = multiphase._system(net)
-    branch = multiphase._branch_powers(net, *powers)
+    branch = multiphase._branch_powers(net, branch_loads(net, *powers[:2]), *powers[2:])
     given = sys_.injections(v.T[sys_.k], *branch)
     residual = net.ybus @ v.T - net.source_current[:, None]
     residual[sys_.k] -= given
@@ -42,7 +42,8 @@ def test_the_mismatch_on_k_judges_as_every_nodes():
     sys_ = multiphase._system(net)
     assert sys_.z_nk is not None and len(sys_.k) < net.n_node / 10
     powers = _day(net)
-    flow = certify(iterate_phase_flow(net, *powers), *powers)
+    loads = branch_loads(net, *powers[:2])
+    flow = certify(iterate_phase_flow(net, loads, *powers[2:]), loads, *powers[2:])
     assert flow.converged.all()
     every = _every_node(net, flow.v, powers)
     off_k = np.setdiff1d(np.arange(net.n_node), sys_.k)
@@ -62,9 +63,10 @@ def test_a_wrong_impedance_off_k_fails_every_snapshot():
     z_nk[node] *= 1 + 1e-4
     wrong = dataclasses.replace(sys_, z_nk=z_nk, linear_error=multiphase._linear_error(net, sys_.v_source, z_nk, sys_.k))
     powers = _day(net)
-    state = iterate_phase_flow(net, *powers)
-    good = multiphase._certify(state, sys_, multiphase._branch_powers(net, *powers))
-    bad = multiphase._certify(state, wrong, multiphase._branch_powers(net, *powers))
+    loads = branch_loads(net, *powers[:2])
+    state = iterate_phase_flow(net, loads, *powers[2:])
+    good = multiphase._certify(state, sys_, multiphase._branch_powers(net, loads, *powers[2:]))
+    bad = multiphase._certify(state, wrong, multiphase._branch_powers(net, loads, *powers[2:]))
     assert good.converged.all() and not bad.converged.any()
     assert (bad.mismatch > MISMATCH_REL).all()
     assert (_every_node(net, bad.v, powers).max(axis=1) > MISMATCH_REL).all()

@@ -17,7 +17,7 @@ import opfbench.powerflow.multiphase as multiphase
 import opfbench.strategies.rule_engine as rule_engine
 from opfbench.io import load_case
 from opfbench.multiphase import PhaseNetwork
-from opfbench.powerflow.multiphase import iterate_phase_flow, voltages_within
+from opfbench.powerflow.multiphase import branch_loads, iterate_phase_flow, voltages_within
 from opfbench.registry.catalog import run_strategy
 from opfbench.scenario import Scenario
 from opfbench.strategies.grids import CertifiedPhaseGrid, grid_of
@@ -71,8 +71,9 @@ def test_voltages_within_decides_as_the_exact_change(iteration, monkeypatch):
     lp, lq = net.load_p_mw[None].repeat(3, 0), net.load_q_mvar[None].repeat(3, 0)
     p = 0.8 * net.der_rating_mw[None].repeat(3, 0)
     q = np.array([0.0, 1e-6, 1e-2])[:, None] * np.ones(len(net.ders))
-    before = iterate_phase_flow(net, lp, lq, p, np.zeros_like(q))
-    after = iterate_phase_flow(net, lp, lq, p, q, start=before)
+    loads = branch_loads(net, lp, lq)
+    before = iterate_phase_flow(net, loads, p, np.zeros_like(q))
+    after = iterate_phase_flow(net, loads, p, q, start=before)
     base = net.node_base_v
     change = np.abs(np.abs(after.v) / base - np.abs(before.v) / base).max(axis=1)
     assert change[0] < 1e-10 < change[1] < 1e-5 < change[2]  # no step (the warm start re-iterated), a small one, a large one
@@ -92,4 +93,4 @@ def test_a_feeder_under_tap_control_steps_on_certified_flows():
     res = run_strategy("volt-var", scenario, 0.0)
     assert list(res.status) == ["ok", "ok"] and res.power_flows[0] > 2 and np.abs(res.q_mvar[0]).max() > 0
     with pytest.raises(ValueError, match="tap control"):
-        iterate_phase_flow(net, net.load_p_mw[None], net.load_q_mvar[None])
+        iterate_phase_flow(net, branch_loads(net, net.load_p_mw[None], net.load_q_mvar[None]))

@@ -21,7 +21,7 @@ from opfbench.formulations.opf_strategies import run_acopf
 from opfbench.formulations.three_phase import BAND_TOL, UNIQUE
 from opfbench.formulations.unique_point import CONTRACTION_MAX, contraction, unique_point
 from opfbench.multiphase import GROUND
-from opfbench.powerflow.multiphase import _branch_powers, _system, solve_phase_flow
+from opfbench.powerflow.multiphase import _branch_powers, _system, branch_loads, solve_phase_flow
 from opfbench.result import CERTIFIED_BY_UNIQUE, OK
 from opfbench.scenario import Scenario
 
@@ -57,7 +57,7 @@ def test_the_contraction_bounds_the_networks_map_at_night(night):
     assert flow.converged.all()
     unique, factor = unique_point(net, flow, lp, lq, dp, np.zeros_like(dp), BAND_TOL)
     assert unique.all() and (factor < CONTRACTION_MAX).all() and (factor > 0).all(), factor
-    powers = _branch_powers(net, lp, lq, dp, None)
+    powers = _branch_powers(net, branch_loads(net, lp, lq), dp, None)
     v = flow.v.T
     base = net.node_base_v[:, None]
     assert (np.abs(_map(net, v, powers) - v) / base).max() < 1e-7  # p.u.: the power flow's own accuracy

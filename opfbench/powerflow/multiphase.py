@@ -338,13 +338,12 @@ def voltages_within(now: PhaseIterate, before: PhaseIterate, tol: float) -> np.n
         if sys_.z_kk is not None and sys_.z_nk is not None and rows.size:
             moved_k = _largest_change(now.v_k.T, before.v_k.T, 1.0 / sys_.base_k[:, 0], True)
             rows = np.flatnonzero(moved_k <= tol + _ROUND_OFF_PU)
-            every = sys_.z_nk @ np.concatenate([now.state[rows], before.state[rows]]).T
-            every += sys_.v_source[:, None]
-            at_now, at_before = every[:, : len(rows)], every[:, len(rows) :]
+            every = sys_.z_nk @ np.concatenate([now.state[rows], before.state[rows]]).T  # V − A⁻¹·I_source
+            at_now, at_before, shift = every[:, : len(rows)], every[:, len(rows) :], sys_.v_source
         else:
-            at_now, at_before = now.state.T, before.state.T
+            at_now, at_before, shift = now.state.T, before.state.T, None
     if rows.size:
-        within[rows] = _largest_change(at_now, at_before, 1.0 / net.node_base_v, True) <= tol
+        within[rows] = _largest_change(at_now, at_before, 1.0 / net.node_base_v, True, shift) <= tol
     return within
 
 
@@ -395,17 +394,36 @@ _Powers = tuple[np.ndarray, np.ndarray, np.ndarray]
 DER complex power generated (W + j var)."""
 
 
-def _branch_powers(
-    net: PhaseNetwork, load_p_mw: np.ndarray, load_q_mvar: np.ndarray, der_p_mw: np.ndarray | None, der_q_mvar: np.ndarray | None
-) -> _Powers:
-    """The elements' powers (`_checked_powers`) spread over their branches."""
-    load_p, load_q, der_p, der_q = _checked_powers(net, load_p_mw, load_q_mvar, der_p_mw, der_q_mvar)
-    lb, db = net.load_branches, net.der_branches
-    return (
-        load_p.T[lb.owner] * lb.share[:, None] * 1e6,
-        load_q.T[lb.owner] * lb.share[:, None] * 1e6,
-        (der_p.T + 1j * der_q.T)[db.owner] * db.share[:, None] * 1e6,
-    )
+@dataclass(frozen=True, eq=False)
+class BranchLoads:
+    """S snapshots' load-element powers spread over the load branches (`branch_loads`):
+    `p` W and `q` var (n_load_branch, S) at their law's reference — spread once for the
+    many flows of a closed loop, each on some of the snapshots (`columns`)."""
+
+    p: np.ndarray
+    q: np.ndarray
+
+    def columns(self, rows: np.ndarray) -> "BranchLoads":
+        """The snapshots `rows`."""
+        return BranchLoads(np.take(self.p, rows, axis=1), np.take(self.q, rows, axis=1))  # row-major, as the kernel reads them
+
+
+def branch_loads(net: PhaseNetwork, load_p_mw: np.ndarray, load_q_mvar: np.ndarray) -> BranchLoads:
+    """Each load element's P and Q (S, n_load) MW/MVAr at its law's reference, checked
+    (`_checked_powers`) and spread over its branches."""
+    load_p, load_q, _, _ = _checked_powers(net, load_p_mw, load_q_mvar, None, None)
+    lb = net.load_branches
+    return BranchLoads(load_p.T[lb.owner] * lb.share[:, None] * 1e6, load_q.T[lb.owner] * lb.share[:, None] * 1e6)
+
+
+def _branch_powers(net: PhaseNetwork, loads: BranchLoads, der_p_mw: np.ndarray | None, der_q_mvar: np.ndarray | None) -> _Powers:
+    """The load branches' powers and each DER's P and Q (S, n_der) MW/MVAr generated
+    (None: 0; checked as `_checked_powers` does) spread over its branches."""
+    n_snap = loads.p.shape[1]
+    der_p = _powers("DER P", der_p_mw, n_snap, len(net.ders))
+    der_q = _powers("DER Q", der_q_mvar, n_snap, len(net.ders))
+    db = net.der_branches
+    return loads.p, loads.q, (der_p.T + 1j * der_q.T)[db.owner] * db.share[:, None] * 1e6
 
 
 def solve_phase_flow(
@@ -484,7 +502,7 @@ def _solve_fixed(
     max_iter: int,
 ) -> PhaseFlowResult:
     """`solve_phase_flow` at the taps the network's elements have (arrays as `solve_phase_flow` checked them)."""
-    powers = _branch_powers(net, load_p, load_q, der_p, der_q)
+    powers = _branch_powers(net, branch_loads(net, load_p, load_q), der_p, der_q)
     sys_ = _system(net)
     start = None
     if v0 is not None:
@@ -496,19 +514,19 @@ def _solve_fixed(
 
 def iterate_phase_flow(
     net: PhaseNetwork,
-    load_p_mw: np.ndarray,
-    load_q_mvar: np.ndarray,
+    loads: BranchLoads,
     der_p_mw: np.ndarray | None = None,
     der_q_mvar: np.ndarray | None = None,
     start: PhaseIterate | None = None,
     tol: float = SWEEP_TOLERANCE,
     max_iter: int = MAX_SWEEP_ITER,
 ) -> PhaseIterate:
-    """The iteration of `solve_phase_flow` without its certificate (`certify`), warm
-    started from an earlier iterate of the same S snapshots on the same network (`start`)."""
+    """The iteration of `solve_phase_flow` without its certificate (`certify`) on the
+    loads `loads` of S snapshots (`branch_loads`), warm started from an earlier iterate of
+    the same S snapshots on the same network (`start`)."""
     if net.tap_control and net.regulators:
         raise ValueError(f"{net.name}: regulators under tap control move inside the solve; iterate with solve_phase_flow")
-    powers = _branch_powers(net, load_p_mw, load_q_mvar, der_p_mw, der_q_mvar)
+    powers = _branch_powers(net, loads, der_p_mw, der_q_mvar)
     sys_ = _system(net)
     carried = None
     if start is not None:  # the carried nodes' voltages of the earlier iterate
@@ -517,12 +535,12 @@ def iterate_phase_flow(
 
 
 def certify(
-    flow: PhaseIterate, load_p_mw: np.ndarray, load_q_mvar: np.ndarray, der_p_mw: np.ndarray | None, der_q_mvar: np.ndarray | None
+    flow: PhaseIterate, loads: BranchLoads, der_p_mw: np.ndarray | None, der_q_mvar: np.ndarray | None
 ) -> PhaseFlowResult:
-    """The certified power flow of an iterate at the powers it was solved for: every
-    node's voltage, the mismatch (`_residual`), the losses; converged = settled and the
-    mismatch below `MISMATCH_REL`."""
-    return _certify(flow, _system(flow.net), _branch_powers(flow.net, load_p_mw, load_q_mvar, der_p_mw, der_q_mvar))
+    """The certified power flow of an iterate at the powers it was solved for (the loads
+    `branch_loads`): every node's voltage, the mismatch (`_residual`), the losses;
+    converged = settled and the mismatch below `MISMATCH_REL`."""
+    return _certify(flow, _system(flow.net), _branch_powers(flow.net, loads, der_p_mw, der_q_mvar))
 
 
 def _iterate(
@@ -534,10 +552,8 @@ def _iterate(
     m = len(sys_.k)
     dense = sys_.z_nk is not None
     rows = sys_.k if dense else np.arange(net.n_node)  # the nodes the iteration carries
-    v = np.repeat(sys_.v_source[rows][:, None], n_snap, axis=1)
-    if start is not None:
-        usable = np.isfinite(start).all(axis=0) & (np.abs(start) > 0).any(axis=0)
-        v[:, usable] = start[:, usable]
+    no_load = sys_.v_source[rows]
+    v = np.repeat(no_load[:, None], n_snap, axis=1) if start is None else _started(no_load, start)
     at_k = np.arange(m) if dense else sys_.k  # K's rows in v
     iterations = np.zeros(n_snap, dtype=np.int64)
     settled = np.full(n_snap, m == 0)  # nothing voltage-dependent: the no-load state is the answer
@@ -568,8 +584,13 @@ def _iterate(
             v[:, active[~keep]] = new[:, ~keep]
             if not keep.any():
                 break
-            active, v_act = active[keep], new[:, keep]
-            p_act = (p_act[0][:, keep], p_act[1][:, keep], p_act[2][:, keep])
+            active = active[keep]  # compress keeps the columns row-major, as the current kernel reads them (no copy there)
+            v_act = np.compress(keep, new, axis=1)
+            p_act = (
+                np.compress(keep, p_act[0], axis=1),
+                np.compress(keep, p_act[1], axis=1),
+                np.compress(keep, p_act[2], axis=1),
+            )
         else:
             v[:, active] = v_act
         if dense:  # the currents every node's voltage follows from: V = A⁻¹·(I_source + P_K·J)
@@ -579,15 +600,37 @@ def _iterate(
     return PhaseIterate(net, state, settled, iterations)
 
 
+@njit(cache=True)
+def _started(no_load: np.ndarray, start: np.ndarray) -> np.ndarray:
+    """(r, S) the iteration's first voltages: each column of `start` (r, S) that is finite
+    and not all zero, else the no-load state `no_load` (r,)."""
+    r, n = start.shape
+    out = np.empty((r, n), dtype=np.complex128)
+    for s in range(n):
+        usable, nonzero = True, False
+        for i in range(r):
+            z = start[i, s]
+            usable = usable and np.isfinite(z.real) and np.isfinite(z.imag)
+            nonzero = nonzero or z != 0
+        for i in range(r):
+            out[i, s] = start[i, s] if usable and nonzero else no_load[i]
+    return out
+
+
 @njit(cache=True, error_model="numpy")
-def _largest_change(new: np.ndarray, old: np.ndarray, per_base: np.ndarray, magnitudes: bool) -> np.ndarray:
+def _largest_change(
+    new: np.ndarray, old: np.ndarray, per_base: np.ndarray, magnitudes: bool, shift: np.ndarray | None = None
+) -> np.ndarray:
     """(S,) the largest |new − old| (m, S) of a column — with `magnitudes` the largest
-    ||new| − |old|| — in p.u. of each row's base (per_base = 1/base); NaN where some is NaN."""
+    ||new| − |old|| — in p.u. of each row's base (per_base = 1/base); NaN where some is NaN.
+    `shift` (m,) is added to each row of both first (as `+=` would, without forming them)."""
     m, n = new.shape
     out = np.zeros(n)
     for i in range(m):
         for s in range(n):
             a, b = new[i, s], old[i, s]
+            if shift is not None:
+                a, b = a + shift[i], b + shift[i]
             if magnitudes:
                 moved = abs(np.sqrt(a.real * a.real + a.imag * a.imag) - np.sqrt(b.real * b.real + b.imag * b.imag))
             else:

@@ -24,6 +24,7 @@ from opfbench.powerflow import PowerFlowResult, solve_pf_batch
 from opfbench.powerflow.multiphase import (
     PhaseFlowResult,
     PhaseIterate,
+    branch_loads,
     certify,
     iterate_phase_flow,
     solve_phase_flow,
@@ -102,6 +103,7 @@ class PhaseGrid:
         self.scenario, self.net = scenario, net
         self.meters: PhaseMeters = PhaseMeters.of(net)
         self.load_p, self.load_q = scenario.element_loads()
+        self.loads = branch_loads(net, self.load_p, self.load_q)  # spread once for every step
         self.available = scenario.der_p_mw
         self.der_p = np.array(self.available, dtype=float)
         self.der_q = np.zeros_like(self.der_p)
@@ -114,7 +116,7 @@ class PhaseGrid:
         p = self.available[rows] if p_mw is None else p_mw
         self.der_p[rows], self.der_q[rows] = p, q_mvar
         start = None if state is None else self._resumed(state)
-        return iterate_phase_flow(self.net, self.load_p[rows], self.load_q[rows], p, q_mvar, start=start)
+        return iterate_phase_flow(self.net, self.loads.columns(rows), p, q_mvar, start=start)
 
     def state(self, flow: Step) -> np.ndarray:
         """(S', r') what the loop keeps of the iterate (`PhaseIterate.kept`: what its node
@@ -151,7 +153,7 @@ class PhaseGrid:
         return voltages_within(self._resumed(state), self._resumed(before), tol)
 
     def final(self, state: np.ndarray, converged: np.ndarray, flows: np.ndarray) -> PhaseFlowResult:
-        return certify(self._resumed(state, converged, flows), self.load_p, self.load_q, self.der_p, self.der_q)
+        return certify(self._resumed(state, converged, flows), self.loads, self.der_p, self.der_q)
 
 
 class CertifiedPhaseGrid(PhaseGrid):

@@ -61,6 +61,7 @@ from opfbench.scenario import Scenario
 from opfbench.strategies.grids import Flow, RuleGrid, Step, grid_of
 from opfbench.strategies.limits import Capability
 from opfbench.strategies.rules import DEFAULT_SETTLING, RESIDUAL, Measurements, Rule, Settling, Targets, targets
+from opfbench.threads import one_blas_thread
 from opfbench.timing import elapsed_ms, now
 
 
@@ -144,7 +145,8 @@ def run_rule(
     capability = Capability(scenario, k, safe, priority)
     plant = _Plant.of(scenario, rule.reads)
     if rule.closed_loop:
-        return _settle(label, rule, options, plant, capability, settling, t0)
+        with one_blas_thread():  # once for the loop's hundreds of flows and checks (each holds it too)
+            return _settle(label, rule, options, plant, capability, settling, t0)
     n = scenario.n_snapshots
     rows = np.arange(n)
     wanted = targets(rule, plant.measure(rule.reads, rows, None), options, n)
@@ -248,8 +250,9 @@ def _settle(
         if moves_p:
             assert wanted_p is not None
             p[rows] = p[rows] + alpha[rows] * (wanted_p[going] - p[rows])
-        answer = grid.step(rows, q[rows], p[rows] if moves_p else None, state[rows])
-        before[rows] = state[rows]
+        last = state[rows]
+        before[rows] = last
+        answer = grid.step(rows, q[rows], p[rows] if moves_p else None, last)
         der_prev[rows] = der_vm[going]
         state[rows] = grid.state(answer)
         flows[rows] += 1
