@@ -43,7 +43,7 @@ from opfbench.powerflow.common import (
 )
 from opfbench.powerflow.dense import DenseNewton, DenseZbus
 from opfbench.powerflow.fixed_point import fixed_point, max_mismatch
-from opfbench.powerflow.memo import flow_memo, row_digests, row_memo, same_snapshots, snapshot_words
+from opfbench.powerflow.memo import first_rows, flow_memo, row_digests, same_snapshots, snapshot_words
 from opfbench.powerflow.sparse import SparseNewton, SparseZbus
 from opfbench.state import PROCESS
 from opfbench.threads import one_blas_thread
@@ -158,53 +158,40 @@ def solve_pf_batch(
     `iterations`. A snapshot counts as solved when its fixed-point update is below `tol`
     p.u. *and* its P/Q mismatch is below `MISMATCH_CHECK` p.u.; the others (and every
     snapshot of a network with PV buses) are solved by Newton–Raphson individually and
-    carry NR's verdict and iteration count. Without `v0` the answer to an input this
-    thread solved recently is that same (read-only) result (`memo.FlowMemo`); with or
-    without, a snapshot this thread solved recently from the same injections and start
-    is not solved again (`memo.RowMemo`).
+    carry NR's verdict and iteration count. A snapshot this thread solved recently from the
+    same injections and start (or none) is not solved again (`memo.FlowMemo`).
     """
     sparse = uses_sparse(net) if sparse is None else sparse
     s = np.ascontiguousarray(check_injections(net, np.atleast_2d(s_mw)) / net.base_mva, dtype=complex)
-    options = (tol, max_iter, sparse)
-    if v0 is None:
-        known = flow_memo().get(net, options, s)
-        return known if known is not None else flow_memo().put(net, options, s, _remembered(net, s, None, options))
-    return _remembered(net, s, np.ascontiguousarray(np.asarray(v0, dtype=complex).reshape(s.shape)), options)
+    v0 = None if v0 is None else np.ascontiguousarray(np.asarray(v0, dtype=complex).reshape(s.shape))
+    return _remembered(net, s, v0, (tol, max_iter, sparse))
 
 
 def _remembered(net: Network, s: np.ndarray, v0: np.ndarray | None, options: tuple[float, int, bool]) -> PowerFlowResult:
     """`_batch` on the snapshots of `s` (and `v0`) this thread has not solved recently (each
     distinct one once: rows of one digest are one snapshot only where their bytes agree);
-    the others' answers from `memo.RowMemo`."""
-    memo = row_memo()
-    keys = row_digests(s, v0)
-    known, v, converged, iterations = memo.find(net, options, keys, s, v0)
+    the others' answers from `memo.FlowMemo`."""
+    memo = flow_memo()
+    digests = row_digests(s, v0)
+    known, v, converged, iterations = memo.find(net, options, digests, s, v0)
     new = np.flatnonzero(~known)
-    first: dict[bytes, int] = {}  # a digest to solve → the first row of `s` that has it
-    rows: list[int] = []  # the rows to solve
-    twins: list[int] = []  # the later rows of a digest to solve
-    for i in new.tolist():
-        if first.setdefault(keys[i], i) == i:
-            rows.append(i)
-        else:
-            twins.append(i)
-    if twins:  # the same snapshot again, unless another one that shares its digest
-        later = np.array(twins)
-        earlier = np.array([first[keys[i]] for i in twins])
-        words = snapshot_words(s, v0)
-        same = same_snapshots(words, later, words, earlier)
-        rows = sorted(rows + later[~same].tolist())
-    if len(rows) == len(keys):
+    earlier = new[first_rows(digests[new])]  # the first row of `new` with each one's digest
+    twin = earlier != new  # the same snapshot again, unless another one that shares its digest
+    if new.size == digests.size and not twin.any():  # every snapshot new, each once
         result = _batch(net, s, v0, *options)
-        memo.put(net, options, keys, s, None if v0 is None else v0.copy(), result)  # `s` is this call's own
+        memo.put(net, options, digests, s, None if v0 is None else v0.copy(), result)  # `s` is this call's own
         return result
-    if rows:
-        s_new, v0_new = s[rows], None if v0 is None else v0[rows]
-        solved = _batch(net, s_new, v0_new, *options)
-        memo.put(net, options, [keys[i] for i in rows], s_new, v0_new, solved)
-        at = {row: j for j, row in enumerate(rows)}
-        taken = np.array([at[i] if i in at else at[first[keys[i]]] for i in new.tolist()])
-        v[new], converged[new], iterations[new] = solved.v[taken], solved.converged[taken], solved.iterations[taken]
+    if not new.size:
+        return PowerFlowResult(net, v, converged, iterations)
+    words = snapshot_words(s, v0)
+    same = np.zeros(new.size, dtype=bool)
+    same[twin] = same_snapshots(words, new[twin], words, earlier[twin])
+    rows = new[~same]
+    s_new, v0_new = s[rows], None if v0 is None else v0[rows]
+    solved = _batch(net, s_new, v0_new, *options)
+    memo.put(net, options, digests[rows], s_new, v0_new, solved)
+    taken = np.searchsorted(rows, np.where(same, earlier, new))
+    v[new], converged[new], iterations[new] = solved.v[taken], solved.converged[taken], solved.iterations[taken]
     return PowerFlowResult(net, v, converged, iterations)
 
 

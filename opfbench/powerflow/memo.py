@@ -1,28 +1,23 @@
-"""Batched power flows remembered by their input, per thread.
+"""Batched power flows remembered snapshot by snapshot, per thread.
 
-A study runs the same batched flow more than once: every closed-loop local rule starts from
-the no-action state (the `no-action` strategy's own flow), and the `socp` strategy
-evaluates the setpoints whose flow the AC OPF's fast path has just solved. A flow is a
-deterministic function of its input — the network, the injections, the options — so the
-answer to the same input is the same object: `FlowMemo` keeps the most recent answers of
-cold-started batched flows (no `v0`), looked up by a cheap fingerprint (network, options,
-shape, the sum of the injections) and confirmed byte for byte, so no two different
-inputs can share an answer. The answers' arrays are made read-only: one caller cannot
-change another's. At most MEMO_BYTES of inputs and answers are kept per thread (least
-recently used dropped first); a batch larger than a quarter of that is not kept.
+A study runs the same flows more than once: every closed-loop local rule starts from the
+no-action state (the `no-action` strategy's own flow), the `socp` strategy evaluates the
+setpoints whose flow the AC OPF's fast path has just solved, and a closed-loop rule whose
+iteration retraces another's (Volt-VAR with a Volt-Watt that never acts, a reserve k whose
+limit never binds, a night hour that no night mode changes) asks again for snapshots
+another has solved. Each snapshot's answer is a function of its own injections and warm
+start alone, whatever else is in the batch (`fixed_point`), and of the network and options,
+so `FlowMemo` remembers the answers per snapshot: a batch gets the voltages, verdict and
+iteration count of the snapshots this thread solved recently, and only the others are
+solved — a batch asked again whole is not solved at all.
 
-Each snapshot's answer is a function of its own injections and warm start alone, whatever
-else is in the batch (`fixed_point`), so the answers are also remembered per snapshot
-(`RowMemo`): a closed-loop rule whose iteration retraces another's (Volt-VAR with a
-Volt-Watt that never acts, a reserve k whose limit never binds, a night hour that no night
-mode changes) or an AC evaluation of setpoints another strategy evaluated gets those
-snapshots' voltages, verdict and iteration count without solving them again, and only the
-others are solved. A snapshot is looked up by a 128-bit digest of its exact bytes
-(injections, and warm start or its absence; `row_digests`) under its network and options,
-and confirmed against the remembered snapshot's bytes, so no two different snapshots can
-share an answer; ROW_MEMO_BYTES of snapshots and answers are kept per thread (oldest batches
-dropped first).
-Benchmarks that time a flow on the same input again call `forget_flows` first.
+A snapshot is looked up by a 64-bit digest of its exact bytes (injections, and warm start
+or its absence; `row_digests`) under its network and options, and confirmed against the
+remembered snapshot's bytes, so no two different snapshots can share an answer, however
+their digests fall. Look-ups and insertions run on a whole batch at once (a compiled
+open-addressing table: no Python step per snapshot). At most MEMO_BYTES of snapshots and
+answers are kept per thread (oldest batches dropped first). Benchmarks that time a flow on
+the same input again call `forget_flows` first.
 """
 
 from __future__ import annotations
@@ -39,57 +34,15 @@ from opfbench.powerflow.common import PowerFlowResult
 from opfbench.state import PROCESS
 
 T = TypeVar("T")
-MEMO_BYTES = 64 * 2**20  # per thread: inputs and answers kept (estimated from their arrays)
-ROW_MEMO_BYTES = 768 * 2**20  # per thread: the per-snapshot inputs and answers kept (`RowMemo`; the inputs take 1–2× the answers)
-_ROW_OVERHEAD = 160  # bytes per remembered snapshot beyond its voltages (its digest and table entry)
+MEMO_BYTES = 768 * 2**20  # per thread: the snapshots and answers kept (the snapshots take 1–2× the answers)
+_ROW_OVERHEAD = 160  # bytes per remembered snapshot beyond its voltages and injections (its table slots: 4–8 of 16 bytes)
+_ROW_BITS = 32  # a table entry: batch << _ROW_BITS | row
 
 _local = threading.local()
 
 
-def _frozen(result: PowerFlowResult) -> PowerFlowResult:
-    for arr in (result.v, result.converged, result.iterations):
-        arr.flags.writeable = False
-    return result
-
-
-class FlowMemo:
-    """The recent answers of one thread (module docstring)."""
-
-    def __init__(self, limit_bytes: int = MEMO_BYTES):
-        self.limit, self.used = limit_bytes, 0
-        self._entries: OrderedDict[tuple, tuple[np.ndarray, PowerFlowResult, int]] = OrderedDict()
-
-    @staticmethod
-    def _key(net: Network, options: Hashable, s: np.ndarray) -> tuple:
-        return (net, options, s.shape, complex(s.sum()))  # Network hashes by identity
-
-    def get(self, net: Network, options: Hashable, s: np.ndarray) -> PowerFlowResult | None:
-        """The answer to exactly these injections `s` (complex, C-contiguous), or None."""
-        key = self._key(net, options, s)
-        entry = self._entries.get(key)
-        if entry is None or entry[0].tobytes() != s.tobytes():
-            return None
-        self._entries.move_to_end(key)
-        return entry[1]
-
-    def put(self, net: Network, options: Hashable, s: np.ndarray, result: PowerFlowResult) -> PowerFlowResult:
-        """Keep `result` as the answer to `s` (its arrays made read-only) and return it."""
-        size = 2 * s.nbytes + result.converged.nbytes + result.iterations.nbytes  # v is as large as s
-        if size > self.limit // 4:
-            return result
-        key = self._key(net, options, s)
-        old = self._entries.pop(key, None)
-        if old is not None:
-            self.used -= old[2]
-        self._entries[key] = (s.copy(), _frozen(result), size)
-        self.used += size
-        while self.used > self.limit:
-            self.used -= self._entries.popitem(last=False)[1][2]
-        return result
-
-
 _M1, _M2 = np.uint64(0xBF58476D1CE4E5B9), np.uint64(0x94D049BB133111EB)
-_SEEDS = (np.uint64(0x9E3779B97F4A7C15), np.uint64(0xD6E8FEB86659FD93))
+_SEED = np.uint64(0x9E3779B97F4A7C15)
 
 
 @njit(cache=True, inline="always")
@@ -102,35 +55,124 @@ def _mix(z):
 
 
 @njit(cache=True, inline="always")
-def _lanes(words: np.ndarray, a, b, offset: int):
-    """Two sums of `_mix` over `words`, each word keyed by its position (from `offset`) with
-    its own key per sum: each word's term is independent of the others' (no chain to wait
-    on), and a change of any one word changes both sums (`_mix` is a bijection)."""
+def _sum(words: np.ndarray, h, offset: int):
+    """`h` plus `_mix` of each of `words` keyed by its position (from `offset`): each word's
+    term is independent of the others' (no chain to wait on), and a change of any one word
+    changes the sum (`_mix` is a bijection)."""
     for j in range(words.size):
-        position = np.uint64(offset + j + 1)
-        a += _mix(words[j] ^ (position * _SEEDS[0]))
-        b += _mix(words[j] + (position * _SEEDS[1]))
-    return a, b
+        h += _mix(words[j] ^ (np.uint64(offset + j + 1) * _SEED))
+    return h
 
 
 @njit(cache=True)
 def _digests(s_words: np.ndarray, v_words: np.ndarray, tag: np.uint64, out: np.ndarray) -> None:
-    """out[i] ← the two sums (`_lanes`) over row i of `s_words` then of `v_words` (S, w)
-    uint64, started from `tag`, each mixed once more."""
+    """out[i] ← the sum (`_sum`) over row i of `s_words` then of `v_words` (S, w) uint64,
+    started from `tag`, mixed once more."""
     for i in range(s_words.shape[0]):
-        a, b = _lanes(s_words[i], tag, tag, 0)
-        a, b = _lanes(v_words[i], a, b, s_words.shape[1])
-        out[i, 0], out[i, 1] = _mix(a), _mix(b ^ _SEEDS[0])
+        out[i] = _mix(_sum(v_words[i], _sum(s_words[i], tag, 0), s_words.shape[1]))
 
 
-def row_digests(s: np.ndarray, v0: np.ndarray | None) -> list[bytes]:
-    """A 16-byte digest of each snapshot's exact bytes: its injections `s` (S, n) complex
-    and warm start `v0` (S, n) complex, or the absence of one (`RowMemo`); both
-    C-contiguous."""
+def row_digests(s: np.ndarray, v0: np.ndarray | None) -> np.ndarray:
+    """A 64-bit digest (S,) uint64 of each snapshot's exact bytes: its injections `s`
+    (S, n) complex and warm start `v0` (S, n) complex, or the absence of one (`FlowMemo`);
+    both C-contiguous."""
     s_words, v_words = snapshot_words(s, v0)
-    out = np.empty((s.shape[0], 2), dtype=np.uint64)
+    out = np.empty(s.shape[0], dtype=np.uint64)
     _digests(s_words, v_words, np.uint64(0 if v0 is None else 1), out)
-    return out.view("V16").ravel().tolist()
+    return out
+
+
+@njit(cache=True, inline="always")
+def _probe(keys: np.ndarray, entries: np.ndarray, key) -> np.int64:
+    """The slot of `key` in the open-addressing table (`keys`, `entries`; linear probing,
+    a power-of-two size, never full): its own, or the empty one (entry -1) where it would go."""
+    mask = keys.size - 1
+    slot = np.int64(key & np.uint64(mask))  # a digest's low bits are as mixed as its others
+    while entries[slot] >= 0 and keys[slot] != key:
+        slot = (slot + 1) & mask
+    return slot
+
+
+def _slots(n: int) -> tuple[np.ndarray, np.ndarray]:
+    """Empty keys and entries of a table (`_probe`) at most a quarter full with `n` entries."""
+    size = 1 << max(6, (4 * n - 1).bit_length())
+    return np.zeros(size, dtype=np.uint64), np.full(size, -1, dtype=np.int64)
+
+
+class _Table:
+    """An open-addressing table (`_probe`) of digests → entries `batch << _ROW_BITS | row`,
+    at most half full. The entries of dropped batches (older than the memo's oldest) are
+    stale: never found, left in place until the table is rebuilt as it grows."""
+
+    def __init__(self, n: int) -> None:
+        self.keys, self.entries = _slots(n)
+        self.filled, self.newest = 0, -1  # slots in use; the newest batch entered
+
+    def look(self, digests: np.ndarray, oldest: int) -> np.ndarray:
+        """The live entry (S,) of each of `digests`, or -1."""
+        out = np.empty(digests.size, dtype=np.int64)
+        _look(self.keys, self.entries, digests, oldest, out)
+        return out
+
+    def enter(self, digests: np.ndarray, batch: int, oldest: int) -> None:
+        """Enter the rows of `batch` under their `digests` (a digest already there: its newer
+        answer); rebuilt from the live entries, at most a quarter full, when it would be over
+        half full."""
+        if 2 * (self.filled + digests.size) > self.keys.size:
+            old = self.keys, self.entries
+            self.keys, self.entries = _slots(int(np.count_nonzero(old[1] >> _ROW_BITS >= oldest)) + digests.size)
+            self.filled = _rehash(*old, oldest, self.keys, self.entries)
+        self.filled += _enter(self.keys, self.entries, digests, batch << _ROW_BITS)
+        self.newest = batch
+
+
+@njit(cache=True)
+def _look(keys: np.ndarray, entries: np.ndarray, digests: np.ndarray, oldest: int, out: np.ndarray) -> None:
+    """out[i] ← the live entry of digests[i], or -1 (`_Table.look`)."""
+    for i in range(digests.size):
+        entry = entries[_probe(keys, entries, digests[i])]
+        out[i] = entry if entry >= 0 and entry >> _ROW_BITS >= oldest else -1
+
+
+@njit(cache=True)
+def _enter(keys: np.ndarray, entries: np.ndarray, digests: np.ndarray, first: int) -> int:
+    """Enter digests[i] → first + i; the number of slots newly in use."""
+    filled = 0
+    for i in range(digests.size):
+        slot = _probe(keys, entries, digests[i])
+        if entries[slot] < 0:
+            filled += 1
+        keys[slot], entries[slot] = digests[i], first + i
+    return filled
+
+
+@njit(cache=True)
+def _rehash(keys: np.ndarray, entries: np.ndarray, oldest: int, new_keys: np.ndarray, new_entries: np.ndarray) -> int:
+    """Enter the live entries of a table into an empty one; their number."""
+    filled = 0
+    for j in range(keys.size):
+        if entries[j] >= 0 and entries[j] >> _ROW_BITS >= oldest:
+            slot = _probe(new_keys, new_entries, keys[j])
+            new_keys[slot], new_entries[slot] = keys[j], entries[j]
+            filled += 1
+    return filled
+
+
+@njit(cache=True)
+def _first_rows(digests: np.ndarray, keys: np.ndarray, entries: np.ndarray, out: np.ndarray) -> None:
+    """out[i] ← the first row with digests[i], by an empty table (`first_rows`)."""
+    for i in range(digests.size):
+        slot = _probe(keys, entries, digests[i])
+        if entries[slot] < 0:
+            keys[slot], entries[slot] = digests[i], i
+        out[i] = entries[slot]
+
+
+def first_rows(digests: np.ndarray) -> np.ndarray:
+    """For each of `digests` (S,) uint64 the first row (S,) that has it."""
+    out = np.empty(digests.size, dtype=np.int64)
+    _first_rows(digests, *_slots(digests.size), out)
+    return out
 
 
 def snapshot_words(s: np.ndarray, v0: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:
@@ -170,46 +212,46 @@ def same_snapshots(
     return out
 
 
-# a remembered batch: (network, options), digests, inputs (`snapshot_words`), answers, bytes
-_Batch = tuple[tuple, list[bytes], tuple[np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray, np.ndarray], int]
+# a remembered batch: (network, options), snapshots (`snapshot_words`), answers, bytes
+_Batch = tuple[tuple, tuple[np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray, np.ndarray], int]
 
 
-class RowMemo:
+class FlowMemo:
     """The per-snapshot answers of one thread (module docstring): `find` the remembered
     answers of some snapshots, `put` those of freshly solved ones; batches of answers are
     dropped oldest first beyond `limit_bytes`. A snapshot found by its digest is served only
     if its bytes are those of the remembered snapshot (kept with its answer), so no two
     different snapshots can share an answer, however their digests fall."""
 
-    def __init__(self, limit_bytes: int = ROW_MEMO_BYTES):
+    def __init__(self, limit_bytes: int = MEMO_BYTES):
         self.limit, self.used = limit_bytes, 0
-        self._tables: dict[tuple, dict[bytes, tuple[int, int]]] = {}  # (network, options) → digest → (batch, row)
+        self._tables: dict[tuple, _Table] = {}  # (network, options) → its snapshots' digests
         self._batches: OrderedDict[int, _Batch] = OrderedDict()
-        self._next = 0
+        self._next = self._oldest = 0  # batches are numbered in order, and dropped in order
 
     def find(
-        self, net: Network, options: Hashable, keys: list[bytes], s: np.ndarray, v0: np.ndarray | None
+        self, net: Network, options: Hashable, digests: np.ndarray, s: np.ndarray, v0: np.ndarray | None
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-        """Which snapshots (digests `keys` of injections `s` (S, n) and warm start `v0`, as
+        """Which snapshots (`digests` of injections `s` (S, n) and warm start `v0`, as
         `row_digests`) have a remembered answer: a mask (S,), and arrays of voltages (S, n),
         converged (S,) and iterations (S,) holding those answers in their rows — the other
         rows are for the caller to fill. Each batch's hits are confirmed in one pass, in place."""
-        n = len(keys)
+        n = digests.size
         known = np.zeros(n, dtype=bool)
         v, converged, iterations = np.empty(s.shape, dtype=complex), np.empty(n, dtype=bool), np.empty(n, dtype=np.int64)
         table = self._tables.get((net, options))
         if table is None:
             return known, v, converged, iterations
-        nowhere = (-1, -1)
-        where = np.array([table.get(key, nowhere) for key in keys], dtype=np.int64).reshape(n, 2)  # (batch, row)
-        hits = np.flatnonzero(where[:, 0] >= 0)
+        entries = table.look(digests, self._oldest)
+        hits = np.flatnonzero(entries >= 0)
         if hits.size == 0:
             return known, v, converged, iterations
         words = snapshot_words(s, v0)
-        for batch in np.unique(where[hits, 0]).tolist():
-            asked = hits[where[hits, 0] == batch]
-            kept = where[asked, 1]
-            inputs, answers = self._batches[batch][2:4]
+        batches, rows = entries >> _ROW_BITS, entries & ((1 << _ROW_BITS) - 1)
+        for batch in np.unique(batches[hits]).tolist():
+            asked = hits[batches[hits] == batch]
+            kept = rows[asked]
+            inputs, answers = self._batches[batch][1:3]
             same = same_snapshots(inputs, kept, words, asked)
             asked, kept = asked[same], kept[same]
             known[asked] = True
@@ -217,34 +259,39 @@ class RowMemo:
         return known, v, converged, iterations
 
     def put(
-        self, net: Network, options: Hashable, keys: list[bytes], s: np.ndarray, v0: np.ndarray | None, result: PowerFlowResult
+        self,
+        net: Network,
+        options: Hashable,
+        digests: np.ndarray,
+        s: np.ndarray,
+        v0: np.ndarray | None,
+        result: PowerFlowResult,
     ) -> None:
-        """Remember the answers `result` (copied) of the snapshots `s`, `v0` with digests
-        `keys`; the memo keeps `s` and `v0` themselves (made read-only): the caller hands over
-        arrays of its own that nothing changes."""
+        """Remember the answers `result` (copied) of the snapshots `s`, `v0` with `digests`;
+        the memo keeps `s` and `v0` themselves (made read-only): the caller hands over arrays
+        of its own that nothing changes."""
         s_words, v_words = snapshot_words(s, v0)
-        size = result.v.nbytes + s_words.nbytes + v_words.nbytes + len(keys) * _ROW_OVERHEAD
-        if not keys or size > self.limit // 4:
+        size = result.v.nbytes + s_words.nbytes + v_words.nbytes + digests.size * _ROW_OVERHEAD
+        if not digests.size or size > self.limit // 4:
             return
-        table = self._tables.setdefault((net, options), {})
+        where = (net, options)
         batch = self._next
         self._next += 1
-        for i, key in enumerate(keys):
-            table[key] = (batch, i)
+        table = self._tables.get(where)
+        if table is None:
+            table = self._tables[where] = _Table(digests.size)
+        table.enter(digests, batch, self._oldest)
         answers = (result.v.copy(), np.array(result.converged, dtype=bool), np.array(result.iterations, dtype=np.int64))
         for kept in (s, v0, s_words, v_words):
             if kept is not None:
                 kept.flags.writeable = False
-        self._batches[batch] = ((net, options), keys, (s_words, v_words), answers, size)
+        self._batches[batch] = (where, (s_words, v_words), answers, size)
         self.used += size
         while self.used > self.limit:
-            old, (where, old_keys, _, _, old_size) = self._batches.popitem(last=False)
-            old_table = self._tables[where]
-            for key in old_keys:
-                if old_table.get(key, (None,))[0] == old:  # not since answered by a newer batch
-                    del old_table[key]
-            if not old_table:  # nothing of that network left: let it go
-                del self._tables[where]
+            old, (old_where, _, _, old_size) = self._batches.popitem(last=False)
+            self._oldest = old + 1
+            if self._tables[old_where].newest < self._oldest:  # nothing of that network left: let it go
+                del self._tables[old_where]
             self.used -= old_size
 
 
@@ -256,18 +303,9 @@ def flow_memo() -> FlowMemo:
     return found
 
 
-def row_memo() -> RowMemo:
-    """This thread's per-snapshot memo."""
-    found: RowMemo | None = getattr(_local, "rows", None)
-    if found is None:
-        found = _local.rows = RowMemo()
-    return found
-
-
 def forget_flows() -> None:
-    """Empty this thread's memos (benchmarks timing the flows themselves)."""
+    """Empty this thread's memo (benchmarks timing the flows themselves)."""
     _local.memo = FlowMemo()
-    _local.rows = RowMemo()
 
 
 PROCESS.on_reset("power-flow answers (the calling thread's)", forget_flows)

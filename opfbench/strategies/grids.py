@@ -53,7 +53,7 @@ class BusGrid:
 
     def answer(self, rows: np.ndarray, q_mvar: np.ndarray, p_mw: np.ndarray | None, v0: np.ndarray | None) -> PowerFlowResult:
         if v0 is None and rows.size == self.scenario.n_snapshots and not q_mvar.any() and p_mw is None:
-            return solve_pf_batch(self.net, self.base)  # the no-action state (shared: `memo.FlowMemo`)
+            return solve_pf_batch(self.net, self.base)  # the no-action state (remembered: `memo.FlowMemo`)
         injections = self.base[rows] + 1j * (q_mvar @ self.place)
         if p_mw is not None:
             injections = injections + (p_mw - self.available[rows]) @ self.place
